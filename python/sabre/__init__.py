@@ -1,0 +1,42 @@
+"""sabre — robust sampling-based control for mobile manipulators that open doors, drawers and dishwashers.
+
+The physics (Rapier), the sampler and the safety filter run in Rust (``sabre._core``, private);
+this package is the public API.
+"""
+
+from __future__ import annotations
+
+from ._core import __version__
+from .errors import (
+    InvalidValueError,
+    SabreError,
+    ShapeError,
+    SimulationError,
+    UnknownAssetError,
+    UnknownFrameError,
+    UrdfError,
+)
+from .scene import OBJECTS, ROBOTS, Scene
+from .scripted import ScriptedMotion, hook_and_pull
+from .sim import LowLevelController, Plant, RolloutModel, RolloutResult, default_threads
+
+__all__ = [
+    "__version__",
+    "Scene",
+    "ROBOTS",
+    "OBJECTS",
+    "RolloutModel",
+    "RolloutResult",
+    "Plant",
+    "LowLevelController",
+    "default_threads",
+    "ScriptedMotion",
+    "hook_and_pull",
+    "SabreError",
+    "ShapeError",
+    "InvalidValueError",
+    "UnknownAssetError",
+    "UrdfError",
+    "UnknownFrameError",
+    "SimulationError",
+]

@@ -1,0 +1,68 @@
+"""Input checking shared by the public wrappers: float64 arrays of a documented shape, finite values."""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+
+from .errors import InvalidValueError, ShapeError
+
+
+def _shape_text(shape: Sequence[int | None]) -> str:
+    return "(" + ", ".join("·" if s is None else str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
+
+
+def as_float_array(name: str, value: Any, shape: Sequence[int | None]) -> np.ndarray:
+    """Returns `value` as a C-contiguous float64 array of `shape` (None = any size), all finite.
+
+    Raises :class:`ShapeError` for a wrong shape or a non-numeric dtype and
+    :class:`InvalidValueError` for NaN or infinite entries.
+    """
+    try:
+        array = np.asarray(value)
+    except Exception as exc:  # ragged nested lists and the like
+        raise ShapeError(f"{name}: cannot be read as an array ({exc})") from None
+    if array.dtype.kind not in "fiu":
+        raise ShapeError(f"{name}: expected a real numeric array, got dtype {array.dtype}")
+    if array.ndim != len(shape) or any(e is not None and g != e for g, e in zip(array.shape, shape)):
+        raise ShapeError(f"{name}: expected shape {_shape_text(shape)}, got {array.shape}")
+    array = np.ascontiguousarray(array, dtype=np.float64)
+    if not np.all(np.isfinite(array)):
+        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(array))[0])
+        raise InvalidValueError(f"{name}: entry {bad} is {array[bad]}; values must be finite")
+    return array
+
+
+def as_positive(name: str, value: Any) -> float:
+    """A finite, strictly positive float."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise InvalidValueError(f"{name}: expected a number, got {value!r}") from None
+    if not np.isfinite(number) or number <= 0.0:
+        raise InvalidValueError(f"{name}: must be finite and positive, got {number}")
+    return number
+
+
+def as_non_negative(name: str, value: Any) -> float:
+    """A finite float that is zero or positive."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise InvalidValueError(f"{name}: expected a number, got {value!r}") from None
+    if not np.isfinite(number) or number < 0.0:
+        raise InvalidValueError(f"{name}: must be finite and non-negative, got {number}")
+    return number
+
+
+def as_count(name: str, value: Any, minimum: int = 1) -> int:
+    """An integer of at least `minimum` (bools are refused)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or int(value) < minimum:
+        raise InvalidValueError(f"{name}: expected an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def readonly(array: np.ndarray) -> np.ndarray:
+    array.setflags(write=False)
+    return array

@@ -1,0 +1,44 @@
+"""The exception hierarchy of sabre: every error the library raises derives from :class:`SabreError`."""
+
+from __future__ import annotations
+
+__all__ = [
+    "SabreError",
+    "ShapeError",
+    "InvalidValueError",
+    "UnknownAssetError",
+    "UrdfError",
+    "UnknownFrameError",
+    "SimulationError",
+]
+
+
+class SabreError(Exception):
+    """Base class of every exception raised by sabre."""
+
+
+class ShapeError(SabreError, ValueError):
+    """An array has the wrong shape or dtype."""
+
+
+class InvalidValueError(SabreError, ValueError):
+    """A value is NaN, infinite or outside its admissible range."""
+
+
+class UnknownAssetError(SabreError, LookupError):
+    """A built-in robot or object name that does not exist."""
+
+
+class UrdfError(SabreError):
+    """A URDF file is missing, unreadable, malformed or uses unsupported features."""
+
+
+class UnknownFrameError(SabreError, KeyError):
+    """A frame (link) name the scene does not have."""
+
+    def __str__(self) -> str:  # KeyError would otherwise quote the message
+        return str(self.args[0]) if self.args else ""
+
+
+class SimulationError(SabreError, RuntimeError):
+    """The physics engine failed or produced non-finite numbers."""

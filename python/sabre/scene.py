@@ -1,0 +1,222 @@
+"""The scene: a robot and one articulated object placed in the world, with kinematics and the state layout."""
+
+from __future__ import annotations
+
+import os
+from typing import Sequence
+
+import numpy as np
+
+from . import _core
+from ._validate import as_float_array, readonly
+from .errors import ShapeError, UrdfError
+
+__all__ = ["Scene", "ROBOTS", "OBJECTS"]
+
+#: Built-in robots (compiled into the library).
+ROBOTS: tuple[str, ...] = ("royalpanda",)
+#: Built-in articulated objects.
+OBJECTS: tuple[str, ...] = ("shelf", "microwave", "dishwasher", "drawer")
+
+
+def _pose(obj_pose: Sequence[float] | np.ndarray | None) -> list[float] | None:
+    if obj_pose is None:
+        return None
+    return as_float_array("obj_pose", obj_pose, (6,)).tolist()
+
+
+class Scene:
+    """A robot and an articulated object.
+
+    State layout: ``x = [q, q̇, o, ȯ]`` with ``nq`` robot coordinates (base x, y, yaw, then the arm),
+    ``no`` object coordinates (hinge angle in rad or slide in m). Input ``u = q̇*`` (``nu = nq``):
+    commanded joint velocities; base velocities are world-frame rates (ẋ, ẏ, yaw rate).
+
+    Build one with :meth:`load` (built-in assets) or :meth:`from_urdf` (your own files).
+    """
+
+    __slots__ = ("_core",)
+
+    def __init__(self, core: _core.Scene) -> None:
+        if not isinstance(core, _core.Scene):
+            raise TypeError("use Scene.load(...) or Scene.from_urdf(...) to build a scene")
+        self._core = core
+
+    # -- construction -------------------------------------------------------------------------
+    @classmethod
+    def load(cls, robot: str = "royalpanda", obj: str = "shelf", obj_pose: Sequence[float] | None = None) -> "Scene":
+        """A scene from built-in assets; ``obj_pose`` is (x, y, z, roll, pitch, yaw) of the object.
+
+        Without ``obj_pose`` the object stands in front of the robot's default base pose
+        (shelf and microwave at x = 1.0 m, dishwasher and drawer at x = 1.2 m).
+        """
+        return cls(_core.Scene.load(str(robot), str(obj), _pose(obj_pose)))
+
+    @classmethod
+    def from_urdf(
+        cls,
+        robot_path: str | os.PathLike[str],
+        obj_path: str | os.PathLike[str],
+        obj_pose: Sequence[float] | None = None,
+    ) -> "Scene":
+        """A scene from a robot URDF and an object URDF on disk (primitives only, see README)."""
+        for label, path in (("robot", robot_path), ("object", obj_path)):
+            if not os.path.isfile(path):
+                raise UrdfError(f"URDF {path}: {label} file does not exist")
+        return cls(_core.Scene.from_urdf(os.fspath(robot_path), os.fspath(obj_path), _pose(obj_pose)))
+
+    @classmethod
+    def from_urdf_strings(cls, robot_urdf: str, obj_urdf: str, obj_pose: Sequence[float] | None = None) -> "Scene":
+        """A scene from URDF text."""
+        return cls(_core.Scene.from_urdf_strings(robot_urdf, obj_urdf, _pose(obj_pose)))
+
+    # -- sizes and names ----------------------------------------------------------------------
+    @property
+    def nq(self) -> int:
+        return self._core.nq
+
+    @property
+    def no(self) -> int:
+        return self._core.no
+
+    @property
+    def nx(self) -> int:
+        return self._core.nx
+
+    @property
+    def nu(self) -> int:
+        return self._core.nu
+
+    @property
+    def robot_name(self) -> str:
+        return self._core.robot_name
+
+    @property
+    def object_name(self) -> str:
+        return self._core.object_name
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """Robot joint names in the order of q."""
+        return tuple(self._core.joint_names)
+
+    @property
+    def frame_names(self) -> tuple[str, ...]:
+        """Every robot link of the URDF (including the ``grasp`` control frame)."""
+        return tuple(self._core.frame_names)
+
+    @property
+    def object_joint_names(self) -> tuple[str, ...]:
+        return tuple(self._core.object_joint_names)
+
+    @property
+    def object_frame_names(self) -> tuple[str, ...]:
+        return tuple(self._core.object_frame_names)
+
+    # -- limits ---------------------------------------------------------------------------------
+    def _robot_limits(self, i: int) -> np.ndarray:
+        return readonly(np.asarray(self._core.robot_limits()[i], dtype=np.float64))
+
+    @property
+    def q_lower(self) -> np.ndarray:
+        """(nq,) lower joint position limits."""
+        return self._robot_limits(0)
+
+    @property
+    def q_upper(self) -> np.ndarray:
+        """(nq,) upper joint position limits."""
+        return self._robot_limits(1)
+
+    @property
+    def dq_limit(self) -> np.ndarray:
+        """(nq,) joint velocity limits (symmetric); inputs are projected onto them."""
+        return self._robot_limits(2)
+
+    @property
+    def effort_limit(self) -> np.ndarray:
+        """(nq,) joint force/torque limits of the plant."""
+        return self._robot_limits(3)
+
+    @property
+    def o_lower(self) -> np.ndarray:
+        """(no,) object joint lower limits (closed)."""
+        return readonly(np.asarray(self._core.object_limits()[0], dtype=np.float64))
+
+    @property
+    def o_upper(self) -> np.ndarray:
+        """(no,) object joint upper limits (fully open)."""
+        return readonly(np.asarray(self._core.object_limits()[1], dtype=np.float64))
+
+    @property
+    def object_damping(self) -> np.ndarray:
+        return readonly(np.asarray(self._core.object_dynamics()[0], dtype=np.float64))
+
+    @property
+    def object_friction(self) -> np.ndarray:
+        return readonly(np.asarray(self._core.object_dynamics()[1], dtype=np.float64))
+
+    @property
+    def object_is_revolute(self) -> bool:
+        return self._core.object_joint_is_revolute()
+
+    @property
+    def object_pose(self) -> np.ndarray:
+        """(4, 4) pose of the object's root (cabinet) in the world."""
+        return readonly(self._core.object_pose())
+
+    @property
+    def rollout_contact_links(self) -> tuple[str, ...]:
+        """Robot links that touch the object in the rollout model."""
+        return tuple(self._core.rollout_contact_links())
+
+    @property
+    def self_collision_spheres(self) -> tuple[tuple[str, str, tuple[float, float, float], float], ...]:
+        """(name, link, centre in link frame, radius) of each self-collision sphere."""
+        spheres, _ = self._core.self_collision()
+        return tuple((n, l, tuple(c), r) for n, l, c, r in spheres)
+
+    @property
+    def self_collision_pairs(self) -> tuple[tuple[str, str], ...]:
+        return tuple(tuple(p) for p in self._core.self_collision()[1])
+
+    @property
+    def arm_reach(self) -> tuple[str, str, float] | None:
+        """(arm base link, frame, maximum planar reach in m), if the robot declares one."""
+        return self._core.arm_reach()
+
+    # -- states -----------------------------------------------------------------------------------
+    def default_state(self) -> np.ndarray:
+        """(nx,) base at the origin, arm in its home pose, everything at rest, object closed."""
+        return np.asarray(self._core.default_state(), dtype=np.float64)
+
+    def home_configuration(self) -> np.ndarray:
+        """(nq,) the robot's home configuration."""
+        return np.asarray(self._core.home_configuration(), dtype=np.float64)
+
+    def split_state(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Views (q, q̇, o, ȯ) of a state or of a batch of states (last axis nx)."""
+        x = np.asarray(x)
+        if x.shape[-1:] != (self.nx,):
+            raise ShapeError(f"x: expected last axis of size nx = {self.nx}, got shape {x.shape}")
+        nq, no = self.nq, self.no
+        return x[..., :nq], x[..., nq : 2 * nq], x[..., 2 * nq : 2 * nq + no], x[..., 2 * nq + no :]
+
+    # -- kinematics -------------------------------------------------------------------------------
+    def fk(self, q: Sequence[float] | np.ndarray, frame: str) -> np.ndarray:
+        """(4, 4) world pose of a robot frame at configuration q (nq,)."""
+        return self._core.fk(as_float_array("q", q, (self.nq,)), str(frame))
+
+    def jacobian(self, q: Sequence[float] | np.ndarray, frame: str) -> np.ndarray:
+        """(6, nq) geometric Jacobian of a robot frame's origin: world frame, linear rows first."""
+        return self._core.jacobian(as_float_array("q", q, (self.nq,)), str(frame))
+
+    def object_fk(self, o: Sequence[float] | np.ndarray, frame: str) -> np.ndarray:
+        """(4, 4) world pose of an object frame (e.g. ``handle_frame``) at object configuration o (no,)."""
+        return self._core.object_fk(as_float_array("o", o, (self.no,)), str(frame))
+
+    def mass_matrix(self, q: Sequence[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Robot joint-space mass matrix (nq, nq) and gravity torque (nq,) at q."""
+        return self._core.mass_matrix_and_gravity(as_float_array("q", q, (self.nq,)))
+
+    def __repr__(self) -> str:
+        return f"Scene(robot={self.robot_name!r}, obj={self.object_name!r}, nq={self.nq}, no={self.no})"

@@ -1,0 +1,177 @@
+"""Scripted hook-and-pull motions: an open-loop joint-velocity sequence planned by differential IK.
+
+Used by the demo and the tests as an independent check that the scene, the hook and the object
+interact as designed; the sampling-based controller does not need it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._validate import as_float_array, as_positive
+from .scene import Scene
+
+__all__ = ["ScriptedMotion", "hook_and_pull"]
+
+
+@dataclass(frozen=True)
+class ScriptedMotion:
+    """An open-loop input sequence with its plan.
+
+    Attributes:
+        U: (K, nu) joint velocity commands at steps of ``dt``.
+        dt: step of the sequence (s).
+        phases: (K,) phase of each step: 0 approach, 1 insert, 2 hook, 3 pull, 4 retreat.
+        planned_states: (K+1, nq) kinematic plan of q.
+        planned_opening: (K+1,) object opening the pull phase aims at, per step.
+    """
+
+    U: np.ndarray
+    dt: float
+    phases: np.ndarray
+    planned_states: np.ndarray
+    planned_opening: np.ndarray
+
+
+def _log_rotation(r: np.ndarray) -> np.ndarray:
+    """Rotation vector of a rotation matrix."""
+    cos = np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0)
+    angle = np.arccos(cos)
+    w = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+    if angle < 1e-9:
+        return 0.5 * w
+    if np.pi - angle < 1e-6:
+        # Near π the antisymmetric part vanishes; take the axis from the symmetric part.
+        axis = np.sqrt(np.maximum((np.diag(r) + 1.0) / 2.0, 0.0))
+        k = int(np.argmax(axis))
+        axis[np.arange(3) != k] *= np.sign(r[k, np.arange(3) != k] + r[np.arange(3) != k, k])
+        return angle * axis / np.linalg.norm(axis)
+    return angle / (2.0 * np.sin(angle)) * w
+
+
+def _offset(pose: np.ndarray, xyz: tuple[float, float, float]) -> np.ndarray:
+    out = pose.copy()
+    out[:3, 3] = pose[:3, 3] + pose[:3, :3] @ np.asarray(xyz)
+    return out
+
+
+def hook_and_pull(
+    scene: Scene,
+    x0: np.ndarray | None = None,
+    *,
+    opening: float | None = None,
+    dt: float = 0.015,
+    approach_time: float = 4.0,
+    pull_time: float = 5.0,
+    release_after: bool | None = None,
+) -> ScriptedMotion:
+    """Plans the hook finger onto the handle and pulls the handle along its opening path.
+
+    The grasp frame is driven through five phases by damped least-squares differential IK on the
+    robot's Jacobian (base and arm, the base weighted to move less): approach a pre-insert pose
+    in front of the handle and offset sideways, insert past the bar, hook (slide the bar into the
+    finger's pocket), pull while following ``handle_frame`` as the object opens to ``opening``, and,
+    for objects that fall open under gravity (the dishwasher), retreat and let go.
+    """
+    dt = as_positive("dt", dt)
+    x0 = scene.default_state() if x0 is None else as_float_array("x0", x0, (scene.nx,))
+    nq, no = scene.nq, scene.no
+    o0 = x0[2 * nq : 2 * nq + no].copy()
+    upper = float(scene.o_upper[0])
+    target = 0.75 * upper if opening is None else float(opening)
+    if release_after is None:
+        release_after = scene.object_name == "dishwasher"
+    if release_after and opening is None:
+        target = 0.45
+
+    # Waypoints in the handle frame: behind the bar (−z) and beside it (−y), clear of the tip.
+    pre_insert = (0.0, -0.022, -0.09)
+    inserted = (0.0, -0.022, 0.0)
+    hooked = (0.0, 0.0, 0.0)
+    pulling = (0.0, 0.0, -0.016)
+
+    def handle(o: float) -> np.ndarray:
+        return scene.object_fk(np.array([o]), "handle_frame")
+
+    segments: list[tuple[int, float, callable]] = []
+
+    def add(phase: int, duration: float, pose_at) -> None:
+        segments.append((phase, duration, pose_at))
+
+    h0 = handle(o0[0])
+    grasp0 = scene.fk(x0[:nq], "grasp")
+
+    def blend(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
+        s = 0.5 - 0.5 * np.cos(np.pi * np.clip(s, 0.0, 1.0))  # smooth start and stop
+        out = np.eye(4)
+        out[:3, 3] = (1 - s) * a[:3, 3] + s * b[:3, 3]
+        rel = a[:3, :3].T @ b[:3, :3]
+        w = _log_rotation(rel) * s
+        angle = np.linalg.norm(w)
+        if angle < 1e-12:
+            out[:3, :3] = a[:3, :3]
+        else:
+            k = w / angle
+            kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+            out[:3, :3] = a[:3, :3] @ (np.eye(3) + np.sin(angle) * kx + (1 - np.cos(angle)) * kx @ kx)
+        return out
+
+    add(0, approach_time, lambda s: blend(grasp0, _offset(h0, pre_insert), s))
+    add(1, 1.2, lambda s: blend(_offset(h0, pre_insert), _offset(h0, inserted), s))
+    add(2, 0.8, lambda s: blend(_offset(h0, inserted), _offset(h0, hooked), s))
+    opening_profile = lambda s: o0[0] + (target - o0[0]) * (0.5 - 0.5 * np.cos(np.pi * np.clip(s, 0, 1)))
+    # Take up the slack first (tip against the bar), then follow the handle along its path.
+    engage = lambda s: tuple(np.asarray(pulling) * min(1.0, 8.0 * s))
+    add(3, pull_time, lambda s: _offset(handle(opening_profile(s)), engage(s)))
+    if release_after:
+        end = _offset(handle(target), pulling)
+        away = end.copy()
+        away[:3, 3] += np.array([-0.15, 0.0, 0.12]) @ np.eye(3)
+        add(4, 1.5, lambda s: blend(end, away, s))
+
+    total = sum(int(round(d / dt)) for _, d, _ in segments)
+    U = np.zeros((total, nq))
+    phases = np.zeros(total, dtype=np.int64)
+    q = x0[:nq].copy()
+    planned = [q.copy()]
+    planned_opening = [o0[0]]
+    lower, upper_q, vmax = scene.q_lower, scene.q_upper, scene.dq_limit
+    weights = np.ones(nq)
+    weights[:3] = 4.0  # moving the 165 kg base is costlier than moving the arm
+    w_inv = 1.0 / weights
+    home = scene.home_configuration()
+    k = 0
+    for phase, duration, pose_at in segments:
+        steps = int(round(duration / dt))
+        for i in range(steps):
+            s = (i + 1) / steps
+            desired = pose_at(s)
+            current = scene.fk(q, "grasp")
+            err = np.concatenate([desired[:3, 3] - current[:3, 3], _log_rotation(desired[:3, :3] @ current[:3, :3].T)])
+            twist = err / dt * 0.5
+            J = scene.jacobian(q, "grasp")
+            Jw = J * w_inv
+            damping = 1e-4
+            u = w_inv * (J.T @ np.linalg.solve(Jw @ J.T + damping * np.eye(6), twist))
+            # Secondary task: stay near the home posture and away from the joint limits (arm only).
+            null = np.eye(nq) - (w_inv[:, None] * J.T) @ np.linalg.solve(Jw @ J.T + damping * np.eye(6), J)
+            posture = np.zeros(nq)
+            posture[3:] = 0.5 * (home[3:] - q[3:])
+            u = u + null @ posture
+            u = np.clip(u, -0.8 * vmax, 0.8 * vmax)
+            q_next = np.clip(q + dt * u, lower + 1e-3, upper_q - 1e-3)
+            U[k] = (q_next - q) / dt  # what the joints can actually do at their limits
+            q = q_next
+            phases[k] = phase
+            planned.append(q.copy())
+            planned_opening.append(opening_profile(s) if phase == 3 else (target if phase == 4 else o0[0]))
+            k += 1
+    return ScriptedMotion(
+        U=U,
+        dt=dt,
+        phases=phases,
+        planned_states=np.asarray(planned),
+        planned_opening=np.asarray(planned_opening),
+    )

@@ -1,0 +1,215 @@
+"""Simulation: the reduced-order rollout model (batched, parallel), the 1 kHz plant and its low-level controller."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from . import _core
+from ._validate import as_count, as_float_array, as_non_negative, as_positive, readonly
+from .scene import Scene
+
+__all__ = ["RolloutModel", "RolloutResult", "Plant", "LowLevelController", "default_threads"]
+
+
+def default_threads() -> int:
+    """Worker threads used when ``threads=None``: every core available to the process."""
+    return _core.default_threads()
+
+
+@dataclass(frozen=True)
+class RolloutResult:
+    """Outputs of N rollouts of K steps (all float64 unless noted).
+
+    Attributes:
+        states: (N, K+1, nx) states; ``states[:, 0]`` is x0.
+        tau_ext: (N, K, nq) external joint torques τ_ext = Σ J_cᵀ f_c during each step (forces on the robot).
+        wrench: (N, K, 6) force (N) and torque (N·m) on the hand and hook about the wrist flange, world frame.
+        contact: (N, K) bool, robot–object contact carried force in that step.
+        failed: (N,) bool, the physics diverged; that rollout is NaN from the failing step on.
+    """
+
+    states: np.ndarray
+    tau_ext: np.ndarray
+    wrench: np.ndarray
+    contact: np.ndarray
+    failed: np.ndarray
+
+
+class RolloutModel:
+    """The reduced-order model the controller plans with (paper Sec. V-F, eq. 57).
+
+    Robot joints follow the commanded velocities through a PI velocity servo, q̈ = Λ (u − q̇) +
+    Λ_I ∫(u − q̇) + M(q)⁻¹ τ_ext, with Λ = ``servo_bandwidth`` (1/s) and Λ_I = ``servo_integral_gain``
+    (1/s²) — the structure of the plant's low-level controller — pushed back by contact forces and
+    bounded by the joint torque limits; only the hand, hook and forearm colliders touch the object; the object is a
+    dynamic Rapier multibody with limits, damping, dry friction and gravity. With
+    ``multibody_robot=True`` the same servo loop is simulated by Rapier's multibody solver instead
+    (more faithful robot compliance, several times slower).
+
+    Rollouts run in parallel on ``threads`` workers (default: all cores), each with its own physics
+    world restored from a pristine snapshot before every rollout; the GIL is released and the
+    results are bit-identical for any thread count.
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        dt: float = 0.015,
+        *,
+        servo_bandwidth: float = 40.0,
+        servo_integral_gain: float = 400.0,
+        servo_integral_limit: float = 0.1,
+        contact_friction: float = 0.2,
+        solver_iterations: int = 2,
+        multibody_robot: bool = False,
+    ) -> None:
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
+        self.scene = scene
+        self.dt = as_positive("dt", dt)
+        self._core = _core.RolloutModel(
+            scene._core,
+            self.dt,
+            as_positive("servo_bandwidth", servo_bandwidth),
+            as_non_negative("servo_integral_gain", servo_integral_gain),
+            as_non_negative("servo_integral_limit", servo_integral_limit),
+            as_non_negative("contact_friction", contact_friction),
+            as_count("solver_iterations", solver_iterations),
+            bool(multibody_robot),
+        )
+
+    def rollout(self, x0: Sequence[float] | np.ndarray, U: np.ndarray, threads: int | None = None) -> RolloutResult:
+        """Simulates N input sequences U (N, K, nu) from the state x0 (nx,).
+
+        Inputs are projected onto the joint velocity limits before they are applied.
+        """
+        x0 = as_float_array("x0", x0, (self.scene.nx,))
+        U = as_float_array("U", U, (None, None, self.scene.nu))
+        if threads is not None:
+            threads = as_count("threads", threads)
+        r = self._core.rollout(x0, U, threads)
+        return RolloutResult(
+            states=readonly(r.states),
+            tau_ext=readonly(r.tau_ext),
+            wrench=readonly(r.wrench),
+            contact=readonly(r.contact),
+            failed=readonly(r.failed),
+        )
+
+    def __repr__(self) -> str:
+        return f"RolloutModel({self.scene!r}, dt={self.dt})"
+
+
+class LowLevelController:
+    """Dynamics-compensated PI joint-velocity controller (53) for the plant.
+
+    τ = M(q) (q̈* + Λ_D (q̇* − q̇) + Λ_I ∫(q̇* − q̇)) + g(q): (53) with K_D = M Λ_D and K_I = M Λ_I, so the
+    plant's free-motion velocity response matches the rollout model's servo of the same bandwidth.
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        dt: float = 0.001,
+        *,
+        bandwidth: float = 40.0,
+        integral_gain: float = 400.0,
+        integral_limit: float = 0.1,
+    ) -> None:
+        self.scene = scene
+        self._core = _core.LowLevelController(
+            scene._core,
+            as_positive("dt", dt),
+            as_positive("bandwidth", bandwidth),
+            as_non_negative("integral_gain", integral_gain),
+            as_non_negative("integral_limit", integral_limit),
+        )
+
+    def reset(self) -> None:
+        """Clears the integrator and the reference history."""
+        self._core.reset()
+
+    def torque(self, x: Sequence[float] | np.ndarray, u_ref: Sequence[float] | np.ndarray) -> np.ndarray:
+        """(nq,) joint torques that make the robot at state x (nx,) track the velocities u_ref (nq,)."""
+        x = as_float_array("x", x, (self.scene.nx,))
+        u_ref = as_float_array("u_ref", u_ref, (self.scene.nq,))
+        return np.asarray(self._core.torque(x, u_ref), dtype=np.float64)
+
+
+class Plant:
+    """The stand-in for the real robot: full rigid-body dynamics of robot and object in Rapier.
+
+    Joint-torque input (clamped to the effort limits), gravity, every collider of robot and object,
+    a wrist force-torque reading from contact forces, and fault injection (:meth:`hold_object`).
+    """
+
+    def __init__(self, scene: Scene, dt: float = 0.001, *, contact_friction: float = 0.2, solver_iterations: int = 4) -> None:
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
+        self.scene = scene
+        self._core = _core.Plant(
+            scene._core,
+            as_positive("dt", dt),
+            as_non_negative("contact_friction", contact_friction),
+            as_count("solver_iterations", solver_iterations),
+        )
+
+    @property
+    def dt(self) -> float:
+        return self._core.dt
+
+    def reset(self, x0: Sequence[float] | np.ndarray | None = None) -> None:
+        """Puts the plant at x0 (default: the scene's default state), time 0, object released."""
+        x0 = self.scene.default_state() if x0 is None else as_float_array("x0", x0, (self.scene.nx,))
+        self._core.reset(x0)
+
+    def step(self, tau: Sequence[float] | np.ndarray) -> None:
+        """Advances one step of dt under joint torques tau (nq,)."""
+        self._core.step(as_float_array("tau", tau, (self.scene.nq,)))
+
+    def track(self, controller: LowLevelController, u_ref: Sequence[float] | np.ndarray, steps: int = 1) -> None:
+        """Runs ``steps`` steps with the controller tracking the constant velocity reference u_ref (nq,)."""
+        self._core.track(controller._core, as_float_array("u_ref", u_ref, (self.scene.nq,)), as_count("steps", steps, 0))
+
+    @property
+    def state(self) -> np.ndarray:
+        """(nx,) current state [q, q̇, o, ȯ]."""
+        return np.asarray(self._core.state, dtype=np.float64)
+
+    @property
+    def wrench(self) -> np.ndarray:
+        """(6,) wrist force-torque reading of the last step (on the hand and hook, world frame)."""
+        return np.asarray(self._core.wrench, dtype=np.float64)
+
+    @property
+    def tau_ext(self) -> np.ndarray:
+        """(nq,) external joint torques of the last step, τ_ext = Σ J_cᵀ f_c."""
+        return np.asarray(self._core.tau_ext, dtype=np.float64)
+
+    @property
+    def contact(self) -> bool:
+        return self._core.contact
+
+    @property
+    def applied_torque(self) -> np.ndarray:
+        """(nq,) torques applied in the last step, after the effort limits."""
+        return np.asarray(self._core.applied_torque, dtype=np.float64)
+
+    @property
+    def time(self) -> float:
+        return self._core.time
+
+    @property
+    def object_held(self) -> bool:
+        return self._core.object_held
+
+    def hold_object(self, flag: bool) -> None:
+        """Fault injection: ``True`` holds the object's joint where it is (stuck door); ``False`` releases it."""
+        self._core.hold_object(bool(flag))
+
+    def object_energy(self) -> float:
+        """Kinetic plus gravitational potential energy of the object (J), from its URDF inertials."""
+        return self._core.object_energy()

@@ -1,0 +1,109 @@
+//! Low-level joint velocity controller (53): dynamics-compensated PI tracking of q̇* at the plant rate.
+
+use std::sync::Arc;
+
+use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
+
+use crate::error::{ensure_finite, ensure_len, Result, SabreError};
+use crate::model::dynamics::{joint_space_terms, DynamicsWorkspace};
+use crate::model::scene::Scene;
+
+/// Gains of the velocity controller.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LowLevelConfig {
+    /// Proportional bandwidth Λ_D (1/s): in free motion the tracking error decays like exp(−Λ_D t).
+    pub bandwidth: f64,
+    /// Integral gain Λ_I (1/s²) on the accumulated velocity error (position error).
+    pub integral_gain: f64,
+    /// Bound on the accumulated position error per joint, against wind-up while in contact.
+    pub integral_limit: f64,
+}
+
+impl Default for LowLevelConfig {
+    fn default() -> Self {
+        Self {
+            bandwidth: 40.0,
+            integral_gain: 400.0,
+            integral_limit: 0.1,
+        }
+    }
+}
+
+/// τ = M(q) (q̈* + Λ_D (q̇* − q̇) + Λ_I ∫(q̇* − q̇)) + g(q).
+///
+/// This is (53) with K_D = M Λ_D and K_I = M Λ_I, so the closed loop has the same first-order
+/// velocity response as the rollout model's servo. The Coriolis feed-forward C q̇* is neglected
+/// (robot velocities are small; it is bounded by the PI terms).
+pub struct LowLevelController {
+    scene: Arc<Scene>,
+    config: LowLevelConfig,
+    dt: f64,
+    integral: Vec<f64>,
+    previous_reference: Option<Vec<f64>>,
+    workspace: DynamicsWorkspace,
+    mass_matrix: DMatrix<f64>,
+    gravity_torque: DVector<f64>,
+    acceleration: DVector<f64>,
+}
+
+impl LowLevelController {
+    pub fn new(scene: Arc<Scene>, dt: f64, config: LowLevelConfig) -> Result<Self> {
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(SabreError::invalid("dt", "must be positive"));
+        }
+        for (name, v) in [("bandwidth", config.bandwidth), ("integral_gain", config.integral_gain), ("integral_limit", config.integral_limit)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(SabreError::invalid(name, format!("must be finite and non-negative, got {v}")));
+            }
+        }
+        let nq = scene.nq();
+        Ok(Self {
+            scene,
+            config,
+            dt,
+            integral: vec![0.0; nq],
+            previous_reference: None,
+            workspace: DynamicsWorkspace::default(),
+            mass_matrix: DMatrix::zeros(nq, nq),
+            gravity_torque: DVector::zeros(nq),
+            acceleration: DVector::zeros(nq),
+        })
+    }
+
+    pub fn reset(&mut self) {
+        self.integral.iter_mut().for_each(|v| *v = 0.0);
+        self.previous_reference = None;
+    }
+
+    /// Joint torques that make the robot at state `x` track the velocity reference `u_ref`.
+    pub fn torque(&mut self, x: &[f64], u_ref: &[f64]) -> Result<Vec<f64>> {
+        let nq = self.scene.nq();
+        self.scene.check_state(x)?;
+        ensure_len("u_ref", u_ref, nq)?;
+        ensure_finite("u_ref", u_ref)?;
+        let q = &x[..nq];
+        let qd = &x[nq..2 * nq];
+        joint_space_terms(
+            &self.scene.robot,
+            &Isometry3::identity(),
+            q,
+            &Vector3::new(0.0, 0.0, -9.81),
+            &mut self.workspace,
+            &mut self.mass_matrix,
+            &mut self.gravity_torque,
+        );
+        let c = &self.config;
+        for i in 0..nq {
+            let error = u_ref[i] - qd[i];
+            self.integral[i] = (self.integral[i] + error * self.dt).clamp(-c.integral_limit, c.integral_limit);
+            let feedforward = match &self.previous_reference {
+                Some(prev) => (u_ref[i] - prev[i]) / self.dt,
+                None => 0.0,
+            };
+            self.acceleration[i] = feedforward + c.bandwidth * error + c.integral_gain * self.integral[i];
+        }
+        self.previous_reference = Some(u_ref.to_vec());
+        let tau = &self.mass_matrix * &self.acceleration + &self.gravity_torque;
+        Ok(tau.iter().copied().collect())
+    }
+}

@@ -1,0 +1,5 @@
+//! The control cascade; for now the low-level joint velocity controller that drives the plant.
+
+pub mod low_level;
+
+pub use low_level::{LowLevelConfig, LowLevelController};

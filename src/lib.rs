@@ -1,0 +1,14 @@
+//! sabre: robust sampling-based control for mobile manipulators opening articulated objects — the Rust core.
+//!
+//! The core is plain Rust; the Python bindings live in `python` behind the `python` cargo feature.
+
+pub mod control;
+pub mod error;
+pub mod model;
+pub mod sim;
+
+#[cfg(feature = "python")]
+mod python;
+
+pub use error::{Result, SabreError};
+pub use model::Scene;

@@ -1,0 +1,286 @@
+//! Kinematic trees (links, joints, inertials, primitive colliders): forward kinematics and geometric Jacobians in f64.
+
+use std::collections::HashMap;
+
+use nalgebra::{Isometry3, Matrix3, Point3, Translation3, UnitQuaternion, Vector3};
+
+use crate::error::{Result, SabreError};
+
+/// How a joint moves its child link relative to its parent.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum JointKind {
+    Fixed,
+    /// Rotation about `axis`; `continuous` URDF joints are revolute without limits.
+    Revolute,
+    /// Translation along `axis`.
+    Prismatic,
+}
+
+/// Position, velocity and effort bounds of one actuated joint.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JointLimits {
+    pub lower: f64,
+    pub upper: f64,
+    pub velocity: f64,
+    pub effort: f64,
+}
+
+#[derive(Debug, Clone)]
+pub struct Joint {
+    pub name: String,
+    pub kind: JointKind,
+    pub parent: usize,
+    pub child: usize,
+    /// Pose of the joint frame (= child link frame at q = 0) in the parent link frame.
+    pub origin: Isometry3<f64>,
+    /// Unit axis in the joint frame.
+    pub axis: Vector3<f64>,
+    /// Index of this joint's coordinate in q, for movable joints.
+    pub q_index: Option<usize>,
+    pub limits: JointLimits,
+    /// Viscous damping (N·s/m or N·m·s/rad) and dry friction (N or N·m) from `<dynamics>`.
+    pub damping: f64,
+    pub friction: f64,
+}
+
+/// A collision primitive; dimensions are half-sizes, long axes along local z as in URDF.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Shape {
+    Box { half_extents: Vector3<f64> },
+    Sphere { radius: f64 },
+    Cylinder { radius: f64, half_length: f64 },
+    Capsule { radius: f64, half_length: f64 },
+}
+
+#[derive(Debug, Clone)]
+pub struct Collision {
+    pub name: Option<String>,
+    pub shape: Shape,
+    /// Pose of the primitive in its link frame.
+    pub origin: Isometry3<f64>,
+}
+
+/// Mass, centre of mass and inertia tensor (about the centre of mass, in the link frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Inertial {
+    pub mass: f64,
+    pub com: Vector3<f64>,
+    pub inertia: Matrix3<f64>,
+}
+
+#[derive(Debug, Clone)]
+pub struct Link {
+    pub name: String,
+    /// The joint whose child this link is; `None` for the root.
+    pub parent_joint: Option<usize>,
+    pub inertial: Option<Inertial>,
+    pub collisions: Vec<Collision>,
+}
+
+/// A tree of links connected by fixed, revolute and prismatic joints.
+#[derive(Debug, Clone)]
+pub struct KinematicTree {
+    pub name: String,
+    pub links: Vec<Link>,
+    pub joints: Vec<Joint>,
+    /// Joints ordered so that each parent link is placed before its child.
+    pub topological_joints: Vec<usize>,
+    /// For each coordinate of q, the joint it drives.
+    pub active_joints: Vec<usize>,
+    pub root: usize,
+    link_index: HashMap<String, usize>,
+    /// For each link, the movable joints between the root and that link (root first).
+    ancestor_active_joints: Vec<Vec<usize>>,
+}
+
+impl KinematicTree {
+    /// Assembles a tree; movable joints get q indices in the order they appear in `joints`.
+    pub fn new(name: String, links: Vec<Link>, mut joints: Vec<Joint>, source: &str) -> Result<Self> {
+        let mut link_index = HashMap::with_capacity(links.len());
+        for (i, link) in links.iter().enumerate() {
+            if link_index.insert(link.name.clone(), i).is_some() {
+                return Err(SabreError::urdf(source, format!("duplicate link '{}'", link.name)));
+            }
+        }
+        let mut links = links;
+        for (j, joint) in joints.iter().enumerate() {
+            if links[joint.child].parent_joint.is_some() {
+                return Err(SabreError::urdf(
+                    source,
+                    format!("link '{}' has more than one parent joint", links[joint.child].name),
+                ));
+            }
+            links[joint.child].parent_joint = Some(j);
+        }
+        let roots: Vec<usize> = (0..links.len()).filter(|&i| links[i].parent_joint.is_none()).collect();
+        if roots.len() != 1 {
+            let names: Vec<&str> = roots.iter().map(|&i| links[i].name.as_str()).collect();
+            return Err(SabreError::urdf(
+                source,
+                format!("expected exactly one root link, found {}: {:?}", roots.len(), names),
+            ));
+        }
+        let root = roots[0];
+
+        // Breadth-first from the root gives a parent-before-child order and detects cycles.
+        let mut children: Vec<Vec<usize>> = vec![Vec::new(); links.len()];
+        for (j, joint) in joints.iter().enumerate() {
+            children[joint.parent].push(j);
+        }
+        let mut topological_joints = Vec::with_capacity(joints.len());
+        let mut frontier = vec![root];
+        while let Some(link) = frontier.pop() {
+            for &j in &children[link] {
+                topological_joints.push(j);
+                frontier.push(joints[j].child);
+            }
+        }
+        if topological_joints.len() != joints.len() {
+            return Err(SabreError::urdf(source, "the joints do not form a tree rooted at one link"));
+        }
+
+        let mut active_joints = Vec::new();
+        for (j, joint) in joints.iter_mut().enumerate() {
+            if joint.kind != JointKind::Fixed {
+                joint.q_index = Some(active_joints.len());
+                active_joints.push(j);
+            } else {
+                joint.q_index = None;
+            }
+        }
+
+        let mut ancestor_active_joints = vec![Vec::new(); links.len()];
+        for &j in &topological_joints {
+            let joint = &joints[j];
+            let mut chain = ancestor_active_joints[joint.parent].clone();
+            if joint.kind != JointKind::Fixed {
+                chain.push(j);
+            }
+            ancestor_active_joints[joint.child] = chain;
+        }
+
+        Ok(Self {
+            name,
+            links,
+            joints,
+            topological_joints,
+            active_joints,
+            root,
+            link_index,
+            ancestor_active_joints,
+        })
+    }
+
+    /// Number of generalized coordinates.
+    pub fn nq(&self) -> usize {
+        self.active_joints.len()
+    }
+
+    pub fn link_id(&self, name: &str) -> Option<usize> {
+        self.link_index.get(name).copied()
+    }
+
+    /// Looks a link up by name, with an error listing the names that exist.
+    pub fn require_link(&self, name: &str) -> Result<usize> {
+        self.link_id(name).ok_or_else(|| SabreError::UnknownFrame {
+            name: name.to_string(),
+            available: self.link_names().join(", "),
+        })
+    }
+
+    pub fn link_names(&self) -> Vec<String> {
+        self.links.iter().map(|l| l.name.clone()).collect()
+    }
+
+    pub fn active_joint_names(&self) -> Vec<String> {
+        self.active_joints.iter().map(|&j| self.joints[j].name.clone()).collect()
+    }
+
+    pub fn active_limits(&self) -> Vec<JointLimits> {
+        self.active_joints.iter().map(|&j| self.joints[j].limits).collect()
+    }
+
+    /// The movable joints that move `link`, root first.
+    pub fn ancestor_active_joints(&self, link: usize) -> &[usize] {
+        &self.ancestor_active_joints[link]
+    }
+
+    /// Motion of a joint's child relative to the joint frame for coordinate value `value`.
+    pub fn joint_motion(joint: &Joint, value: f64) -> Isometry3<f64> {
+        match joint.kind {
+            JointKind::Fixed => Isometry3::identity(),
+            JointKind::Revolute => Isometry3::from_parts(
+                Translation3::identity(),
+                UnitQuaternion::from_scaled_axis(joint.axis * value),
+            ),
+            JointKind::Prismatic => Isometry3::from_parts(Translation3::from(joint.axis * value), UnitQuaternion::identity()),
+        }
+    }
+
+    /// World poses of every link, with the root placed at `root_pose`.
+    pub fn link_poses_into(&self, root_pose: &Isometry3<f64>, q: &[f64], out: &mut Vec<Isometry3<f64>>) {
+        debug_assert_eq!(q.len(), self.nq());
+        out.clear();
+        out.resize(self.links.len(), Isometry3::identity());
+        out[self.root] = *root_pose;
+        for &j in &self.topological_joints {
+            let joint = &self.joints[j];
+            let value = joint.q_index.map_or(0.0, |i| q[i]);
+            out[joint.child] = out[joint.parent] * joint.origin * Self::joint_motion(joint, value);
+        }
+    }
+
+    pub fn link_poses(&self, root_pose: &Isometry3<f64>, q: &[f64]) -> Vec<Isometry3<f64>> {
+        let mut out = Vec::new();
+        self.link_poses_into(root_pose, q, &mut out);
+        out
+    }
+
+    /// World axis and world origin of a movable joint, given the link poses.
+    pub fn joint_axis_world(&self, poses: &[Isometry3<f64>], joint: usize) -> (Vector3<f64>, Point3<f64>) {
+        let j = &self.joints[joint];
+        let frame = poses[j.parent] * j.origin;
+        (frame.rotation * j.axis, Point3::from(frame.translation.vector))
+    }
+
+    /// Geometric Jacobian (6 × nq, world frame, linear rows first) of the point `point`
+    /// (world coordinates) rigidly attached to `link`; angular rows are the link's angular velocity.
+    /// `out` is column-major with 6 rows: `out[6 * c + r]`.
+    pub fn point_jacobian_into(&self, poses: &[Isometry3<f64>], link: usize, point: &Point3<f64>, out: &mut [f64]) {
+        let n = self.nq();
+        debug_assert_eq!(out.len(), 6 * n);
+        out.iter_mut().for_each(|v| *v = 0.0);
+        for &j in &self.ancestor_active_joints[link] {
+            let joint = &self.joints[j];
+            let col = joint.q_index.expect("active joint has a coordinate");
+            let (axis, origin) = self.joint_axis_world(poses, j);
+            let c = &mut out[6 * col..6 * col + 6];
+            match joint.kind {
+                JointKind::Revolute => {
+                    let lin = axis.cross(&(point - origin));
+                    c[0] = lin.x;
+                    c[1] = lin.y;
+                    c[2] = lin.z;
+                    c[3] = axis.x;
+                    c[4] = axis.y;
+                    c[5] = axis.z;
+                }
+                JointKind::Prismatic => {
+                    c[0] = axis.x;
+                    c[1] = axis.y;
+                    c[2] = axis.z;
+                }
+                JointKind::Fixed => {}
+            }
+        }
+    }
+
+    /// Jacobian of the origin of `link`'s frame as a dense 6 × nq matrix.
+    pub fn frame_jacobian(&self, root_pose: &Isometry3<f64>, q: &[f64], link: usize) -> nalgebra::DMatrix<f64> {
+        let poses = self.link_poses(root_pose, q);
+        let point = Point3::from(poses[link].translation.vector);
+        let mut data = vec![0.0; 6 * self.nq()];
+        self.point_jacobian_into(&poses, link, &point, &mut data);
+        nalgebra::DMatrix::from_column_slice(6, self.nq(), &data)
+    }
+}

@@ -1,0 +1,276 @@
+//! The scene: one robot, one articulated object placed in the world, the state layout and built-in assets.
+
+use nalgebra::{DMatrix, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+
+use super::kinematics::{JointKind, JointLimits, KinematicTree};
+use super::urdf::{parse_urdf, ParsedUrdf};
+use crate::error::{ensure_finite, ensure_len, Result, SabreError};
+
+/// Built-in robots, compiled into the library so that installed wheels need no data files.
+pub const BUILTIN_ROBOTS: &[(&str, &str)] = &[("royalpanda", include_str!("../../assets/robots/royalpanda.urdf"))];
+
+/// Built-in articulated objects.
+pub const BUILTIN_OBJECTS: &[(&str, &str)] = &[
+    ("shelf", include_str!("../../assets/objects/shelf.urdf")),
+    ("microwave", include_str!("../../assets/objects/microwave.urdf")),
+    ("dishwasher", include_str!("../../assets/objects/dishwasher.urdf")),
+    ("drawer", include_str!("../../assets/objects/drawer.urdf")),
+];
+
+/// Where an object stands when the caller gives no pose: its front faces the robot's default base
+/// pose (origin, looking along +x) with the handle within arm's reach.
+pub const DEFAULT_OBJECT_POSE: [f64; 6] = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+
+/// Default placement of each built-in object; low objects stand a little further away so the
+/// opening part clears the robot's base.
+pub fn default_object_pose(object: &str) -> [f64; 6] {
+    match object {
+        "dishwasher" | "drawer" => [1.2, 0.0, 0.0, 0.0, 0.0, 0.0],
+        _ => DEFAULT_OBJECT_POSE,
+    }
+}
+
+/// A self-collision sphere attached to a robot link.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sphere {
+    pub name: String,
+    pub link: usize,
+    pub center: Vector3<f64>,
+    pub radius: f64,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArmReach {
+    pub base_link: usize,
+    pub frame_link: usize,
+    pub max: f64,
+}
+
+/// Robot, object and their placement; all kinematic queries go through here.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    pub robot: KinematicTree,
+    pub object: KinematicTree,
+    /// Pose of the object's root link in the world.
+    pub object_pose: Isometry3<f64>,
+    pub spheres: Vec<Sphere>,
+    pub sphere_pairs: Vec<(usize, usize)>,
+    /// Robot links whose colliders touch the object in the reduced-order rollout model.
+    pub rollout_contact_links: Vec<usize>,
+    pub arm_reach: Option<ArmReach>,
+    pub robot_source: String,
+    pub object_source: String,
+}
+
+/// (x, y, z, roll, pitch, yaw) to an isometry; roll-pitch-yaw as in URDF.
+pub fn pose_from_xyzrpy(p: &[f64]) -> Result<Isometry3<f64>> {
+    ensure_len("obj_pose", p, 6)?;
+    ensure_finite("obj_pose", p)?;
+    Ok(Isometry3::from_parts(
+        Translation3::new(p[0], p[1], p[2]),
+        UnitQuaternion::from_euler_angles(p[3], p[4], p[5]),
+    ))
+}
+
+fn builtin<'a>(kind: &str, table: &'a [(&str, &str)], name: &str) -> Result<&'a str> {
+    table
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, text)| *text)
+        .ok_or_else(|| SabreError::UnknownAsset {
+            kind: kind.to_string(),
+            name: name.to_string(),
+            available: table.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", "),
+        })
+}
+
+impl Scene {
+    /// Scene from built-in assets by name.
+    pub fn load(robot: &str, object: &str, object_pose: Option<&[f64]>) -> Result<Self> {
+        let robot_text = builtin("robot", BUILTIN_ROBOTS, robot)?;
+        let object_text = builtin("object", BUILTIN_OBJECTS, object)?;
+        let robot = parse_urdf(robot, robot_text)?;
+        let default_pose = default_object_pose(object);
+        let obj = parse_urdf(object, object_text)?;
+        Self::assemble(robot, obj, Some(object_pose.unwrap_or(&default_pose)))
+    }
+
+    /// Scene from URDF files on disk.
+    pub fn from_urdf_files(robot: &std::path::Path, object: &std::path::Path, object_pose: Option<&[f64]>) -> Result<Self> {
+        let robot = super::urdf::load_urdf_file(robot)?;
+        let obj = super::urdf::load_urdf_file(object)?;
+        Self::assemble(robot, obj, object_pose)
+    }
+
+    /// Scene from URDF text (robot, object).
+    pub fn from_urdf_strings(robot: &str, object: &str, object_pose: Option<&[f64]>) -> Result<Self> {
+        Self::assemble(parse_urdf("robot", robot)?, parse_urdf("object", object)?, object_pose)
+    }
+
+    fn assemble(robot: ParsedUrdf, obj: ParsedUrdf, object_pose: Option<&[f64]>) -> Result<Self> {
+        let object_pose = pose_from_xyzrpy(object_pose.unwrap_or(&DEFAULT_OBJECT_POSE))?;
+        let ext = robot.extension;
+        let tree = robot.tree;
+        if tree.nq() == 0 {
+            return Err(SabreError::urdf(&tree.name, "the robot has no movable joint"));
+        }
+        if obj.tree.nq() == 0 {
+            return Err(SabreError::urdf(&obj.tree.name, "the object has no movable joint"));
+        }
+        for &j in &obj.tree.active_joints {
+            let l = obj.tree.joints[j].limits;
+            if !(l.lower.is_finite() && l.upper.is_finite()) {
+                return Err(SabreError::urdf(
+                    &obj.tree.name,
+                    format!("object joint '{}' needs finite position limits", obj.tree.joints[j].name),
+                ));
+            }
+        }
+        let spheres: Vec<Sphere> = ext
+            .spheres
+            .iter()
+            .map(|s| Sphere {
+                name: s.name.clone(),
+                link: tree.link_id(&s.link).expect("validated by the parser"),
+                center: s.center,
+                radius: s.radius,
+            })
+            .collect();
+        let sphere_index = |name: &str| spheres.iter().position(|s| s.name == name).expect("validated by the parser");
+        let sphere_pairs = ext.pairs.iter().map(|(a, b)| (sphere_index(a), sphere_index(b))).collect();
+        let mut rollout_contact_links: Vec<usize> = ext
+            .rollout_contact_links
+            .iter()
+            .map(|n| tree.link_id(n).expect("validated by the parser"))
+            .collect();
+        if rollout_contact_links.is_empty() {
+            // Without a declaration every link with collision geometry may touch the object.
+            rollout_contact_links = (0..tree.links.len()).filter(|&l| !tree.links[l].collisions.is_empty()).collect();
+        }
+        let arm_reach = ext.arm_reach.as_ref().map(|a| ArmReach {
+            base_link: tree.link_id(&a.base).expect("validated"),
+            frame_link: tree.link_id(&a.frame).expect("validated"),
+            max: a.max,
+        });
+        Ok(Self {
+            robot_source: tree.name.clone(),
+            object_source: obj.tree.name.clone(),
+            robot: tree,
+            object: obj.tree,
+            object_pose,
+            spheres,
+            sphere_pairs,
+            rollout_contact_links,
+            arm_reach,
+        })
+    }
+
+    pub fn nq(&self) -> usize {
+        self.robot.nq()
+    }
+    pub fn no(&self) -> usize {
+        self.object.nq()
+    }
+    /// State x = [q, q̇, o, ȯ].
+    pub fn nx(&self) -> usize {
+        2 * (self.nq() + self.no())
+    }
+    /// Input u = commanded robot joint velocities q̇*.
+    pub fn nu(&self) -> usize {
+        self.nq()
+    }
+
+    pub fn robot_limits(&self) -> Vec<JointLimits> {
+        self.robot.active_limits()
+    }
+    pub fn object_limits(&self) -> Vec<JointLimits> {
+        self.object.active_limits()
+    }
+
+    /// Mid-range robot configuration, or zero where zero is admissible; arm at rest, object closed.
+    pub fn default_state(&self) -> Vec<f64> {
+        let mut x = vec![0.0; self.nx()];
+        let home = self.home_configuration();
+        x[..self.nq()].copy_from_slice(&home);
+        let no = self.no();
+        let off = 2 * self.nq();
+        for (i, l) in self.object_limits().iter().enumerate() {
+            x[off + i] = 0.0_f64.clamp(l.lower, l.upper);
+        }
+        debug_assert_eq!(off + 2 * no, x.len());
+        x
+    }
+
+    /// The robot's resting configuration: for the built-in Panda the manufacturer's "ready" pose.
+    pub fn home_configuration(&self) -> Vec<f64> {
+        let names = self.robot.active_joint_names();
+        self.robot
+            .active_limits()
+            .iter()
+            .zip(names.iter())
+            .map(|(l, name)| {
+                let preferred = match name.as_str() {
+                    "panda_joint2" => -0.785,
+                    "panda_joint4" => -2.356,
+                    "panda_joint6" => 1.571,
+                    "panda_joint7" => 0.785,
+                    _ => 0.0,
+                };
+                if preferred >= l.lower && preferred <= l.upper {
+                    preferred
+                } else if l.lower.is_finite() && l.upper.is_finite() {
+                    0.5 * (l.lower + l.upper)
+                } else {
+                    0.0_f64.clamp(l.lower, l.upper)
+                }
+            })
+            .collect()
+    }
+
+    fn check_q(&self, q: &[f64]) -> Result<()> {
+        ensure_len("q", q, self.nq())?;
+        ensure_finite("q", q)
+    }
+
+    fn check_o(&self, o: &[f64]) -> Result<()> {
+        ensure_len("o", o, self.no())?;
+        ensure_finite("o", o)
+    }
+
+    /// World pose of a robot link or frame.
+    pub fn fk(&self, q: &[f64], frame: &str) -> Result<Isometry3<f64>> {
+        self.check_q(q)?;
+        let link = self.robot.require_link(frame)?;
+        Ok(self.robot.link_poses(&Isometry3::identity(), q)[link])
+    }
+
+    /// Geometric Jacobian (6 × nq, world frame, linear rows first) of a robot frame's origin.
+    pub fn jacobian(&self, q: &[f64], frame: &str) -> Result<DMatrix<f64>> {
+        self.check_q(q)?;
+        let link = self.robot.require_link(frame)?;
+        Ok(self.robot.frame_jacobian(&Isometry3::identity(), q, link))
+    }
+
+    /// World pose of an object link or frame (e.g. `handle_frame`) at object configuration `o`.
+    pub fn object_fk(&self, o: &[f64], frame: &str) -> Result<Isometry3<f64>> {
+        self.check_o(o)?;
+        let link = self.object.require_link(frame)?;
+        Ok(self.object.link_poses(&self.object_pose, o)[link])
+    }
+
+    /// World centre of each self-collision sphere.
+    pub fn sphere_centers(&self, poses: &[Isometry3<f64>]) -> Vec<Point3<f64>> {
+        self.spheres.iter().map(|s| poses[s.link] * Point3::from(s.center)).collect()
+    }
+
+    /// Validates a full state vector.
+    pub fn check_state(&self, x: &[f64]) -> Result<()> {
+        ensure_len("x", x, self.nx())?;
+        ensure_finite("x", x)
+    }
+
+    /// True if the object's single movable joint is a hinge.
+    pub fn object_is_revolute(&self) -> bool {
+        self.object.active_joints.iter().all(|&j| self.object.joints[j].kind == JointKind::Revolute)
+    }
+}

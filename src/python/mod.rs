@@ -1,0 +1,479 @@
+//! PyO3 bindings (`sabre._core`): thin wrappers over the core, error mapping, GIL release, no panics across.
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+
+use numpy::{IntoPyArray, PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyModule;
+
+use crate::control::{LowLevelConfig, LowLevelController};
+use crate::error::SabreError;
+use crate::model::scene::Scene;
+use crate::sim::{Plant, PlantConfig, RolloutConfig, RolloutModel};
+
+/// Maps a core error to the matching class of `sabre.errors` (falling back to builtins if the
+/// Python package is not importable, e.g. when `_core` is used on its own).
+fn to_pyerr(error: SabreError) -> PyErr {
+    let class = match &error {
+        SabreError::Shape { .. } => "ShapeError",
+        SabreError::InvalidValue { .. } => "InvalidValueError",
+        SabreError::UnknownAsset { .. } => "UnknownAssetError",
+        SabreError::Urdf { .. } => "UrdfError",
+        SabreError::UnknownFrame { .. } => "UnknownFrameError",
+        SabreError::Simulation(_) => "SimulationError",
+    };
+    let message = error.to_string();
+    Python::attach(|py| {
+        let class = py
+            .import("sabre.errors")
+            .and_then(|m| m.getattr(class))
+            .and_then(|c| c.call1((message.clone(),)));
+        match class {
+            Ok(instance) => PyErr::from_value(instance),
+            Err(_) => match error {
+                SabreError::Simulation(_) => PyRuntimeError::new_err(message),
+                _ => PyValueError::new_err(message),
+            },
+        }
+    })
+}
+
+/// Runs `f` without the GIL and turns both errors and panics into Python exceptions.
+fn run_detached<T: Send, F: FnOnce() -> crate::Result<T> + Send>(py: Python<'_>, f: F) -> PyResult<T> {
+    let outcome = py.detach(|| catch_unwind(AssertUnwindSafe(f)));
+    settle(outcome)
+}
+
+/// Same as [`run_detached`] for cheap calls that keep the GIL.
+fn run<T, F: FnOnce() -> crate::Result<T>>(f: F) -> PyResult<T> {
+    settle(catch_unwind(AssertUnwindSafe(f)))
+}
+
+fn settle<T>(outcome: std::thread::Result<crate::Result<T>>) -> PyResult<T> {
+    match outcome {
+        Ok(Ok(value)) => Ok(value),
+        Ok(Err(error)) => Err(to_pyerr(error)),
+        Err(panic) => {
+            let detail = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown panic".to_string());
+            Err(to_pyerr(SabreError::Simulation(format!("internal error: {detail}"))))
+        }
+    }
+}
+
+/// A contiguous float64 view of an array with the expected shape (-1 = any size).
+fn view<'a>(name: &str, array: &'a PyReadonlyArrayDyn<'_, f64>, shape: &[isize]) -> crate::Result<&'a [f64]> {
+    let got = array.shape();
+    let matches = got.len() == shape.len() && got.iter().zip(shape).all(|(&g, &e)| e < 0 || g as isize == e);
+    if !matches {
+        let fmt = |s: Vec<String>| format!("({})", s.join(", "));
+        return Err(SabreError::shape(
+            name,
+            fmt(shape.iter().map(|&e| if e < 0 { "·".into() } else { e.to_string() }).collect()),
+            fmt(got.iter().map(|g| g.to_string()).collect()),
+        ));
+    }
+    array
+        .as_slice()
+        .map_err(|_| SabreError::invalid(name, "array must be C-contiguous"))
+}
+
+fn array<'py>(py: Python<'py>, data: Vec<f64>, shape: &[usize]) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    PyArray1::from_vec(py, data).reshape(shape.to_vec())
+}
+
+#[pyclass(name = "Scene", module = "sabre._core", frozen)]
+pub struct PyScene {
+    inner: Arc<Scene>,
+}
+
+#[pymethods]
+impl PyScene {
+    #[staticmethod]
+    #[pyo3(signature = (robot, obj, obj_pose=None))]
+    fn load(robot: &str, obj: &str, obj_pose: Option<Vec<f64>>) -> PyResult<Self> {
+        run(|| Scene::load(robot, obj, obj_pose.as_deref())).map(|s| Self { inner: Arc::new(s) })
+    }
+
+    #[staticmethod]
+    #[pyo3(signature = (robot_path, obj_path, obj_pose=None))]
+    fn from_urdf(robot_path: PathBuf, obj_path: PathBuf, obj_pose: Option<Vec<f64>>) -> PyResult<Self> {
+        run(|| Scene::from_urdf_files(&robot_path, &obj_path, obj_pose.as_deref())).map(|s| Self { inner: Arc::new(s) })
+    }
+
+    #[staticmethod]
+    #[pyo3(signature = (robot_urdf, obj_urdf, obj_pose=None))]
+    fn from_urdf_strings(robot_urdf: &str, obj_urdf: &str, obj_pose: Option<Vec<f64>>) -> PyResult<Self> {
+        run(|| Scene::from_urdf_strings(robot_urdf, obj_urdf, obj_pose.as_deref())).map(|s| Self { inner: Arc::new(s) })
+    }
+
+    #[getter]
+    fn nq(&self) -> usize {
+        self.inner.nq()
+    }
+    #[getter]
+    fn no(&self) -> usize {
+        self.inner.no()
+    }
+    #[getter]
+    fn nx(&self) -> usize {
+        self.inner.nx()
+    }
+    #[getter]
+    fn nu(&self) -> usize {
+        self.inner.nu()
+    }
+    #[getter]
+    fn robot_name(&self) -> String {
+        self.inner.robot.name.clone()
+    }
+    #[getter]
+    fn object_name(&self) -> String {
+        self.inner.object.name.clone()
+    }
+    #[getter]
+    fn joint_names(&self) -> Vec<String> {
+        self.inner.robot.active_joint_names()
+    }
+    #[getter]
+    fn frame_names(&self) -> Vec<String> {
+        self.inner.robot.link_names()
+    }
+    #[getter]
+    fn object_joint_names(&self) -> Vec<String> {
+        self.inner.object.active_joint_names()
+    }
+    #[getter]
+    fn object_frame_names(&self) -> Vec<String> {
+        self.inner.object.link_names()
+    }
+    /// Robot joint limits as (lower, upper, velocity, effort) arrays of length nq.
+    fn robot_limits(&self) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
+        let l = self.inner.robot_limits();
+        (
+            l.iter().map(|v| v.lower).collect(),
+            l.iter().map(|v| v.upper).collect(),
+            l.iter().map(|v| v.velocity).collect(),
+            l.iter().map(|v| v.effort).collect(),
+        )
+    }
+    /// Object joint limits as (lower, upper) arrays of length no.
+    fn object_limits(&self) -> (Vec<f64>, Vec<f64>) {
+        let l = self.inner.object_limits();
+        (l.iter().map(|v| v.lower).collect(), l.iter().map(|v| v.upper).collect())
+    }
+    /// Object damping and dry friction per object joint.
+    fn object_dynamics(&self) -> (Vec<f64>, Vec<f64>) {
+        let o = &self.inner.object;
+        (
+            o.active_joints.iter().map(|&j| o.joints[j].damping).collect(),
+            o.active_joints.iter().map(|&j| o.joints[j].friction).collect(),
+        )
+    }
+    fn object_joint_is_revolute(&self) -> bool {
+        self.inner.object_is_revolute()
+    }
+    /// Object pose in the world as a 4 × 4 matrix.
+    fn object_pose<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        array(py, self.inner.object_pose.to_homogeneous().transpose().as_slice().to_vec(), &[4, 4])
+    }
+    fn default_state(&self) -> Vec<f64> {
+        self.inner.default_state()
+    }
+    fn home_configuration(&self) -> Vec<f64> {
+        self.inner.home_configuration()
+    }
+    fn rollout_contact_links(&self) -> Vec<String> {
+        self.inner.rollout_contact_links.iter().map(|&l| self.inner.robot.links[l].name.clone()).collect()
+    }
+    /// Self-collision spheres as (name, link, centre xyz, radius) and the checked pairs (by name).
+    fn self_collision(&self) -> (Vec<(String, String, [f64; 3], f64)>, Vec<(String, String)>) {
+        let s = &self.inner;
+        (
+            s.spheres
+                .iter()
+                .map(|sp| (sp.name.clone(), s.robot.links[sp.link].name.clone(), [sp.center.x, sp.center.y, sp.center.z], sp.radius))
+                .collect(),
+            s.sphere_pairs.iter().map(|&(a, b)| (s.spheres[a].name.clone(), s.spheres[b].name.clone())).collect(),
+        )
+    }
+    /// (base link, frame, max) of the planar arm-reach limit, if declared.
+    fn arm_reach(&self) -> Option<(String, String, f64)> {
+        let s = &self.inner;
+        s.arm_reach
+            .as_ref()
+            .map(|a| (s.robot.links[a.base_link].name.clone(), s.robot.links[a.frame_link].name.clone(), a.max))
+    }
+
+    fn fk<'py>(&self, py: Python<'py>, q: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let nq = self.inner.nq() as isize;
+        let pose = run(|| self.inner.fk(view("q", &q, &[nq])?, frame))?;
+        array(py, pose.to_homogeneous().transpose().as_slice().to_vec(), &[4, 4])
+    }
+
+    fn jacobian<'py>(&self, py: Python<'py>, q: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let nq = self.inner.nq() as isize;
+        let j = run(|| self.inner.jacobian(view("q", &q, &[nq])?, frame))?;
+        array(py, j.transpose().as_slice().to_vec(), &[6, self.inner.nq()])
+    }
+
+    fn object_fk<'py>(&self, py: Python<'py>, o: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let no = self.inner.no() as isize;
+        let pose = run(|| self.inner.object_fk(view("o", &o, &[no])?, frame))?;
+        array(py, pose.to_homogeneous().transpose().as_slice().to_vec(), &[4, 4])
+    }
+
+    /// Joint-space mass matrix (nq × nq) and gravity torque (nq) of the robot at q.
+    fn mass_matrix_and_gravity<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArrayDyn<'py, f64>,
+    ) -> PyResult<(Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>)> {
+        let nq = self.inner.nq();
+        let (m, g) = run(|| {
+            let q = view("q", &q, &[nq as isize])?;
+            crate::error::ensure_finite("q", q)?;
+            let mut ws = crate::model::dynamics::DynamicsWorkspace::default();
+            let mut m = nalgebra::DMatrix::zeros(nq, nq);
+            let mut g = nalgebra::DVector::zeros(nq);
+            crate::model::dynamics::joint_space_terms(
+                &self.inner.robot,
+                &nalgebra::Isometry3::identity(),
+                q,
+                &nalgebra::Vector3::new(0.0, 0.0, -9.81),
+                &mut ws,
+                &mut m,
+                &mut g,
+            );
+            Ok((m, g))
+        })?;
+        Ok((array(py, m.transpose().as_slice().to_vec(), &[nq, nq])?, array(py, g.as_slice().to_vec(), &[nq])?))
+    }
+}
+
+#[pyclass(name = "RolloutResult", module = "sabre._core", frozen)]
+pub struct PyRolloutResult {
+    #[pyo3(get)]
+    states: Py<PyArrayDyn<f64>>,
+    #[pyo3(get)]
+    tau_ext: Py<PyArrayDyn<f64>>,
+    #[pyo3(get)]
+    wrench: Py<PyArrayDyn<f64>>,
+    #[pyo3(get)]
+    contact: Py<PyArrayDyn<bool>>,
+    #[pyo3(get)]
+    failed: Py<PyArrayDyn<bool>>,
+}
+
+#[pyclass(name = "RolloutModel", module = "sabre._core", frozen)]
+pub struct PyRolloutModel {
+    inner: Arc<RolloutModel>,
+}
+
+#[pymethods]
+impl PyRolloutModel {
+    #[new]
+    #[pyo3(signature = (scene, dt=0.015, servo_bandwidth=40.0, servo_integral_gain=400.0, servo_integral_limit=0.1, contact_friction=0.2, solver_iterations=2, multibody_robot=false))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        scene: &PyScene,
+        dt: f64,
+        servo_bandwidth: f64,
+        servo_integral_gain: f64,
+        servo_integral_limit: f64,
+        contact_friction: f64,
+        solver_iterations: usize,
+        multibody_robot: bool,
+    ) -> PyResult<Self> {
+        let config = RolloutConfig {
+            dt,
+            servo_bandwidth,
+            servo_integral_gain,
+            servo_integral_limit,
+            multibody_robot,
+            contact_friction,
+            solver_iterations,
+        };
+        run(|| RolloutModel::new(scene.inner.clone(), config)).map(|m| Self { inner: Arc::new(m) })
+    }
+
+    #[getter]
+    fn dt(&self) -> f64 {
+        self.inner.dt()
+    }
+
+    #[pyo3(signature = (x0, u, threads=None))]
+    fn rollout<'py>(
+        &self,
+        py: Python<'py>,
+        x0: PyReadonlyArrayDyn<'py, f64>,
+        u: PyReadonlyArrayDyn<'py, f64>,
+        threads: Option<usize>,
+    ) -> PyResult<PyRolloutResult> {
+        let scene = self.inner.scene();
+        let (nx, nq) = (scene.nx() as isize, scene.nq() as isize);
+        let x0 = run(|| view("x0", &x0, &[nx]))?;
+        let u_shape = u.shape().to_vec();
+        let u = run(|| view("U", &u, &[-1, -1, nq]))?;
+        let (n, k) = (u_shape[0], u_shape[1]);
+        let model = self.inner.clone();
+        let batch = run_detached(py, move || model.rollout(x0, u, n, k, threads))?;
+        let (nx, nq) = (batch.nx, batch.nq);
+        Ok(PyRolloutResult {
+            states: array(py, batch.states, &[n, k + 1, nx])?.unbind(),
+            tau_ext: array(py, batch.tau_ext, &[n, k, nq])?.unbind(),
+            wrench: array(py, batch.wrench, &[n, k, 6])?.unbind(),
+            contact: batch.contact.into_pyarray(py).reshape(vec![n, k])?.unbind(),
+            failed: batch.failed.into_pyarray(py).reshape(vec![n])?.unbind(),
+        })
+    }
+}
+
+#[pyclass(name = "Plant", module = "sabre._core")]
+pub struct PyPlant {
+    inner: Mutex<Plant>,
+}
+
+impl PyPlant {
+    fn with<T>(&self, f: impl FnOnce(&mut Plant) -> crate::Result<T>) -> PyResult<T> {
+        let mut plant = self.inner.lock().unwrap_or_else(|e| e.into_inner());
+        run(|| f(&mut plant))
+    }
+}
+
+#[pymethods]
+impl PyPlant {
+    #[new]
+    #[pyo3(signature = (scene, dt=0.001, contact_friction=0.2, solver_iterations=4))]
+    fn new(scene: &PyScene, dt: f64, contact_friction: f64, solver_iterations: usize) -> PyResult<Self> {
+        let config = PlantConfig {
+            dt,
+            contact_friction,
+            solver_iterations,
+        };
+        run(|| Plant::new(scene.inner.clone(), config)).map(|p| Self { inner: Mutex::new(p) })
+    }
+
+    fn reset(&self, x0: PyReadonlyArrayDyn<'_, f64>) -> PyResult<()> {
+        self.with(|p| {
+            let nx = p.scene().nx() as isize;
+            p.reset(view("x0", &x0, &[nx])?)
+        })
+    }
+
+    fn step(&self, py: Python<'_>, tau: PyReadonlyArrayDyn<'_, f64>) -> PyResult<()> {
+        let tau = self.with(|p| Ok(view("tau", &tau, &[p.scene().nq() as isize])?.to_vec()))?;
+        let plant = &self.inner;
+        run_detached(py, || plant.lock().unwrap_or_else(|e| e.into_inner()).step(&tau))
+    }
+
+    /// Runs `steps` plant steps, each with torques from the low-level controller tracking `u_ref`.
+    fn track(&self, py: Python<'_>, controller: &PyLowLevelController, u_ref: PyReadonlyArrayDyn<'_, f64>, steps: usize) -> PyResult<()> {
+        let u_ref = self.with(|p| Ok(view("u_ref", &u_ref, &[p.scene().nq() as isize])?.to_vec()))?;
+        let plant = &self.inner;
+        let controller = &controller.inner;
+        run_detached(py, || {
+            let mut plant = plant.lock().unwrap_or_else(|e| e.into_inner());
+            let mut controller = controller.lock().unwrap_or_else(|e| e.into_inner());
+            for _ in 0..steps {
+                let tau = controller.torque(plant.state(), &u_ref)?;
+                plant.step(&tau)?;
+            }
+            Ok(())
+        })
+    }
+
+    #[getter]
+    fn state(&self) -> PyResult<Vec<f64>> {
+        self.with(|p| Ok(p.state().to_vec()))
+    }
+    #[getter]
+    fn wrench(&self) -> PyResult<Vec<f64>> {
+        self.with(|p| Ok(p.interaction().wrench.to_vec()))
+    }
+    #[getter]
+    fn tau_ext(&self) -> PyResult<Vec<f64>> {
+        self.with(|p| Ok(p.interaction().tau_ext.clone()))
+    }
+    #[getter]
+    fn contact(&self) -> PyResult<bool> {
+        self.with(|p| Ok(p.interaction().contact))
+    }
+    #[getter]
+    fn applied_torque(&self) -> PyResult<Vec<f64>> {
+        self.with(|p| Ok(p.applied_torque().to_vec()))
+    }
+    #[getter]
+    fn time(&self) -> PyResult<f64> {
+        self.with(|p| Ok(p.time()))
+    }
+    #[getter]
+    fn dt(&self) -> PyResult<f64> {
+        self.with(|p| Ok(p.dt()))
+    }
+    #[getter]
+    fn object_held(&self) -> PyResult<bool> {
+        self.with(|p| Ok(p.object_held()))
+    }
+    fn hold_object(&self, flag: bool) -> PyResult<()> {
+        self.with(|p| {
+            p.hold_object(flag);
+            Ok(())
+        })
+    }
+    fn object_energy(&self) -> PyResult<f64> {
+        self.with(|p| Ok(p.object_energy()))
+    }
+}
+
+#[pyclass(name = "LowLevelController", module = "sabre._core")]
+pub struct PyLowLevelController {
+    inner: Mutex<LowLevelController>,
+}
+
+#[pymethods]
+impl PyLowLevelController {
+    #[new]
+    #[pyo3(signature = (scene, dt=0.001, bandwidth=40.0, integral_gain=400.0, integral_limit=0.1))]
+    fn new(scene: &PyScene, dt: f64, bandwidth: f64, integral_gain: f64, integral_limit: f64) -> PyResult<Self> {
+        let config = LowLevelConfig {
+            bandwidth,
+            integral_gain,
+            integral_limit,
+        };
+        run(|| LowLevelController::new(scene.inner.clone(), dt, config)).map(|c| Self { inner: Mutex::new(c) })
+    }
+
+    fn reset(&self) {
+        self.inner.lock().unwrap_or_else(|e| e.into_inner()).reset();
+    }
+
+    fn torque(&self, x: PyReadonlyArrayDyn<'_, f64>, u_ref: PyReadonlyArrayDyn<'_, f64>) -> PyResult<Vec<f64>> {
+        let mut c = self.inner.lock().unwrap_or_else(|e| e.into_inner());
+        run(|| c.torque(view("x", &x, &[-1])?, view("u_ref", &u_ref, &[-1])?))
+    }
+}
+
+/// Number of worker threads used when `threads=None`.
+#[pyfunction]
+fn default_threads() -> usize {
+    crate::sim::default_threads()
+}
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyScene>()?;
+    m.add_class::<PyRolloutModel>()?;
+    m.add_class::<PyRolloutResult>()?;
+    m.add_class::<PyPlant>()?;
+    m.add_class::<PyLowLevelController>()?;
+    m.add_function(wrap_pyfunction!(default_threads, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

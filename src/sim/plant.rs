@@ -1,0 +1,155 @@
+//! The plant: full rigid-body dynamics of robot and object at 1 kHz under joint torques, with fault injection.
+
+use std::sync::Arc;
+
+use super::world::{Interaction, RobotColliders, RobotDrive, SimWorld, WorldConfig};
+use crate::error::{ensure_finite, ensure_len, Result, SabreError};
+use crate::model::scene::Scene;
+
+/// Settings of the plant.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlantConfig {
+    pub dt: f64,
+    pub contact_friction: f64,
+    pub solver_iterations: usize,
+}
+
+impl Default for PlantConfig {
+    fn default() -> Self {
+        Self {
+            dt: 0.001,
+            contact_friction: 0.2,
+            solver_iterations: 4,
+        }
+    }
+}
+
+/// The stand-in for the real robot: gravity on, every collider present, torque-controlled joints.
+pub struct Plant {
+    scene: Arc<Scene>,
+    template: SimWorld,
+    world: SimWorld,
+    x: Vec<f64>,
+    interaction: Interaction,
+    applied_torque: Vec<f64>,
+    time: f64,
+    object_held: bool,
+}
+
+impl Plant {
+    pub fn new(scene: Arc<Scene>, config: PlantConfig) -> Result<Self> {
+        if !(config.contact_friction.is_finite() && config.contact_friction >= 0.0) {
+            return Err(SabreError::invalid("contact_friction", "must be finite and non-negative"));
+        }
+        let world_config = WorldConfig {
+            dt: config.dt,
+            colliders: RobotColliders::All,
+            drive: RobotDrive::Torque,
+            contact_friction: config.contact_friction,
+            solver_iterations: config.solver_iterations,
+        };
+        let template = SimWorld::new(scene.clone(), &world_config)?;
+        let world = template.clone();
+        let nq = scene.nq();
+        let mut plant = Self {
+            x: scene.default_state(),
+            interaction: Interaction {
+                contact: false,
+                tau_ext: vec![0.0; nq],
+                wrench: [0.0; 6],
+            },
+            applied_torque: vec![0.0; nq],
+            time: 0.0,
+            object_held: false,
+            scene,
+            template,
+            world,
+        };
+        let x0 = plant.x.clone();
+        plant.reset(&x0)?;
+        Ok(plant)
+    }
+
+    pub fn scene(&self) -> &Arc<Scene> {
+        &self.scene
+    }
+
+    pub fn dt(&self) -> f64 {
+        self.world.dt()
+    }
+
+    /// Puts the plant at state x0 with time zero, no contact history and the object released.
+    pub fn reset(&mut self, x0: &[f64]) -> Result<()> {
+        self.scene.check_state(x0)?;
+        self.world.restore_from(&self.template);
+        self.world.set_state(x0);
+        self.x.copy_from_slice(x0);
+        self.interaction.contact = false;
+        self.interaction.tau_ext.iter_mut().for_each(|v| *v = 0.0);
+        self.interaction.wrench = [0.0; 6];
+        self.applied_torque.iter_mut().for_each(|v| *v = 0.0);
+        self.time = 0.0;
+        self.object_held = false;
+        Ok(())
+    }
+
+    /// Advances one step under joint torques `tau` (nq), clamped to the joint effort limits.
+    pub fn step(&mut self, tau: &[f64]) -> Result<()> {
+        ensure_len("tau", tau, self.scene.nq())?;
+        ensure_finite("tau", tau)?;
+        self.world.apply_joint_torques(tau, &mut self.applied_torque);
+        self.world.step();
+        let mut x = std::mem::take(&mut self.x);
+        self.world.read_state(&mut x);
+        if let Some(i) = x.iter().position(|v| !v.is_finite()) {
+            self.x = x;
+            return Err(SabreError::Simulation(format!(
+                "plant state entry {i} became non-finite at t = {:.3} s; reset the plant",
+                self.time
+            )));
+        }
+        self.interaction.clone_from(self.world.interaction());
+        self.x = x;
+        self.time += self.world.dt();
+        Ok(())
+    }
+
+    pub fn state(&self) -> &[f64] {
+        &self.x
+    }
+    pub fn interaction(&self) -> &Interaction {
+        &self.interaction
+    }
+    /// Torques actually applied in the last step, after the effort limits.
+    pub fn applied_torque(&self) -> &[f64] {
+        &self.applied_torque
+    }
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+    pub fn object_held(&self) -> bool {
+        self.object_held
+    }
+
+    /// Fault injection: holds the object's joint fixed where it is (a stuck door), or releases it.
+    pub fn hold_object(&mut self, hold: bool) {
+        self.world.hold_object(hold);
+        self.object_held = hold;
+        if hold {
+            let (nq, no) = (self.scene.nq(), self.scene.no());
+            self.x[2 * nq + no..].iter_mut().for_each(|v| *v = 0.0);
+        }
+    }
+
+    /// Object kinetic plus potential energy at the current state, from the object's URDF inertials.
+    pub fn object_energy(&self) -> f64 {
+        let (nq, no) = (self.scene.nq(), self.scene.no());
+        crate::model::dynamics::mechanical_energy(
+            &self.scene.object,
+            &self.scene.object_pose,
+            &self.x[2 * nq..2 * nq + no],
+            &self.x[2 * nq + no..],
+            &nalgebra::Vector3::new(0.0, 0.0, -9.81),
+        )
+    }
+}

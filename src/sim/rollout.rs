@@ -1,0 +1,258 @@
+//! The reduced-order rollout model and its data-parallel batch rollouts (rayon, one world per worker).
+
+use std::collections::HashMap;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::{Arc, Mutex, OnceLock};
+
+use rayon::prelude::*;
+
+use super::world::{RobotColliders, RobotDrive, SimWorld, WorldConfig};
+use crate::error::{ensure_finite, Result, SabreError};
+use crate::model::scene::Scene;
+
+/// Settings of the rollout model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RolloutConfig {
+    /// Step of the rollout model (the paper uses 0.015 s).
+    pub dt: f64,
+    /// Closed-loop bandwidth (1/s) of the joint velocity servo (57): a first-order lag 1/bandwidth.
+    pub servo_bandwidth: f64,
+    /// Integral gain Λ_I (1/s²) of the servo and the bound on its accumulated error (rad or m); the
+    /// same PI structure as the plant's low-level controller, so contact loads are held, not yielded to.
+    pub servo_integral_gain: f64,
+    pub servo_integral_limit: f64,
+    /// Simulate the servo loop with Rapier's multibody solver instead of the joint-space kinematic
+    /// servo: higher fidelity to robot compliance in contact, several times slower.
+    pub multibody_robot: bool,
+    pub contact_friction: f64,
+    pub solver_iterations: usize,
+}
+
+impl Default for RolloutConfig {
+    fn default() -> Self {
+        Self {
+            dt: 0.015,
+            servo_bandwidth: 40.0,
+            servo_integral_gain: 400.0,
+            servo_integral_limit: 0.1,
+            multibody_robot: false,
+            contact_friction: 0.2,
+            solver_iterations: 2,
+        }
+    }
+}
+
+/// Results of N rollouts of K steps, row-major in (N, K[+1], ·).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RolloutBatch {
+    pub n: usize,
+    pub k: usize,
+    pub nx: usize,
+    pub nq: usize,
+    /// (N, K+1, nx); entry 0 of each rollout is x0.
+    pub states: Vec<f64>,
+    /// (N, K, nq)
+    pub tau_ext: Vec<f64>,
+    /// (N, K, 6)
+    pub wrench: Vec<f64>,
+    /// (N, K)
+    pub contact: Vec<bool>,
+    /// (N,) rollouts whose physics failed; their outputs are NaN from the failing step on.
+    pub failed: Vec<bool>,
+}
+
+/// Batch rollouts of the reduced-order model from one initial state.
+pub struct RolloutModel {
+    scene: Arc<Scene>,
+    config: RolloutConfig,
+    template: SimWorld,
+    /// Worlds handed to workers; each is restored from `template` before every rollout.
+    worlds: Mutex<Vec<SimWorld>>,
+}
+
+/// Thread pools by size, built once: rayon pools are costly to create and a rollout is short.
+fn pool(threads: usize) -> Result<Arc<rayon::ThreadPool>> {
+    static POOLS: OnceLock<Mutex<HashMap<usize, Arc<rayon::ThreadPool>>>> = OnceLock::new();
+    let pools = POOLS.get_or_init(|| Mutex::new(HashMap::new()));
+    let mut pools = pools.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(p) = pools.get(&threads) {
+        return Ok(p.clone());
+    }
+    let p = Arc::new(
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .thread_name(|i| format!("sabre-rollout-{i}"))
+            .build()
+            .map_err(|e| SabreError::Simulation(format!("cannot start {threads} worker threads: {e}")))?,
+    );
+    pools.insert(threads, p.clone());
+    Ok(p)
+}
+
+/// Default worker count: every core the process may use.
+pub fn default_threads() -> usize {
+    std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+}
+
+struct RolloutSlices<'a> {
+    states: &'a mut [f64],
+    tau_ext: &'a mut [f64],
+    wrench: &'a mut [f64],
+    contact: &'a mut [bool],
+}
+
+impl RolloutModel {
+    pub fn new(scene: Arc<Scene>, config: RolloutConfig) -> Result<Self> {
+        for (name, v) in [
+            ("contact_friction", config.contact_friction),
+            ("servo_integral_gain", config.servo_integral_gain),
+            ("servo_integral_limit", config.servo_integral_limit),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(SabreError::invalid(name, format!("must be finite and non-negative, got {v}")));
+            }
+        }
+        let world_config = WorldConfig {
+            dt: config.dt,
+            colliders: RobotColliders::Links(scene.rollout_contact_links.clone()),
+            drive: if config.multibody_robot {
+                RobotDrive::MultibodyServo {
+                    bandwidth: config.servo_bandwidth,
+                }
+            } else {
+                RobotDrive::KinematicServo {
+                    bandwidth: config.servo_bandwidth,
+                    integral_gain: config.servo_integral_gain,
+                    integral_limit: config.servo_integral_limit,
+                }
+            },
+            contact_friction: config.contact_friction,
+            solver_iterations: config.solver_iterations,
+        };
+        let template = SimWorld::new(scene.clone(), &world_config)?;
+        Ok(Self {
+            scene,
+            config,
+            template,
+            worlds: Mutex::new(Vec::new()),
+        })
+    }
+
+    pub fn scene(&self) -> &Arc<Scene> {
+        &self.scene
+    }
+
+    pub fn config(&self) -> &RolloutConfig {
+        &self.config
+    }
+
+    pub fn dt(&self) -> f64 {
+        self.config.dt
+    }
+
+    fn checkout(&self) -> SimWorld {
+        let popped = self.worlds.lock().unwrap_or_else(|e| e.into_inner()).pop();
+        popped.unwrap_or_else(|| self.template.clone())
+    }
+
+    fn checkin(&self, world: SimWorld) {
+        self.worlds.lock().unwrap_or_else(|e| e.into_inner()).push(world);
+    }
+
+    /// Simulates one input sequence `u` (K × nu) from `x0`; returns the step at which the physics
+    /// produced non-finite numbers, if it did.
+    fn rollout_one(&self, world: &mut SimWorld, x0: &[f64], u: &[f64], out: RolloutSlices) -> Option<usize> {
+        let nx = self.scene.nx();
+        let nq = self.scene.nq();
+        let k = out.contact.len();
+        world.restore_from(&self.template);
+        world.set_state(x0);
+        out.states[..nx].copy_from_slice(x0);
+        for step in 0..k {
+            world.set_velocity_command(&u[step * nq..(step + 1) * nq]);
+            world.step();
+            let x = &mut out.states[(step + 1) * nx..(step + 2) * nx];
+            world.read_state(x);
+            if x.iter().any(|v| !v.is_finite()) {
+                return Some(step);
+            }
+            let interaction = world.interaction();
+            out.tau_ext[step * nq..(step + 1) * nq].copy_from_slice(&interaction.tau_ext);
+            out.wrench[step * 6..(step + 1) * 6].copy_from_slice(&interaction.wrench);
+            out.contact[step] = interaction.contact;
+        }
+        None
+    }
+
+    /// Runs N rollouts of K steps from `x0` (nx) with inputs `u` (N × K × nu, row-major).
+    /// Inputs are projected onto the joint velocity limits. The result does not depend on `threads`.
+    pub fn rollout(&self, x0: &[f64], u: &[f64], n: usize, k: usize, threads: Option<usize>) -> Result<RolloutBatch> {
+        let nx = self.scene.nx();
+        let nq = self.scene.nq();
+        self.scene.check_state(x0)?;
+        if u.len() != n * k * nq {
+            return Err(SabreError::shape("U", format!("({n}, {k}, {nq})"), format!("{} elements", u.len())));
+        }
+        ensure_finite("U", u)?;
+        let threads = threads.unwrap_or_else(default_threads);
+        if threads == 0 {
+            return Err(SabreError::invalid("threads", "must be at least 1"));
+        }
+        let mut batch = RolloutBatch {
+            n,
+            k,
+            nx,
+            nq,
+            states: vec![0.0; n * (k + 1) * nx],
+            tau_ext: vec![0.0; n * k * nq],
+            wrench: vec![0.0; n * k * 6],
+            contact: vec![false; n * k],
+            failed: vec![false; n],
+        };
+        if n == 0 || k == 0 {
+            for i in 0..n {
+                batch.states[i * nx..(i + 1) * nx].copy_from_slice(x0);
+            }
+            return Ok(batch);
+        }
+        let work = |i: usize, states: &mut [f64], tau: &mut [f64], wrench: &mut [f64], contact: &mut [bool], failed: &mut bool| {
+            let mut world = self.checkout();
+            let u_i = &u[i * k * nq..(i + 1) * k * nq];
+            let slices = RolloutSlices {
+                states: &mut *states,
+                tau_ext: &mut *tau,
+                wrench: &mut *wrench,
+                contact: &mut *contact,
+            };
+            // A panic inside the physics engine must not cross into the caller: that rollout is
+            // marked failed from its first step and its world, possibly inconsistent, is dropped.
+            let failed_at = match catch_unwind(AssertUnwindSafe(|| self.rollout_one(&mut world, x0, u_i, slices))) {
+                Ok(result) => {
+                    self.checkin(world);
+                    result
+                }
+                Err(_) => Some(0),
+            };
+            if let Some(step) = failed_at {
+                *failed = true;
+                states[(step + 1) * nx..].fill(f64::NAN);
+                tau[step * nq..].fill(f64::NAN);
+                wrench[step * 6..].fill(f64::NAN);
+                contact[step..].fill(false);
+            }
+        };
+        let run = || {
+            batch
+                .states
+                .par_chunks_mut((k + 1) * nx)
+                .zip(batch.tau_ext.par_chunks_mut(k * nq))
+                .zip(batch.wrench.par_chunks_mut(k * 6))
+                .zip(batch.contact.par_chunks_mut(k))
+                .zip(batch.failed.par_iter_mut())
+                .enumerate()
+                .for_each(|(i, ((((s, t), w), c), f))| work(i, s, t, w, c, f));
+        };
+        pool(threads)?.install(run);
+        Ok(batch)
+    }
+}

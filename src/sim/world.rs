@@ -1,0 +1,948 @@
+//! Builds a Rapier world (robot and object as reduced-coordinate multibodies) from a scene, sets and reads
+//! the state x = [q, q̇, o, ȯ], and turns solver contact impulses into τ_ext, the wrist wrench and a contact flag.
+
+use std::sync::Arc;
+
+use nalgebra::{DMatrix, DVector, Isometry3, Point3, UnitQuaternion, Vector3};
+use rapier3d_f64::prelude::*;
+
+use crate::error::{Result, SabreError};
+use crate::model::dynamics::{joint_space_terms, DynamicsWorkspace};
+use crate::model::kinematics::{JointKind, KinematicTree, Shape};
+use crate::model::scene::Scene;
+
+/// Which robot colliders exist in the world.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RobotColliders {
+    /// Every collision primitive of the robot (the plant).
+    All,
+    /// Only these links' primitives (the reduced-order rollout model: hand, hook, forearm).
+    Links(Vec<usize>),
+}
+
+/// How the robot's joints are driven.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RobotDrive {
+    /// The closed loop of (57) integrated in joint space, with the integral action of the plant's
+    /// controller (53): q̈ = Λ (u − q̇) + Λ_I ∫(u − q̇) + M(q)⁻¹ τ_ext, each joint's acceleration bounded
+    /// by effort / inertia; gravity and Coriolis terms are compensated by the servo, as in (57). Each contact body of the robot is a free Rapier body ("proxy") carrying
+    /// the robot's effective mass at that body: every step it is placed at its forward-kinematics pose
+    /// with its forward-kinematics velocity, Rapier's contact solver resolves its contacts with the
+    /// dynamic object (so forces stay bounded by the robot's inertia, also in jams), and the contact
+    /// forces act back on the joints through τ_ext on the next step.
+    KinematicServo { bandwidth: f64, integral_gain: f64, integral_limit: f64 },
+    /// The same closed loop simulated by Rapier's multibody solver: implicit velocity motors per
+    /// joint (torque-limited), robot links without gravity. Higher fidelity, several times slower.
+    MultibodyServo { bandwidth: f64 },
+    /// Joint torques applied by the caller; gravity acts on the robot (the plant).
+    Torque,
+}
+
+impl RobotDrive {
+    fn bandwidth(&self) -> Option<f64> {
+        match *self {
+            RobotDrive::KinematicServo { bandwidth, .. } | RobotDrive::MultibodyServo { bandwidth } => Some(bandwidth),
+            RobotDrive::Torque => None,
+        }
+    }
+}
+
+/// Physics settings shared by the rollout model and the plant.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WorldConfig {
+    pub dt: f64,
+    pub colliders: RobotColliders,
+    pub drive: RobotDrive,
+    /// Coulomb friction coefficient between robot and object surfaces; low, as the paper advises,
+    /// so that plans rely on geometry (hooking) rather than on friction that is hard to know.
+    pub contact_friction: f64,
+    pub solver_iterations: usize,
+}
+
+const ROBOT_GROUP: Group = Group::GROUP_1;
+const OBJECT_GROUP: Group = Group::GROUP_2;
+const OWNER_ROBOT: u128 = 1 << 64;
+const OWNER_OBJECT: u128 = 2 << 64;
+
+/// One movable joint as Rapier sees it.
+#[derive(Debug, Clone, Copy)]
+struct DofRef {
+    link_id: usize,
+    dof: usize,
+    /// Index in the joint's 6-vector of coordinates (0 = linear x, 3 = angular x).
+    coord: usize,
+    axis: JointAxis,
+    parent_body: RigidBodyHandle,
+    child_body: RigidBodyHandle,
+}
+
+/// Static facts about a built world, shared by every copy of it.
+#[derive(Debug)]
+pub struct WorldLayout {
+    pub nq: usize,
+    pub no: usize,
+    drive: RobotDrive,
+    /// Proxy bodies of the robot (kinematic servo): link owning the body, the body, its centre of
+    /// mass in the link frame.
+    proxies: Vec<(usize, RigidBodyHandle, Point3<f64>)>,
+    /// Largest joint acceleration the servo can produce: effort / M_ii at the home configuration.
+    acceleration_limits: Vec<f64>,
+    position_limits: Vec<(f64, f64)>,
+    robot_handle: Option<MultibodyJointHandle>,
+    object_handle: MultibodyJointHandle,
+    robot_dofs: Vec<DofRef>,
+    object_dofs: Vec<DofRef>,
+    velocity_limits: Vec<f64>,
+    effort_limits: Vec<f64>,
+    /// Robot links whose contact forces the wrist force-torque sensor measures.
+    pub sensor_links: Vec<bool>,
+    pub sensor_link: usize,
+}
+
+/// Per-step interaction readings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Interaction {
+    /// Any contact between the robot and the object (or its cabinet) carried force in this step.
+    pub contact: bool,
+    /// τ_ext = Σ J_cᵀ f_c over contacts on the robot, f_c the force acting on the robot (35).
+    pub tau_ext: Vec<f64>,
+    /// Force (world frame) and torque about the sensor origin (world frame) acting on the robot
+    /// links at and beyond the wrist sensor.
+    pub wrench: [f64; 6],
+}
+
+/// The mutable Rapier state; cloning it is how a world is reset to a pristine snapshot.
+#[derive(Clone)]
+struct PhysicsState {
+    islands: IslandManager,
+    broad_phase: BroadPhaseBvh,
+    narrow_phase: NarrowPhase,
+    bodies: RigidBodySet,
+    colliders: ColliderSet,
+    impulse_joints: ImpulseJointSet,
+    multibody_joints: MultibodyJointSet,
+    soft_bodies: SoftBodySet,
+    ccd_solver: CCDSolver,
+    /// Robot configuration and velocity when the robot is a kinematic servo (else unused).
+    robot_q: Vec<f64>,
+    robot_qd: Vec<f64>,
+    /// Accumulated velocity error of the servo's integral term.
+    robot_integral: Vec<f64>,
+    /// Velocity command of the next step (servo drives).
+    command: Vec<f64>,
+    /// Interaction measured in the last step.
+    last: Interaction,
+}
+
+/// A Rapier world holding one robot and one articulated object.
+pub struct SimWorld {
+    state: PhysicsState,
+    pipeline: PhysicsPipeline,
+    params: IntegrationParameters,
+    gravity: Vector,
+    pub layout: Arc<WorldLayout>,
+    scene: Arc<Scene>,
+    link_poses: Vec<Isometry3<f64>>,
+    jacobian: Vec<f64>,
+    displacement: Vec<f64>,
+    dynamics: DynamicsWorkspace,
+    mass_matrix: DMatrix<f64>,
+    gravity_torque: DVector<f64>,
+}
+
+impl Clone for SimWorld {
+    fn clone(&self) -> Self {
+        Self {
+            state: self.state.clone(),
+            pipeline: PhysicsPipeline::new(),
+            params: self.params,
+            gravity: self.gravity,
+            layout: self.layout.clone(),
+            scene: self.scene.clone(),
+            link_poses: self.link_poses.clone(),
+            jacobian: self.jacobian.clone(),
+            displacement: self.displacement.clone(),
+            dynamics: DynamicsWorkspace::default(),
+            mass_matrix: self.mass_matrix.clone(),
+            gravity_torque: self.gravity_torque.clone(),
+        }
+    }
+}
+
+fn vec_to_rapier(v: &Vector3<f64>) -> Vector {
+    Vector::new(v.x, v.y, v.z)
+}
+
+fn vec_from_rapier(v: Vector) -> Vector3<f64> {
+    Vector3::new(v.x, v.y, v.z)
+}
+
+fn pose_to_rapier(iso: &Isometry3<f64>) -> Pose {
+    Pose::from(*iso)
+}
+
+/// Rotation that maps the x axis onto `axis` (Rapier joints move along or about their local x).
+fn align_x_to(axis: &Vector3<f64>) -> UnitQuaternion<f64> {
+    UnitQuaternion::rotation_between(&Vector3::x(), axis)
+        .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::PI))
+}
+
+/// For each link: the link that owns its rigid body (fixed joints merge links) and its pose in that body.
+fn body_groups(tree: &KinematicTree) -> (Vec<usize>, Vec<Isometry3<f64>>) {
+    let n = tree.links.len();
+    let mut group: Vec<usize> = (0..n).collect();
+    let mut offset = vec![Isometry3::identity(); n];
+    for &j in &tree.topological_joints {
+        let joint = &tree.joints[j];
+        if joint.kind == JointKind::Fixed {
+            group[joint.child] = group[joint.parent];
+            offset[joint.child] = offset[joint.parent] * joint.origin;
+        }
+    }
+    (group, offset)
+}
+
+fn mass_properties(tree: &KinematicTree, group: &[usize], offset: &[Isometry3<f64>], body: usize) -> MassProperties {
+    let mut total = MassProperties::default();
+    for (link, l) in tree.links.iter().enumerate() {
+        if group[link] != body {
+            continue;
+        }
+        if let Some(inertial) = &l.inertial {
+            let m = inertial.inertia;
+            let local = MassProperties::with_inertia_matrix(
+                vec_to_rapier(&inertial.com),
+                inertial.mass,
+                Matrix::from_cols_array(&[m[(0, 0)], m[(1, 0)], m[(2, 0)], m[(0, 1)], m[(1, 1)], m[(2, 1)], m[(0, 2)], m[(1, 2)], m[(2, 2)]]),
+            );
+            total += local.transform_by(&pose_to_rapier(&offset[link]));
+        }
+    }
+    if total.mass() <= 0.0 {
+        // Massless intermediate links (virtual base axes) still need an invertible inertia.
+        total = MassProperties::new(Vector::ZERO, 1e-3, Vector::splat(1e-6));
+    }
+    total
+}
+
+fn collider_for(shape: &Shape) -> (ColliderBuilder, Isometry3<f64>) {
+    match *shape {
+        Shape::Box { half_extents: h } => (ColliderBuilder::cuboid(h.x, h.y, h.z), Isometry3::identity()),
+        Shape::Sphere { radius } => (ColliderBuilder::ball(radius), Isometry3::identity()),
+        // URDF cylinders run along z, Rapier's along y: rotate y onto z.
+        Shape::Cylinder { radius, half_length } => (
+            ColliderBuilder::cylinder(half_length, radius),
+            Isometry3::rotation(Vector3::x() * std::f64::consts::FRAC_PI_2),
+        ),
+        Shape::Capsule { radius, half_length } => (ColliderBuilder::capsule_z(half_length, radius), Isometry3::identity()),
+    }
+}
+
+/// Smallest effective mass of the robot felt at `point` (link frame) of `link`: 1 / λ_max(J_v M⁻¹ J_vᵀ).
+fn effective_mass(tree: &KinematicTree, q: &[f64], link: usize, point: &Point3<f64>) -> f64 {
+    let n = tree.nq();
+    let mut ws = DynamicsWorkspace::default();
+    let mut m = DMatrix::zeros(n, n);
+    let mut g = DVector::zeros(n);
+    joint_space_terms(tree, &Isometry3::identity(), q, &Vector3::zeros(), &mut ws, &mut m, &mut g);
+    let poses = tree.link_poses(&Isometry3::identity(), q);
+    let mut jac = vec![0.0; 6 * n];
+    tree.point_jacobian_into(&poses, link, &(poses[link] * point), &mut jac);
+    let jv = DMatrix::from_fn(3, n, |r, c| jac[6 * c + r]);
+    let Some(chol) = m.cholesky() else { return 1.0 };
+    let a = &jv * chol.solve(&jv.transpose());
+    let largest = a.symmetric_eigenvalues().max();
+    if largest > 0.0 {
+        (1.0 / largest).clamp(0.1, 1e3)
+    } else {
+        1.0
+    }
+}
+
+struct BuiltTree {
+    bodies: Vec<Option<RigidBodyHandle>>,
+    dofs: Vec<DofRef>,
+    first_joint: Option<MultibodyJointHandle>,
+}
+
+#[allow(clippy::too_many_arguments)]
+fn build_tree(
+    state: &mut PhysicsState,
+    tree: &KinematicTree,
+    root_pose: &Isometry3<f64>,
+    q0: &[f64],
+    include_collider: &dyn Fn(usize) -> bool,
+    membership: (Group, Group, u128),
+    friction: f64,
+    gravity_scale: f64,
+    drive: Option<&RobotDrive>,
+) -> Result<BuiltTree> {
+    let (group, offset) = body_groups(tree);
+    let poses = tree.link_poses(root_pose, q0);
+    let n = tree.links.len();
+    let mut bodies: Vec<Option<RigidBodyHandle>> = vec![None; n];
+    let kinematic = matches!(drive, Some(RobotDrive::KinematicServo { .. }));
+    for link in 0..n {
+        if group[link] != link {
+            continue;
+        }
+        if kinematic {
+            // Only bodies that carry contact geometry exist, as free proxies with the robot's
+            // effective mass at that body.
+            let has_colliders = (0..n).any(|l| group[l] == link && include_collider(l) && !tree.links[l].collisions.is_empty());
+            if has_colliders {
+                let own = mass_properties(tree, &group, &offset, link);
+                let effective = effective_mass(tree, q0, link, &Point3::from(vec_from_rapier(own.local_com)));
+                let scale = effective / own.mass().max(1e-9);
+                let mprops = MassProperties::with_principal_inertia_frame(
+                    own.local_com,
+                    effective,
+                    own.principal_inertia() * scale,
+                    own.principal_inertia_local_frame,
+                );
+                let rb = RigidBodyBuilder::dynamic()
+                    .additional_mass_properties(mprops)
+                    .gravity_scale(0.0)
+                    .can_sleep(false)
+                    .pose(pose_to_rapier(&poses[link]))
+                    .build();
+                bodies[link] = Some(state.bodies.insert(rb));
+            }
+            continue;
+        }
+        let builder = if link == tree.root {
+            RigidBodyBuilder::fixed()
+        } else {
+            RigidBodyBuilder::dynamic()
+                .additional_mass_properties(mass_properties(tree, &group, &offset, link))
+                .gravity_scale(gravity_scale)
+                .can_sleep(false)
+        };
+        bodies[link] = Some(state.bodies.insert(builder.pose(pose_to_rapier(&poses[link])).build()));
+    }
+    for (link, l) in tree.links.iter().enumerate() {
+        if !include_collider(link) {
+            continue;
+        }
+        let Some(body) = bodies[group[link]] else { continue };
+        for c in &l.collisions {
+            let (builder, shape_frame) = collider_for(&c.shape);
+            let collider = builder
+                .position(pose_to_rapier(&(offset[link] * c.origin * shape_frame)))
+                .density(0.0)
+                .friction(friction)
+                .restitution(0.0)
+                .collision_groups(InteractionGroups::new(membership.0, membership.1, InteractionTestMode::And))
+                .user_data(membership.2 | link as u128)
+                .build();
+            state.colliders.insert_with_parent(collider, body, &mut state.bodies);
+        }
+    }
+    let mut dofs = Vec::with_capacity(tree.nq());
+    let mut first_joint = None;
+    let mut handles = Vec::with_capacity(tree.nq());
+    if kinematic {
+        return Ok(BuiltTree {
+            bodies,
+            dofs,
+            first_joint,
+        });
+    }
+    for &j in &tree.topological_joints {
+        let joint = &tree.joints[j];
+        if joint.kind == JointKind::Fixed {
+            continue;
+        }
+        let align = align_x_to(&joint.axis);
+        let frame1 = offset[joint.parent] * joint.origin * Isometry3::from_parts(Default::default(), align);
+        let frame2 = Isometry3::from_parts(Default::default(), align);
+        let (locked, axis, coord) = match joint.kind {
+            JointKind::Revolute => (JointAxesMask::LOCKED_REVOLUTE_AXES, JointAxis::AngX, 3),
+            _ => (JointAxesMask::LOCKED_PRISMATIC_AXES, JointAxis::LinX, 0),
+        };
+        let mut builder = GenericJointBuilder::new(locked)
+            .local_frame1(pose_to_rapier(&frame1))
+            .local_frame2(pose_to_rapier(&frame2))
+            .contacts_enabled(false);
+        if joint.limits.lower.is_finite() && joint.limits.upper.is_finite() {
+            builder = builder.limits(axis, [joint.limits.lower, joint.limits.upper]);
+        }
+        if let Some(RobotDrive::MultibodyServo { bandwidth }) = drive {
+            builder = builder
+                .motor_model(axis, MotorModel::AccelerationBased)
+                .motor_velocity(axis, 0.0, *bandwidth)
+                .motor_max_force(axis, joint.limits.effort);
+        }
+        let parent_body = bodies[group[joint.parent]].expect("parent body");
+        let child_body = bodies[joint.child].expect("child body");
+        let handle = state
+            .multibody_joints
+            .insert(parent_body, child_body, builder.build(), true)
+            .ok_or_else(|| SabreError::Simulation(format!("Rapier rejected joint '{}'", joint.name)))?;
+        first_joint.get_or_insert(handle);
+        handles.push((j, handle, axis, coord, parent_body, child_body));
+    }
+    // Link ids are final only once every joint of the multibody is inserted, and a fixed root's
+    // six free coordinates are dropped only by the first forward-kinematics pass.
+    if let Some(h) = first_joint {
+        let (mb, _) = state.multibody_joints.get_mut(h).expect("inserted");
+        mb.forward_kinematics(&state.bodies, true);
+    }
+    let mut by_q: Vec<Option<DofRef>> = vec![None; tree.nq()];
+    for (j, handle, axis, coord, parent_body, child_body) in handles {
+        let (mb, link_id) = state.multibody_joints.get(handle).expect("inserted");
+        let q_index = tree.joints[j].q_index.expect("movable");
+        by_q[q_index] = Some(DofRef {
+            link_id,
+            dof: mb.link(link_id).expect("link").assembly_id(),
+            coord,
+            axis,
+            parent_body,
+            child_body,
+        });
+    }
+    dofs.extend(by_q.into_iter().map(|d| d.expect("every coordinate has a joint")));
+    if let Some(h) = first_joint {
+        let (mb, _) = state.multibody_joints.get_mut(h).expect("inserted");
+        let damping = mb.damping_mut();
+        damping.fill(0.0);
+        for (qi, d) in dofs.iter().enumerate() {
+            damping[d.dof] = tree.joints[tree.active_joints[qi]].damping;
+        }
+        let frictions = mb.frictions_mut();
+        frictions.fill(0.0);
+        for (qi, d) in dofs.iter().enumerate() {
+            frictions[d.dof] = tree.joints[tree.active_joints[qi]].friction;
+        }
+    }
+    Ok(BuiltTree {
+        bodies,
+        dofs,
+        first_joint,
+    })
+}
+
+impl SimWorld {
+    /// Builds the world once; copies of it are reset, never rebuilt.
+    pub fn new(scene: Arc<Scene>, config: &WorldConfig) -> Result<Self> {
+        if !(config.dt.is_finite() && config.dt > 0.0) {
+            return Err(SabreError::invalid("dt", format!("must be positive and finite, got {}", config.dt)));
+        }
+        if let Some(bandwidth) = config.drive.bandwidth() {
+            if !(bandwidth.is_finite() && bandwidth > 0.0) {
+                return Err(SabreError::invalid("servo bandwidth", format!("must be positive, got {bandwidth}")));
+            }
+        }
+        let nq = scene.nq();
+        let mut state = PhysicsState {
+            islands: IslandManager::new(),
+            broad_phase: BroadPhaseBvh::new(),
+            narrow_phase: NarrowPhase::new(),
+            bodies: RigidBodySet::new(),
+            colliders: ColliderSet::new(),
+            impulse_joints: ImpulseJointSet::new(),
+            multibody_joints: MultibodyJointSet::new(),
+            soft_bodies: SoftBodySet::new(),
+            ccd_solver: CCDSolver::new(),
+            robot_q: vec![0.0; nq],
+            robot_qd: vec![0.0; nq],
+            robot_integral: vec![0.0; nq],
+            command: vec![0.0; nq],
+            last: Interaction {
+                contact: false,
+                tau_ext: vec![0.0; nq],
+                wrench: [0.0; 6],
+            },
+        };
+        let x0 = scene.default_state();
+        let no = scene.no();
+        let robot_links: Vec<bool> = match &config.colliders {
+            RobotColliders::All => vec![true; scene.robot.links.len()],
+            RobotColliders::Links(links) => {
+                let mut v = vec![false; scene.robot.links.len()];
+                links.iter().for_each(|&l| v[l] = true);
+                v
+            }
+        };
+        let (drive, gravity_scale) = match config.drive {
+            RobotDrive::KinematicServo { .. } | RobotDrive::MultibodyServo { .. } => (Some(&config.drive), 0.0),
+            RobotDrive::Torque => (None, 1.0),
+        };
+        let robot = build_tree(
+            &mut state,
+            &scene.robot,
+            &Isometry3::identity(),
+            &x0[..nq],
+            &|l| robot_links[l],
+            (ROBOT_GROUP, OBJECT_GROUP, OWNER_ROBOT),
+            config.contact_friction,
+            gravity_scale,
+            drive,
+        )?;
+        let object = build_tree(
+            &mut state,
+            &scene.object,
+            &scene.object_pose,
+            &x0[2 * nq..2 * nq + no],
+            &|_| true,
+            (OBJECT_GROUP, ROBOT_GROUP, OWNER_OBJECT),
+            config.contact_friction,
+            1.0,
+            None,
+        )?;
+        let proxies = robot
+            .bodies
+            .iter()
+            .enumerate()
+            .filter_map(|(link, b)| b.map(|b| (link, b)))
+            .filter(|_| matches!(config.drive, RobotDrive::KinematicServo { .. }))
+            .map(|(link, b)| (link, b, Point3::from(vec_from_rapier(state.bodies[b].local_center_of_mass()))))
+            .collect();
+        let mut dynamics = DynamicsWorkspace::default();
+        let mut mass_matrix = DMatrix::zeros(nq, nq);
+        let mut gravity_torque = DVector::zeros(nq);
+        joint_space_terms(
+            &scene.robot,
+            &Isometry3::identity(),
+            &scene.home_configuration(),
+            &Vector3::zeros(),
+            &mut dynamics,
+            &mut mass_matrix,
+            &mut gravity_torque,
+        );
+
+        let sensor_link = scene
+            .robot
+            .link_id("panda_link8")
+            .unwrap_or_else(|| scene.robot.joints[*scene.robot.active_joints.last().expect("nq > 0")].child);
+        let sensor_links = (0..scene.robot.links.len())
+            .map(|l| {
+                let mut cur = Some(l);
+                while let Some(c) = cur {
+                    if c == sensor_link {
+                        return true;
+                    }
+                    cur = scene.robot.links[c].parent_joint.map(|j| scene.robot.joints[j].parent);
+                }
+                false
+            })
+            .collect();
+        let limits = scene.robot_limits();
+        let layout = WorldLayout {
+            nq,
+            no,
+            drive: config.drive,
+            proxies,
+            acceleration_limits: limits
+                .iter()
+                .enumerate()
+                .map(|(i, l)| l.effort / mass_matrix[(i, i)].max(1e-9))
+                .collect(),
+            position_limits: limits.iter().map(|l| (l.lower, l.upper)).collect(),
+            robot_handle: robot.first_joint,
+            object_handle: object.first_joint.expect("object has joints"),
+            robot_dofs: robot.dofs,
+            object_dofs: object.dofs,
+            velocity_limits: limits.iter().map(|l| l.velocity).collect(),
+            effort_limits: limits.iter().map(|l| l.effort).collect(),
+            sensor_links,
+            sensor_link,
+        };
+        let mut params = IntegrationParameters::default();
+        params.dt = config.dt;
+        params.num_solver_iterations = config.solver_iterations.max(1);
+        // Proxies are re-placed every step; recycled manifolds would keep contacts from the
+        // pose before the jump (seen as forces across centimetre gaps).
+        let proxies_used = matches!(config.drive, RobotDrive::KinematicServo { .. });
+        params.contact_recycling = !proxies_used;
+        if proxies_used {
+            // Proxies re-enter a little of what they pushed every step; a stiffer, less damped contact
+            // than Rapier's default (30 Hz, ζ = 10) resolves that within a step or two at dt = 15 ms,
+            // so a hooked handle is held instead of slipping off the 16 mm tip.
+            params.contact_softness.natural_frequency = 60.0;
+            params.contact_softness.damping_ratio = 1.0;
+        }
+        let mut world = Self {
+            state,
+            pipeline: PhysicsPipeline::new(),
+            params,
+            gravity: Vector::new(0.0, 0.0, -9.81),
+            layout: Arc::new(layout),
+            link_poses: Vec::with_capacity(scene.robot.links.len()),
+            jacobian: vec![0.0; 6 * nq],
+            displacement: Vec::new(),
+            dynamics,
+            mass_matrix,
+            gravity_torque,
+            scene,
+        };
+        world.set_state(&x0);
+        Ok(world)
+    }
+
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    pub fn dt(&self) -> f64 {
+        self.params.dt
+    }
+
+    /// Restores every piece of Rapier state (bodies, contacts, warm starts, broad phase) from `snapshot`.
+    /// The result depends only on the snapshot, never on what this world simulated before.
+    pub fn restore_from(&mut self, snapshot: &SimWorld) {
+        self.state.clone_from(&snapshot.state);
+    }
+
+    fn set_tree_state(
+        multibodies: &mut MultibodyJointSet,
+        bodies: &mut RigidBodySet,
+        handle: MultibodyJointHandle,
+        dofs: &[DofRef],
+        q: &[f64],
+        qd: &[f64],
+        displacement: &mut Vec<f64>,
+    ) {
+        let (mb, _) = multibodies.get_mut(handle).expect("multibody");
+        displacement.clear();
+        displacement.resize(mb.ndofs(), 0.0);
+        for (i, d) in dofs.iter().enumerate() {
+            let current = mb.link(d.link_id).expect("link").joint().coords()[d.coord];
+            displacement[d.dof] = q[i] - current;
+        }
+        mb.apply_displacements(displacement);
+        {
+            let mut v = mb.generalized_velocity_mut();
+            v.fill(0.0);
+            for (i, d) in dofs.iter().enumerate() {
+                v[d.dof] = qd[i];
+            }
+        }
+        mb.forward_kinematics(bodies, false);
+        mb.update_rigid_bodies(bodies, true);
+    }
+
+    /// Places robot and object at state x = [q, q̇, o, ȯ] (x must be validated by the caller).
+    pub fn set_state(&mut self, x: &[f64]) {
+        let (nq, no) = (self.layout.nq, self.layout.no);
+        let layout = self.layout.clone();
+        match layout.robot_handle {
+            Some(handle) => Self::set_tree_state(
+                &mut self.state.multibody_joints,
+                &mut self.state.bodies,
+                handle,
+                &layout.robot_dofs,
+                &x[..nq],
+                &x[nq..2 * nq],
+                &mut self.displacement,
+            ),
+            None => {
+                self.state.robot_q.copy_from_slice(&x[..nq]);
+                self.state.robot_qd.copy_from_slice(&x[nq..2 * nq]);
+                self.state.robot_integral.iter_mut().for_each(|v| *v = 0.0);
+                let qd = self.state.robot_qd.clone();
+                self.place_proxies(&qd);
+            }
+        }
+        Self::set_tree_state(
+            &mut self.state.multibody_joints,
+            &mut self.state.bodies,
+            layout.object_handle,
+            &layout.object_dofs,
+            &x[2 * nq..2 * nq + no],
+            &x[2 * nq + no..],
+            &mut self.displacement,
+        );
+        self.state.command.iter_mut().for_each(|v| *v = 0.0);
+        self.state.last.contact = false;
+        self.state.last.tau_ext.iter_mut().for_each(|v| *v = 0.0);
+        self.state.last.wrench = [0.0; 6];
+    }
+
+    /// Places every proxy body at the forward kinematics of `robot_q` with the velocity that the
+    /// joint velocities `qd` give it.
+    fn place_proxies(&mut self, qd: &[f64]) {
+        self.scene.robot.link_poses_into(&Isometry3::identity(), &self.state.robot_q, &mut self.link_poses);
+        for &(link, body, com) in &self.layout.proxies {
+            let pose = self.link_poses[link];
+            let com_world = pose * com;
+            self.scene.robot.point_jacobian_into(&self.link_poses, link, &com_world, &mut self.jacobian);
+            let mut twist = [0.0; 6];
+            for (c, &v) in qd.iter().enumerate() {
+                for (r, t) in twist.iter_mut().enumerate() {
+                    *t += self.jacobian[6 * c + r] * v;
+                }
+            }
+            let rb = &mut self.state.bodies[body];
+            rb.set_position(pose_to_rapier(&pose), true);
+            rb.set_linvel(Vector::new(twist[0], twist[1], twist[2]), true);
+            rb.set_angvel(Vector::new(twist[3], twist[4], twist[5]), true);
+        }
+    }
+
+    /// Writes the current state into `x` (length nx).
+    pub fn read_state(&self, x: &mut [f64]) {
+        let (nq, no) = (self.layout.nq, self.layout.no);
+        let mbs = &self.state.multibody_joints;
+        match self.layout.robot_handle {
+            Some(handle) => {
+                let (robot, _) = mbs.get(handle).expect("robot");
+                let rv = robot.generalized_velocity();
+                for (i, d) in self.layout.robot_dofs.iter().enumerate() {
+                    x[i] = robot.link(d.link_id).expect("link").joint().coords()[d.coord];
+                    x[nq + i] = rv[d.dof];
+                }
+            }
+            None => {
+                x[..nq].copy_from_slice(&self.state.robot_q);
+                x[nq..2 * nq].copy_from_slice(&self.state.robot_qd);
+            }
+        }
+        let (object, _) = mbs.get(self.layout.object_handle).expect("object");
+        let ov = object.generalized_velocity();
+        for (i, d) in self.layout.object_dofs.iter().enumerate() {
+            x[2 * nq + i] = object.link(d.link_id).expect("link").joint().coords()[d.coord];
+            x[2 * nq + no + i] = ov[d.dof];
+        }
+    }
+
+    /// Sets the joint velocity command of the next step for the servo drives, projected onto the
+    /// joint velocity limits.
+    pub fn set_velocity_command(&mut self, u: &[f64]) {
+        let layout = self.layout.clone();
+        for (i, c) in self.state.command.iter_mut().enumerate() {
+            let limit = layout.velocity_limits[i];
+            *c = u[i].clamp(-limit, limit);
+        }
+        if let (Some(handle), RobotDrive::MultibodyServo { bandwidth }) = (layout.robot_handle, layout.drive) {
+            let (mb, _) = self.state.multibody_joints.get_mut(handle).expect("robot");
+            for (i, d) in layout.robot_dofs.iter().enumerate() {
+                if let Some(link) = mb.link_mut(d.link_id) {
+                    link.joint.data.set_motor_velocity(d.axis, self.state.command[i], bandwidth);
+                }
+            }
+        }
+    }
+
+    /// Applies joint torques (clamped to the effort limits) for the next step as equal and opposite
+    /// wrenches on each joint's child and parent bodies, which Rapier maps to exactly τ_i on that joint.
+    pub fn apply_joint_torques(&mut self, tau: &[f64], applied: &mut [f64]) {
+        let Some(handle) = self.layout.robot_handle else { return };
+        let bodies = &mut self.state.bodies;
+        for (_, rb) in bodies.iter_mut() {
+            rb.reset_forces(false);
+            rb.reset_torques(false);
+        }
+        let (mb, _) = self.state.multibody_joints.get(handle).expect("robot");
+        for (i, d) in self.layout.robot_dofs.iter().enumerate() {
+            let limit = self.layout.effort_limits[i];
+            let t = tau[i].clamp(-limit, limit);
+            applied[i] = t;
+            if t == 0.0 {
+                continue;
+            }
+            let link = mb.link(d.link_id).expect("link");
+            let frame = *link.local_to_world() * link.joint().data.local_frame2;
+            let axis = frame.rotation * Vector::X;
+            let origin = frame.translation;
+            match d.axis {
+                JointAxis::AngX => {
+                    bodies[d.child_body].add_torque(axis * t, true);
+                    bodies[d.parent_body].add_torque(-axis * t, true);
+                }
+                _ => {
+                    bodies[d.child_body].add_force_at_point(axis * t, origin, true);
+                    bodies[d.parent_body].add_force_at_point(-axis * t, origin, true);
+                }
+            }
+        }
+    }
+
+    /// Locks (or releases) the object's joints in place: a stuck door or drawer.
+    pub fn hold_object(&mut self, hold: bool) {
+        let (mb, _) = self.state.multibody_joints.get_mut(self.layout.object_handle).expect("object");
+        for d in &self.layout.object_dofs {
+            if let Some(link) = mb.link_mut(d.link_id) {
+                link.joint.kinematic = hold;
+            }
+        }
+        if hold {
+            let mut v = mb.generalized_velocity_mut();
+            for d in &self.layout.object_dofs {
+                v[d.dof] = 0.0;
+            }
+        }
+    }
+
+    /// One step of the kinematic servo: semi-implicit Euler of q̈ = Λ (u − q̇) + Λ_I ∫(u − q̇) + M⁻¹ τ_ext.
+    fn advance_kinematic_robot(&mut self, bandwidth: f64, integral_gain: f64, integral_limit: f64) {
+        let dt = self.params.dt;
+        let nq = self.layout.nq;
+        let in_contact = self.state.last.tau_ext.iter().any(|&t| t != 0.0);
+        if in_contact {
+            joint_space_terms(
+                &self.scene.robot,
+                &Isometry3::identity(),
+                &self.state.robot_q,
+                &Vector3::zeros(),
+                &mut self.dynamics,
+                &mut self.mass_matrix,
+                &mut self.gravity_torque,
+            );
+        }
+        let contact_acceleration = if in_contact {
+            self.mass_matrix
+                .clone()
+                .cholesky()
+                .map(|c| c.solve(&DVector::from_column_slice(&self.state.last.tau_ext)))
+        } else {
+            None
+        };
+        let mut q_next = std::mem::take(&mut self.displacement);
+        q_next.clear();
+        for i in 0..nq {
+            let qd = self.state.robot_qd[i];
+            let external = contact_acceleration.as_ref().map_or(0.0, |a| a[i]);
+            let previous_integral = self.state.robot_integral[i];
+            let integral = (previous_integral + dt * (self.state.command[i] - qd)).clamp(-integral_limit, integral_limit);
+            let drive = bandwidth * self.state.command[i] + integral_gain * integral + external;
+            let target = (qd + dt * drive) / (1.0 + dt * bandwidth);
+            let max_change = self.layout.acceleration_limits[i] * dt;
+            let saturated = (target - qd).abs() > max_change;
+            let mut qd_next = qd + (target - qd).clamp(-max_change, max_change);
+            // Anti-windup: a saturated joint does not accumulate error it cannot act on.
+            self.state.robot_integral[i] = if saturated { previous_integral } else { integral };
+            let (lower, upper) = self.layout.position_limits[i];
+            let mut next = self.state.robot_q[i] + dt * qd_next;
+            if next < lower || next > upper {
+                next = next.clamp(lower, upper);
+                qd_next = (next - self.state.robot_q[i]) / dt;
+                self.state.robot_integral[i] = previous_integral;
+            }
+            q_next.push(next);
+            self.state.robot_qd[i] = qd_next;
+        }
+        // The proxies start the step where the robot is, moving as it will move during the step.
+        let qd = self.state.robot_qd.clone();
+        self.place_proxies(&qd);
+        self.state.robot_q.copy_from_slice(&q_next);
+        self.displacement = q_next;
+    }
+
+    /// Advances the physics by one step of length dt under the current command, then measures
+    /// the interaction of that step.
+    pub fn step(&mut self) {
+        if let RobotDrive::KinematicServo {
+            bandwidth,
+            integral_gain,
+            integral_limit,
+        } = self.layout.drive
+        {
+            self.advance_kinematic_robot(bandwidth, integral_gain, integral_limit);
+        }
+        let s = &mut self.state;
+        self.pipeline.step(
+            self.gravity,
+            &self.params,
+            &mut s.islands,
+            &mut s.broad_phase,
+            &mut s.narrow_phase,
+            &mut s.bodies,
+            &mut s.colliders,
+            &mut s.impulse_joints,
+            &mut s.multibody_joints,
+            &mut s.soft_bodies,
+            &mut s.ccd_solver,
+            &(),
+            &(),
+        );
+        self.measure_interaction();
+    }
+
+    /// Interaction measured in the last step.
+    pub fn interaction(&self) -> &Interaction {
+        &self.state.last
+    }
+
+    fn measure_interaction(&mut self) {
+        let nq = self.layout.nq;
+        let mut last = std::mem::replace(
+            &mut self.state.last,
+            Interaction {
+                contact: false,
+                tau_ext: Vec::new(),
+                wrench: [0.0; 6],
+            },
+        );
+        last.contact = false;
+        last.tau_ext.iter_mut().for_each(|v| *v = 0.0);
+        last.wrench = [0.0; 6];
+        let inv_dt = 1.0 / self.params.dt;
+        let mut poses_ready = false;
+        for pair in self.state.narrow_phase.contact_pairs() {
+            let (Some(c1), Some(c2)) = (self.state.colliders.get(pair.collider1), self.state.colliders.get(pair.collider2)) else {
+                continue;
+            };
+            let owner = |c: &Collider| c.user_data & !0xffff_ffff_ffff_ffff;
+            // The robot may be either side of the pair; forces are taken as acting on the robot.
+            let (robot_link, robot_is_first) = match (owner(c1), owner(c2)) {
+                (OWNER_ROBOT, OWNER_OBJECT) => ((c1.user_data & 0xffff_ffff) as usize, true),
+                (OWNER_OBJECT, OWNER_ROBOT) => ((c2.user_data & 0xffff_ffff) as usize, false),
+                _ => continue,
+            };
+            for manifold in pair.solver_manifolds() {
+                for sc in manifold.data.solver_contacts.iter() {
+                    let contact_index = (sc.contact_id[0] & !NEW_CONTACT_BIT) as usize;
+                    let Some(point) = manifold.points.get(contact_index) else { continue };
+                    let normal_impulse = point.data.impulse;
+                    let tangent_impulse = point.data.warmstart_tangent_world;
+                    if normal_impulse <= 0.0 && tangent_impulse.length_squared() == 0.0 {
+                        continue;
+                    }
+                    // The normal points from the first collider to the second; the normal impulse
+                    // pushes the first collider back along −normal.
+                    let on_first = -(manifold.data.normal * normal_impulse) + tangent_impulse;
+                    let impulse = if robot_is_first { on_first } else { -on_first };
+                    let force = vec_from_rapier(impulse * inv_dt);
+                    let (p1, p2) = manifold.data.solver_contact_world_points(sc, &self.state.bodies);
+                    let p = vec_from_rapier((p1 + p2) * 0.5);
+                    last.contact = true;
+                    if !poses_ready {
+                        let mut q = std::mem::take(&mut self.displacement);
+                        q.resize(nq, 0.0);
+                        self.read_robot_q(&mut q);
+                        self.scene.robot.link_poses_into(&Isometry3::identity(), &q, &mut self.link_poses);
+                        self.displacement = q;
+                        poses_ready = true;
+                    }
+                    let point = Point3::from(p);
+                    self.scene.robot.point_jacobian_into(&self.link_poses, robot_link, &point, &mut self.jacobian);
+                    for (c, t) in last.tau_ext.iter_mut().enumerate() {
+                        let col = &self.jacobian[6 * c..6 * c + 3];
+                        *t += col[0] * force.x + col[1] * force.y + col[2] * force.z;
+                    }
+                    if self.layout.sensor_links[robot_link] {
+                        let sensor = self.link_poses[self.layout.sensor_link].translation.vector;
+                        let torque = (p - sensor).cross(&force);
+                        for (w, v) in last.wrench.iter_mut().zip([force.x, force.y, force.z, torque.x, torque.y, torque.z]) {
+                            *w += v;
+                        }
+                    }
+                }
+            }
+        }
+        self.state.last = last;
+    }
+
+    fn read_robot_q(&self, q: &mut [f64]) {
+        match self.layout.robot_handle {
+            Some(handle) => {
+                let (robot, _) = self.state.multibody_joints.get(handle).expect("robot");
+                for (i, d) in self.layout.robot_dofs.iter().enumerate() {
+                    q[i] = robot.link(d.link_id).expect("link").joint().coords()[d.coord];
+                }
+            }
+            None => q.copy_from_slice(&self.state.robot_q),
+        }
+    }
+}
