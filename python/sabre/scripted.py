@@ -66,6 +66,7 @@ def hook_and_pull(
     approach_time: float = 4.0,
     pull_time: float = 5.0,
     release_after: bool | None = None,
+    standoff: float = 0.75,
 ) -> ScriptedMotion:
     """Plans the hook finger onto the handle and pulls the handle along its opening path.
 
@@ -142,6 +143,17 @@ def hook_and_pull(
     weights[:3] = 4.0  # moving the 165 kg base is costlier than moving the arm
     w_inv = 1.0 / weights
     home = scene.home_configuration()
+    # Null-space posture: for a Panda, elbow up and wrist pitched so the hand points forward
+    # with margin on every joint limit; other robots keep their home configuration.
+    if scene.joint_names[3:] == tuple(f"panda_joint{i}" for i in range(1, 8)):
+        home = home.copy()
+        home[3:] = [0.0, 0.3, 0.0, -1.9, 0.0, 2.2, 0.785]
+    # Keep the base footprint (radius 0.53 m) clear of the cabinet front: its centre stays
+    # `standoff` in front of the object's front plane (the plane x = 0 of the object frame).
+    pose = scene.object_pose
+    front_normal = -pose[:3, 0]  # points from the object toward the robot
+    front_point = pose[:3, 3]
+    base_joints = [i for i, n in enumerate(scene.joint_names) if n in ("base_x", "base_y")]
     k = 0
     for phase, duration, pose_at in segments:
         steps = int(round(duration / dt))
@@ -162,6 +174,11 @@ def hook_and_pull(
             u = u + null @ posture
             u = np.clip(u, -0.8 * vmax, 0.8 * vmax)
             q_next = np.clip(q + dt * u, lower + 1e-3, upper_q - 1e-3)
+            if len(base_joints) == 2:
+                xy = q_next[base_joints]
+                depth = standoff - float(np.dot(np.r_[xy, 0.0] - front_point, front_normal))
+                if depth > 0.0:
+                    q_next[base_joints] = xy + depth * front_normal[:2] / max(np.linalg.norm(front_normal[:2]), 1e-9)
             U[k] = (q_next - q) / dt  # what the joints can actually do at their limits
             q = q_next
             phases[k] = phase

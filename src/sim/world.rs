@@ -553,9 +553,11 @@ impl SimWorld {
         params.num_solver_iterations = config.solver_iterations.max(1);
         // Proxies are re-placed every step; recycled manifolds would keep contacts from the
         // pose before the jump (seen as forces across centimetre gaps).
-        let proxies_used = matches!(config.drive, RobotDrive::KinematicServo { .. });
-        params.contact_recycling = !proxies_used;
-        if proxies_used {
+        // Recycled manifolds keep a contact's normal and separation while bodies move less than
+        // 5 cm: far too coarse for a 1 cm bar and a 16 mm hook (a finger passing beside the bar
+        // keeps "touching" it long after), and wrong for proxies that are re-placed every step.
+        params.contact_recycling = false;
+        if matches!(config.drive, RobotDrive::KinematicServo { .. }) {
             // Proxies re-enter a little of what they pushed every step; a stiffer, less damped contact
             // than Rapier's default (30 Hz, ζ = 10) resolves that within a step or two at dt = 15 ms,
             // so a hooked handle is held instead of slipping off the 16 mm tip.
