@@ -2,13 +2,14 @@
 
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Vector3};
 
-use super::kinematics::KinematicTree;
+use super::kinematics::{Frames, KinematicTree};
 
-/// Reusable buffers for [`joint_space_terms`].
+/// Reusable buffers for [`joint_space_terms`]; `frames` holds the link poses of the last call.
 #[derive(Debug, Default, Clone)]
 pub struct DynamicsWorkspace {
-    poses: Vec<Isometry3<f64>>,
+    pub frames: Frames,
     jacobian: Vec<f64>,
+    columns: Vec<usize>,
 }
 
 /// M(q) = Σ_links (m J_vᵀ J_v + J_ωᵀ I_world J_ω) with J taken at each link's centre of mass, and
@@ -27,27 +28,28 @@ pub fn joint_space_terms(
     mass_matrix.fill(0.0);
     gravity_torque.resize_vertically_mut(n, 0.0);
     gravity_torque.fill(0.0);
-    tree.link_poses_into(root_pose, q, &mut ws.poses);
+    tree.update_frames(root_pose, q, &mut ws.frames);
     ws.jacobian.resize(6 * n, 0.0);
     for (link, l) in tree.links.iter().enumerate() {
         let Some(inertial) = &l.inertial else { continue };
         if tree.ancestor_active_joints(link).is_empty() {
             continue;
         }
-        let pose = ws.poses[link];
+        let pose = ws.frames.poses[link];
         let com = pose * Point3::from(inertial.com);
-        tree.point_jacobian_into(&ws.poses, link, &com, &mut ws.jacobian);
+        tree.frames_jacobian_into(&ws.frames, link, &com, &mut ws.jacobian);
         let r = pose.rotation.to_rotation_matrix();
         let inertia_world = r.matrix() * inertial.inertia * r.matrix().transpose();
-        let cols = tree.ancestor_active_joints(link).iter().map(|&j| tree.joints[j].q_index.expect("movable"));
-        let cols: Vec<usize> = cols.collect();
-        for &a in &cols {
+        ws.columns.clear();
+        ws.columns.extend(tree.ancestor_active_joints(link).iter().map(|&j| tree.joints[j].q_index.expect("movable")));
+        let cols = &ws.columns;
+        for &a in cols {
             let ja = &ws.jacobian[6 * a..6 * a + 6];
             let va = Vector3::new(ja[0], ja[1], ja[2]);
             let wa = Vector3::new(ja[3], ja[4], ja[5]);
             gravity_torque[a] -= inertial.mass * va.dot(gravity);
             let iwa = inertia_world * wa;
-            for &b in &cols {
+            for &b in cols {
                 let jb = &ws.jacobian[6 * b..6 * b + 6];
                 let vb = Vector3::new(jb[0], jb[1], jb[2]);
                 let wb = Vector3::new(jb[3], jb[4], jb[5]);

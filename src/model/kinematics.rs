@@ -77,6 +77,28 @@ pub struct Link {
     pub collisions: Vec<Collision>,
 }
 
+/// Link poses and world joint axes of one configuration, reused while the configuration is unchanged.
+#[derive(Debug, Clone, Default)]
+pub struct Frames {
+    pub poses: Vec<Isometry3<f64>>,
+    axes: Vec<Vector3<f64>>,
+    origins: Vec<Point3<f64>>,
+    q: Vec<f64>,
+    root: Option<Isometry3<f64>>,
+}
+
+/// One Jacobian column: the velocity a unit joint rate gives `point` (linear) and the link (angular).
+fn fill_column(kind: JointKind, axis: &Vector3<f64>, origin: &Point3<f64>, point: &Point3<f64>, c: &mut [f64]) {
+    match kind {
+        JointKind::Revolute => {
+            let lin = axis.cross(&(point - origin));
+            c.copy_from_slice(&[lin.x, lin.y, lin.z, axis.x, axis.y, axis.z]);
+        }
+        JointKind::Prismatic => c.copy_from_slice(&[axis.x, axis.y, axis.z, 0.0, 0.0, 0.0]),
+        JointKind::Fixed => c.fill(0.0),
+    }
+}
+
 /// A tree of links connected by fixed, revolute and prismatic joints.
 #[derive(Debug, Clone)]
 pub struct KinematicTree {
@@ -254,24 +276,41 @@ impl KinematicTree {
             let joint = &self.joints[j];
             let col = joint.q_index.expect("active joint has a coordinate");
             let (axis, origin) = self.joint_axis_world(poses, j);
-            let c = &mut out[6 * col..6 * col + 6];
-            match joint.kind {
-                JointKind::Revolute => {
-                    let lin = axis.cross(&(point - origin));
-                    c[0] = lin.x;
-                    c[1] = lin.y;
-                    c[2] = lin.z;
-                    c[3] = axis.x;
-                    c[4] = axis.y;
-                    c[5] = axis.z;
-                }
-                JointKind::Prismatic => {
-                    c[0] = axis.x;
-                    c[1] = axis.y;
-                    c[2] = axis.z;
-                }
-                JointKind::Fixed => {}
-            }
+            fill_column(joint.kind, &axis, &origin, point, &mut out[6 * col..6 * col + 6]);
+        }
+    }
+
+    /// Brings `frames` to configuration `q` with the root at `root_pose`; free if nothing changed.
+    pub fn update_frames(&self, root_pose: &Isometry3<f64>, q: &[f64], frames: &mut Frames) {
+        if frames.root.as_ref() == Some(root_pose) && frames.q == q && frames.poses.len() == self.links.len() {
+            return;
+        }
+        frames.poses.clear();
+        frames.poses.resize(self.links.len(), Isometry3::identity());
+        frames.axes.resize(self.joints.len(), Vector3::zeros());
+        frames.origins.resize(self.joints.len(), Point3::origin());
+        frames.poses[self.root] = *root_pose;
+        for &j in &self.topological_joints {
+            let joint = &self.joints[j];
+            let frame = frames.poses[joint.parent] * joint.origin;
+            frames.axes[j] = frame.rotation * joint.axis;
+            frames.origins[j] = Point3::from(frame.translation.vector);
+            let value = joint.q_index.map_or(0.0, |i| q[i]);
+            frames.poses[joint.child] = frame * Self::joint_motion(joint, value);
+        }
+        frames.q.clear();
+        frames.q.extend_from_slice(q);
+        frames.root = Some(*root_pose);
+    }
+
+    /// [`Self::point_jacobian_into`] from up-to-date [`Frames`].
+    pub fn frames_jacobian_into(&self, frames: &Frames, link: usize, point: &Point3<f64>, out: &mut [f64]) {
+        debug_assert_eq!(out.len(), 6 * self.nq());
+        out.fill(0.0);
+        for &j in &self.ancestor_active_joints[link] {
+            let joint = &self.joints[j];
+            let col = joint.q_index.expect("active joint has a coordinate");
+            fill_column(joint.kind, &frames.axes[j], &frames.origins[j], point, &mut out[6 * col..6 * col + 6]);
         }
     }
 

@@ -89,6 +89,9 @@ fn pool(threads: usize) -> Result<Arc<rayon::ThreadPool>> {
     Ok(p)
 }
 
+/// Upper bound on worker threads; pools are cached per size, so this also bounds idle threads.
+pub const MAX_THREADS: usize = 256;
+
 /// Default worker count: every core the process may use.
 pub fn default_threads() -> usize {
     std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
@@ -195,8 +198,8 @@ impl RolloutModel {
         }
         ensure_finite("U", u)?;
         let threads = threads.unwrap_or_else(default_threads);
-        if threads == 0 {
-            return Err(SabreError::invalid("threads", "must be at least 1"));
+        if !(1..=MAX_THREADS).contains(&threads) {
+            return Err(SabreError::invalid("threads", format!("must be between 1 and {MAX_THREADS}, got {threads}")));
         }
         let mut batch = RolloutBatch {
             n,

@@ -132,6 +132,10 @@ struct PhysicsState {
     command: Vec<f64>,
     /// Interaction measured in the last step.
     last: Interaction,
+    /// Factorised robot mass matrix for the contact term of the kinematic servo, and the
+    /// configuration it was computed at (recomputed once the robot has moved on).
+    mass_factor: Option<nalgebra::linalg::Cholesky<f64, nalgebra::Dyn>>,
+    mass_factor_q: Vec<f64>,
 }
 
 /// A Rapier world holding one robot and one articulated object.
@@ -142,7 +146,6 @@ pub struct SimWorld {
     gravity: Vector,
     pub layout: Arc<WorldLayout>,
     scene: Arc<Scene>,
-    link_poses: Vec<Isometry3<f64>>,
     jacobian: Vec<f64>,
     displacement: Vec<f64>,
     dynamics: DynamicsWorkspace,
@@ -159,10 +162,9 @@ impl Clone for SimWorld {
             gravity: self.gravity,
             layout: self.layout.clone(),
             scene: self.scene.clone(),
-            link_poses: self.link_poses.clone(),
             jacobian: self.jacobian.clone(),
             displacement: self.displacement.clone(),
-            dynamics: DynamicsWorkspace::default(),
+            dynamics: self.dynamics.clone(),
             mass_matrix: self.mass_matrix.clone(),
             gravity_torque: self.gravity_torque.clone(),
         }
@@ -453,6 +455,8 @@ impl SimWorld {
                 tau_ext: vec![0.0; nq],
                 wrench: [0.0; 6],
             },
+            mass_factor: None,
+            mass_factor_q: Vec::new(),
         };
         let x0 = scene.default_state();
         let no = scene.no();
@@ -570,7 +574,6 @@ impl SimWorld {
             params,
             gravity: Vector::new(0.0, 0.0, -9.81),
             layout: Arc::new(layout),
-            link_poses: Vec::with_capacity(scene.robot.links.len()),
             jacobian: vec![0.0; 6 * nq],
             displacement: Vec::new(),
             dynamics,
@@ -642,6 +645,7 @@ impl SimWorld {
                 self.state.robot_q.copy_from_slice(&x[..nq]);
                 self.state.robot_qd.copy_from_slice(&x[nq..2 * nq]);
                 self.state.robot_integral.iter_mut().for_each(|v| *v = 0.0);
+                self.state.mass_factor = None;
                 let qd = self.state.robot_qd.clone();
                 self.place_proxies(&qd);
             }
@@ -664,11 +668,12 @@ impl SimWorld {
     /// Places every proxy body at the forward kinematics of `robot_q` with the velocity that the
     /// joint velocities `qd` give it.
     fn place_proxies(&mut self, qd: &[f64]) {
-        self.scene.robot.link_poses_into(&Isometry3::identity(), &self.state.robot_q, &mut self.link_poses);
+        let frames = &mut self.dynamics.frames;
+        self.scene.robot.update_frames(&Isometry3::identity(), &self.state.robot_q, frames);
         for &(link, body, com) in &self.layout.proxies {
-            let pose = self.link_poses[link];
+            let pose = frames.poses[link];
             let com_world = pose * com;
-            self.scene.robot.point_jacobian_into(&self.link_poses, link, &com_world, &mut self.jacobian);
+            self.scene.robot.frames_jacobian_into(frames, link, &com_world, &mut self.jacobian);
             let mut twist = [0.0; 6];
             for (c, &v) in qd.iter().enumerate() {
                 for (r, t) in twist.iter_mut().enumerate() {
@@ -781,7 +786,17 @@ impl SimWorld {
         let dt = self.params.dt;
         let nq = self.layout.nq;
         let in_contact = self.state.last.tau_ext.iter().any(|&t| t != 0.0);
-        if in_contact {
+        // M(q) varies slowly; refactorising it only after a joint moved by MASS_REFRESH keeps the
+        // contact term within a few percent at a fraction of the cost.
+        const MASS_REFRESH: f64 = 0.02;
+        let stale = self.state.mass_factor.is_none()
+            || self
+                .state
+                .mass_factor_q
+                .iter()
+                .zip(&self.state.robot_q)
+                .any(|(a, b)| (a - b).abs() > MASS_REFRESH);
+        if in_contact && stale {
             joint_space_terms(
                 &self.scene.robot,
                 &Isometry3::identity(),
@@ -791,14 +806,12 @@ impl SimWorld {
                 &mut self.mass_matrix,
                 &mut self.gravity_torque,
             );
+            self.state.mass_factor = self.mass_matrix.clone().cholesky();
+            self.state.mass_factor_q.clone_from(&self.state.robot_q);
         }
-        let contact_acceleration = if in_contact {
-            self.mass_matrix
-                .clone()
-                .cholesky()
-                .map(|c| c.solve(&DVector::from_column_slice(&self.state.last.tau_ext)))
-        } else {
-            None
+        let contact_acceleration = match (&self.state.mass_factor, in_contact) {
+            (Some(factor), true) => Some(factor.solve(&DVector::from_column_slice(&self.state.last.tau_ext))),
+            _ => None,
         };
         let mut q_next = std::mem::take(&mut self.displacement);
         q_next.clear();
@@ -913,18 +926,19 @@ impl SimWorld {
                         let mut q = std::mem::take(&mut self.displacement);
                         q.resize(nq, 0.0);
                         self.read_robot_q(&mut q);
-                        self.scene.robot.link_poses_into(&Isometry3::identity(), &q, &mut self.link_poses);
+                        self.scene.robot.update_frames(&Isometry3::identity(), &q, &mut self.dynamics.frames);
                         self.displacement = q;
                         poses_ready = true;
                     }
                     let point = Point3::from(p);
-                    self.scene.robot.point_jacobian_into(&self.link_poses, robot_link, &point, &mut self.jacobian);
+                    let frames = &self.dynamics.frames;
+                    self.scene.robot.frames_jacobian_into(frames, robot_link, &point, &mut self.jacobian);
                     for (c, t) in last.tau_ext.iter_mut().enumerate() {
                         let col = &self.jacobian[6 * c..6 * c + 3];
                         *t += col[0] * force.x + col[1] * force.y + col[2] * force.z;
                     }
                     if self.layout.sensor_links[robot_link] {
-                        let sensor = self.link_poses[self.layout.sensor_link].translation.vector;
+                        let sensor = frames.poses[self.layout.sensor_link].translation.vector;
                         let torque = (p - sensor).cross(&force);
                         for (w, v) in last.wrench.iter_mut().zip([force.x, force.y, force.z, torque.x, torque.y, torque.z]) {
                             *w += v;

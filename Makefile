@@ -1,0 +1,45 @@
+# sabre — `make demo` and `make test` set everything up from a fresh clone.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.deps-stamp
+export VIRTUAL_ENV := $(CURDIR)/$(VENV)
+
+.PHONY: all venv build demo test test-rust test-python bench bench-rust bench-python clean
+
+all: build
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet "maturin>=1.5,<2" "numpy>=1.24" "pytest>=7" "matplotlib>=3.7" "tqdm>=4.60" "mujoco>=3.1"
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+# Release build of the extension, installed into the venv in editable mode.
+build: venv
+	$(VENV)/bin/maturin develop --release --quiet
+
+demo: build
+	$(PY) -m sabre demo
+
+test-rust:
+	cargo test --release
+
+test-python: build
+	$(PY) -m pytest -q tests
+
+test: test-rust test-python
+
+bench-rust:
+	cargo bench --bench rollout
+
+bench-python: build
+	$(PY) benches/compare_mujoco.py
+
+bench: bench-rust bench-python
+
+clean:
+	cargo clean
+	rm -rf $(VENV) .pytest_cache

@@ -1,0 +1,31 @@
+"""Shared fixtures for the Python tests."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import sabre
+
+
+@pytest.fixture(scope="session")
+def scene() -> sabre.Scene:
+    """The built-in RoyalPanda in front of the shelf (default placement)."""
+    return sabre.Scene.load("royalpanda", "shelf")
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(20240611)
+
+
+@pytest.fixture
+def random_q(rng: np.random.Generator):
+    """random_q(scene): a configuration strictly inside the joint limits, base translation within ±2 m."""
+
+    def draw(scene: sabre.Scene, base_range: float = 2.0) -> np.ndarray:
+        lower = np.maximum(scene.q_lower, -base_range) + 0.05
+        upper = np.minimum(scene.q_upper, base_range) - 0.05
+        return rng.uniform(lower, upper)
+
+    return draw
