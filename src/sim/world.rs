@@ -765,12 +765,16 @@ impl SimWorld {
         }
     }
 
-    /// Locks (or releases) the object's joints in place: a stuck door or drawer.
+    /// Locks (or releases) the object's joints in place: a stuck door or drawer. The joint's limits
+    /// collapse onto its current value (a hard constraint that transmits any force), then return.
     pub fn hold_object(&mut self, hold: bool) {
+        let object_limits = self.scene.object_limits();
         let (mb, _) = self.state.multibody_joints.get_mut(self.layout.object_handle).expect("object");
-        for d in &self.layout.object_dofs {
+        for (i, d) in self.layout.object_dofs.iter().enumerate() {
+            let value = mb.link(d.link_id).expect("link").joint().coords()[d.coord];
             if let Some(link) = mb.link_mut(d.link_id) {
-                link.joint.kinematic = hold;
+                let limits = if hold { [value, value] } else { [object_limits[i].lower, object_limits[i].upper] };
+                link.joint.data.set_limits(d.axis, limits);
             }
         }
         if hold {
@@ -818,21 +822,29 @@ impl SimWorld {
         for i in 0..nq {
             let qd = self.state.robot_qd[i];
             let external = contact_acceleration.as_ref().map_or(0.0, |a| a[i]);
-            let previous_integral = self.state.robot_integral[i];
-            let integral = (previous_integral + dt * (self.state.command[i] - qd)).clamp(-integral_limit, integral_limit);
+            // The integral is the position lag behind the integrated command, ∫u dt − (q − q₀),
+            // booked with the same velocity that moves q so that it settles at zero lag exactly.
+            let integral = self.state.robot_integral[i];
             let drive = bandwidth * self.state.command[i] + integral_gain * integral + external;
             let target = (qd + dt * drive) / (1.0 + dt * bandwidth);
             let max_change = self.layout.acceleration_limits[i] * dt;
             let saturated = (target - qd).abs() > max_change;
-            let mut qd_next = qd + (target - qd).clamp(-max_change, max_change);
-            // Anti-windup: a saturated joint does not accumulate error it cannot act on.
-            self.state.robot_integral[i] = if saturated { previous_integral } else { integral };
+            let velocity_limit = self.layout.velocity_limits[i];
+            let unclamped = qd + (target - qd).clamp(-max_change, max_change);
+            let mut qd_next = unclamped.clamp(-velocity_limit, velocity_limit);
+            let saturated = saturated || qd_next != unclamped;
             let (lower, upper) = self.layout.position_limits[i];
             let mut next = self.state.robot_q[i] + dt * qd_next;
-            if next < lower || next > upper {
+            let at_limit = next < lower || next > upper;
+            if at_limit {
                 next = next.clamp(lower, upper);
                 qd_next = (next - self.state.robot_q[i]) / dt;
-                self.state.robot_integral[i] = previous_integral;
+            }
+            // Anti-windup: a joint that is saturated or at a limit does not accumulate lag it
+            // cannot act on.
+            if !saturated && !at_limit {
+                let lag = integral + dt * self.state.command[i] - (next - self.state.robot_q[i]);
+                self.state.robot_integral[i] = lag.clamp(-integral_limit, integral_limit);
             }
             q_next.push(next);
             self.state.robot_qd[i] = qd_next;
