@@ -3,8 +3,10 @@
 //! The core is plain Rust; the Python bindings live in `python` behind the `python` cargo feature.
 
 pub mod control;
+pub mod cost;
 pub mod error;
 pub mod model;
+pub mod mppi;
 pub mod sim;
 
 #[cfg(feature = "python")]

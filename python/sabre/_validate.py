@@ -56,10 +56,12 @@ def as_non_negative(name: str, value: Any) -> float:
     return number
 
 
-def as_count(name: str, value: Any, minimum: int = 1) -> int:
-    """An integer of at least `minimum` (bools are refused)."""
+def as_count(name: str, value: Any, minimum: int = 1, maximum: int | None = None) -> int:
+    """An integer within [minimum, maximum] (bools are refused)."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or int(value) < minimum:
         raise InvalidValueError(f"{name}: expected an integer >= {minimum}, got {value!r}")
+    if maximum is not None and int(value) > maximum:
+        raise InvalidValueError(f"{name}: expected an integer <= {maximum}, got {value!r}")
     return int(value)
 
 

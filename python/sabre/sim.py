@@ -11,7 +11,10 @@ from . import _core
 from ._validate import as_count, as_float_array, as_non_negative, as_positive, readonly
 from .scene import Scene
 
-__all__ = ["RolloutModel", "RolloutResult", "Plant", "LowLevelController", "default_threads"]
+__all__ = ["RolloutModel", "RolloutResult", "Plant", "LowLevelController", "default_threads", "MAX_THREADS"]
+
+#: Largest worker-thread count accepted (pools are cached per size).
+MAX_THREADS = 256
 
 
 def default_threads() -> int:
@@ -89,7 +92,7 @@ class RolloutModel:
         x0 = as_float_array("x0", x0, (self.scene.nx,))
         U = as_float_array("U", U, (None, None, self.scene.nu))
         if threads is not None:
-            threads = as_count("threads", threads)
+            threads = as_count("threads", threads, maximum=MAX_THREADS)
         r = self._core.rollout(x0, U, threads)
         return RolloutResult(
             states=readonly(r.states),
@@ -119,6 +122,8 @@ class LowLevelController:
         integral_gain: float = 400.0,
         integral_limit: float = 0.1,
     ) -> None:
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
         self.scene = scene
         self._core = _core.LowLevelController(
             scene._core,

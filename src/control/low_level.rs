@@ -107,3 +107,65 @@ impl LowLevelController {
         Ok(tau.iter().copied().collect())
     }
 }
+
+/// Samples recorded while the plant follows a reference (one row per recorded plant step).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TrackTrace {
+    pub time: Vec<f64>,
+    /// nx per row.
+    pub state: Vec<f64>,
+    /// nq per row: the interpolated velocity reference applied in that step.
+    pub reference: Vec<f64>,
+    /// 6 per row.
+    pub wrench: Vec<f64>,
+    /// nq per row.
+    pub tau_ext: Vec<f64>,
+    pub contact: Vec<bool>,
+}
+
+/// The inner loop: for `steps` plant steps, interpolate the reference sequence (K × nq starting at
+/// `t0`, steps of `dt`) at the plant's time, turn it into torques and step the plant. Records every
+/// `record_every`-th step into `trace`.
+#[allow(clippy::too_many_arguments)]
+pub fn follow_reference(
+    plant: &mut crate::sim::Plant,
+    controller: &mut LowLevelController,
+    reference: &[f64],
+    t0: f64,
+    dt: f64,
+    steps: usize,
+    record_every: usize,
+    trace: &mut TrackTrace,
+) -> Result<()> {
+    let nq = plant.scene().nq();
+    if reference.is_empty() || reference.len() % nq != 0 {
+        return Err(SabreError::shape("reference", format!("(K, {nq})"), format!("{} elements", reference.len())));
+    }
+    ensure_finite("reference", reference)?;
+    if !(dt.is_finite() && dt > 0.0) || !t0.is_finite() {
+        return Err(SabreError::invalid("reference timing", "t0 must be finite and dt positive"));
+    }
+    let k = reference.len() / nq;
+    let mut u = vec![0.0; nq];
+    for step in 0..steps {
+        let s = ((plant.time() - t0) / dt).clamp(0.0, (k - 1) as f64);
+        let i = s.floor() as usize;
+        let j = (i + 1).min(k - 1);
+        let a = s - i as f64;
+        for d in 0..nq {
+            u[d] = (1.0 - a) * reference[i * nq + d] + a * reference[j * nq + d];
+        }
+        let tau = controller.torque(plant.state(), &u)?;
+        plant.step(&tau)?;
+        if record_every > 0 && step % record_every == 0 {
+            trace.time.push(plant.time());
+            trace.state.extend_from_slice(plant.state());
+            trace.reference.extend_from_slice(&u);
+            let i = plant.interaction();
+            trace.wrench.extend_from_slice(&i.wrench);
+            trace.tau_ext.extend_from_slice(&i.tau_ext);
+            trace.contact.push(i.contact);
+        }
+    }
+    Ok(())
+}

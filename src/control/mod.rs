@@ -2,4 +2,4 @@
 
 pub mod low_level;
 
-pub use low_level::{LowLevelConfig, LowLevelController};
+pub use low_level::{follow_reference, LowLevelConfig, LowLevelController, TrackTrace};

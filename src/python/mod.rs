@@ -9,7 +9,9 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyModule;
 
-use crate::control::{LowLevelConfig, LowLevelController};
+use crate::control::{follow_reference, LowLevelConfig, LowLevelController, TrackTrace};
+use crate::cost::{Cost, PoseTarget, Term};
+use crate::mppi::{LikelihoodMapping, Mppi, MppiConfig};
 use crate::error::SabreError;
 use crate::model::scene::Scene;
 use crate::sim::{Plant, PlantConfig, RolloutConfig, RolloutModel};
@@ -78,6 +80,10 @@ fn view<'a>(name: &str, array: &'a PyReadonlyArrayDyn<'_, f64>, shape: &[isize])
             fmt(shape.iter().map(|&e| if e < 0 { "·".into() } else { e.to_string() }).collect()),
             fmt(got.iter().map(|g| g.to_string()).collect()),
         ));
+    }
+    // rust-numpy also hands out Fortran-ordered memory as a slice; only C order matches our layout.
+    if !array.is_c_contiguous() {
+        return Err(SabreError::invalid(name, "array must be C-contiguous (use numpy.ascontiguousarray)"));
     }
     array
         .as_slice()
@@ -389,6 +395,50 @@ impl PyPlant {
         })
     }
 
+    /// Follows a reference sequence (K, nq) starting at t0 with steps dt for `steps` plant steps under
+    /// the low-level controller; returns the trace of every `record_every`-th step as
+    /// (time, state, reference, wrench, tau_ext, contact).
+    #[pyo3(signature = (controller, reference, t0, dt, steps, record_every=1))]
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    fn follow<'py>(
+        &self,
+        py: Python<'py>,
+        controller: &PyLowLevelController,
+        reference: PyReadonlyArrayDyn<'py, f64>,
+        t0: f64,
+        dt: f64,
+        steps: usize,
+        record_every: usize,
+    ) -> PyResult<(
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyArrayDyn<bool>>,
+    )> {
+        let (nx, nq) = self.with(|p| Ok((p.scene().nx(), p.scene().nq())))?;
+        let reference = run(|| view("reference", &reference, &[-1, nq as isize]))?;
+        let plant = &self.inner;
+        let controller = &controller.inner;
+        let trace = run_detached(py, || {
+            let mut plant = plant.lock().unwrap_or_else(|e| e.into_inner());
+            let mut controller = controller.lock().unwrap_or_else(|e| e.into_inner());
+            let mut trace = TrackTrace::default();
+            follow_reference(&mut plant, &mut controller, reference, t0, dt, steps, record_every, &mut trace)?;
+            Ok(trace)
+        })?;
+        let m = trace.time.len();
+        Ok((
+            array(py, trace.time, &[m])?,
+            array(py, trace.state, &[m, nx])?,
+            array(py, trace.reference, &[m, nq])?,
+            array(py, trace.wrench, &[m, 6])?,
+            array(py, trace.tau_ext, &[m, nq])?,
+            trace.contact.into_pyarray(py).reshape(vec![m])?,
+        ))
+    }
+
     #[getter]
     fn state(&self) -> PyResult<Vec<f64>> {
         self.with(|p| Ok(p.state().to_vec()))
@@ -460,6 +510,309 @@ impl PyLowLevelController {
     }
 }
 
+fn isometry(name: &str, m: &[f64]) -> crate::Result<nalgebra::Isometry3<f64>> {
+    if m.len() != 16 {
+        return Err(SabreError::shape(name, "(4, 4)", format!("{} elements", m.len())));
+    }
+    crate::error::ensure_finite(name, m)?;
+    let mat = nalgebra::Matrix4::from_row_slice(m);
+    let rot = nalgebra::Matrix3::from(mat.fixed_view::<3, 3>(0, 0));
+    if (rot.transpose() * rot - nalgebra::Matrix3::identity()).norm() > 1e-6 || (rot.determinant() - 1.0).abs() > 1e-6 {
+        return Err(SabreError::invalid(name, "rotation block is not a rotation matrix"));
+    }
+    let rotation = nalgebra::UnitQuaternion::from_matrix(&rot);
+    Ok(nalgebra::Isometry3::from_parts(nalgebra::Translation3::new(m[3], m[7], m[11]), rotation))
+}
+
+fn spec_error(detail: impl Into<String>) -> SabreError {
+    SabreError::invalid("cost term", detail)
+}
+
+fn floats(spec: &Bound<'_, PyAny>, key: &str) -> crate::Result<Vec<f64>> {
+    spec.get_item(key)
+        .and_then(|v| v.extract::<Vec<f64>>())
+        .map_err(|e| spec_error(format!("'{key}': {e}")))
+}
+
+fn float(spec: &Bound<'_, PyAny>, key: &str) -> crate::Result<f64> {
+    let v = spec.get_item(key).and_then(|v| v.extract::<f64>()).map_err(|e| spec_error(format!("'{key}': {e}")))?;
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(spec_error(format!("'{key}' must be finite, got {v}")))
+    }
+}
+
+fn text(spec: &Bound<'_, PyAny>, key: &str) -> crate::Result<String> {
+    spec.get_item(key).and_then(|v| v.extract::<String>()).map_err(|e| spec_error(format!("'{key}': {e}")))
+}
+
+/// Turns one term specification (a dict made by `sabre.costs`) into a core term.
+fn term_from_spec(scene: &Scene, spec: &Bound<'_, PyAny>) -> crate::Result<Term> {
+    let kind = text(spec, "kind")?;
+    Ok(match kind.as_str() {
+        "pose" => {
+            let link = scene.robot.require_link(&text(spec, "frame")?)?;
+            let w = floats(spec, "weights")?;
+            if w.len() != 6 {
+                return Err(spec_error("pose weights need 6 entries (linear, then angular)"));
+            }
+            let pose = isometry("pose target", &floats(spec, "target")?)?;
+            let target = match spec.get_item("object_frame").ok().and_then(|v| v.extract::<Option<String>>().ok()).flatten() {
+                Some(name) => PoseTarget::ObjectLink { link: scene.object.require_link(&name)?, offset: pose },
+                None => PoseTarget::World(pose),
+            };
+            Term::TargetPose { link, target, weights: [w[0], w[1], w[2], w[3], w[4], w[5]] }
+        }
+        "contact" => Term::Contact { weight: float(spec, "weight")? },
+        "joint_limits" => Term::JointLimits {
+            weight: float(spec, "weight")?,
+            weight_slope: float(spec, "weight_slope")?,
+            lower: floats(spec, "lower")?,
+            upper: floats(spec, "upper")?,
+        },
+        "arm_reach" => Term::ArmReach {
+            base_link: scene.robot.require_link(&text(spec, "base")?)?,
+            frame_link: scene.robot.require_link(&text(spec, "frame")?)?,
+            r_max: float(spec, "r_max")?,
+            weight: float(spec, "weight")?,
+            weight_slope: float(spec, "weight_slope")?,
+        },
+        "self_collision" => Term::SelfCollision {
+            pairs: scene.sphere_pairs.clone(),
+            weight: float(spec, "weight")?,
+            weight_slope: float(spec, "weight_slope")?,
+        },
+        "object" => Term::ObjectState { target: floats(spec, "target")?, weights: floats(spec, "weights")? },
+        "power" => Term::Power { weight: float(spec, "weight")?, p_max: float(spec, "p_max")? },
+        "base_box" => {
+            let (lo, hi) = (floats(spec, "lower")?, floats(spec, "upper")?);
+            if lo.len() != 2 || hi.len() != 2 {
+                return Err(spec_error("base box bounds need 2 entries (x, y)"));
+            }
+            Term::BaseBox { lower: [lo[0], lo[1]], upper: [hi[0], hi[1]], weight: float(spec, "weight")?, weight_slope: float(spec, "weight_slope")? }
+        }
+        "obstacles" => {
+            let centers = floats(spec, "centers")?;
+            let radii = floats(spec, "radii")?;
+            if centers.len() != 3 * radii.len() {
+                return Err(spec_error("obstacles need 3 centre coordinates per radius"));
+            }
+            Term::Obstacles {
+                spheres: radii.iter().enumerate().map(|(i, &r)| (nalgebra::Point3::new(centers[3 * i], centers[3 * i + 1], centers[3 * i + 2]), r)).collect(),
+                weight: float(spec, "weight")?,
+                weight_slope: float(spec, "weight_slope")?,
+            }
+        }
+        other => return Err(spec_error(format!("unknown kind '{other}'"))),
+    })
+}
+
+#[pyclass(name = "Cost", module = "sabre._core", frozen)]
+pub struct PyCost {
+    inner: Arc<Cost>,
+}
+
+#[pymethods]
+impl PyCost {
+    /// A cost compiled from term specifications (dicts with a "kind" key, made by `sabre.costs`).
+    #[new]
+    fn new(scene: &PyScene, terms: Vec<Bound<'_, PyAny>>) -> PyResult<Self> {
+        run(|| {
+            let terms = terms.iter().map(|t| term_from_spec(&scene.inner, t)).collect::<crate::Result<Vec<_>>>()?;
+            let cost = Cost::new(terms);
+            cost.validate(&scene.inner)?;
+            Ok(Self { inner: Arc::new(cost) })
+        })
+    }
+
+    #[getter]
+    fn num_terms(&self) -> usize {
+        self.inner.terms.len()
+    }
+}
+
+#[pyclass(name = "Planner", module = "sabre._core")]
+pub struct PyPlanner {
+    inner: Mutex<Mppi>,
+    cost: Mutex<Arc<Cost>>,
+}
+
+fn stats_dict<'py>(py: Python<'py>, s: &crate::mppi::IterationStats) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+    let d = pyo3::types::PyDict::new(py);
+    d.set_item("iteration", s.iteration)?;
+    d.set_item("iteration_time", s.iteration_time)?;
+    d.set_item("rollout_time", s.rollout_time)?;
+    d.set_item("cost_min", s.cost_min)?;
+    d.set_item("cost_mean", s.cost_mean)?;
+    d.set_item("cost_max", s.cost_max)?;
+    d.set_item("nominal_cost", s.nominal_cost)?;
+    d.set_item("effective_sample_size", s.effective_sample_size)?;
+    d.set_item("failed_rollouts", s.failed_rollouts)?;
+    Ok(d)
+}
+
+#[pymethods]
+impl PyPlanner {
+    #[new]
+    #[pyo3(signature = (model, cost, rollouts, horizon, sigma, h, step_size, gradient_clip, keep_fraction, smoothing_window, smoothing_order, seed, threads=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        model: &PyRolloutModel,
+        cost: &PyCost,
+        rollouts: usize,
+        horizon: f64,
+        sigma: Vec<f64>,
+        h: f64,
+        step_size: f64,
+        gradient_clip: f64,
+        keep_fraction: f64,
+        smoothing_window: usize,
+        smoothing_order: usize,
+        seed: u64,
+        threads: Option<usize>,
+    ) -> PyResult<Self> {
+        let config = MppiConfig {
+            rollouts,
+            horizon,
+            sigma,
+            h,
+            step_size,
+            gradient_clip,
+            keep_fraction,
+            smoothing_window,
+            smoothing_order,
+            seed,
+            threads,
+        };
+        run(|| {
+            cost.inner.validate(model.inner.scene())?;
+            Mppi::new(model.inner.clone(), config)
+        })
+        .map(|m| Self { inner: Mutex::new(m), cost: Mutex::new(cost.inner.clone()) })
+    }
+
+    fn set_cost(&self, cost: &PyCost) -> PyResult<()> {
+        let planner = self.inner.lock().unwrap_or_else(|e| e.into_inner());
+        run(|| cost.inner.validate(planner.model().scene()))?;
+        *self.cost.lock().unwrap_or_else(|e| e.into_inner()) = cost.inner.clone();
+        Ok(())
+    }
+
+    fn reset(&self, seed: u64, t0: f64) {
+        self.inner.lock().unwrap_or_else(|e| e.into_inner()).reset(seed, t0);
+    }
+
+    /// One planning iteration (sample, roll out, update) without the GIL; returns its statistics.
+    fn iterate<'py>(&self, py: Python<'py>, x: PyReadonlyArrayDyn<'py, f64>, t: f64) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        let cost = self.cost.lock().unwrap_or_else(|e| e.into_inner()).clone();
+        let inner = &self.inner;
+        let x = run(|| view("x", &x, &[-1]))?;
+        let stats = run_detached(py, || {
+            let mut planner = inner.lock().unwrap_or_else(|e| e.into_inner());
+            planner.iterate(x, t, &cost).cloned()
+        })?;
+        stats_dict(py, &stats)
+    }
+
+    /// Builds the batch for time t and returns it, (N, K, nu).
+    fn sample<'py>(&self, py: Python<'py>, t: f64) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let mut planner = self.inner.lock().unwrap_or_else(|e| e.into_inner());
+        let (n, k, nu) = (planner.config().rollouts, planner.horizon_steps(), planner.model().scene().nu());
+        let samples = planner.sample(t).to_vec();
+        array(py, samples, &[n, k, nu])
+    }
+
+    /// Rolls the current batch out from x; returns (costs, states, tau_ext, wrench, contact).
+    #[allow(clippy::type_complexity)]
+    fn evaluate<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArrayDyn<'py, f64>,
+    ) -> PyResult<(Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<bool>>)> {
+        let cost = self.cost.lock().unwrap_or_else(|e| e.into_inner()).clone();
+        let inner = &self.inner;
+        let x = run(|| view("x", &x, &[-1]))?;
+        let batch = run_detached(py, || inner.lock().unwrap_or_else(|e| e.into_inner()).rollout(x, &cost))?;
+        let (n, k, nx, nq) = (batch.n, batch.k, batch.nx, batch.nq);
+        Ok((
+            array(py, batch.costs, &[n])?,
+            array(py, batch.states, &[n, k + 1, nx])?,
+            array(py, batch.tau_ext, &[n, k, nq])?,
+            array(py, batch.wrench, &[n, k, 6])?,
+            batch.contact.into_pyarray(py).reshape(vec![n, k])?,
+        ))
+    }
+
+    /// Weights the current batch by `costs` (N,) and updates the policy.
+    fn update<'py>(&self, py: Python<'py>, costs: PyReadonlyArrayDyn<'py, f64>) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        let mut planner = self.inner.lock().unwrap_or_else(|e| e.into_inner());
+        let n = planner.config().rollouts as isize;
+        let costs = run(|| view("costs", &costs, &[n]))?;
+        let stats = run(|| planner.update(costs).map(|_| planner.stats().clone()))?;
+        stats_dict(py, &stats)
+    }
+
+    fn reference(&self, t: f64) -> PyResult<Vec<f64>> {
+        if !t.is_finite() {
+            return Err(to_pyerr(SabreError::invalid("t", "must be finite")));
+        }
+        let planner = self.inner.lock().unwrap_or_else(|e| e.into_inner());
+        let mut out = vec![0.0; planner.model().scene().nu()];
+        planner.reference(t, &mut out);
+        Ok(out)
+    }
+
+    #[getter]
+    fn nominal<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let planner = self.inner.lock().unwrap_or_else(|e| e.into_inner());
+        let (k, nu) = (planner.horizon_steps(), planner.model().scene().nu());
+        array(py, planner.nominal().to_vec(), &[k, nu])
+    }
+
+    #[getter]
+    fn nominal_t0(&self) -> f64 {
+        self.inner.lock().unwrap_or_else(|e| e.into_inner()).nominal_t0()
+    }
+
+    fn set_nominal(&self, nominal: PyReadonlyArrayDyn<'_, f64>, t0: f64) -> PyResult<()> {
+        let mut planner = self.inner.lock().unwrap_or_else(|e| e.into_inner());
+        let (k, nu) = (planner.horizon_steps() as isize, planner.model().scene().nu() as isize);
+        let nominal = run(|| view("nominal", &nominal, &[k, nu]))?;
+        run(|| planner.set_nominal(nominal, t0))
+    }
+
+    #[getter]
+    fn weights(&self) -> Vec<f64> {
+        self.inner.lock().unwrap_or_else(|e| e.into_inner()).weights().to_vec()
+    }
+
+    #[getter]
+    fn horizon_steps(&self) -> usize {
+        self.inner.lock().unwrap_or_else(|e| e.into_inner()).horizon_steps()
+    }
+
+    #[getter]
+    fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        let planner = self.inner.lock().unwrap_or_else(|e| e.into_inner());
+        stats_dict(py, planner.stats())
+    }
+}
+
+/// Normalised weights of a cost vector under one likelihood mapping ("naive", "baseline", "invariant").
+#[pyfunction]
+fn likelihood_weights(costs: Vec<f64>, mapping: &str, parameter: f64) -> PyResult<Vec<f64>> {
+    let mapping = match mapping {
+        "naive" => LikelihoodMapping::Naive { lambda: parameter },
+        "baseline" => LikelihoodMapping::Baseline { lambda: parameter },
+        "invariant" => LikelihoodMapping::Invariant { h: parameter },
+        other => return Err(to_pyerr(SabreError::invalid("mapping", format!("unknown mapping '{other}' (naive, baseline, invariant)")))),
+    };
+    let mut out = Vec::new();
+    crate::mppi::weights(&costs, mapping, &mut out);
+    Ok(out)
+}
+
 /// Number of worker threads used when `threads=None`.
 #[pyfunction]
 fn default_threads() -> usize {
@@ -473,7 +826,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyRolloutResult>()?;
     m.add_class::<PyPlant>()?;
     m.add_class::<PyLowLevelController>()?;
+    m.add_class::<PyCost>()?;
+    m.add_class::<PyPlanner>()?;
     m.add_function(wrap_pyfunction!(default_threads, m)?)?;
+    m.add_function(wrap_pyfunction!(likelihood_weights, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -7,6 +7,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use rayon::prelude::*;
 
 use super::world::{RobotColliders, RobotDrive, SimWorld, WorldConfig};
+use crate::cost::Cost;
 use crate::error::{ensure_finite, Result, SabreError};
 use crate::model::scene::Scene;
 
@@ -59,6 +60,8 @@ pub struct RolloutBatch {
     pub contact: Vec<bool>,
     /// (N,) rollouts whose physics failed; their outputs are NaN from the failing step on.
     pub failed: Vec<bool>,
+    /// (N,) accumulated cost of each rollout (zero without a cost; +∞ for failed rollouts).
+    pub costs: Vec<f64>,
 }
 
 /// Batch rollouts of the reduced-order model from one initial state.
@@ -89,6 +92,9 @@ fn pool(threads: usize) -> Result<Arc<rayon::ThreadPool>> {
     Ok(p)
 }
 
+/// Upper bound on the values in one output array of a batch (2^28 doubles = 2 GiB).
+pub const MAX_BATCH_ELEMENTS: usize = 1 << 28;
+
 /// Upper bound on worker threads; pools are cached per size, so this also bounds idle threads.
 pub const MAX_THREADS: usize = 256;
 
@@ -102,6 +108,7 @@ struct RolloutSlices<'a> {
     tau_ext: &'a mut [f64],
     wrench: &'a mut [f64],
     contact: &'a mut [bool],
+    cost: &'a mut f64,
 }
 
 impl RolloutModel {
@@ -164,20 +171,25 @@ impl RolloutModel {
 
     /// Simulates one input sequence `u` (K × nu) from `x0`; returns the step at which the physics
     /// produced non-finite numbers, if it did.
-    fn rollout_one(&self, world: &mut SimWorld, x0: &[f64], u: &[f64], out: RolloutSlices) -> Option<usize> {
+    fn rollout_one(&self, world: &mut SimWorld, x0: &[f64], u: &[f64], cost: Option<&Cost>, out: RolloutSlices) -> Option<usize> {
         let nx = self.scene.nx();
         let nq = self.scene.nq();
         let k = out.contact.len();
         world.restore_from(&self.template);
         world.set_state(x0);
         out.states[..nx].copy_from_slice(x0);
+        *out.cost = 0.0;
         for step in 0..k {
-            world.set_velocity_command(&u[step * nq..(step + 1) * nq]);
+            let u_step = &u[step * nq..(step + 1) * nq];
+            world.set_velocity_command(u_step);
             world.step();
             let x = &mut out.states[(step + 1) * nx..(step + 2) * nx];
             world.read_state(x);
             if x.iter().any(|v| !v.is_finite()) {
                 return Some(step);
+            }
+            if let Some(cost) = cost {
+                *out.cost += world.step_cost(cost, x, u_step);
             }
             let interaction = world.interaction();
             out.tau_ext[step * nq..(step + 1) * nq].copy_from_slice(&interaction.tau_ext);
@@ -190,6 +202,19 @@ impl RolloutModel {
     /// Runs N rollouts of K steps from `x0` (nx) with inputs `u` (N × K × nu, row-major).
     /// Inputs are projected onto the joint velocity limits. The result does not depend on `threads`.
     pub fn rollout(&self, x0: &[f64], u: &[f64], n: usize, k: usize, threads: Option<usize>) -> Result<RolloutBatch> {
+        self.rollout_with_cost(x0, u, n, k, threads, None)
+    }
+
+    /// [`Self::rollout`] that also sums `cost` over each rollout's steps, inside the workers.
+    pub fn rollout_with_cost(
+        &self,
+        x0: &[f64],
+        u: &[f64],
+        n: usize,
+        k: usize,
+        threads: Option<usize>,
+        cost: Option<&Cost>,
+    ) -> Result<RolloutBatch> {
         let nx = self.scene.nx();
         let nq = self.scene.nq();
         self.scene.check_state(x0)?;
@@ -201,16 +226,34 @@ impl RolloutModel {
         if !(1..=MAX_THREADS).contains(&threads) {
             return Err(SabreError::invalid("threads", format!("must be between 1 and {MAX_THREADS}, got {threads}")));
         }
+        // Sizes come from the caller: check them before allocating, so that an absurd batch is an
+        // error and not an allocation failure that aborts the process.
+        let elements = n
+            .checked_mul(k + 1)
+            .and_then(|v| v.checked_mul(nx.max(nq).max(6)))
+            .filter(|&v| v <= MAX_BATCH_ELEMENTS)
+            .ok_or_else(|| {
+                SabreError::invalid("U", format!("a batch of {n} rollouts × {k} steps is too large (limit {MAX_BATCH_ELEMENTS} values per output)"))
+            })?;
+        let zeros = |len: usize| -> Result<Vec<f64>> {
+            let mut v = Vec::new();
+            v.try_reserve_exact(len)
+                .map_err(|_| SabreError::Simulation(format!("cannot allocate {len} values for the rollout outputs")))?;
+            v.resize(len, 0.0);
+            Ok(v)
+        };
+        debug_assert!(elements >= n * k);
         let mut batch = RolloutBatch {
             n,
             k,
             nx,
             nq,
-            states: vec![0.0; n * (k + 1) * nx],
-            tau_ext: vec![0.0; n * k * nq],
-            wrench: vec![0.0; n * k * 6],
+            states: zeros(n * (k + 1) * nx)?,
+            tau_ext: zeros(n * k * nq)?,
+            wrench: zeros(n * k * 6)?,
             contact: vec![false; n * k],
             failed: vec![false; n],
+            costs: zeros(n)?,
         };
         if n == 0 || k == 0 {
             for i in 0..n {
@@ -218,7 +261,10 @@ impl RolloutModel {
             }
             return Ok(batch);
         }
-        let work = |i: usize, states: &mut [f64], tau: &mut [f64], wrench: &mut [f64], contact: &mut [bool], failed: &mut bool| {
+        if let Some(cost) = cost {
+            cost.validate(&self.scene)?;
+        }
+        let work = |i: usize, states: &mut [f64], tau: &mut [f64], wrench: &mut [f64], contact: &mut [bool], (failed, total): (&mut bool, &mut f64)| {
             let mut world = self.checkout();
             let u_i = &u[i * k * nq..(i + 1) * k * nq];
             let slices = RolloutSlices {
@@ -226,10 +272,11 @@ impl RolloutModel {
                 tau_ext: &mut *tau,
                 wrench: &mut *wrench,
                 contact: &mut *contact,
+                cost: &mut *total,
             };
             // A panic inside the physics engine must not cross into the caller: that rollout is
             // marked failed from its first step and its world, possibly inconsistent, is dropped.
-            let failed_at = match catch_unwind(AssertUnwindSafe(|| self.rollout_one(&mut world, x0, u_i, slices))) {
+            let failed_at = match catch_unwind(AssertUnwindSafe(|| self.rollout_one(&mut world, x0, u_i, cost, slices))) {
                 Ok(result) => {
                     self.checkin(world);
                     result
@@ -238,6 +285,7 @@ impl RolloutModel {
             };
             if let Some(step) = failed_at {
                 *failed = true;
+                *total = f64::INFINITY;
                 states[(step + 1) * nx..].fill(f64::NAN);
                 tau[step * nq..].fill(f64::NAN);
                 wrench[step * 6..].fill(f64::NAN);
@@ -251,7 +299,7 @@ impl RolloutModel {
                 .zip(batch.tau_ext.par_chunks_mut(k * nq))
                 .zip(batch.wrench.par_chunks_mut(k * 6))
                 .zip(batch.contact.par_chunks_mut(k))
-                .zip(batch.failed.par_iter_mut())
+                .zip(batch.failed.par_iter_mut().zip(batch.costs.par_iter_mut()))
                 .enumerate()
                 .for_each(|(i, ((((s, t), w), c), f))| work(i, s, t, w, c, f));
         };

@@ -8,7 +8,8 @@ use rapier3d_f64::prelude::*;
 
 use crate::error::{Result, SabreError};
 use crate::model::dynamics::{joint_space_terms, DynamicsWorkspace};
-use crate::model::kinematics::{JointKind, KinematicTree, Shape};
+use crate::cost::{Cost, StepView};
+use crate::model::kinematics::{Frames, JointKind, KinematicTree, Shape};
 use crate::model::scene::Scene;
 
 /// Which robot colliders exist in the world.
@@ -149,6 +150,8 @@ pub struct SimWorld {
     jacobian: Vec<f64>,
     displacement: Vec<f64>,
     dynamics: DynamicsWorkspace,
+    /// Robot and object link poses for cost evaluation (caches keyed by the configuration).
+    cost_frames: (Frames, Frames),
     mass_matrix: DMatrix<f64>,
     gravity_torque: DVector<f64>,
 }
@@ -165,6 +168,7 @@ impl Clone for SimWorld {
             jacobian: self.jacobian.clone(),
             displacement: self.displacement.clone(),
             dynamics: self.dynamics.clone(),
+            cost_frames: self.cost_frames.clone(),
             mass_matrix: self.mass_matrix.clone(),
             gravity_torque: self.gravity_torque.clone(),
         }
@@ -577,6 +581,7 @@ impl SimWorld {
             jacobian: vec![0.0; 6 * nq],
             displacement: Vec::new(),
             dynamics,
+            cost_frames: Default::default(),
             mass_matrix,
             gravity_torque,
             scene,
@@ -960,6 +965,28 @@ impl SimWorld {
             }
         }
         self.state.last = last;
+    }
+
+    /// Cost of the last step, which led to state `x` under command `u`.
+    pub fn step_cost(&mut self, cost: &Cost, x: &[f64], u: &[f64]) -> f64 {
+        let interaction = &self.state.last;
+        let (nq, no) = (self.layout.nq, self.layout.no);
+        let (robot_frames, object_frames) = &mut self.cost_frames;
+        self.scene.robot.update_frames(&Isometry3::identity(), &x[..nq], robot_frames);
+        if cost.needs_object_frames() {
+            self.scene.object.update_frames(&self.scene.object_pose, &x[2 * nq..2 * nq + no], object_frames);
+        }
+        cost.step(
+            &self.scene,
+            &StepView {
+                x,
+                u,
+                tau_ext: &interaction.tau_ext,
+                contact: interaction.contact,
+                robot: robot_frames,
+                object: object_frames,
+            },
+        )
     }
 
     fn read_robot_q(&self, q: &mut [f64]) {

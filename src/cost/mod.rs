@@ -1,0 +1,262 @@
+//! Cost terms of the sampling-based controller (paper Sec. IV-A, eqs. 29–36), evaluated per rollout step.
+
+use nalgebra::{Isometry3, Matrix3, Point3, Vector3, Vector6};
+
+use crate::error::{Result, SabreError};
+use crate::model::kinematics::Frames;
+use crate::model::scene::Scene;
+
+/// SE(3) logarithm: the twist ξ = (v, ω) (linear first) with exp(ξ) = T.
+pub fn se3_log(t: &Isometry3<f64>) -> Vector6<f64> {
+    let omega = t.rotation.scaled_axis();
+    let theta = omega.norm();
+    let p = t.translation.vector;
+    let w = omega.cross_matrix();
+    // V⁻¹ = I − ½[ω]× + (1/θ²)(1 − θ sinθ / (2(1 − cosθ)))[ω]×², with its series near θ = 0.
+    let coefficient = if theta < 1e-6 {
+        1.0 / 12.0 + theta * theta / 720.0
+    } else {
+        (1.0 - theta * theta.sin() / (2.0 * (1.0 - theta.cos()))) / (theta * theta)
+    };
+    let v_inv = Matrix3::identity() - 0.5 * w + coefficient * w * w;
+    let v = v_inv * p;
+    Vector6::new(v.x, v.y, v.z, omega.x, omega.y, omega.z)
+}
+
+/// Where a pose target lives.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PoseTarget {
+    /// A fixed world pose.
+    World(Isometry3<f64>),
+    /// A pose rigidly attached to an object link (e.g. `handle_frame`), following the object as it moves.
+    ObjectLink { link: usize, offset: Isometry3<f64> },
+}
+
+/// One cost term with its weights (defaults from the paper's Table I live on the Python side).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Term {
+    /// (29) ‖log(T⁻¹ T*)‖²_W of a robot frame; `weights` is diag(W), linear then angular.
+    TargetPose { link: usize, target: PoseTarget, weights: [f64; 6] },
+    /// (30) w_γ when the robot touches the object in that step.
+    Contact { weight: f64 },
+    /// (31) per violated joint limit: w_j + w_s · violation².
+    JointLimits { weight: f64, weight_slope: f64, lower: Vec<f64>, upper: Vec<f64> },
+    /// (32) if the planar distance r of `frame` from `base` exceeds r_max: w_r + w_rs (r − r_max)².
+    ArmReach { base_link: usize, frame_link: usize, r_max: f64, weight: f64, weight_slope: f64 },
+    /// (33) per sphere pair closer than d_min = r_i + r_j: w + w_s (d_min − d)².
+    SelfCollision { pairs: Vec<(usize, usize)>, weight: f64, weight_slope: f64 },
+    /// (34) ‖o − o*‖²_{W_o}.
+    ObjectState { target: Vec<f64>, weights: Vec<f64> },
+    /// (36) w_p · max(0, −τ_extᵀ u − p_max).
+    Power { weight: f64, p_max: f64 },
+    /// Base position box [x_min, x_max] × [y_min, y_max] (Cartesian limits, Sec. VI-A2): w + w_s · excess².
+    BaseBox { lower: [f64; 2], upper: [f64; 2], weight: f64, weight_slope: f64 },
+    /// Sphere obstacles (centre, radius) against the robot's collision spheres: w + w_s · penetration².
+    Obstacles { spheres: Vec<(Point3<f64>, f64)>, weight: f64, weight_slope: f64 },
+}
+
+/// What a term sees of one rollout step.
+pub struct StepView<'a> {
+    /// State after the step, [q, q̇, o, ȯ].
+    pub x: &'a [f64],
+    /// Command applied during the step.
+    pub u: &'a [f64],
+    pub tau_ext: &'a [f64],
+    pub contact: bool,
+    /// Robot link poses at the step's q.
+    pub robot: &'a Frames,
+    /// Object link poses at the step's o.
+    pub object: &'a Frames,
+}
+
+/// A sum of terms, compiled once and evaluated inside the rollout workers.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Cost {
+    pub terms: Vec<Term>,
+}
+
+fn hinge_square(excess: f64, weight: f64, slope: f64) -> f64 {
+    if excess > 0.0 {
+        weight + slope * excess * excess
+    } else {
+        0.0
+    }
+}
+
+impl Cost {
+    pub fn new(terms: Vec<Term>) -> Self {
+        Self { terms }
+    }
+
+    /// Checks every index and number against the scene.
+    pub fn validate(&self, scene: &Scene) -> Result<()> {
+        let bad = |what: &str, detail: String| Err(SabreError::invalid(what, detail));
+        let finite = |what: &str, v: &[f64]| crate::error::ensure_finite(what, v);
+        for term in &self.terms {
+            match term {
+                Term::TargetPose { link, target, weights } => {
+                    if *link >= scene.robot.links.len() {
+                        return bad("pose cost", format!("robot link index {link} out of range"));
+                    }
+                    finite("pose cost weights", weights)?;
+                    if let PoseTarget::ObjectLink { link, .. } = target {
+                        if *link >= scene.object.links.len() {
+                            return bad("pose cost", format!("object link index {link} out of range"));
+                        }
+                    }
+                }
+                Term::JointLimits { lower, upper, weight, weight_slope } => {
+                    if lower.len() != scene.nq() || upper.len() != scene.nq() {
+                        return bad("joint limit cost", format!("limits must have nq = {} entries", scene.nq()));
+                    }
+                    finite("joint limit cost", &[*weight, *weight_slope])?;
+                }
+                Term::ArmReach { base_link, frame_link, r_max, .. } => {
+                    if *base_link >= scene.robot.links.len() || *frame_link >= scene.robot.links.len() {
+                        return bad("arm reach cost", "link index out of range".into());
+                    }
+                    finite("arm reach r_max", &[*r_max])?;
+                }
+                Term::SelfCollision { pairs, .. } => {
+                    if pairs.iter().any(|&(a, b)| a >= scene.spheres.len() || b >= scene.spheres.len()) {
+                        return bad("self-collision cost", "sphere index out of range".into());
+                    }
+                }
+                Term::ObjectState { target, weights } => {
+                    if target.len() != scene.no() || weights.len() != scene.no() {
+                        return bad("object cost", format!("target and weights need no = {} entries", scene.no()));
+                    }
+                    finite("object target", target)?;
+                    finite("object weights", weights)?;
+                }
+                Term::Contact { weight } => finite("contact weight", &[*weight])?,
+                Term::Power { weight, p_max } => finite("power cost", &[*weight, *p_max])?,
+                Term::BaseBox { lower, upper, .. } => finite("base box", &[lower[0], lower[1], upper[0], upper[1]])?,
+                Term::Obstacles { spheres, .. } => {
+                    for (c, r) in spheres {
+                        finite("obstacle", &[c.x, c.y, c.z, *r])?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether any term needs the object's link poses.
+    pub fn needs_object_frames(&self) -> bool {
+        self.terms
+            .iter()
+            .any(|t| matches!(t, Term::TargetPose { target: PoseTarget::ObjectLink { .. }, .. }))
+    }
+
+    /// Cost of one step.
+    pub fn step(&self, scene: &Scene, view: &StepView) -> f64 {
+        let nq = scene.nq();
+        let no = scene.no();
+        let q = &view.x[..nq];
+        let o = &view.x[2 * nq..2 * nq + no];
+        let mut total = 0.0;
+        for term in &self.terms {
+            total += match term {
+                Term::TargetPose { link, target, weights } => {
+                    let current = view.robot.poses[*link];
+                    let desired = match target {
+                        PoseTarget::World(t) => *t,
+                        PoseTarget::ObjectLink { link, offset } => view.object.poses[*link] * offset,
+                    };
+                    let xi = se3_log(&(current.inverse() * desired));
+                    (0..6).map(|i| weights[i] * xi[i] * xi[i]).sum()
+                }
+                Term::Contact { weight } => {
+                    if view.contact {
+                        *weight
+                    } else {
+                        0.0
+                    }
+                }
+                Term::JointLimits { weight, weight_slope, lower, upper } => q
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &v)| hinge_square(v - upper[i], *weight, *weight_slope) + hinge_square(lower[i] - v, *weight, *weight_slope))
+                    .sum(),
+                Term::ArmReach { base_link, frame_link, r_max, weight, weight_slope } => {
+                    let d = view.robot.poses[*frame_link].translation.vector - view.robot.poses[*base_link].translation.vector;
+                    hinge_square((d.x * d.x + d.y * d.y).sqrt() - r_max, *weight, *weight_slope)
+                }
+                Term::SelfCollision { pairs, weight, weight_slope } => pairs
+                    .iter()
+                    .map(|&(a, b)| {
+                        let (sa, sb) = (&scene.spheres[a], &scene.spheres[b]);
+                        let pa = view.robot.poses[sa.link] * Point3::from(sa.center);
+                        let pb = view.robot.poses[sb.link] * Point3::from(sb.center);
+                        hinge_square(sa.radius + sb.radius - (pa - pb).norm(), *weight, *weight_slope)
+                    })
+                    .sum(),
+                Term::ObjectState { target, weights } => o.iter().zip(target).zip(weights).map(|((v, t), w)| w * (v - t) * (v - t)).sum(),
+                Term::Power { weight, p_max } => {
+                    let dissipated: f64 = -view.tau_ext.iter().zip(view.u).map(|(t, u)| t * u).sum::<f64>();
+                    weight * (dissipated - p_max).max(0.0)
+                }
+                Term::BaseBox { lower, upper, weight, weight_slope } => (0..2)
+                    .map(|i| hinge_square(q[i] - upper[i], *weight, *weight_slope) + hinge_square(lower[i] - q[i], *weight, *weight_slope))
+                    .sum(),
+                Term::Obstacles { spheres, weight, weight_slope } => {
+                    let mut sum = 0.0;
+                    for s in &scene.spheres {
+                        let p = view.robot.poses[s.link] * Point3::from(s.center);
+                        for (c, r) in spheres {
+                            sum += hinge_square(r + s.radius - (p - c).norm(), *weight, *weight_slope);
+                        }
+                    }
+                    sum
+                }
+            };
+        }
+        total
+    }
+}
+
+/// World position of a point given in a link frame.
+pub fn point_in_world(frames: &Frames, link: usize, local: &Vector3<f64>) -> Point3<f64> {
+    frames.poses[link] * Point3::from(*local)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Translation3, UnitQuaternion};
+
+    fn se3_exp(xi: &Vector6<f64>) -> Isometry3<f64> {
+        let v = Vector3::new(xi[0], xi[1], xi[2]);
+        let w = Vector3::new(xi[3], xi[4], xi[5]);
+        let theta = w.norm();
+        let k = w.cross_matrix();
+        let (a, b) = if theta < 1e-9 {
+            (0.5, 1.0 / 6.0)
+        } else {
+            ((1.0 - theta.cos()) / (theta * theta), (theta - theta.sin()) / (theta * theta * theta))
+        };
+        let vmat = Matrix3::identity() + a * k + b * k * k;
+        Isometry3::from_parts(Translation3::from(vmat * v), UnitQuaternion::from_scaled_axis(w))
+    }
+
+    #[test]
+    fn log_inverts_the_exponential() {
+        for xi in [
+            Vector6::new(0.1, -0.2, 0.3, 0.0, 0.0, 0.0),
+            Vector6::new(0.1, -0.2, 0.3, 0.4, -0.5, 0.6),
+            Vector6::new(-1.0, 0.5, 0.2, 2.5, 0.3, -0.4),
+            Vector6::new(0.0, 0.0, 0.0, 1e-8, 0.0, 0.0),
+        ] {
+            let back = se3_log(&se3_exp(&xi));
+            assert!((back - xi).norm() < 1e-9, "{xi:?} -> {back:?}");
+        }
+    }
+
+    #[test]
+    fn pure_translation_log_is_the_translation() {
+        let t = Isometry3::translation(0.3, -0.1, 2.0);
+        let xi = se3_log(&t);
+        assert!((xi - Vector6::new(0.3, -0.1, 2.0, 0.0, 0.0, 0.0)).norm() < 1e-12);
+    }
+}

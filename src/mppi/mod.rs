@@ -1,0 +1,381 @@
+//! The MPPI-style sampler (paper Sec. III-A and V): Gaussian policy, cost-scale-invariant weights, clipped
+//! gradient step, nominal and zero sequences always sampled, best samples reused, receding horizon, smoothing.
+
+pub mod smoothing;
+pub mod weights;
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+
+use crate::cost::Cost;
+use crate::error::{ensure_finite, Result, SabreError};
+use crate::sim::{RolloutBatch, RolloutModel};
+pub use smoothing::SavitzkyGolay;
+pub use weights::{effective_sample_size, weights, LikelihoodMapping};
+
+/// Sampler settings; the defaults are the paper's Table I.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MppiConfig {
+    /// Number of rollouts N per iteration.
+    pub rollouts: usize,
+    /// Horizon T in seconds; K = round(T / dt) steps of the rollout model.
+    pub horizon: f64,
+    /// Diagonal of the sampling covariance Σ (variances, one per input).
+    pub sigma: Vec<f64>,
+    /// Sharpness h of the invariant likelihood mapping (55).
+    pub h: f64,
+    /// Step size α of the update (14).
+    pub step_size: f64,
+    /// Element-wise clip g_max of the gradient estimate (54).
+    pub gradient_clip: f64,
+    /// Fraction of the previous batch kept (the best by weight) and shifted in time.
+    pub keep_fraction: f64,
+    /// Savitzky–Golay window (samples) and polynomial order; a window of 0 or 1 turns smoothing off.
+    pub smoothing_window: usize,
+    pub smoothing_order: usize,
+    pub seed: u64,
+    /// Rollout worker threads (None: all cores).
+    pub threads: Option<usize>,
+}
+
+impl MppiConfig {
+    /// Table I defaults for `nu` inputs: Σ = 0.5 on the three base inputs, 1.0 on the arm joints.
+    pub fn paper_defaults(nu: usize) -> Self {
+        Self {
+            rollouts: 40,
+            horizon: 1.0,
+            sigma: (0..nu).map(|i| if i < 3 { 0.5 } else { 1.0 }).collect(),
+            h: 10.0,
+            step_size: 1.0,
+            gradient_clip: 0.2,
+            keep_fraction: 0.3,
+            smoothing_window: 30,
+            smoothing_order: 3,
+            seed: 0,
+            threads: None,
+        }
+    }
+}
+
+/// Statistics of the last iteration.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct IterationStats {
+    pub iteration: u64,
+    /// Wall time of sampling, rollouts and update (s).
+    pub iteration_time: f64,
+    pub rollout_time: f64,
+    pub cost_min: f64,
+    pub cost_mean: f64,
+    pub cost_max: f64,
+    /// Cost of the unperturbed nominal sequence (sample 0).
+    pub nominal_cost: f64,
+    pub effective_sample_size: f64,
+    pub failed_rollouts: usize,
+}
+
+/// The sampler and its policy (the nominal input sequence).
+pub struct Mppi {
+    model: Arc<RolloutModel>,
+    config: MppiConfig,
+    k: usize,
+    nu: usize,
+    dt: f64,
+    lower: Vec<f64>,
+    upper: Vec<f64>,
+    std: Vec<f64>,
+    nominal: Vec<f64>,
+    /// Time at which nominal[0] applies.
+    nominal_t0: f64,
+    samples: Vec<f64>,
+    previous: Vec<f64>,
+    previous_weights: Vec<f64>,
+    previous_t0: f64,
+    have_previous: bool,
+    weights: Vec<f64>,
+    smoother: Option<SavitzkyGolay>,
+    rng: ChaCha8Rng,
+    stats: IterationStats,
+    scratch: Vec<f64>,
+}
+
+/// Value of a K × nu sequence at fractional index `s`, linearly interpolated, clamped at both ends.
+fn interpolate(seq: &[f64], nu: usize, s: f64, out: &mut [f64]) {
+    let k = seq.len() / nu;
+    if k == 0 {
+        out.fill(0.0);
+        return;
+    }
+    let s = s.clamp(0.0, (k - 1) as f64);
+    let i = s.floor() as usize;
+    let j = (i + 1).min(k - 1);
+    let a = s - i as f64;
+    for d in 0..nu {
+        out[d] = (1.0 - a) * seq[i * nu + d] + a * seq[j * nu + d];
+    }
+}
+
+/// Shifts a K × nu sequence forward by `steps` (fractional), padding with its last value.
+fn shift(seq: &mut [f64], nu: usize, steps: f64, scratch: &mut Vec<f64>) {
+    if steps <= 0.0 {
+        return;
+    }
+    let k = seq.len() / nu;
+    scratch.clear();
+    scratch.resize(seq.len(), 0.0);
+    for i in 0..k {
+        interpolate(seq, nu, i as f64 + steps, &mut scratch[i * nu..(i + 1) * nu]);
+    }
+    seq.copy_from_slice(scratch);
+}
+
+impl Mppi {
+    pub fn new(model: Arc<RolloutModel>, config: MppiConfig) -> Result<Self> {
+        let scene = model.scene().clone();
+        let nu = scene.nu();
+        let dt = model.dt();
+        if config.rollouts < 3 {
+            return Err(SabreError::invalid("rollouts", "needs at least 3 (nominal, zero and one sample)"));
+        }
+        if !(config.horizon.is_finite() && config.horizon >= dt) {
+            return Err(SabreError::invalid("horizon", format!("must be at least one step ({dt} s)")));
+        }
+        if config.sigma.len() != nu {
+            return Err(SabreError::shape("sigma", format!("({nu},)"), format!("({},)", config.sigma.len())));
+        }
+        ensure_finite("sigma", &config.sigma)?;
+        if config.sigma.iter().any(|&s| s < 0.0) {
+            return Err(SabreError::invalid("sigma", "variances must be non-negative"));
+        }
+        for (name, v) in [("h", config.h), ("step_size", config.step_size), ("gradient_clip", config.gradient_clip)] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(SabreError::invalid(name, format!("must be positive and finite, got {v}")));
+            }
+        }
+        if !(0.0..=1.0).contains(&config.keep_fraction) {
+            return Err(SabreError::invalid("keep_fraction", "must be within [0, 1]"));
+        }
+        let k = (config.horizon / dt).round() as usize;
+        let limits = scene.robot_limits();
+        let smoother = (config.smoothing_window > 1).then(|| SavitzkyGolay::new(k, config.smoothing_window, config.smoothing_order));
+        let n = config.rollouts;
+        Ok(Self {
+            lower: limits.iter().map(|l| -l.velocity).collect(),
+            upper: limits.iter().map(|l| l.velocity).collect(),
+            std: config.sigma.iter().map(|v| v.sqrt()).collect(),
+            nominal: vec![0.0; k * nu],
+            nominal_t0: 0.0,
+            samples: vec![0.0; n * k * nu],
+            previous: vec![0.0; n * k * nu],
+            previous_weights: vec![0.0; n],
+            previous_t0: 0.0,
+            have_previous: false,
+            weights: vec![0.0; n],
+            smoother,
+            rng: ChaCha8Rng::seed_from_u64(config.seed),
+            stats: IterationStats::default(),
+            scratch: Vec::new(),
+            model,
+            config,
+            k,
+            nu,
+            dt,
+        })
+    }
+
+    pub fn config(&self) -> &MppiConfig {
+        &self.config
+    }
+    pub fn horizon_steps(&self) -> usize {
+        self.k
+    }
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+    pub fn model(&self) -> &Arc<RolloutModel> {
+        &self.model
+    }
+    pub fn stats(&self) -> &IterationStats {
+        &self.stats
+    }
+    /// The policy mean, K × nu, row-major; row 0 applies at [`Self::nominal_t0`].
+    pub fn nominal(&self) -> &[f64] {
+        &self.nominal
+    }
+    pub fn nominal_t0(&self) -> f64 {
+        self.nominal_t0
+    }
+    /// Samples of the last iteration (N × K × nu) and their weights.
+    pub fn samples(&self) -> &[f64] {
+        &self.samples
+    }
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// Clears the policy and the sample memory; the random stream restarts from `seed`.
+    pub fn reset(&mut self, seed: u64, t0: f64) {
+        self.nominal.fill(0.0);
+        self.nominal_t0 = t0;
+        self.have_previous = false;
+        self.rng = ChaCha8Rng::seed_from_u64(seed);
+        self.config.seed = seed;
+        self.stats = IterationStats::default();
+    }
+
+    /// Replaces the policy mean (e.g. with a filtered sequence), K × nu starting at time `t0`.
+    pub fn set_nominal(&mut self, nominal: &[f64], t0: f64) -> Result<()> {
+        if nominal.len() != self.nominal.len() {
+            return Err(SabreError::shape("nominal", format!("({}, {})", self.k, self.nu), format!("{} elements", nominal.len())));
+        }
+        ensure_finite("nominal", nominal)?;
+        self.nominal.copy_from_slice(nominal);
+        self.nominal_t0 = t0;
+        Ok(())
+    }
+
+    /// The commanded velocity at time `t`, linearly interpolated between the nominal's steps.
+    pub fn reference(&self, t: f64, out: &mut [f64]) {
+        interpolate(&self.nominal, self.nu, (t - self.nominal_t0) / self.dt, out);
+    }
+
+    /// Receding horizon: the nominal now starts at `t`.
+    fn shift_to(&mut self, t: f64) {
+        let steps = (t - self.nominal_t0) / self.dt;
+        shift(&mut self.nominal, self.nu, steps, &mut self.scratch);
+        self.nominal_t0 = t;
+    }
+
+    fn project(&self, u: &mut [f64]) {
+        for (i, v) in u.iter_mut().enumerate() {
+            let d = i % self.nu;
+            *v = v.clamp(self.lower[d], self.upper[d]);
+        }
+    }
+
+    /// Builds the batch for time `t`: nominal, zero, the best previous samples shifted, fresh samples.
+    pub fn sample(&mut self, t: f64) -> &[f64] {
+        self.shift_to(t);
+        let (n, k, nu) = (self.config.rollouts, self.k, self.nu);
+        let row = k * nu;
+        self.samples[..row].copy_from_slice(&self.nominal);
+        self.samples[row..2 * row].fill(0.0);
+        let mut filled = 2;
+        if self.have_previous {
+            let keep = ((self.config.keep_fraction * n as f64).floor() as usize).min(n - 2);
+            let mut order: Vec<usize> = (0..n).filter(|&i| self.previous_weights[i] > 0.0).collect();
+            // Highest weight first; ties by index keep the choice deterministic.
+            order.sort_by(|&a, &b| self.previous_weights[b].total_cmp(&self.previous_weights[a]).then(a.cmp(&b)));
+            let steps = (t - self.previous_t0) / self.dt;
+            for &i in order.iter().take(keep) {
+                let mut seq = self.previous[i * row..(i + 1) * row].to_vec();
+                shift(&mut seq, nu, steps, &mut self.scratch);
+                self.samples[filled * row..(filled + 1) * row].copy_from_slice(&seq);
+                filled += 1;
+            }
+        }
+        for i in filled..n {
+            for s in 0..k {
+                for d in 0..nu {
+                    let e: f64 = StandardNormal.sample(&mut self.rng);
+                    self.samples[i * row + s * nu + d] = self.nominal[s * nu + d] + self.std[d] * e;
+                }
+            }
+        }
+        let mut samples = std::mem::take(&mut self.samples);
+        self.project(&mut samples);
+        self.samples = samples;
+        &self.samples
+    }
+
+    /// Rolls the current samples out from `x` under `cost`.
+    pub fn rollout(&self, x: &[f64], cost: &Cost) -> Result<RolloutBatch> {
+        self.model
+            .rollout_with_cost(x, &self.samples, self.config.rollouts, self.k, self.config.threads, Some(cost))
+    }
+
+    /// Weights the samples by `costs` and moves the policy: μ_k += α clip(Σ_l w_l ε_k^l, ±g_max) (14, 54),
+    /// then smooths and projects it. Keeps the batch for reuse in the next iteration.
+    pub fn update(&mut self, costs: &[f64]) -> Result<()> {
+        let (n, k, nu) = (self.config.rollouts, self.k, self.nu);
+        if costs.len() != n {
+            return Err(SabreError::shape("costs", format!("({n},)"), format!("({},)", costs.len())));
+        }
+        let mut w = std::mem::take(&mut self.weights);
+        weights(costs, LikelihoodMapping::Invariant { h: self.config.h }, &mut w);
+        let row = k * nu;
+        let total: f64 = w.iter().sum();
+        if total > 0.0 {
+            let clip = self.config.gradient_clip;
+            let mut gradient = vec![0.0; row];
+            for (l, &wl) in w.iter().enumerate() {
+                if wl == 0.0 {
+                    continue;
+                }
+                let sample = &self.samples[l * row..(l + 1) * row];
+                for ((g, &u), &m) in gradient.iter_mut().zip(sample).zip(&self.nominal) {
+                    *g += wl * (u - m);
+                }
+            }
+            for (m, g) in self.nominal.iter_mut().zip(&gradient) {
+                *m += self.config.step_size * g.clamp(-clip, clip);
+            }
+            if let Some(smoother) = &self.smoother {
+                let mut smoothed = vec![0.0; row];
+                smoother.apply(&self.nominal, nu, &mut smoothed);
+                self.nominal = smoothed;
+            }
+            let mut nominal = std::mem::take(&mut self.nominal);
+            self.project(&mut nominal);
+            self.nominal = nominal;
+        }
+        let finite: Vec<f64> = costs.iter().copied().filter(|c| c.is_finite()).collect();
+        self.stats.cost_min = finite.iter().copied().fold(f64::INFINITY, f64::min);
+        self.stats.cost_max = finite.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        self.stats.cost_mean = if finite.is_empty() { f64::NAN } else { finite.iter().sum::<f64>() / finite.len() as f64 };
+        self.stats.nominal_cost = costs[0];
+        self.stats.effective_sample_size = effective_sample_size(&w);
+        self.stats.failed_rollouts = n - finite.len();
+        self.previous.copy_from_slice(&self.samples);
+        self.previous_weights.copy_from_slice(&w);
+        self.previous_t0 = self.nominal_t0;
+        self.have_previous = true;
+        self.weights = w;
+        self.stats.iteration += 1;
+        Ok(())
+    }
+
+    /// One planning iteration from the measured state `x` at time `t`.
+    pub fn iterate(&mut self, x: &[f64], t: f64, cost: &Cost) -> Result<&IterationStats> {
+        if !t.is_finite() {
+            return Err(SabreError::invalid("t", "must be finite"));
+        }
+        let start = Instant::now();
+        self.sample(t);
+        let rollout_start = Instant::now();
+        let batch = self.rollout(x, cost)?;
+        let rollout_time = rollout_start.elapsed().as_secs_f64();
+        self.update(&batch.costs)?;
+        self.stats.rollout_time = rollout_time;
+        self.stats.iteration_time = start.elapsed().as_secs_f64();
+        Ok(&self.stats)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shifting_by_whole_and_fractional_steps() {
+        let mut seq = vec![0.0, 1.0, 2.0, 3.0];
+        let mut scratch = Vec::new();
+        shift(&mut seq, 1, 1.0, &mut scratch);
+        assert_eq!(seq, vec![1.0, 2.0, 3.0, 3.0]);
+        shift(&mut seq, 1, 0.5, &mut scratch);
+        assert_eq!(seq, vec![1.5, 2.5, 3.0, 3.0]);
+    }
+}
