@@ -14,3 +14,4 @@ mod python;
 
 pub use error::{Result, SabreError};
 pub use model::Scene;
+

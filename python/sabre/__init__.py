@@ -16,6 +16,8 @@ from .errors import (
     UnknownFrameError,
     UrdfError,
 )
+from . import costs, tasks
+from .controller import Controller, ControllerConfig, Episode, likelihood_weights, paper_start_state, run_episode
 from .scene import OBJECTS, ROBOTS, Scene
 from .scripted import ScriptedMotion, hook_and_pull
 from .sim import LowLevelController, Plant, RolloutModel, RolloutResult, default_threads
@@ -30,6 +32,14 @@ __all__ = [
     "Plant",
     "LowLevelController",
     "default_threads",
+    "costs",
+    "tasks",
+    "Controller",
+    "ControllerConfig",
+    "Episode",
+    "run_episode",
+    "paper_start_state",
+    "likelihood_weights",
     "ScriptedMotion",
     "hook_and_pull",
     "SabreError",

@@ -206,6 +206,14 @@ class Scene:
         """(4, 4) world pose of a robot frame at configuration q (nq,)."""
         return self._core.fk(as_float_array("q", q, (self.nq,)), str(frame))
 
+    def fk_many(self, q: np.ndarray, frame: str) -> np.ndarray:
+        """(..., 4, 4) world poses of a robot frame for configurations q (..., nq), computed in Rust."""
+        q = np.asarray(q)
+        if q.ndim < 1 or q.shape[-1] != self.nq:
+            raise ShapeError(f"q: expected shape (..., {self.nq}), got {q.shape}")
+        flat = as_float_array("q", q.reshape(-1, self.nq), (None, self.nq))
+        return self._core.fk_many(flat, str(frame)).reshape(q.shape[:-1] + (4, 4))
+
     def jacobian(self, q: Sequence[float] | np.ndarray, frame: str) -> np.ndarray:
         """(6, nq) geometric Jacobian of a robot frame's origin: world frame, linear rows first."""
         return self._core.jacobian(as_float_array("q", q, (self.nq,)), str(frame))

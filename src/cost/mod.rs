@@ -45,6 +45,9 @@ pub enum Term {
     ArmReach { base_link: usize, frame_link: usize, r_max: f64, weight: f64, weight_slope: f64 },
     /// (33) per sphere pair closer than d_min = r_i + r_j: w + w_s (d_min − d)².
     SelfCollision { pairs: Vec<(usize, usize)>, weight: f64, weight_slope: f64 },
+    /// Σ_i w_i (q_i − q*_i)²: a preferred posture (a task-design hint that moves the sampler out of
+    /// folded local minima; weights of zero leave a joint free).
+    Posture { target: Vec<f64>, weights: Vec<f64> },
     /// (34) ‖o − o*‖²_{W_o}.
     ObjectState { target: Vec<f64>, weights: Vec<f64> },
     /// (36) w_p · max(0, −τ_extᵀ u − p_max).
@@ -122,6 +125,13 @@ impl Cost {
                         return bad("self-collision cost", "sphere index out of range".into());
                     }
                 }
+                Term::Posture { target, weights } => {
+                    if target.len() != scene.nq() || weights.len() != scene.nq() {
+                        return bad("posture cost", format!("target and weights need nq = {} entries", scene.nq()));
+                    }
+                    finite("posture target", target)?;
+                    finite("posture weights", weights)?;
+                }
                 Term::ObjectState { target, weights } => {
                     if target.len() != scene.no() || weights.len() != scene.no() {
                         return bad("object cost", format!("target and weights need no = {} entries", scene.no()));
@@ -192,6 +202,7 @@ impl Cost {
                         hinge_square(sa.radius + sb.radius - (pa - pb).norm(), *weight, *weight_slope)
                     })
                     .sum(),
+                Term::Posture { target, weights } => q.iter().zip(target).zip(weights).map(|((v, t), w)| w * (v - t) * (v - t)).sum(),
                 Term::ObjectState { target, weights } => o.iter().zip(target).zip(weights).map(|((v, t), w)| w * (v - t) * (v - t)).sum(),
                 Term::Power { weight, p_max } => {
                     let dissipated: f64 = -view.tau_ext.iter().zip(view.u).map(|(t, u)| t * u).sum::<f64>();

@@ -37,6 +37,10 @@ pub struct MppiConfig {
     /// Savitzky–Golay window (samples) and polynomial order; a window of 0 or 1 turns smoothing off.
     pub smoothing_window: usize,
     pub smoothing_order: usize,
+    /// Noise is drawn every `noise_interval` steps and linearly interpolated in between (1: white
+    /// noise, the paper's sampler). Longer intervals explore joint positions much further per
+    /// rollout for the same per-step variance.
+    pub noise_interval: usize,
     pub seed: u64,
     /// Rollout worker threads (None: all cores).
     pub threads: Option<usize>,
@@ -55,6 +59,7 @@ impl MppiConfig {
             keep_fraction: 0.3,
             smoothing_window: 30,
             smoothing_order: 3,
+            noise_interval: 1,
             seed: 0,
             threads: None,
         }
@@ -277,10 +282,17 @@ impl Mppi {
                 filled += 1;
             }
         }
+        let interval = self.config.noise_interval.max(1);
+        let knots = (k - 1) / interval + 2;
+        let mut knot_noise = vec![0.0; knots * nu];
         for i in filled..n {
+            for e in knot_noise.iter_mut() {
+                *e = StandardNormal.sample(&mut self.rng);
+            }
             for s in 0..k {
+                let (j, a) = (s / interval, (s % interval) as f64 / interval as f64);
                 for d in 0..nu {
-                    let e: f64 = StandardNormal.sample(&mut self.rng);
+                    let e = (1.0 - a) * knot_noise[j * nu + d] + a * knot_noise[(j + 1) * nu + d];
                     self.samples[i * row + s * nu + d] = self.nominal[s * nu + d] + self.std[d] * e;
                 }
             }

@@ -223,6 +223,25 @@ impl PyScene {
         array(py, pose.to_homogeneous().transpose().as_slice().to_vec(), &[4, 4])
     }
 
+    /// World poses (M, 4, 4) of a robot frame for M configurations (M, nq).
+    fn fk_many<'py>(&self, py: Python<'py>, q: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let nq = self.inner.nq();
+        let m = q.shape().first().copied().unwrap_or(0);
+        let poses = run(|| {
+            let q = view("q", &q, &[-1, nq as isize])?;
+            crate::error::ensure_finite("q", q)?;
+            let link = self.inner.robot.require_link(frame)?;
+            let mut frames = crate::model::kinematics::Frames::default();
+            let mut out = Vec::with_capacity(m * 16);
+            for row in q.chunks(nq) {
+                self.inner.robot.update_frames(&nalgebra::Isometry3::identity(), row, &mut frames);
+                out.extend_from_slice(frames.poses[link].to_homogeneous().transpose().as_slice());
+            }
+            Ok(out)
+        })?;
+        array(py, poses, &[m, 4, 4])
+    }
+
     fn jacobian<'py>(&self, py: Python<'py>, q: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let nq = self.inner.nq() as isize;
         let j = run(|| self.inner.jacobian(view("q", &q, &[nq])?, frame))?;
@@ -583,6 +602,7 @@ fn term_from_spec(scene: &Scene, spec: &Bound<'_, PyAny>) -> crate::Result<Term>
             weight: float(spec, "weight")?,
             weight_slope: float(spec, "weight_slope")?,
         },
+        "posture" => Term::Posture { target: floats(spec, "target")?, weights: floats(spec, "weights")? },
         "object" => Term::ObjectState { target: floats(spec, "target")?, weights: floats(spec, "weights")? },
         "power" => Term::Power { weight: float(spec, "weight")?, p_max: float(spec, "p_max")? },
         "base_box" => {
@@ -655,7 +675,7 @@ fn stats_dict<'py>(py: Python<'py>, s: &crate::mppi::IterationStats) -> PyResult
 #[pymethods]
 impl PyPlanner {
     #[new]
-    #[pyo3(signature = (model, cost, rollouts, horizon, sigma, h, step_size, gradient_clip, keep_fraction, smoothing_window, smoothing_order, seed, threads=None))]
+    #[pyo3(signature = (model, cost, rollouts, horizon, sigma, h, step_size, gradient_clip, keep_fraction, smoothing_window, smoothing_order, seed, threads=None, noise_interval=1))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         model: &PyRolloutModel,
@@ -671,8 +691,10 @@ impl PyPlanner {
         smoothing_order: usize,
         seed: u64,
         threads: Option<usize>,
+        noise_interval: usize,
     ) -> PyResult<Self> {
         let config = MppiConfig {
+            noise_interval,
             rollouts,
             horizon,
             sigma,

@@ -1,0 +1,352 @@
+"""The sampling-based controller and closed-loop episodes in the plant.
+
+``Controller`` wraps the Rust sampler (one planning iteration per :meth:`Controller.update`, GIL
+released) and a :class:`~sabre.tasks.Task` (phases, costs, switching). ``run_episode`` closes the loop
+on the 1 kHz plant: the inner loop interpolates the controller's reference and tracks it with the
+low-level controller (53), the outer loop re-plans at ``replan_rate`` in simulated time.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from . import _core
+from ._validate import as_count, as_float_array, as_positive
+from .costs import Batch, CompiledCost
+from .errors import InvalidValueError
+from .scene import Scene
+from .sim import MAX_THREADS, LowLevelController, Plant, RolloutModel
+from .tasks import Task
+
+__all__ = ["ControllerConfig", "Controller", "Episode", "run_episode", "paper_start_state", "likelihood_weights"]
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """Every Table I parameter of the sampler, with the paper's defaults, plus seed and threads.
+
+    sigma: diagonal of Σ (variances), one entry per input; None gives 0.5 for the base and 1.0 for
+    the arm joints (Table I). h: sharpness of the likelihood mapping (55). step_size: ρ = α (14).
+    gradient_clip: g_max (54). keep_fraction: share of the best previous samples reused ("caching").
+    """
+
+    rollouts: int = 40
+    horizon: float = 1.0
+    dt: float = 0.015
+    sigma: tuple[float, ...] | None = None
+    h: float = 10.0
+    step_size: float = 1.0
+    gradient_clip: float = 0.2
+    keep_fraction: float = 0.3
+    smoothing_window: int = 30
+    smoothing_order: int = 3
+    #: noise drawn every `noise_interval` rollout steps and interpolated (1 = white, as in the paper).
+    noise_interval: int = 1
+    seed: int = 0
+    threads: int | None = None
+    #: Rollout-model settings (the closed loop the sampler predicts with).
+    servo_bandwidth: float = 40.0
+    contact_friction: float = 0.2
+
+    def __post_init__(self) -> None:
+        as_count("rollouts", self.rollouts, 3)
+        as_positive("horizon", self.horizon)
+        as_positive("dt", self.dt)
+        if self.horizon < self.dt:
+            raise InvalidValueError(f"horizon ({self.horizon} s) is shorter than one step ({self.dt} s)")
+        for name in ("h", "step_size", "gradient_clip", "servo_bandwidth"):
+            as_positive(name, getattr(self, name))
+        if not 0.0 <= self.keep_fraction <= 1.0:
+            raise InvalidValueError(f"keep_fraction must be within [0, 1], got {self.keep_fraction}")
+        as_count("smoothing_window", self.smoothing_window, 0)
+        as_count("smoothing_order", self.smoothing_order, 0)
+        as_count("noise_interval", self.noise_interval, 1)
+        as_count("seed", self.seed, 0)
+        if self.threads is not None:
+            as_count("threads", self.threads, 1, MAX_THREADS)
+        if self.sigma is not None:
+            sigma = np.asarray(self.sigma, dtype=float)
+            if sigma.ndim != 1 or np.any(~np.isfinite(sigma)) or np.any(sigma < 0):
+                raise InvalidValueError("sigma must be a sequence of finite, non-negative variances")
+
+    @property
+    def horizon_steps(self) -> int:
+        return int(round(self.horizon / self.dt))
+
+    def sigma_for(self, nu: int) -> list[float]:
+        if self.sigma is None:
+            return [0.5 if i < 3 else 1.0 for i in range(nu)]
+        if len(self.sigma) != nu:
+            raise InvalidValueError(f"sigma has {len(self.sigma)} entries, the scene has nu = {nu} inputs")
+        return [float(s) for s in self.sigma]
+
+
+class Controller:
+    """Sampling-based controller for `scene` pursuing `task`.
+
+    update(x, t): one planning iteration from the measured state. reference(t): the commanded joint
+    velocity at time t (linear interpolation of the nominal). nominal: the current input sequence
+    (K, nu) starting at ``nominal_t0``. stats: statistics of the last iteration.
+    """
+
+    def __init__(self, scene: Scene, task: Task, config: ControllerConfig | None = None) -> None:
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
+        if not isinstance(task, Task):
+            raise TypeError(f"task must be a sabre.tasks.Task, got {type(task).__name__}")
+        self.scene = scene
+        self.task = task
+        self.config = config or ControllerConfig()
+        c = self.config
+        self.model = RolloutModel(scene, c.dt, servo_bandwidth=c.servo_bandwidth, contact_friction=c.contact_friction)
+        self.phase = task.initial_phase()
+        self._compiled: dict[str, CompiledCost] = {}
+        self._cost = self._compile(self.phase)
+        self._planner = _core.Planner(
+            self.model._core,
+            self._cost.core,
+            c.rollouts,
+            c.horizon,
+            c.sigma_for(scene.nu),
+            c.h,
+            c.step_size,
+            c.gradient_clip,
+            c.keep_fraction,
+            c.smoothing_window,
+            c.smoothing_order,
+            c.seed,
+            c.threads,
+            c.noise_interval,
+        )
+        self._stats: dict = {}
+        self.phase_history: list[tuple[float, str]] = [(0.0, self.phase)]
+
+    def _compile(self, phase: str) -> CompiledCost:
+        if phase not in self._compiled:
+            self._compiled[phase] = self.task.cost(self.scene, phase).compile(self.scene)
+        return self._compiled[phase]
+
+    def reset(self, seed: int | None = None, t0: float = 0.0) -> None:
+        """Forgets the policy and restarts the random stream (default: the configured seed)."""
+        self._planner.reset(self.config.seed if seed is None else as_count("seed", seed, 0), float(t0))
+        self.phase = self.task.initial_phase()
+        self._cost = self._compile(self.phase)
+        self._planner.set_cost(self._cost.core)
+        self.phase_history = [(float(t0), self.phase)]
+
+    def update(self, x: Sequence[float] | np.ndarray, t: float) -> dict:
+        """One planning iteration from state x (nx,) at time t (s); returns its statistics."""
+        x = as_float_array("x", x, (self.scene.nx,))
+        t = float(t)
+        if not np.isfinite(t):
+            raise InvalidValueError("t must be finite")
+        phase = self.task.next_phase(self.scene, x, t, self.phase)
+        if phase not in self.task.phases:
+            raise InvalidValueError(f"task returned unknown phase {phase!r}; phases: {self.task.phases}")
+        if phase != self.phase:
+            self.phase = phase
+            self._cost = self._compile(phase)
+            self._planner.set_cost(self._cost.core)
+            self.phase_history.append((t, phase))
+        self.task.on_step(self.scene, x, t, self)
+        start = time.perf_counter()
+        if not self._cost.python_terms:
+            stats = self._planner.iterate(x, t)
+        else:
+            inputs = self._planner.sample(t)
+            costs, states, tau_ext, _wrench, contact = self._planner.evaluate(x)
+            frames = {name: self.scene.fk_many(states[..., : self.scene.nq], name) for name in self._cost.frames_needed}
+            batch = Batch(states, inputs, tau_ext, contact, self.config.dt, frames)
+            for term in self._cost.python_terms:
+                costs = costs + term.evaluate(self.scene, batch)
+            stats = self._planner.update(costs)
+            stats["iteration_time"] = time.perf_counter() - start
+        stats["phase"] = self.phase
+        self._stats = stats
+        return stats
+
+    def reference(self, t: float) -> np.ndarray:
+        """(nu,) commanded joint velocity at time t."""
+        return np.asarray(self._planner.reference(float(t)), dtype=np.float64)
+
+    @property
+    def nominal(self) -> np.ndarray:
+        """(K, nu) current input sequence; row k applies at nominal_t0 + k·dt."""
+        return self._planner.nominal
+
+    @property
+    def nominal_t0(self) -> float:
+        return self._planner.nominal_t0
+
+    @property
+    def stats(self) -> dict:
+        """Last iteration: iteration_time, rollout_time (s), cost_min/mean/max, nominal_cost,
+        effective_sample_size, failed_rollouts, phase."""
+        return dict(self._stats)
+
+
+@dataclass
+class Episode:
+    """Traces of a closed-loop run, one row per recorded plant step.
+
+    time (M,), state (M, nx), reference (M, nu), wrench (M, 6), tau_ext (M, nq), contact (M,),
+    cost (M,) nominal cost of the latest plan, phase (M,) phase index into ``phases``.
+    """
+
+    scene: Scene
+    time: np.ndarray
+    state: np.ndarray
+    reference: np.ndarray
+    wrench: np.ndarray
+    tau_ext: np.ndarray
+    contact: np.ndarray
+    cost: np.ndarray
+    phase: np.ndarray
+    phases: tuple[str, ...]
+    success: bool
+    time_to_success: float | None
+    planning_times: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    wall_time: float = 0.0
+
+    @property
+    def opening(self) -> np.ndarray:
+        return self.state[:, 2 * self.scene.nq]
+
+    @property
+    def duration(self) -> float:
+        return float(self.time[-1]) if len(self.time) else 0.0
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.duration / self.wall_time if self.wall_time > 0 else float("inf")
+
+    def mean_wrench(self, only_contact: bool = True) -> float:
+        norms = np.linalg.norm(self.wrench[:, :3], axis=1)
+        mask = self.contact if only_contact and self.contact.any() else np.ones_like(self.contact)
+        return float(norms[mask].mean()) if mask.any() else 0.0
+
+    def dissipated_energy(self) -> float:
+        """Σ −uᵀ τ_ext dt over the episode (58), J."""
+        dt = np.diff(self.time, prepend=0.0)
+        return float(np.sum(-np.einsum("ij,ij->i", self.reference, self.tau_ext) * dt))
+
+
+def paper_start_state(scene: Scene) -> np.ndarray:
+    """The paper's starting condition: base at (−3, −3), arm folded near its joint limits and close
+    to self-collision (shoulder back, elbow fully bent), everything at rest, object closed."""
+    x = scene.default_state()
+    names = scene.joint_names
+    start = {"base_x": -3.0, "base_y": -3.0, "base_yaw": 0.0,
+             "panda_joint1": 0.0, "panda_joint2": -1.6, "panda_joint3": 0.0, "panda_joint4": -2.95,
+             "panda_joint5": 0.0, "panda_joint6": 1.6, "panda_joint7": 0.785}
+    for i, name in enumerate(names):
+        if name in start:
+            x[i] = np.clip(start[name], scene.q_lower[i], scene.q_upper[i])
+    return x
+
+
+def run_episode(
+    scene: Scene,
+    controller: Controller,
+    duration: float,
+    *,
+    seed: int | None = None,
+    x0: Sequence[float] | np.ndarray | None = None,
+    replan_rate: float = 20.0,
+    record_every: int = 10,
+    stop_on_success: bool = True,
+    settle_time: float = 0.5,
+    progress: bool | None = None,
+    plant: Plant | None = None,
+    low_level: LowLevelController | None = None,
+    on_replan: Callable[[float, np.ndarray, Plant, Controller], None] | None = None,
+) -> Episode:
+    """Runs the controller on the 1 kHz plant for `duration` seconds of simulated time.
+
+    The controller re-plans every 1/replan_rate s of simulated time from the plant's state; in
+    between, the inner loop interpolates its reference and tracks it with the low-level controller.
+    ``on_replan(t, x, plant, controller)`` runs before each re-plan (for disturbances). Stops
+    ``settle_time`` after the task succeeds if ``stop_on_success``. A progress bar (tqdm) shows for
+    runs longer than 10 s of simulated time unless ``progress=False``.
+    """
+    duration = as_positive("duration", duration)
+    replan_rate = as_positive("replan_rate", replan_rate)
+    record_every = as_count("record_every", record_every)
+    plant = plant or Plant(scene)
+    low_level = low_level or LowLevelController(scene, dt=plant.dt)
+    x0 = paper_start_state(scene) if x0 is None else as_float_array("x0", x0, (scene.nx,))
+    plant.reset(x0)
+    low_level.reset()
+    controller.reset(seed, 0.0)
+    steps_per_plan = max(1, int(round(1.0 / (replan_rate * plant.dt))))
+    n_plans = int(np.ceil(duration / (steps_per_plan * plant.dt)))
+    show = duration > 10.0 if progress is None else progress
+    bar = None
+    if show:
+        try:
+            from tqdm import tqdm
+
+            bar = tqdm(total=round(duration, 3), unit="s sim", leave=False, desc=f"{scene.object_name}")
+        except ImportError:
+            bar = None
+    chunks: dict[str, list[np.ndarray]] = {k: [] for k in ("time", "state", "reference", "wrench", "tau_ext", "contact", "cost", "phase")}
+    planning_times = []
+    success_time = None
+    wall = time.perf_counter()
+    for _ in range(n_plans):
+        x = plant.state
+        t = plant.time
+        if on_replan is not None:
+            on_replan(t, x, plant, controller)
+        stats = controller.update(x, t)
+        planning_times.append(stats["iteration_time"])
+        trace = plant._core.follow(low_level._core, controller.nominal, controller.nominal_t0, controller.config.dt, steps_per_plan, record_every)
+        times, states, refs, wrench, tau, contact = trace
+        chunks["time"].append(times)
+        chunks["state"].append(states)
+        chunks["reference"].append(refs)
+        chunks["wrench"].append(wrench)
+        chunks["tau_ext"].append(tau)
+        chunks["contact"].append(contact)
+        chunks["cost"].append(np.full(len(times), stats["nominal_cost"]))
+        chunks["phase"].append(np.full(len(times), controller.task.phases.index(controller.phase)))
+        if bar is not None:
+            bar.update(round(steps_per_plan * plant.dt, 3))
+        if success_time is None and controller.task.success(scene, plant.state):
+            success_time = plant.time
+        if stop_on_success and success_time is not None and plant.time >= success_time + settle_time:
+            break
+    if bar is not None:
+        bar.close()
+    wall = time.perf_counter() - wall
+    data = {k: np.concatenate(v) if v else np.zeros(0) for k, v in chunks.items()}
+    return Episode(
+        scene=scene,
+        time=data["time"],
+        state=data["state"],
+        reference=data["reference"],
+        wrench=data["wrench"],
+        tau_ext=data["tau_ext"],
+        contact=data["contact"].astype(bool),
+        cost=data["cost"],
+        phase=data["phase"].astype(int),
+        phases=tuple(controller.task.phases),
+        success=success_time is not None,
+        time_to_success=success_time,
+        planning_times=np.asarray(planning_times),
+        wall_time=wall,
+    )
+
+
+def likelihood_weights(costs: Sequence[float] | np.ndarray, mapping: str = "invariant", parameter: float = 10.0) -> np.ndarray:
+    """Normalised sample weights of a cost vector (paper Fig. 3).
+
+    mapping: "naive" exp(−λJ), "baseline" exp(−λ(J − J_min)), or "invariant" (55)
+    exp(−h (J − J_min)/(J_max − J_min)); `parameter` is λ or h. Non-finite costs weigh zero.
+    """
+    costs = np.asarray(costs, dtype=np.float64).reshape(-1)
+    return np.asarray(_core.likelihood_weights(costs.tolist(), str(mapping), float(parameter)), dtype=np.float64)

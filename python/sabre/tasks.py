@@ -1,0 +1,214 @@
+"""Tasks: what the controller should achieve, as phases with a cost each, a switch rule and a success test.
+
+Subclass :class:`Task` to script your own: give ``phases``, ``cost(scene, phase)``,
+``next_phase(scene, x, t, phase)`` and ``success(scene, x)``; ``on_step`` runs once per planning
+iteration for anything else (logging, moving a target, ...).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from . import costs
+from ._validate import as_float_array
+from .scene import Scene
+
+__all__ = ["Task", "Reach", "OpenObject", "SafetyWeights"]
+
+
+@dataclass(frozen=True)
+class SafetyWeights:
+    """Weights of the terms that every phase carries (Table I defaults)."""
+
+    joint_limit: float = 1000.0
+    joint_limit_slope: float = 100.0
+    reach: float = 1000.0
+    reach_slope: float = 100.0
+    self_collision: float = 1000.0
+    self_collision_slope: float = 100.0
+    power: float = 10.0
+    p_max: float = 0.0
+
+    def terms(self, scene: Scene) -> costs.Cost:
+        out = costs.Cost([
+            costs.JointLimits(self.joint_limit, self.joint_limit_slope),
+            costs.SelfCollision(self.self_collision, self.self_collision_slope),
+            costs.Power(self.power, self.p_max),
+        ])
+        if scene.arm_reach is not None:
+            out = out + costs.ArmReach(weight=self.reach, weight_slope=self.reach_slope)
+        return out
+
+
+class Task:
+    """Base class: a sequence of named phases, each with its cost."""
+
+    phases: tuple[str, ...] = ("main",)
+
+    def initial_phase(self) -> str:
+        return self.phases[0]
+
+    def cost(self, scene: Scene, phase: str) -> costs.Cost:
+        """The cost the controller minimises during `phase`."""
+        return costs.Cost()
+
+    def next_phase(self, scene: Scene, x: np.ndarray, t: float, phase: str) -> str:
+        """The phase to use from state x at time t (called before every planning iteration)."""
+        return phase
+
+    def success(self, scene: Scene, x: np.ndarray) -> bool:
+        return False
+
+    def on_step(self, scene: Scene, x: np.ndarray, t: float, controller) -> None:
+        """Hook called once per planning iteration, after the phase update."""
+
+
+@dataclass
+class Reach(Task):
+    """Bring robot frame ``frame`` to ``target_pose`` (4, 4); success within 2 cm and 0.1 rad."""
+
+    frame: str = "grasp"
+    target_pose: np.ndarray = field(default_factory=lambda: np.eye(4))
+    pose_weight: float = 100.0
+    safety: SafetyWeights = field(default_factory=SafetyWeights)
+    position_tolerance: float = 0.02
+    angle_tolerance: float = 0.1
+    extra: costs.Cost = field(default_factory=costs.Cost)
+
+    phases = ("reach",)
+
+    def __post_init__(self) -> None:
+        self.target_pose = as_float_array("target_pose", self.target_pose, (4, 4))
+
+    def cost(self, scene: Scene, phase: str) -> costs.Cost:
+        return costs.TargetPose(self.target_pose, self.frame, None, self.pose_weight, self.pose_weight) + self.safety.terms(scene) + self.extra
+
+    def success(self, scene: Scene, x: np.ndarray) -> bool:
+        pose = scene.fk(x[: scene.nq], self.frame)
+        dp = np.linalg.norm(pose[:3, 3] - self.target_pose[:3, 3])
+        cos = (np.trace(self.target_pose[:3, :3].T @ pose[:3, :3]) - 1.0) / 2.0
+        return dp < self.position_tolerance and np.arccos(np.clip(cos, -1.0, 1.0)) < self.angle_tolerance
+
+
+def _offset(xyz: tuple[float, float, float]) -> np.ndarray:
+    t = np.eye(4)
+    t[:3, 3] = xyz
+    return t
+
+
+@dataclass
+class OpenObject(Task):
+    """Open the scene's object to ``opening`` (rad or m; default 75 % of its range), in two phases.
+
+    approach: drive the ``grasp`` frame to a pose on the handle (``handle_frame``) with the hook's
+    tip beside and past the bar, touching nothing (contact cost on).
+    open: the pose target moves into the hook's pocket and follows the handle as the object
+    moves, with a lower weight so the hand may slide along the handle; the object cost pulls
+    toward the target opening; contact is allowed.
+    The switch happens once the grasp frame is within ``switch_position`` (m) and
+    ``switch_angle`` (rad) of the approach pose. Success: opening ≥ 90 % of the target.
+    """
+
+    opening: float | None = None
+    approach_weight: float = 100.0
+    open_pose_weight: float = 10.0
+    object_weight: float = 100.0
+    contact_weight: float = 100.0
+    safety: SafetyWeights = field(default_factory=SafetyWeights)
+    #: grasp pose in the handle frame while approaching (beside and past the bar) and while opening.
+    approach_offset: tuple[float, float, float] = (0.0, -0.022, 0.0)
+    open_offset: tuple[float, float, float] = (0.0, 0.0, -0.016)
+    #: the hand points this much (rad) below the handle's normal, tilted about the handle's horizontal
+    #: axis: a Panda reaches a forward-and-down hand at handle height with margin on its wrist joint,
+    #: a level one only at its wrist limit; the hook still closes around the bar.
+    approach_pitch: float = 0.6
+    switch_position: float = 0.015
+    switch_angle: float = 0.15
+    success_fraction: float = 0.9
+    #: preferred arm posture while approaching (None: for a Panda arm, shoulder forward, elbow open,
+    #: wrist pitched up — the configurations that hold a hand level with a handle); weight per rad².
+    posture: Sequence[float] | None = None
+    posture_weight: float = 2.0
+    extra: costs.Cost = field(default_factory=costs.Cost)
+
+    phases = ("approach", "open")
+
+    def posture_term(self, scene: Scene) -> costs.Cost:
+        names = scene.joint_names
+        if self.posture is not None:
+            target = np.asarray(self.posture, dtype=float)
+            weights = np.where(np.arange(scene.nq) < 3, 0.0, self.posture_weight)
+        elif all(f"panda_joint{i}" in names for i in (2, 4, 6)):
+            target = np.zeros(scene.nq)
+            weights = np.zeros(scene.nq)
+            for joint, value in (("panda_joint2", 1.0), ("panda_joint4", -1.2), ("panda_joint6", 2.9)):
+                i = names.index(joint)
+                target[i], weights[i] = value, self.posture_weight
+        else:
+            return costs.Cost()
+        return costs.Cost([costs.Posture(target, weights)])
+
+    def target_opening(self, scene: Scene) -> float:
+        if self.opening is not None:
+            return float(self.opening)
+        return float(scene.o_lower[0] + 0.75 * (scene.o_upper[0] - scene.o_lower[0]))
+
+    def grasp_offset(self, scene: Scene, phase: str) -> np.ndarray:
+        """Pose of the grasp target in the handle frame for `phase`."""
+        xyz = self.approach_offset if phase == "approach" else self.open_offset
+        closed = scene.object_fk(scene.o_lower, "handle_frame")
+        # Tilt about whichever handle axis (x or y) is horizontal, so that z points downward.
+        axis = 0 if abs(closed[2, 0]) < abs(closed[2, 1]) else 1
+        angle = self.approach_pitch
+        c, s_ = np.cos(angle), np.sin(angle)
+        rot = np.eye(3)
+        if axis == 0:
+            rot[1:, 1:] = [[c, -s_], [s_, c]]
+        else:
+            rot[np.ix_([0, 2], [0, 2])] = [[c, s_], [-s_, c]]
+        z_world = closed[:3, :3] @ rot[:, 2]
+        if z_world[2] > 0.0:  # tilted up: flip the direction
+            rot = rot.T
+        out = _offset(xyz)
+        out[:3, :3] = rot
+        return out
+
+    def cost(self, scene: Scene, phase: str) -> costs.Cost:
+        if phase == "approach":
+            return (
+                costs.TargetPose(self.grasp_offset(scene, phase), "grasp", "handle_frame", self.approach_weight, self.approach_weight)
+                + costs.Contact(self.contact_weight)
+                + self.posture_term(scene)
+                + self.safety.terms(scene)
+                + self.extra
+            )
+        return (
+            costs.TargetPose(self.grasp_offset(scene, phase), "grasp", "handle_frame", self.open_pose_weight, self.open_pose_weight)
+            + costs.ObjectState([self.target_opening(scene)], self.object_weight)
+            + self.safety.terms(scene)
+            + self.extra
+        )
+
+    def approach_error(self, scene: Scene, x: np.ndarray) -> tuple[float, float]:
+        nq, no = scene.nq, scene.no
+        target = scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame") @ self.grasp_offset(scene, "approach")
+        pose = scene.fk(x[:nq], "grasp")
+        dp = float(np.linalg.norm(pose[:3, 3] - target[:3, 3]))
+        cos = (np.trace(target[:3, :3].T @ pose[:3, :3]) - 1.0) / 2.0
+        return dp, float(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+    def next_phase(self, scene: Scene, x: np.ndarray, t: float, phase: str) -> str:
+        if phase == "approach":
+            dp, angle = self.approach_error(scene, x)
+            if dp < self.switch_position and angle < self.switch_angle:
+                return "open"
+        return phase
+
+    def opening_of(self, scene: Scene, x: np.ndarray) -> float:
+        return float(x[2 * scene.nq])
+
+    def success(self, scene: Scene, x: np.ndarray) -> bool:
+        return self.opening_of(scene, x) >= self.success_fraction * self.target_opening(scene)
