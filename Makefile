@@ -34,6 +34,7 @@ test: test-rust test-python
 
 bench-rust:
 	cargo bench --bench rollout
+	cargo bench --bench planning
 
 bench-python: build
 	$(PY) benches/compare_mujoco.py

@@ -8,7 +8,20 @@ import time
 
 import numpy as np
 
-from . import OBJECTS, Plant, LowLevelController, RolloutModel, Scene, default_threads, hook_and_pull
+from . import (
+    OBJECTS,
+    Controller,
+    ControllerConfig,
+    LowLevelController,
+    Plant,
+    RolloutModel,
+    Scene,
+    default_threads,
+    hook_and_pull,
+    paper_start_state,
+    run_episode,
+    tasks,
+)
 
 
 def scripted_demo(obj: str, threads: int | None) -> int:
@@ -58,15 +71,62 @@ def scripted_demo(obj: str, threads: int | None) -> int:
     return 0 if opening > 0.5 * scene.o_upper[0] else 1
 
 
+def plot_episode(episode, path: str) -> None:
+    """Opening, wrench norm and base path of an episode, as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
+    axes[0].plot(episode.time, episode.opening)
+    axes[0].set(xlabel="time (s)", ylabel="opening", title="object")
+    axes[1].plot(episode.time, np.linalg.norm(episode.wrench[:, :3], axis=1))
+    axes[1].set(xlabel="time (s)", ylabel="|f| (N)", title="wrist force")
+    axes[2].plot(episode.state[:, 0], episode.state[:, 1])
+    axes[2].set(xlabel="x (m)", ylabel="y (m)", title="base path", aspect="equal")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def episode_command(obj: str, duration: float, start: str, seed: int, replan_rate: float, plot: str | None) -> int:
+    """Closed-loop opening with the sampling-based controller in the plant."""
+    scene = Scene.load(obj=obj)
+    task = tasks.OpenObject()
+    controller = Controller(scene, task, ControllerConfig(seed=seed))
+    x0 = paper_start_state(scene) if start == "paper" else scene.default_state()
+    episode = run_episode(scene, controller, duration, seed=seed, x0=x0, replan_rate=replan_rate)
+    print(f"[{obj}] success: {episode.success}, final opening {episode.opening[-1]:.3f} "
+          f"(target {task.target_opening(scene):.3f}), time to open: {episode.time_to_success}")
+    print(f"  phases: {controller.phase_history}")
+    print(f"  mean wrench in contact {episode.mean_wrench():.1f} N, dissipated energy {episode.dissipated_energy():.2f} J")
+    print(f"  planning iteration median {1e3 * np.median(episode.planning_times):.1f} ms, "
+          f"real-time factor {episode.real_time_factor:.2f}")
+    if plot:
+        plot_episode(episode, plot)
+        print(f"  wrote {plot}")
+    return 0 if episode.success else 1
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m sabre", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="open an articulated object")
     demo.add_argument("--object", choices=OBJECTS, default="shelf")
     demo.add_argument("--threads", type=int, default=None)
+    ep = sub.add_parser("episode", help="closed-loop opening with the sampling-based controller")
+    ep.add_argument("--object", choices=OBJECTS, default="shelf")
+    ep.add_argument("--duration", type=float, default=30.0)
+    ep.add_argument("--start", choices=("default", "paper"), default="paper")
+    ep.add_argument("--seed", type=int, default=0)
+    ep.add_argument("--replan-rate", type=float, default=100.0)
+    ep.add_argument("--plot", default=None, help="write a PNG of opening, wrench and base path")
     args = parser.parse_args(argv)
     if args.command == "demo":
         return scripted_demo(args.object, args.threads)
+    if args.command == "episode":
+        return episode_command(args.object, args.duration, args.start, args.seed, args.replan_rate, args.plot)
     return 2
 
 

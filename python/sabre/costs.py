@@ -60,6 +60,10 @@ class Term(abc.ABC):
     def __add__(self, other: "Term | Cost") -> "Cost":
         return Cost([self]) + other
 
+    def compile(self, scene: Scene) -> "CompiledCost":
+        """This term alone, compiled (see :meth:`Cost.compile`)."""
+        return Cost([self]).compile(scene)
+
     def __radd__(self, other: "Term | Cost | int") -> "Cost":
         if other == 0:  # sum([...]) starts from 0
             return Cost([self])

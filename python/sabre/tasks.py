@@ -103,8 +103,9 @@ def _offset(xyz: tuple[float, float, float]) -> np.ndarray:
 class OpenObject(Task):
     """Open the scene's object to ``opening`` (rad or m; default 75 % of its range), in two phases.
 
-    approach: drive the ``grasp`` frame to a pose on the handle (``handle_frame``) with the hook's
-    tip beside and past the bar, touching nothing (contact cost on).
+    approach: drive the ``grasp`` frame to a pre-grasp pose 12 cm in front of the handle
+    (``handle_frame``), touching nothing (contact cost on); insert: move in until the hook's tip is
+    beside and past the bar, still touching nothing.
     open: the pose target moves into the hook's pocket and follows the handle as the object
     moves, with a lower weight so the hand may slide along the handle; the object cost pulls
     toward the target opening; contact is allowed.
@@ -119,6 +120,7 @@ class OpenObject(Task):
     contact_weight: float = 100.0
     safety: SafetyWeights = field(default_factory=SafetyWeights)
     #: grasp pose in the handle frame while approaching (beside and past the bar) and while opening.
+    pregrasp_offset: tuple[float, float, float] = (0.0, -0.022, -0.12)
     approach_offset: tuple[float, float, float] = (0.0, -0.022, 0.0)
     open_offset: tuple[float, float, float] = (0.0, 0.0, -0.016)
     #: the hand points this much (rad) below the handle's normal, tilted about the handle's horizontal
@@ -134,7 +136,7 @@ class OpenObject(Task):
     posture_weight: float = 2.0
     extra: costs.Cost = field(default_factory=costs.Cost)
 
-    phases = ("approach", "open")
+    phases = ("approach", "insert", "open")
 
     def posture_term(self, scene: Scene) -> costs.Cost:
         names = scene.joint_names
@@ -158,7 +160,7 @@ class OpenObject(Task):
 
     def grasp_offset(self, scene: Scene, phase: str) -> np.ndarray:
         """Pose of the grasp target in the handle frame for `phase`."""
-        xyz = self.approach_offset if phase == "approach" else self.open_offset
+        xyz = {"approach": self.pregrasp_offset, "insert": self.approach_offset}.get(phase, self.open_offset)
         closed = scene.object_fk(scene.o_lower, "handle_frame")
         # Tilt about whichever handle axis (x or y) is horizontal, so that z points downward.
         axis = 0 if abs(closed[2, 0]) < abs(closed[2, 1]) else 1
@@ -177,7 +179,7 @@ class OpenObject(Task):
         return out
 
     def cost(self, scene: Scene, phase: str) -> costs.Cost:
-        if phase == "approach":
+        if phase in ("approach", "insert"):
             return (
                 costs.TargetPose(self.grasp_offset(scene, phase), "grasp", "handle_frame", self.approach_weight, self.approach_weight)
                 + costs.Contact(self.contact_weight)
@@ -192,9 +194,10 @@ class OpenObject(Task):
             + self.extra
         )
 
-    def approach_error(self, scene: Scene, x: np.ndarray) -> tuple[float, float]:
+    def approach_error(self, scene: Scene, x: np.ndarray, phase: str = "insert") -> tuple[float, float]:
+        """Distance (m) and angle (rad) of the grasp frame from the target of `phase`."""
         nq, no = scene.nq, scene.no
-        target = scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame") @ self.grasp_offset(scene, "approach")
+        target = scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame") @ self.grasp_offset(scene, phase)
         pose = scene.fk(x[:nq], "grasp")
         dp = float(np.linalg.norm(pose[:3, 3] - target[:3, 3]))
         cos = (np.trace(target[:3, :3].T @ pose[:3, :3]) - 1.0) / 2.0
@@ -202,7 +205,11 @@ class OpenObject(Task):
 
     def next_phase(self, scene: Scene, x: np.ndarray, t: float, phase: str) -> str:
         if phase == "approach":
-            dp, angle = self.approach_error(scene, x)
+            dp, angle = self.approach_error(scene, x, "approach")
+            if dp < 2.0 * self.switch_position and angle < self.switch_angle:
+                return "insert"
+        if phase == "insert":
+            dp, angle = self.approach_error(scene, x, "insert")
             if dp < self.switch_position and angle < self.switch_angle:
                 return "open"
         return phase

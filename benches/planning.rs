@@ -1,0 +1,59 @@
+//! Criterion bench of one planning iteration (sample, 40 × 67-step rollouts with the cost, update) on
+//! 1 and 2 threads: the shelf scene, the approach-phase cost, from the default state.
+
+use std::sync::Arc;
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use nalgebra::Isometry3;
+use sabre::cost::{Cost, PoseTarget, Term};
+use sabre::model::Scene;
+use sabre::mppi::{Mppi, MppiConfig};
+use sabre::sim::{RolloutConfig, RolloutModel};
+
+fn approach_cost(scene: &Scene) -> Cost {
+    let limits = scene.robot_limits();
+    Cost::new(vec![
+        Term::TargetPose {
+            link: scene.robot.link_id("grasp").expect("grasp frame"),
+            target: PoseTarget::ObjectLink {
+                link: scene.object.link_id("handle_frame").expect("handle frame"),
+                offset: Isometry3::translation(0.0, -0.022, -0.12),
+            },
+            weights: [100.0; 6],
+        },
+        Term::Contact { weight: 100.0 },
+        Term::JointLimits {
+            weight: 1000.0,
+            weight_slope: 100.0,
+            lower: limits.iter().map(|l| l.lower).collect(),
+            upper: limits.iter().map(|l| l.upper).collect(),
+        },
+        Term::SelfCollision { pairs: scene.sphere_pairs.clone(), weight: 1000.0, weight_slope: 100.0 },
+        Term::Power { weight: 10.0, p_max: 0.0 },
+    ])
+}
+
+fn planning(c: &mut Criterion) {
+    let scene = Arc::new(Scene::load("royalpanda", "shelf", None).expect("built-in scene"));
+    let model = Arc::new(RolloutModel::new(scene.clone(), RolloutConfig::default()).expect("model"));
+    let cost = approach_cost(&scene);
+    let x0 = scene.default_state();
+    let mut group = c.benchmark_group("planning_iteration_shelf_40x67");
+    group.sample_size(40);
+    for threads in [1usize, 2] {
+        let mut config = MppiConfig::paper_defaults(scene.nu());
+        config.threads = Some(threads);
+        let mut mppi = Mppi::new(model.clone(), config).expect("sampler");
+        let mut t = 0.0;
+        group.bench_with_input(BenchmarkId::from_parameter(format!("{threads}_threads")), &threads, |b, _| {
+            b.iter(|| {
+                t += 0.01;
+                mppi.iterate(&x0, t, &cost).expect("iteration").iteration_time
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, planning);
+criterion_main!(benches);

@@ -1,0 +1,171 @@
+"""The sampler, its likelihood mapping, cost composition and the controller on small tasks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import sabre
+from sabre import costs
+from sabre.errors import InvalidValueError
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return sabre.Scene.load(obj="shelf")
+
+
+def _ess(w: np.ndarray) -> float:
+    return 1.0 / np.sum(w**2) if np.any(w > 0) else 0.0
+
+
+@pytest.mark.parametrize("scale", [1.0, 100.0, 1e4])
+def test_likelihood_mapping_at_high_cost_scale(scale):
+    """Paper Fig. 3: costs uniform between J_max·0.8 and J_max. With λ = h = 10, once J_max is large the
+    naive and baseline-subtracted mappings put all weight on one sample, the invariant one does not."""
+    costs_ = np.linspace(0.8 * scale, scale, 40)
+    naive = sabre.likelihood_weights(costs_, "naive", 10.0)
+    baseline = sabre.likelihood_weights(costs_, "baseline", 10.0)
+    invariant = sabre.likelihood_weights(costs_, "invariant", 10.0)
+    # Independent reference for (55): exp(−h (J − J_min)/(J_max − J_min)) normalised.
+    reference = np.exp(-10.0 * (costs_ - costs_.min()) / (costs_.max() - costs_.min()))
+    np.testing.assert_allclose(invariant, reference / reference.sum(), rtol=1e-12)
+    assert _ess(invariant) > 7.0  # ≈ 7.6 for 40 uniform costs, whatever the scale
+    if scale >= 100.0:
+        assert _ess(baseline) < 1.05
+        # exp(−10 · J) underflows or collapses: the naive mapping keeps at most one sample.
+        assert _ess(naive) <= 1.05
+    else:
+        assert _ess(baseline) > 1.5
+
+
+def test_invariant_weights_ignore_non_finite_costs():
+    w = sabre.likelihood_weights([1.0, np.nan, 2.0, np.inf, 3.0], "invariant", 10.0)
+    assert w[1] == 0.0 and w[3] == 0.0
+    assert w.sum() == pytest.approx(1.0)
+    with pytest.raises(InvalidValueError):
+        sabre.likelihood_weights([1.0, 2.0], "exotic", 1.0)
+
+
+def test_costs_compose_and_validate(scene):
+    cost = costs.TargetPose(np.eye(4)) + costs.JointLimits() + costs.Power()
+    assert isinstance(cost, costs.Cost) and len(cost.terms) == 3
+    compiled = cost.compile(scene)
+    assert compiled.core.num_terms == 3 and not compiled.python_terms
+    assert len((sum([costs.Contact(), costs.Power()])).terms) == 2
+    with pytest.raises(sabre.UnknownFrameError):
+        costs.TargetPose(np.eye(4), frame="no_such_frame").compile(scene)
+    with pytest.raises(sabre.ShapeError):
+        costs.ObjectState([0.1, 0.2]).compile(scene)
+    with pytest.raises(InvalidValueError):
+        costs.Contact(weight=-1.0).compile(scene)
+    with pytest.raises(InvalidValueError):
+        costs.PythonTerm(function=None)
+
+
+def _reach(scene, seed=0, threads=None, extra=costs.Cost(), rollouts=24):
+    q0 = scene.home_configuration()
+    target = scene.fk(q0, "grasp")
+    target[:3, 3] += [0.15, 0.10, -0.05]  # 19 cm away, same orientation
+    task = sabre.tasks.Reach(frame="grasp", target_pose=target, extra=extra)
+    controller = sabre.Controller(scene, task, sabre.ControllerConfig(seed=seed, threads=threads, rollouts=rollouts))
+    return task, controller, target
+
+
+def test_controller_reaches_a_target_in_the_rollout_model(scene):
+    """Closed loop on the rollout model itself (update, then apply the reference for one step)."""
+    task, controller, target = _reach(scene)
+    model = sabre.RolloutModel(scene)
+    x = scene.default_state()
+    start = np.linalg.norm(scene.fk(x[: scene.nq], "grasp")[:3, 3] - target[:3, 3])
+    for i in range(300):
+        t = i * model.dt
+        controller.update(x, t)
+        x = model.rollout(x, controller.nominal[None, :1]).states[0, -1]
+    end = np.linalg.norm(scene.fk(x[: scene.nq], "grasp")[:3, 3] - target[:3, 3])
+    assert end < 0.3 * start
+    stats = controller.stats
+    assert stats["iteration"] == 300 and stats["effective_sample_size"] > 1.0
+    assert stats["cost_min"] <= stats["nominal_cost"] + 1e-9 or stats["cost_min"] <= stats["cost_mean"]
+
+
+def test_planning_is_deterministic_for_a_seed_whatever_the_thread_count(scene):
+    x = scene.default_state()
+    noms = []
+    for threads in (1, 2):
+        _, controller, _ = _reach(scene, seed=5, threads=threads)
+        for i in range(5):
+            controller.update(x, 0.02 * i)
+        noms.append(controller.nominal.copy())
+    np.testing.assert_array_equal(noms[0], noms[1])
+    _, other, _ = _reach(scene, seed=6)
+    for i in range(5):
+        other.update(x, 0.02 * i)
+    assert not np.array_equal(other.nominal, noms[0])
+
+
+def test_nominal_and_zero_sequences_are_always_sampled(scene):
+    _, controller, _ = _reach(scene)
+    x = scene.default_state()
+    controller.update(x, 0.0)
+    planner = controller._planner
+    nominal = controller.nominal.copy()
+    batch = planner.sample(0.0)  # same time: no shift
+    np.testing.assert_array_equal(batch[0], nominal)
+    np.testing.assert_array_equal(batch[1], 0.0)
+    assert np.all(np.abs(batch) <= scene.dq_limit + 1e-12)  # projected onto the input limits
+
+
+def test_reference_interpolates_the_nominal_linearly(scene):
+    _, controller, _ = _reach(scene)
+    controller.update(scene.default_state(), 1.0)
+    u, t0, dt = controller.nominal, controller.nominal_t0, controller.config.dt
+    np.testing.assert_allclose(controller.reference(t0 + 2.5 * dt), 0.5 * (u[2] + u[3]), rtol=1e-12)
+    np.testing.assert_allclose(controller.reference(t0 - 1.0), u[0])
+    np.testing.assert_allclose(controller.reference(t0 + 100.0), u[-1])
+
+
+def test_python_term_is_added_to_the_rollout_costs(scene):
+    """A user term that heavily penalises any base motion keeps the base still while reaching."""
+    calls = []
+
+    def no_base_motion(batch: costs.Batch) -> np.ndarray:
+        calls.append(batch.states.shape)
+        assert batch.frames["grasp"].shape == batch.states.shape[:2] + (4, 4)
+        return 1e4 * np.abs(batch.states[:, :, :2] - batch.states[:, :1, :2]).sum(axis=(1, 2))
+
+    x0 = scene.default_state()
+    results = {}
+    for label, extra in (("free", costs.Cost()), ("held", costs.Cost([costs.PythonTerm(no_base_motion, frames=("grasp",))]))):
+        _, controller, _ = _reach(scene, extra=extra)
+        model = sabre.RolloutModel(scene)
+        x = x0.copy()
+        for i in range(60):
+            controller.update(x, i * model.dt)
+            x = model.rollout(x, controller.nominal[None, :1]).states[0, -1]
+        results[label] = np.linalg.norm(x[:2] - x0[:2])
+    assert calls and calls[0][0] == 24
+    assert results["held"] < 0.5 * results["free"]
+
+
+def test_controller_config_validation():
+    with pytest.raises(InvalidValueError):
+        sabre.ControllerConfig(rollouts=2)
+    with pytest.raises(InvalidValueError):
+        sabre.ControllerConfig(horizon=0.001)
+    with pytest.raises(InvalidValueError):
+        sabre.ControllerConfig(keep_fraction=1.5)
+    with pytest.raises(InvalidValueError):
+        sabre.ControllerConfig(sigma=(1.0, -1.0))
+    assert sabre.ControllerConfig().horizon_steps == 67
+
+
+def test_open_object_phases_switch_on_the_approach_pose(scene):
+    task = sabre.tasks.OpenObject()
+    x = scene.default_state()
+    assert task.next_phase(scene, x, 0.0, "approach") == "approach"
+    assert task.target_opening(scene) == pytest.approx(0.75 * scene.o_upper[0])
+    assert not task.success(scene, x)
+    x_open = x.copy()
+    x_open[2 * scene.nq] = 0.95 * task.target_opening(scene)
+    assert task.success(scene, x_open)
