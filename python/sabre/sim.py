@@ -66,7 +66,7 @@ class RolloutModel:
         servo_integral_gain: float = 400.0,
         servo_integral_limit: float = 0.1,
         contact_friction: float = 0.2,
-        solver_iterations: int = 2,
+        solver_iterations: int = 1,
         multibody_robot: bool = False,
     ) -> None:
         if not isinstance(scene, Scene):

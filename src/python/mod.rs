@@ -304,7 +304,7 @@ pub struct PyRolloutModel {
 #[pymethods]
 impl PyRolloutModel {
     #[new]
-    #[pyo3(signature = (scene, dt=0.015, servo_bandwidth=40.0, servo_integral_gain=400.0, servo_integral_limit=0.1, contact_friction=0.2, solver_iterations=2, multibody_robot=false))]
+    #[pyo3(signature = (scene, dt=0.015, servo_bandwidth=40.0, servo_integral_gain=400.0, servo_integral_limit=0.1, contact_friction=0.2, solver_iterations=1, multibody_robot=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         scene: &PyScene,

@@ -38,7 +38,9 @@ impl Default for RolloutConfig {
             servo_integral_limit: 0.1,
             multibody_robot: false,
             contact_friction: 0.2,
-            solver_iterations: 2,
+            // One TGS substep suffices for a hook pulling a handle at 15 ms (the scripted openings
+            // of all four objects come out the same) and saves a sixth of the contact-step time.
+            solver_iterations: 1,
         }
     }
 }
