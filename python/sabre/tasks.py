@@ -103,9 +103,10 @@ def _offset(xyz: tuple[float, float, float]) -> np.ndarray:
 class OpenObject(Task):
     """Open the scene's object to ``opening`` (rad or m; default 75 % of its range), in two phases.
 
-    approach: drive the ``grasp`` frame to a pre-grasp pose 12 cm in front of the handle
+    approach: drive the ``grasp`` frame to a pre-grasp pose 7 cm in front of the handle
     (``handle_frame``), touching nothing (contact cost on); insert: move in until the hook's tip is
-    beside and past the bar, still touching nothing.
+    beside and past the bar (touching is no longer penalised: with the sampling noise, every move
+    that close to the handle brushes it, and a contact cost makes the hand hover).
     open: the pose target moves into the hook's pocket and follows the handle as the object
     moves, with a lower weight so the hand may slide along the handle; the object cost pulls
     toward the target opening; contact is allowed.
@@ -120,13 +121,13 @@ class OpenObject(Task):
     contact_weight: float = 100.0
     safety: SafetyWeights = field(default_factory=SafetyWeights)
     #: grasp pose in the handle frame while approaching (beside and past the bar) and while opening.
-    pregrasp_offset: tuple[float, float, float] = (0.0, -0.022, -0.12)
+    pregrasp_offset: tuple[float, float, float] = (0.0, -0.022, -0.07)
     approach_offset: tuple[float, float, float] = (0.0, -0.022, 0.0)
     open_offset: tuple[float, float, float] = (0.0, 0.0, -0.016)
     #: the hand points this much (rad) below the handle's normal, tilted about the handle's horizontal
     #: axis: a Panda reaches a forward-and-down hand at handle height with margin on its wrist joint,
     #: a level one only at its wrist limit; the hook still closes around the bar.
-    approach_pitch: float = 0.6
+    approach_pitch: float = 0.3
     switch_position: float = 0.015
     switch_angle: float = 0.15
     success_fraction: float = 0.9
@@ -182,8 +183,7 @@ class OpenObject(Task):
         if phase in ("approach", "insert"):
             return (
                 costs.TargetPose(self.grasp_offset(scene, phase), "grasp", "handle_frame", self.approach_weight, self.approach_weight)
-                + costs.Contact(self.contact_weight)
-                + self.posture_term(scene)
+                + (costs.Contact(self.contact_weight) + self.posture_term(scene) if phase == "approach" else costs.Cost())
                 + self.safety.terms(scene)
                 + self.extra
             )

@@ -78,3 +78,19 @@ pub fn mechanical_energy(tree: &KinematicTree, root_pose: &Isometry3<f64>, q: &[
     let v = DVector::from_column_slice(qd);
     0.5 * v.dot(&(&m * &v)) + potential_energy(tree, root_pose, q, gravity)
 }
+
+/// Gravity torque g(q) alone (the torque that holds the tree still), without the mass matrix.
+pub fn gravity_torque(tree: &KinematicTree, root_pose: &Isometry3<f64>, q: &[f64], gravity: &Vector3<f64>) -> Vec<f64> {
+    let poses = tree.link_poses(root_pose, q);
+    let mut out = vec![0.0; tree.nq()];
+    let mut jac = vec![0.0; 6 * tree.nq()];
+    for (link, l) in tree.links.iter().enumerate() {
+        let Some(inertial) = &l.inertial else { continue };
+        let com = poses[link] * Point3::from(inertial.com);
+        tree.point_jacobian_into(&poses, link, &com, &mut jac);
+        for (c, g) in out.iter_mut().enumerate() {
+            *g -= inertial.mass * (jac[6 * c] * gravity.x + jac[6 * c + 1] * gravity.y + jac[6 * c + 2] * gravity.z);
+        }
+    }
+    out
+}

@@ -98,6 +98,59 @@ pub struct WorldLayout {
     /// Robot links whose contact forces the wrist force-torque sensor measures.
     pub sensor_links: Vec<bool>,
     pub sensor_link: usize,
+    /// Bounding spheres (link, centre in the link frame, radius) of the robot's contact geometry
+    /// and of the object's links, for the quiescence test.
+    robot_spheres: Vec<(usize, Point3<f64>, f64)>,
+    /// Object collision primitives (link, pose in the link frame, shape).
+    object_shapes: Vec<(usize, Isometry3<f64>, Shape)>,
+    object_friction: Vec<f64>,
+}
+
+/// Radius of a sphere about the primitive's centre that contains it.
+fn bounding_radius(shape: &Shape) -> f64 {
+    match *shape {
+        Shape::Box { half_extents } => half_extents.norm(),
+        Shape::Sphere { radius } => radius,
+        Shape::Cylinder { radius, half_length } => (radius * radius + half_length * half_length).sqrt(),
+        Shape::Capsule { radius, half_length } => radius + half_length,
+    }
+}
+
+/// Distance from `point` to a primitive placed at `pose` (exact for boxes and spheres, through the
+/// bounding sphere otherwise; never more than the true distance).
+fn distance_to_shape(pose: &Isometry3<f64>, shape: &Shape, point: &Point3<f64>) -> f64 {
+    let local = pose.inverse_transform_point(point);
+    match *shape {
+        Shape::Box { half_extents } => {
+            let outside = Vector3::new(
+                (local.x.abs() - half_extents.x).max(0.0),
+                (local.y.abs() - half_extents.y).max(0.0),
+                (local.z.abs() - half_extents.z).max(0.0),
+            );
+            outside.norm()
+        }
+        _ => (local.coords.norm() - bounding_radius(shape)).max(0.0),
+    }
+}
+
+/// One bounding sphere per link with collision geometry (of the links `include` accepts).
+fn link_spheres(tree: &KinematicTree, include: &dyn Fn(usize) -> bool) -> Vec<(usize, Point3<f64>, f64)> {
+    let mut out = Vec::new();
+    for (link, l) in tree.links.iter().enumerate() {
+        if l.collisions.is_empty() || !include(link) {
+            continue;
+        }
+        let centers: Vec<Point3<f64>> = l.collisions.iter().map(|c| Point3::from(c.origin.translation.vector)).collect();
+        let center = Point3::from(centers.iter().map(|c| c.coords).sum::<Vector3<f64>>() / centers.len() as f64);
+        let radius = l
+            .collisions
+            .iter()
+            .zip(&centers)
+            .map(|(c, p)| (p - center).norm() + bounding_radius(&c.shape))
+            .fold(0.0, f64::max);
+        out.push((link, center, radius));
+    }
+    out
 }
 
 /// Per-step interaction readings.
@@ -536,7 +589,19 @@ impl SimWorld {
             })
             .collect();
         let limits = scene.robot_limits();
+        let robot_spheres = link_spheres(&scene.robot, &|l| robot_links[l]);
+        let object_shapes = scene
+            .object
+            .links
+            .iter()
+            .enumerate()
+            .flat_map(|(link, l)| l.collisions.iter().map(move |c| (link, c.origin, c.shape)))
+            .collect();
+        let object_friction = scene.object.active_joints.iter().map(|&j| scene.object.joints[j].friction).collect();
         let layout = WorldLayout {
+            robot_spheres,
+            object_shapes,
+            object_friction,
             nq,
             no,
             drive: config.drive,
@@ -874,6 +939,15 @@ impl SimWorld {
         } = self.layout.drive
         {
             self.advance_kinematic_robot(bandwidth, integral_gain, integral_limit);
+            if self.quiescent() {
+                // Nothing can touch the object and it is held at rest: the physics step would leave
+                // it exactly where it is, as Rapier's island sleeping would. Skip it.
+                let last = &mut self.state.last;
+                last.contact = false;
+                last.tau_ext.iter_mut().for_each(|v| *v = 0.0);
+                last.wrench = [0.0; 6];
+                return;
+            }
         }
         let s = &mut self.state;
         self.pipeline.step(
@@ -892,6 +966,62 @@ impl SimWorld {
             &(),
         );
         self.measure_interaction();
+    }
+
+    /// True when the object is at rest and statically held (dry friction at least its gravity
+    /// torque, or gravity pressing it onto a limit), and no robot contact body can reach any object
+    /// link within this step (bounding spheres, with the contact prediction distance and each
+    /// body's travel as margin). The robot frames must be those of the step's start (placed proxies).
+    fn quiescent(&mut self) -> bool {
+        let (nq, no) = (self.layout.nq, self.layout.no);
+        let mut x = std::mem::take(&mut self.displacement);
+        x.resize(2 * (nq + no), 0.0);
+        self.read_state(&mut x);
+        let o = &x[2 * nq..2 * nq + no];
+        let od = &x[2 * nq + no..];
+        let at_rest = od.iter().all(|v| v.abs() < 1e-9);
+        let mut quiet = at_rest;
+        if quiet {
+            // Rest is kept only if no generalized force beats the dry friction, or a limit takes it.
+            let g = crate::model::dynamics::gravity_torque(&self.scene.object, &self.scene.object_pose, o, &Vector3::new(0.0, 0.0, -9.81));
+            let limits = self.scene.object_limits();
+            for i in 0..no {
+                // g is the torque that holds the object still; gravity itself pushes with −g.
+                let push = -g[i];
+                let held_by_friction = push.abs() <= self.layout.object_friction[i];
+                let on_lower = o[i] <= limits[i].lower + 1e-6 && push <= 0.0;
+                let on_upper = o[i] >= limits[i].upper - 1e-6 && push >= 0.0;
+                if !(held_by_friction || on_lower || on_upper) {
+                    quiet = false;
+                }
+            }
+        }
+        if quiet {
+            let frames = &self.dynamics.frames; // robot frames at the step's start (place_proxies)
+            let object_poses = self.scene.object.link_poses(&self.scene.object_pose, o);
+            let dt = self.params.dt;
+            let margin = self.params.normalized_prediction_distance * self.params.length_unit + 0.02;
+            'outer: for &(link, center, radius) in &self.layout.robot_spheres {
+                let c = frames.poses[link] * center;
+                // Travel bound of this body over the step: its link's linear speed at the centre.
+                let mut jac = std::mem::take(&mut self.jacobian);
+                self.scene.robot.frames_jacobian_into(frames, link, &c, &mut jac);
+                let mut v = Vector3::zeros();
+                for (col, &rate) in self.state.robot_qd.iter().enumerate() {
+                    v += Vector3::new(jac[6 * col], jac[6 * col + 1], jac[6 * col + 2]) * rate;
+                }
+                self.jacobian = jac;
+                let reach = radius + v.norm() * dt + margin;
+                for (olink, origin, shape) in &self.layout.object_shapes {
+                    if distance_to_shape(&(object_poses[*olink] * origin), shape, &c) < reach {
+                        quiet = false;
+                        break 'outer;
+                    }
+                }
+            }
+        }
+        self.displacement = x;
+        quiet
     }
 
     /// Interaction measured in the last step.
