@@ -77,6 +77,7 @@ class RolloutModel:
         contact_friction: float = 0.2,
         solver_iterations: int = 1,
         multibody_robot: bool = False,
+        skip_quiescent_steps: bool = True,
     ) -> None: ...
     @property
     def dt(self) -> float: ...

@@ -50,7 +50,10 @@ class RolloutModel:
     bounded by the joint torque limits; only the hand, hook and forearm colliders touch the object; the object is a
     dynamic Rapier multibody with limits, damping, dry friction and gravity. With
     ``multibody_robot=True`` the same servo loop is simulated by Rapier's multibody solver instead
-    (more faithful robot compliance, several times slower).
+    (more faithful robot compliance, several times slower). While the object is statically held
+    (at rest, its dry friction or a limit holding it against gravity) and no contact body can reach
+    it within a step, the physics step is skipped — it could not change anything — unless
+    ``skip_quiescent_steps=False``.
 
     Rollouts run in parallel on ``threads`` workers (default: all cores), each with its own physics
     world restored from a pristine snapshot before every rollout; the GIL is released and the
@@ -68,6 +71,7 @@ class RolloutModel:
         contact_friction: float = 0.2,
         solver_iterations: int = 1,
         multibody_robot: bool = False,
+        skip_quiescent_steps: bool = True,
     ) -> None:
         if not isinstance(scene, Scene):
             raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
@@ -82,6 +86,7 @@ class RolloutModel:
             as_non_negative("contact_friction", contact_friction),
             as_count("solver_iterations", solver_iterations),
             bool(multibody_robot),
+            bool(skip_quiescent_steps),
         )
 
     def rollout(self, x0: Sequence[float] | np.ndarray, U: np.ndarray, threads: int | None = None) -> RolloutResult:

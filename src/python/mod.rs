@@ -304,7 +304,7 @@ pub struct PyRolloutModel {
 #[pymethods]
 impl PyRolloutModel {
     #[new]
-    #[pyo3(signature = (scene, dt=0.015, servo_bandwidth=40.0, servo_integral_gain=400.0, servo_integral_limit=0.1, contact_friction=0.2, solver_iterations=1, multibody_robot=false))]
+    #[pyo3(signature = (scene, dt=0.015, servo_bandwidth=40.0, servo_integral_gain=400.0, servo_integral_limit=0.1, contact_friction=0.2, solver_iterations=1, multibody_robot=false, skip_quiescent_steps=true))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         scene: &PyScene,
@@ -315,8 +315,10 @@ impl PyRolloutModel {
         contact_friction: f64,
         solver_iterations: usize,
         multibody_robot: bool,
+        skip_quiescent_steps: bool,
     ) -> PyResult<Self> {
         let config = RolloutConfig {
+            skip_quiescent_steps,
             dt,
             servo_bandwidth,
             servo_integral_gain,

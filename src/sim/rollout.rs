@@ -25,6 +25,9 @@ pub struct RolloutConfig {
     /// Simulate the servo loop with Rapier's multibody solver instead of the joint-space kinematic
     /// servo: higher fidelity to robot compliance in contact, several times slower.
     pub multibody_robot: bool,
+    /// Skip the physics step while the object is statically held and out of the robot's reach
+    /// (its state cannot change then); off, every step goes through Rapier.
+    pub skip_quiescent_steps: bool,
     pub contact_friction: f64,
     pub solver_iterations: usize,
 }
@@ -37,6 +40,7 @@ impl Default for RolloutConfig {
             servo_integral_gain: 400.0,
             servo_integral_limit: 0.1,
             multibody_robot: false,
+            skip_quiescent_steps: true,
             contact_friction: 0.2,
             // One TGS substep suffices for a hook pulling a handle at 15 ms (the scripted openings
             // of all four objects come out the same) and saves a sixth of the contact-step time.
@@ -136,6 +140,7 @@ impl RolloutModel {
                     bandwidth: config.servo_bandwidth,
                     integral_gain: config.servo_integral_gain,
                     integral_limit: config.servo_integral_limit,
+                    skip_quiescent: config.skip_quiescent_steps,
                 }
             },
             contact_friction: config.contact_friction,

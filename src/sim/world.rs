@@ -31,7 +31,7 @@ pub enum RobotDrive {
     /// with its forward-kinematics velocity, Rapier's contact solver resolves its contacts with the
     /// dynamic object (so forces stay bounded by the robot's inertia, also in jams), and the contact
     /// forces act back on the joints through τ_ext on the next step.
-    KinematicServo { bandwidth: f64, integral_gain: f64, integral_limit: f64 },
+    KinematicServo { bandwidth: f64, integral_gain: f64, integral_limit: f64, skip_quiescent: bool },
     /// The same closed loop simulated by Rapier's multibody solver: implicit velocity motors per
     /// joint (torque-limited), robot links without gravity. Higher fidelity, several times slower.
     MultibodyServo { bandwidth: f64 },
@@ -936,10 +936,11 @@ impl SimWorld {
             bandwidth,
             integral_gain,
             integral_limit,
+            skip_quiescent,
         } = self.layout.drive
         {
             self.advance_kinematic_robot(bandwidth, integral_gain, integral_limit);
-            if self.quiescent() {
+            if skip_quiescent && self.quiescent() {
                 // Nothing can touch the object and it is held at rest: the physics step would leave
                 // it exactly where it is, as Rapier's island sleeping would. Skip it.
                 let last = &mut self.state.last;
