@@ -145,16 +145,9 @@ pub fn follow_reference(
     if !(dt.is_finite() && dt > 0.0) || !t0.is_finite() {
         return Err(SabreError::invalid("reference timing", "t0 must be finite and dt positive"));
     }
-    let k = reference.len() / nq;
     let mut u = vec![0.0; nq];
     for step in 0..steps {
-        let s = ((plant.time() - t0) / dt).clamp(0.0, (k - 1) as f64);
-        let i = s.floor() as usize;
-        let j = (i + 1).min(k - 1);
-        let a = s - i as f64;
-        for d in 0..nq {
-            u[d] = (1.0 - a) * reference[i * nq + d] + a * reference[j * nq + d];
-        }
+        crate::mppi::interpolate(reference, nq, (plant.time() - t0) / dt, &mut u);
         let tau = controller.torque(plant.state(), &u)?;
         plant.step(&tau)?;
         if record_every > 0 && step % record_every == 0 {

@@ -108,7 +108,7 @@ pub struct Mppi {
 }
 
 /// Value of a K × nu sequence at fractional index `s`, linearly interpolated, clamped at both ends.
-fn interpolate(seq: &[f64], nu: usize, s: f64, out: &mut [f64]) {
+pub fn interpolate(seq: &[f64], nu: usize, s: f64, out: &mut [f64]) {
     let k = seq.len() / nu;
     if k == 0 {
         out.fill(0.0);
