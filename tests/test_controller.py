@@ -169,3 +169,35 @@ def test_open_object_phases_switch_on_the_approach_pose(scene):
     x_open = x.copy()
     x_open[2 * scene.nq] = 0.95 * task.target_opening(scene)
     assert task.success(scene, x_open)
+
+
+def test_run_episode_closes_the_loop_on_the_plant(scene):
+    """A short closed-loop reach on the 1 kHz plant: traces have the documented shapes, time runs at
+    the plant rate, the plant follows the controller's reference, and the grasp frame approaches."""
+    task, controller, target = _reach(scene, rollouts=16)
+    x0 = scene.default_state()
+    episode = sabre.run_episode(scene, controller, 1.5, x0=x0, replan_rate=50.0, record_every=5, progress=False)
+    m = len(episode.time)
+    assert m == 300  # 1.5 s at 1 kHz, every 5th step
+    np.testing.assert_allclose(np.diff(episode.time), 0.005, atol=1e-9)
+    assert episode.state.shape == (m, scene.nx) and episode.reference.shape == (m, scene.nu)
+    assert episode.wrench.shape == (m, 6) and episode.tau_ext.shape == (m, scene.nq)
+    assert episode.phase.shape == (m,) and set(episode.phase) == {0}
+    assert len(episode.planning_times) == 75
+    # The low-level controller tracks the reference: velocities lag it by little.
+    late = slice(m // 2, None)
+    err = np.abs(episode.state[late, scene.nq : 2 * scene.nq] - episode.reference[late])
+    assert np.median(err) < 0.02
+    start = np.linalg.norm(scene.fk(x0[: scene.nq], "grasp")[:3, 3] - target[:3, 3])
+    end = np.linalg.norm(scene.fk(episode.state[-1, : scene.nq], "grasp")[:3, 3] - target[:3, 3])
+    assert end < 0.8 * start
+
+
+def test_paper_start_state(scene):
+    x = sabre.paper_start_state(scene)
+    assert x.shape == (scene.nx,)
+    assert x[0] == -3.0 and x[1] == -3.0
+    q = x[: scene.nq]
+    assert np.all(q >= scene.q_lower) and np.all(q <= scene.q_upper)
+    # Near the joint limits: the elbow within 0.15 rad of its fully folded limit.
+    assert q[6] - scene.q_lower[6] < 0.15
