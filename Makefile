@@ -38,6 +38,7 @@ bench-rust:
 
 bench-python: build
 	$(PY) benches/compare_mujoco.py
+	$(PY) benches/compare_planning.py
 
 bench: bench-rust bench-python
 

@@ -138,6 +138,16 @@ class Controller:
         self._planner.set_cost(self._cost.core)
         self.phase_history = [(float(t0), self.phase)]
 
+    def set_phase(self, phase: str, t: float = 0.0) -> None:
+        """Switches the task phase by hand (the task's own rule keeps running afterwards)."""
+        if phase not in self.task.phases:
+            raise InvalidValueError(f"unknown phase {phase!r}; phases: {self.task.phases}")
+        if phase != self.phase:
+            self.phase = phase
+            self._cost = self._compile(phase)
+            self._planner.set_cost(self._cost.core)
+            self.phase_history.append((float(t), phase))
+
     def update(self, x: Sequence[float] | np.ndarray, t: float) -> dict:
         """One planning iteration from state x (nx,) at time t (s); returns its statistics."""
         x = as_float_array("x", x, (self.scene.nx,))
@@ -147,11 +157,7 @@ class Controller:
         phase = self.task.next_phase(self.scene, x, t, self.phase)
         if phase not in self.task.phases:
             raise InvalidValueError(f"task returned unknown phase {phase!r}; phases: {self.task.phases}")
-        if phase != self.phase:
-            self.phase = phase
-            self._cost = self._compile(phase)
-            self._planner.set_cost(self._cost.core)
-            self.phase_history.append((t, phase))
+        self.set_phase(phase, t)
         self.task.on_step(self.scene, x, t, self)
         start = time.perf_counter()
         if not self._cost.python_terms:

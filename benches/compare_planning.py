@@ -1,0 +1,105 @@
+"""One planning iteration of sabre's controller next to `mujoco.rollout` of the same batch, plus the
+closed-loop real-time factor.
+
+    python benches/compare_planning.py [--object shelf] [--repeats 30] [--episode-seconds 5]
+
+A sabre planning iteration samples N = 40 sequences of K = 67 steps, rolls them out in parallel with
+the task's cost evaluated at every step, and updates the policy (`Controller.update`). The peer is
+what a MuJoCo-based sampler would pay for its rollouts alone: `mujoco.rollout` of the same N × K
+batch on the equivalent scene (benches/mujoco_scene.py), 2 threads, per-step states, cost not
+included. Both are timed alternately in one process, from the default state (free space) and from
+the state with the hook on the handle (contact); medians are printed with the ratio of the two.
+Finally the closed loop runs for a few simulated seconds (plant at 1 kHz, re-planning at 100 Hz)
+and its real-time factor is printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import mujoco
+import mujoco.rollout
+import numpy as np
+
+import sabre
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from compare_mujoco import mujoco_controls, mujoco_state  # noqa: E402
+from mujoco_scene import build_mujoco_model  # noqa: E402
+
+THREADS = 2
+
+
+def hooked_state(scene: sabre.Scene) -> np.ndarray:
+    motion = sabre.hook_and_pull(scene)
+    start = int(np.argmax(motion.phases == 3)) + 20
+    return sabre.RolloutModel(scene).rollout(scene.default_state(), motion.U[None, :start]).states[0, -1]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--object", default="shelf", choices=sabre.OBJECTS)
+    parser.add_argument("--repeats", type=int, default=30)
+    parser.add_argument("--episode-seconds", type=float, default=5.0)
+    args = parser.parse_args(argv)
+
+    scene = sabre.Scene.load(obj=args.object)
+    config = sabre.ControllerConfig(seed=0, threads=THREADS)
+    n, k = config.rollouts, config.horizon_steps
+    model = build_mujoco_model(args.object)
+    data = mujoco.MjData(model)
+    # One MjData per worker thread: rollout threads must not share one.
+    thread_data = [mujoco.MjData(model) for _ in range(THREADS)]
+    runner = mujoco.rollout.Rollout(nthread=THREADS)
+    rng = np.random.default_rng(0)
+
+    print(f"sabre {sabre.__version__} vs MuJoCo {mujoco.__version__}: planning iteration, N={n} x K={k}, "
+          f"{THREADS} threads, median of {args.repeats} alternating rounds")
+    print(f"{'start':<10} {'sabre iteration (ms)':>22} {'mujoco.rollout (ms)':>21} {'ratio':>7}")
+    for label, x in (("free", scene.default_state()), ("contact", hooked_state(scene))):
+        controller = sabre.Controller(scene, sabre.tasks.OpenObject(), config)
+        if label == "contact":
+            controller.set_phase("open")
+        state = mujoco_state(model, data, scene, x)
+        states0 = np.tile(state, (n, 1))
+        commands = np.clip(rng.normal(0.0, 0.3, size=(n, k, scene.nu)), -scene.dq_limit, scene.dq_limit)
+        controls = mujoco_controls(model, commands)
+        out_state = np.empty((n, k, state.size))
+        t_sim = 0.0
+        sabre_times, mujoco_times = [], []
+        for round_ in range(args.repeats + 3):
+            def run_sabre() -> float:
+                nonlocal t_sim
+                t_sim += 0.01
+                t0 = time.perf_counter()
+                controller.update(x, t_sim)
+                return time.perf_counter() - t0
+
+            def run_mujoco() -> float:
+                t0 = time.perf_counter()
+                runner.rollout(model, thread_data, states0, controls, state=out_state)
+                return time.perf_counter() - t0
+
+            pair = (run_sabre, run_mujoco) if round_ % 2 == 0 else (run_mujoco, run_sabre)
+            results = {f.__name__: f() for f in pair}
+            if round_ >= 3:
+                sabre_times.append(results["run_sabre"])
+                mujoco_times.append(results["run_mujoco"])
+        s, m = statistics.median(sabre_times), statistics.median(mujoco_times)
+        print(f"{label:<10} {1e3 * s:>22.2f} {1e3 * m:>21.2f} {m / s:>6.2f}x")
+    print("(ratio = MuJoCo rollouts alone / sabre's whole iteration; > 1 means sabre's iteration is faster)")
+
+    controller = sabre.Controller(scene, sabre.tasks.OpenObject(), config)
+    episode = sabre.run_episode(scene, controller, args.episode_seconds, x0=scene.default_state(), replan_rate=100.0, progress=False)
+    print(f"closed loop: {episode.duration:.1f} s simulated in {episode.wall_time:.1f} s "
+          f"(real-time factor {episode.real_time_factor:.2f}, plant at 1 kHz, re-planning at 100 Hz, "
+          f"median iteration {1e3 * np.median(episode.planning_times):.1f} ms)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
