@@ -85,8 +85,8 @@ def test_controller_reaches_a_target_in_the_rollout_model(scene):
     end = np.linalg.norm(scene.fk(x[: scene.nq], "grasp")[:3, 3] - target[:3, 3])
     assert end < 0.3 * start
     stats = controller.stats
-    assert stats["iteration"] == 300 and stats["effective_sample_size"] > 1.0
-    assert stats["cost_min"] <= stats["nominal_cost"] + 1e-9 or stats["cost_min"] <= stats["cost_mean"]
+    assert stats["iteration"] == 300
+    assert 1.0 < stats["effective_sample_size"] < 24.0 and stats["failed_rollouts"] == 0
 
 
 def test_planning_is_deterministic_for_a_seed_whatever_the_thread_count(scene):

@@ -1,6 +1,6 @@
 //! Cost terms of the sampling-based controller (paper Sec. IV-A, eqs. 29–36), evaluated per rollout step.
 
-use nalgebra::{Isometry3, Matrix3, Point3, Vector3, Vector6};
+use nalgebra::{Isometry3, Matrix3, Point3, Vector6};
 
 use crate::error::{Result, SabreError};
 use crate::model::kinematics::Frames;
@@ -227,15 +227,10 @@ impl Cost {
     }
 }
 
-/// World position of a point given in a link frame.
-pub fn point_in_world(frames: &Frames, link: usize, local: &Vector3<f64>) -> Point3<f64> {
-    frames.poses[link] * Point3::from(*local)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::{Translation3, UnitQuaternion};
+    use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
     fn se3_exp(xi: &Vector6<f64>) -> Isometry3<f64> {
         let v = Vector3::new(xi[0], xi[1], xi[2]);

@@ -201,7 +201,8 @@ pub struct SimWorld {
     pub layout: Arc<WorldLayout>,
     scene: Arc<Scene>,
     jacobian: Vec<f64>,
-    displacement: Vec<f64>,
+    /// Scratch buffer (joint displacements, next configuration, state) reused every step.
+    scratch: Vec<f64>,
     dynamics: DynamicsWorkspace,
     /// Robot and object link poses for cost evaluation (caches keyed by the configuration).
     cost_frames: (Frames, Frames),
@@ -219,7 +220,7 @@ impl Clone for SimWorld {
             layout: self.layout.clone(),
             scene: self.scene.clone(),
             jacobian: self.jacobian.clone(),
-            displacement: self.displacement.clone(),
+            scratch: self.scratch.clone(),
             dynamics: self.dynamics.clone(),
             cost_frames: self.cost_frames.clone(),
             mass_matrix: self.mass_matrix.clone(),
@@ -647,7 +648,7 @@ impl SimWorld {
             gravity: Vector::new(0.0, 0.0, -9.81),
             layout: Arc::new(layout),
             jacobian: vec![0.0; 6 * nq],
-            displacement: Vec::new(),
+            scratch: Vec::new(),
             dynamics,
             cost_frames: Default::default(),
             mass_matrix,
@@ -712,7 +713,7 @@ impl SimWorld {
                 &layout.robot_dofs,
                 &x[..nq],
                 &x[nq..2 * nq],
-                &mut self.displacement,
+                &mut self.scratch,
             ),
             None => {
                 self.state.robot_q.copy_from_slice(&x[..nq]);
@@ -730,7 +731,7 @@ impl SimWorld {
             &layout.object_dofs,
             &x[2 * nq..2 * nq + no],
             &x[2 * nq + no..],
-            &mut self.displacement,
+            &mut self.scratch,
         );
         self.state.command.iter_mut().for_each(|v| *v = 0.0);
         self.state.last.contact = false;
@@ -890,7 +891,7 @@ impl SimWorld {
             (Some(factor), true) => Some(factor.solve(&DVector::from_column_slice(&self.state.last.tau_ext))),
             _ => None,
         };
-        let mut q_next = std::mem::take(&mut self.displacement);
+        let mut q_next = std::mem::take(&mut self.scratch);
         q_next.clear();
         for i in 0..nq {
             let qd = self.state.robot_qd[i];
@@ -926,7 +927,7 @@ impl SimWorld {
         let qd = self.state.robot_qd.clone();
         self.place_proxies(&qd);
         self.state.robot_q.copy_from_slice(&q_next);
-        self.displacement = q_next;
+        self.scratch = q_next;
     }
 
     /// Advances the physics by one step of length dt under the current command, then measures
@@ -975,7 +976,7 @@ impl SimWorld {
     /// body's travel as margin). The robot frames must be those of the step's start (placed proxies).
     fn quiescent(&mut self) -> bool {
         let (nq, no) = (self.layout.nq, self.layout.no);
-        let mut x = std::mem::take(&mut self.displacement);
+        let mut x = std::mem::take(&mut self.scratch);
         x.resize(2 * (nq + no), 0.0);
         self.read_state(&mut x);
         let o = &x[2 * nq..2 * nq + no];
@@ -1021,7 +1022,7 @@ impl SimWorld {
                 }
             }
         }
-        self.displacement = x;
+        self.scratch = x;
         quiet
     }
 
@@ -1074,11 +1075,11 @@ impl SimWorld {
                     let p = vec_from_rapier((p1 + p2) * 0.5);
                     last.contact = true;
                     if !poses_ready {
-                        let mut q = std::mem::take(&mut self.displacement);
+                        let mut q = std::mem::take(&mut self.scratch);
                         q.resize(nq, 0.0);
                         self.read_robot_q(&mut q);
                         self.scene.robot.update_frames(&Isometry3::identity(), &q, &mut self.dynamics.frames);
-                        self.displacement = q;
+                        self.scratch = q;
                         poses_ready = true;
                     }
                     let point = Point3::from(p);
