@@ -18,6 +18,8 @@ fn approach_cost(scene: &Scene) -> Cost {
             target: PoseTarget::ObjectLink {
                 link: scene.object.link_id("handle_frame").expect("handle frame"),
                 offset: Isometry3::translation(0.0, -0.022, -0.12),
+                lead: 0.0,
+                lead_limit: f64::INFINITY,
             },
             weights: [100.0; 6],
         },

@@ -201,3 +201,118 @@ def test_paper_start_state(scene):
     assert np.all(q >= scene.q_lower) and np.all(q <= scene.q_upper)
     # Near the joint limits: the elbow within 0.15 rad of its fully folded limit.
     assert q[6] - scene.q_lower[6] < 0.15
+
+
+def _planner(scene, cost, rollouts=40, horizon=1.0, keep=0.0, sigma=None, **kw):
+    model = sabre.RolloutModel(scene)
+    sigma = [0.5] * 3 + [1.0] * 7 if sigma is None else sigma
+    return sabre._core.Planner(model._core, cost.compile(scene).core, rollouts, horizon, sigma,
+                               10.0, 1.0, 0.2, keep, 0, 3, 0, 1, 1, **kw)
+
+
+def test_input_limit_bounds_every_sample(scene):
+    limit = [0.2, 0.2, 1.0] + [1.0] * 7
+    planner = _planner(scene, costs.Cost([costs.Power()]), input_limit=limit)
+    samples = planner.sample(0.0)
+    assert np.all(np.abs(samples) <= np.asarray(limit) + 1e-12)
+    # With σ = 1 on the arm, the bound is reached: the projection is doing the work.
+    assert np.isclose(np.abs(samples[..., 5]).max(), 1.0)
+    with pytest.raises(InvalidValueError):
+        sabre.ControllerConfig(input_limit=(0.2, -1.0))
+    with pytest.raises(sabre.errors.ShapeError):
+        _planner(scene, costs.Cost([costs.Power()]), input_limit=[1.0] * 3)
+
+
+def test_noise_scale_scales_the_fresh_samples(scene):
+    """Around a zero nominal, fresh samples are N(0, s·Σ): their spread scales with √s."""
+    spreads = []
+    sigma = [0.01] * 3 + [0.04] * 7  # far inside the velocity limits: no projection
+    for s in (1.0, 0.01):
+        planner = _planner(scene, costs.Cost([costs.Power()]), sigma=sigma)
+        planner.noise_scale = s
+        fresh = planner.sample(0.0)[2:]  # after the nominal and the zero sequence
+        spreads.append(fresh.reshape(-1, scene.nu).std(axis=0))
+    ratio = spreads[1] / spreads[0]
+    np.testing.assert_allclose(ratio, 0.1, rtol=0.05)
+    np.testing.assert_allclose(spreads[0], np.sqrt(sigma), rtol=0.05)
+    with pytest.raises(InvalidValueError):
+        planner.noise_scale = -1.0
+
+
+def _se3_log(t: np.ndarray) -> np.ndarray:
+    """Independent SE(3) log: (V⁻¹ p, ω), ω the rotation vector of R."""
+    r, p = t[:3, :3], t[:3, 3]
+    angle = np.arccos(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0))
+    w_hat = (r - r.T) / 2.0
+    w = np.array([w_hat[2, 1], w_hat[0, 2], w_hat[1, 0]])
+    if angle > 1e-9:
+        w = w * angle / np.sin(angle)
+    wx = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
+    if angle < 1e-9:
+        v_inv = np.eye(3) - 0.5 * wx
+    else:
+        v_inv = np.eye(3) - 0.5 * wx + (1.0 - angle * np.sin(angle) / (2.0 * (1.0 - np.cos(angle)))) / angle**2 * wx @ wx
+    return np.r_[v_inv @ p, w]
+
+
+@pytest.mark.parametrize("opening, lead, limit, expected", [(0.1, 0.0, 10.0, 0.1), (0.1, 0.2, 10.0, 0.3), (0.1, 0.2, 0.25, 0.25), (0.4, 0.2, 0.25, 0.4)])
+def test_pose_target_leads_along_the_articulation(scene, opening, lead, limit, expected):
+    """The pose cost of a one-step horizon from rest equals ‖log(T⁻¹ T*)‖²_W with T* the handle
+    frame at the leading opening (capped at the limit unless already past it)."""
+    offset = np.eye(4)
+    offset[:3, 3] = [0.0, 0.0, -0.05]
+    weights = (1.0, 2.0, 3.0, 4.0, 5.0, 6.0)
+    term = costs.TargetPose(offset, "grasp", "handle_frame", weights=weights, lead=lead, lead_limit=limit)
+    planner = _planner(scene, costs.Cost([term]), rollouts=3, horizon=0.015)
+    x = scene.default_state()
+    x[2 * scene.nq] = opening
+    planner.set_nominal(np.zeros((1, scene.nu)), 0.0)
+    planner.sample(0.0)
+    cost = planner.evaluate(x)[0][1]  # the zero sequence: the robot holds still
+    target = scene.object_fk(np.array([expected]), "handle_frame") @ offset
+    xi = _se3_log(np.linalg.solve(scene.fk(x[: scene.nq], "grasp"), target))
+    assert cost == pytest.approx(float(np.sum(np.asarray(weights) * xi**2)), rel=2e-3)
+    with pytest.raises(InvalidValueError):
+        costs.TargetPose(offset, "grasp", None, lead=0.1).spec(scene)
+
+
+def _place_grasp(scene, x, target, iterations=200):
+    """Damped least-squares IK on the arm only (base fixed): grasp frame onto `target`."""
+    x = x.copy()
+    for _ in range(iterations):
+        q = x[: scene.nq]
+        pose = scene.fk(q, "grasp")
+        r = pose[:3, :3].T @ target[:3, :3]
+        xi = _se3_log(np.linalg.solve(pose, target))
+        err = np.r_[pose[:3, :3] @ xi[:3], pose[:3, :3] @ xi[3:]]
+        j = scene.jacobian(q, "grasp")[:, 3:]
+        x[3 : scene.nq] += j.T @ np.linalg.solve(j @ j.T + 1e-6 * np.eye(6), err)
+    assert np.linalg.norm(np.linalg.solve(scene.fk(x[: scene.nq], "grasp"), target)[:3, 3]) < 1e-4
+    return x
+
+
+def test_open_object_walks_through_its_phases_and_recovers_from_a_slip(scene):
+    task = sabre.tasks.OpenObject()
+    x = scene.default_state()
+    x[0] = 0.939 - 0.75  # base in front of the handle
+    handle = scene.object_fk(np.zeros(1), "handle_frame")
+    expected = {"approach": "insert", "insert": "hook", "hook": "open"}
+    for phase, following in expected.items():
+        at = _place_grasp(scene, x, handle @ task.grasp_offset(scene, phase))
+        assert task.next_phase(scene, at, 0.0, phase) == following
+        assert task.noise_scale(scene, at, phase) == pytest.approx(task.noise_floor)
+    hooked = _place_grasp(scene, x, handle @ task.grasp_offset(scene, "open"))
+    assert task.next_phase(scene, hooked, 0.0, "open") == "open"
+    assert task.noise_scale(scene, hooked, "open") == task.noise_open
+    slipped = _place_grasp(scene, x, handle @ task.grasp_offset(scene, "open") @ _translation(0.0, -0.015, 0.0))
+    assert task.lateral_error(scene, slipped) == pytest.approx(-0.015, abs=1e-4)
+    assert task.next_phase(scene, slipped, 0.0, "open") == "approach"
+    # Far away, Σ is used as configured; the schedule shrinks it quadratically with the distance.
+    assert task.noise_scale(scene, scene.default_state(), "approach") == pytest.approx(
+        min(1.0, (task.approach_error(scene, scene.default_state(), "approach")[0] / task.noise_distance) ** 2))
+
+
+def _translation(x, y, z):
+    t = np.eye(4)
+    t[:3, 3] = [x, y, z]
+    return t

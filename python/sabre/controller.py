@@ -48,6 +48,9 @@ class ControllerConfig:
     noise_interval: int = 1
     seed: int = 0
     threads: int | None = None
+    #: Symmetric bound |u_i| ≤ input_limit_i on the commanded velocities (one entry per input, or
+    #: None for the joint velocity limits). Samples are projected onto it.
+    input_limit: tuple[float, ...] | None = None
     #: Rollout-model settings (the closed loop the sampler predicts with).
     servo_bandwidth: float = 40.0
     contact_friction: float = 0.2
@@ -68,6 +71,10 @@ class ControllerConfig:
         as_count("seed", self.seed, 0)
         if self.threads is not None:
             as_count("threads", self.threads, 1, MAX_THREADS)
+        if self.input_limit is not None:
+            limit = np.asarray(self.input_limit, dtype=float)
+            if limit.ndim != 1 or np.any(~np.isfinite(limit)) or np.any(limit <= 0):
+                raise InvalidValueError("input_limit must be a sequence of positive, finite bounds")
         if self.sigma is not None:
             sigma = np.asarray(self.sigma, dtype=float)
             if sigma.ndim != 1 or np.any(~np.isfinite(sigma)) or np.any(sigma < 0):
@@ -121,6 +128,7 @@ class Controller:
             c.seed,
             c.threads,
             c.noise_interval,
+            None if c.input_limit is None else [float(v) for v in c.input_limit],
         )
         self._stats: dict = {}
         self.phase_history: list[tuple[float, str]] = [(0.0, self.phase)]
@@ -159,6 +167,10 @@ class Controller:
             raise InvalidValueError(f"task returned unknown phase {phase!r}; phases: {self.task.phases}")
         self.set_phase(phase, t)
         self.task.on_step(self.scene, x, t, self)
+        scale = float(self.task.noise_scale(self.scene, x, self.phase))
+        if not (np.isfinite(scale) and scale > 0.0):
+            raise InvalidValueError(f"task.noise_scale returned {scale}; it must be positive and finite")
+        self._planner.noise_scale = scale
         start = time.perf_counter()
         if not self._cost.python_terms:
             stats = self._planner.iterate(x, t)
@@ -172,6 +184,7 @@ class Controller:
             stats = self._planner.update(costs)
             stats["iteration_time"] = time.perf_counter() - start
         stats["phase"] = self.phase
+        stats["noise_scale"] = scale
         self._stats = stats
         return stats
 

@@ -80,7 +80,11 @@ class TargetPose(Term):
 
     The target is ``target`` (4, 4) in the world, or, with ``object_frame``, the pose
     ``object_frame ∘ target`` that moves with the object (e.g. a grasp pose on the handle).
-    W = diag(linear_weight × 3, angular_weight × 3); Table I: W_t = 100 I.
+    W = diag(linear_weight × 3, angular_weight × 3); Table I: W_t = 100 I. ``weights`` (6,) sets
+    the diagonal of W per axis instead (translation x, y, z then rotation x, y, z, all in the
+    frame's own axes), e.g. to let a hand slide along a handle but not off it. With
+    ``object_frame``, ``lead`` takes that frame at the object configuration ``lead`` ahead of the
+    current one (capped at ``lead_limit``): a target that runs ahead along the opening path.
     """
 
     target: np.ndarray = field(default_factory=lambda: np.eye(4))
@@ -88,15 +92,30 @@ class TargetPose(Term):
     object_frame: str | None = None
     linear_weight: float = 100.0
     angular_weight: float = 100.0
+    weights: tuple[float, ...] | None = None
+    lead: float = 0.0
+    lead_limit: float = float("inf")
 
     def spec(self, scene: Scene) -> dict:
         target = as_float_array("target", self.target, (4, 4))
+        if not np.isfinite(self.lead) or np.isnan(self.lead_limit):
+            raise InvalidValueError("lead must be finite and lead_limit a number")
+        if self.lead != 0.0 and self.object_frame is None:
+            raise InvalidValueError("lead needs an object_frame to run ahead on")
+        if self.weights is not None:
+            if len(self.weights) != 6:
+                raise InvalidValueError(f"weights must have 6 entries (x, y, z, rx, ry, rz), got {len(self.weights)}")
+            weights = [_weight(f"weights[{i}]", w) for i, w in enumerate(self.weights)]
+        else:
+            weights = [_weight("linear_weight", self.linear_weight)] * 3 + [_weight("angular_weight", self.angular_weight)] * 3
         return {
             "kind": "pose",
             "frame": self.frame,
             "target": target.ravel().tolist(),
             "object_frame": self.object_frame,
-            "weights": [_weight("linear_weight", self.linear_weight)] * 3 + [_weight("angular_weight", self.angular_weight)] * 3,
+            "weights": weights,
+            "lead": float(self.lead),
+            "lead_limit": float(self.lead_limit),
         }
 
 

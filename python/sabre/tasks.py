@@ -55,12 +55,29 @@ class Task:
         """The cost the controller minimises during `phase`."""
         return costs.Cost()
 
+    def lateral_error(self, scene: Scene, x: np.ndarray) -> float:
+        """Sideways offset (m) of the grasp frame from its open-phase target, along the handle
+        frame's y axis: how far the bar has moved toward leaving the finger's pocket."""
+        nq, no = scene.nq, scene.no
+        handle = scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame")
+        grasp = np.linalg.solve(handle, scene.fk(x[:nq], "grasp"))
+        return float(grasp[1, 3] - self.open_offset[1])
+
     def next_phase(self, scene: Scene, x: np.ndarray, t: float, phase: str) -> str:
         """The phase to use from state x at time t (called before every planning iteration)."""
         return phase
 
     def success(self, scene: Scene, x: np.ndarray) -> bool:
         return False
+
+    def noise_scale(self, scene: Scene, x: np.ndarray, phase: str) -> float:
+        """Factor on the sampling covariance Σ for the next batch (1: Σ as configured).
+
+        A fixed Σ cannot both explore across metres and settle within millimetres: near a goal
+        almost every fresh sample is worse than the nominal, and the update is dominated by noise.
+        Tasks shrink Σ as they close in on their target.
+        """
+        return 1.0
 
     def on_step(self, scene: Scene, x: np.ndarray, t: float, controller) -> None:
         """Hook called once per planning iteration, after the phase update."""
@@ -101,46 +118,74 @@ def _offset(xyz: tuple[float, float, float]) -> np.ndarray:
 
 @dataclass
 class OpenObject(Task):
-    """Open the scene's object to ``opening`` (rad or m; default 75 % of its range), in two phases.
+    """Open the scene's object to ``opening`` (rad or m; default 75 % of its range).
 
-    approach: drive the ``grasp`` frame to a pre-grasp pose 7 cm in front of the handle
-    (``handle_frame``), touching nothing (contact cost on); insert: move in until the hook's tip is
-    beside and past the bar (touching is no longer penalised: with the sampling noise, every move
-    that close to the handle brushes it, and a contact cost makes the hand hover).
-    open: the pose target moves into the hook's pocket and follows the handle as the object
-    moves, with a lower weight so the hand may slide along the handle; the object cost pulls
-    toward the target opening; contact is allowed.
-    The switch happens once the grasp frame is within ``switch_position`` (m) and
-    ``switch_angle`` (rad) of the approach pose. Success: opening ≥ 90 % of the target.
+    The two phases of the paper (reach the handle, then open) with the reaching split into the
+    moves a hook finger needs:
+
+    - approach: drive the ``grasp`` frame to a pre-grasp pose 7 cm in front of the handle
+      (``handle_frame``) and beside the bar, touching nothing (contact cost on);
+    - insert: move in until the finger is beside the bar with its tip past it (touching is no
+      longer penalised: with the sampling noise, every move that close to the handle brushes it);
+    - hook: slide sideways so the bar sits in the finger's pocket, behind the tip;
+    - open: the pose target sits in the pocket, 1.6 cm out from the bar (the pull), and follows the
+      handle as the object moves; the object cost pulls toward the target opening. The pose weight
+      is low along the bar and toward the door (the hand may slide along the handle and take up
+      slack) and high sideways (the bar must stay in the pocket).
+
+    Switches happen when the grasp frame is within ``switch_position`` (m) and ``switch_angle``
+    (rad) of the current phase's target (twice that for the approach, ``hook_tolerance`` for the
+    hook). If the bar leaves the pocket while opening (the grasp frame more than
+    ``slip_distance`` from its target), the task starts over from the approach. Success: opening
+    ≥ 90 % of the target.
     """
 
     opening: float | None = None
     approach_weight: float = 100.0
-    open_pose_weight: float = 10.0
+    #: open-phase pose weights (x along the bar, y sideways, z into the door, then rotation).
+    open_pose_weights: tuple[float, float, float, float, float, float] = (100.0, 10000.0, 1000.0, 1000.0, 1000.0, 1000.0)
+    #: while opening, the pose target sits on the handle this far (rad or m) ahead of the object's
+    #: current opening, so the hand is led along the opening path (0: the handle as it is).
+    open_lead: float = 0.0
     object_weight: float = 100.0
     contact_weight: float = 100.0
     safety: SafetyWeights = field(default_factory=SafetyWeights)
-    #: grasp pose in the handle frame while approaching (beside and past the bar) and while opening.
+    #: grasp pose in the handle frame while approaching (in front of and beside the bar), inserting
+    #: (beside the bar, tip past it), hooking (bar in the pocket) and opening (pulling on the bar).
     pregrasp_offset: tuple[float, float, float] = (0.0, -0.022, -0.07)
     approach_offset: tuple[float, float, float] = (0.0, -0.022, 0.0)
-    open_offset: tuple[float, float, float] = (0.0, 0.0, -0.016)
+    #: (the bar sits 3 mm toward the finger from the grasp frame: the pocket's middle, clear of the
+    #: tip's open end.)
+    hook_offset: tuple[float, float, float] = (0.0, 0.003, 0.0)
+    open_offset: tuple[float, float, float] = (0.0, 0.003, -0.016)
     #: the hand points this much (rad) below the handle's normal, tilted about the handle's horizontal
     #: axis: a Panda reaches a forward-and-down hand at handle height with margin on its wrist joint,
     #: a level one only at its wrist limit; the hook still closes around the bar.
     approach_pitch: float = 0.3
     switch_position: float = 0.015
     switch_angle: float = 0.15
+    hook_tolerance: float = 0.006
+    slip_distance: float = 0.05
+    slip_lateral: float = 0.01
     success_fraction: float = 0.9
-    #: preferred arm posture while approaching (None: for a Panda arm, shoulder forward, elbow open,
-    #: wrist pitched up — the configurations that hold a hand level with a handle); weight per rad².
+    #: optional preferred arm posture while approaching (joint targets; None: a Panda posture that
+    #: holds a hand level with a handle) and its weight per rad² (0: off).
     posture: Sequence[float] | None = None
-    posture_weight: float = 2.0
+    posture_weight: float = 0.0
+    #: noise schedule: while reaching, Σ is scaled by (d / noise_distance)², clipped to
+    #: [noise_floor, 1], where d is the grasp frame's distance to the phase's target; opening uses
+    #: noise_open (the hand must travel far, but stay hooked).
+    noise_distance: float = 0.5
+    noise_floor: float = 1e-3
+    noise_open: float = 0.01
     extra: costs.Cost = field(default_factory=costs.Cost)
 
-    phases = ("approach", "insert", "open")
+    phases = ("approach", "insert", "hook", "open")
 
     def posture_term(self, scene: Scene) -> costs.Cost:
         names = scene.joint_names
+        if self.posture_weight <= 0.0:
+            return costs.Cost()
         if self.posture is not None:
             target = np.asarray(self.posture, dtype=float)
             weights = np.where(np.arange(scene.nq) < 3, 0.0, self.posture_weight)
@@ -154,6 +199,9 @@ class OpenObject(Task):
             return costs.Cost()
         return costs.Cost([costs.Posture(target, weights)])
 
+    def lead(self, scene: Scene) -> float:
+        return float(self.open_lead)
+
     def target_opening(self, scene: Scene) -> float:
         if self.opening is not None:
             return float(self.opening)
@@ -161,7 +209,7 @@ class OpenObject(Task):
 
     def grasp_offset(self, scene: Scene, phase: str) -> np.ndarray:
         """Pose of the grasp target in the handle frame for `phase`."""
-        xyz = {"approach": self.pregrasp_offset, "insert": self.approach_offset}.get(phase, self.open_offset)
+        xyz = {"approach": self.pregrasp_offset, "insert": self.approach_offset, "hook": self.hook_offset}.get(phase, self.open_offset)
         closed = scene.object_fk(scene.o_lower, "handle_frame")
         # Tilt about whichever handle axis (x or y) is horizontal, so that z points downward.
         axis = 0 if abs(closed[2, 0]) < abs(closed[2, 1]) else 1
@@ -180,7 +228,7 @@ class OpenObject(Task):
         return out
 
     def cost(self, scene: Scene, phase: str) -> costs.Cost:
-        if phase in ("approach", "insert"):
+        if phase in ("approach", "insert", "hook"):
             return (
                 costs.TargetPose(self.grasp_offset(scene, phase), "grasp", "handle_frame", self.approach_weight, self.approach_weight)
                 + (costs.Contact(self.contact_weight) + self.posture_term(scene) if phase == "approach" else costs.Cost())
@@ -188,7 +236,8 @@ class OpenObject(Task):
                 + self.extra
             )
         return (
-            costs.TargetPose(self.grasp_offset(scene, phase), "grasp", "handle_frame", self.open_pose_weight, self.open_pose_weight)
+            costs.TargetPose(self.grasp_offset(scene, phase), "grasp", "handle_frame", weights=tuple(self.open_pose_weights),
+                             lead=self.lead(scene), lead_limit=self.target_opening(scene))
             + costs.ObjectState([self.target_opening(scene)], self.object_weight)
             + self.safety.terms(scene)
             + self.extra
@@ -211,8 +260,22 @@ class OpenObject(Task):
         if phase == "insert":
             dp, angle = self.approach_error(scene, x, "insert")
             if dp < self.switch_position and angle < self.switch_angle:
+                return "hook"
+        if phase == "hook":
+            dp, angle = self.approach_error(scene, x, "hook")
+            if dp < self.hook_tolerance and angle < self.switch_angle:
                 return "open"
+        if phase == "open" and not self.success(scene, x):
+            dp, _ = self.approach_error(scene, x, "open")
+            if dp > self.slip_distance or abs(self.lateral_error(scene, x)) > self.slip_lateral:
+                return "approach"
         return phase
+
+    def noise_scale(self, scene: Scene, x: np.ndarray, phase: str) -> float:
+        if phase == "open":
+            return self.noise_open
+        d, _ = self.approach_error(scene, x, phase)
+        return float(np.clip((d / self.noise_distance) ** 2, self.noise_floor, 1.0))
 
     def opening_of(self, scene: Scene, x: np.ndarray) -> float:
         return float(x[2 * scene.nq])

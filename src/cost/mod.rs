@@ -23,13 +23,21 @@ pub fn se3_log(t: &Isometry3<f64>) -> Vector6<f64> {
     Vector6::new(v.x, v.y, v.z, omega.x, omega.y, omega.z)
 }
 
+thread_local! {
+    /// Scratch for object poses at a leading configuration (cost evaluation runs on rollout workers).
+    static LEAD_POSES: std::cell::RefCell<(Vec<f64>, Vec<Isometry3<f64>>)> = const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
+}
+
 /// Where a pose target lives.
 #[derive(Debug, Clone, PartialEq)]
 pub enum PoseTarget {
     /// A fixed world pose.
     World(Isometry3<f64>),
-    /// A pose rigidly attached to an object link (e.g. `handle_frame`), following the object as it moves.
-    ObjectLink { link: usize, offset: Isometry3<f64> },
+    /// A pose rigidly attached to an object link (e.g. `handle_frame`), following the object as it
+    /// moves. With a non-zero `lead` the link is taken at the object configuration `lead` ahead of
+    /// the current one (each joint, capped at `lead_limit` unless already past it): a target that
+    /// runs ahead along the articulation's path and so tells the sampler which way to pull.
+    ObjectLink { link: usize, offset: Isometry3<f64>, lead: f64, lead_limit: f64 },
 }
 
 /// One cost term with its weights (defaults from the paper's Table I live on the Python side).
@@ -172,7 +180,16 @@ impl Cost {
                     let current = view.robot.poses[*link];
                     let desired = match target {
                         PoseTarget::World(t) => *t,
-                        PoseTarget::ObjectLink { link, offset } => view.object.poses[*link] * offset,
+                        PoseTarget::ObjectLink { link, offset, lead, .. } if *lead == 0.0 => view.object.poses[*link] * offset,
+                        PoseTarget::ObjectLink { link, offset, lead, lead_limit } => {
+                            LEAD_POSES.with(|cell| {
+                                let (ahead, poses) = &mut *cell.borrow_mut();
+                                ahead.clear();
+                                ahead.extend(o.iter().map(|&v| if v >= *lead_limit { v } else { (v + lead).min(*lead_limit) }));
+                                scene.object.link_poses_into(&scene.object_pose, ahead, poses);
+                                poses[*link] * offset
+                            })
+                        }
                     };
                     let xi = se3_log(&(current.inverse() * desired));
                     (0..6).map(|i| weights[i] * xi[i] * xi[i]).sum()

@@ -44,6 +44,9 @@ pub struct MppiConfig {
     pub seed: u64,
     /// Rollout worker threads (None: all cores).
     pub threads: Option<usize>,
+    /// Symmetric bound on each commanded input (|u_i| ≤ limit_i), tighter than the joint velocity
+    /// limits if given; None uses the scene's velocity limits.
+    pub input_limit: Option<Vec<f64>>,
 }
 
 impl MppiConfig {
@@ -60,6 +63,7 @@ impl MppiConfig {
             smoothing_window: 30,
             smoothing_order: 3,
             noise_interval: 1,
+            input_limit: None,
             seed: 0,
             threads: None,
         }
@@ -92,6 +96,8 @@ pub struct Mppi {
     lower: Vec<f64>,
     upper: Vec<f64>,
     std: Vec<f64>,
+    /// Multiplies Σ for the fresh samples (a task's noise schedule); 1 = the configured Σ.
+    noise_scale: f64,
     nominal: Vec<f64>,
     /// Time at which nominal[0] applies.
     nominal_t0: f64,
@@ -165,12 +171,25 @@ impl Mppi {
         }
         let k = (config.horizon / dt).round() as usize;
         let limits = scene.robot_limits();
+        let mut bound: Vec<f64> = limits.iter().map(|l| l.velocity).collect();
+        if let Some(limit) = &config.input_limit {
+            if limit.len() != nu {
+                return Err(SabreError::shape("input_limit", format!("({nu},)"), format!("({},)", limit.len())));
+            }
+            if limit.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+                return Err(SabreError::invalid("input_limit", "bounds must be positive and finite"));
+            }
+            for (b, l) in bound.iter_mut().zip(limit) {
+                *b = b.min(*l);
+            }
+        }
         let smoother = (config.smoothing_window > 1).then(|| SavitzkyGolay::new(k, config.smoothing_window, config.smoothing_order));
         let n = config.rollouts;
         Ok(Self {
-            lower: limits.iter().map(|l| -l.velocity).collect(),
-            upper: limits.iter().map(|l| l.velocity).collect(),
+            lower: bound.iter().map(|b| -b).collect(),
+            upper: bound,
             std: config.sigma.iter().map(|v| v.sqrt()).collect(),
+            noise_scale: 1.0,
             nominal: vec![0.0; k * nu],
             nominal_t0: 0.0,
             samples: vec![0.0; n * k * nu],
@@ -228,7 +247,22 @@ impl Mppi {
         self.have_previous = false;
         self.rng = ChaCha8Rng::seed_from_u64(seed);
         self.config.seed = seed;
+        self.noise_scale = 1.0;
         self.stats = IterationStats::default();
+    }
+
+    /// Scales the sampling covariance to `scale` · Σ from the next batch on (a task's noise
+    /// schedule: explore widely far from the goal, finely near it).
+    pub fn set_noise_scale(&mut self, scale: f64) -> Result<()> {
+        if !(scale.is_finite() && scale > 0.0) {
+            return Err(SabreError::invalid("noise_scale", format!("must be positive and finite, got {scale}")));
+        }
+        self.noise_scale = scale;
+        Ok(())
+    }
+
+    pub fn noise_scale(&self) -> f64 {
+        self.noise_scale
     }
 
     /// Replaces the policy mean (e.g. with a filtered sequence), K × nu starting at time `t0`.
@@ -283,6 +317,7 @@ impl Mppi {
             }
         }
         let interval = self.config.noise_interval.max(1);
+        let std_scale = self.noise_scale.sqrt();
         let knots = (k - 1) / interval + 2;
         let mut knot_noise = vec![0.0; knots * nu];
         for i in filled..n {
@@ -293,7 +328,7 @@ impl Mppi {
                 let (j, a) = (s / interval, (s % interval) as f64 / interval as f64);
                 for d in 0..nu {
                     let e = (1.0 - a) * knot_noise[j * nu + d] + a * knot_noise[(j + 1) * nu + d];
-                    self.samples[i * row + s * nu + d] = self.nominal[s * nu + d] + self.std[d] * e;
+                    self.samples[i * row + s * nu + d] = self.nominal[s * nu + d] + std_scale * self.std[d] * e;
                 }
             }
         }

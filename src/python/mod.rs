@@ -580,7 +580,14 @@ fn term_from_spec(scene: &Scene, spec: &Bound<'_, PyAny>) -> crate::Result<Term>
             }
             let pose = isometry("pose target", &floats(spec, "target")?)?;
             let target = match spec.get_item("object_frame").ok().and_then(|v| v.extract::<Option<String>>().ok()).flatten() {
-                Some(name) => PoseTarget::ObjectLink { link: scene.object.require_link(&name)?, offset: pose },
+                Some(name) => {
+                    let lead = spec.get_item("lead").ok().and_then(|v| v.extract::<f64>().ok()).unwrap_or(0.0);
+                    let lead_limit = spec.get_item("lead_limit").ok().and_then(|v| v.extract::<f64>().ok()).unwrap_or(f64::INFINITY);
+                    if !lead.is_finite() || lead_limit.is_nan() {
+                        return Err(spec_error("pose lead must be finite and lead_limit a number"));
+                    }
+                    PoseTarget::ObjectLink { link: scene.object.require_link(&name)?, offset: pose, lead, lead_limit }
+                }
                 None => PoseTarget::World(pose),
             };
             Term::TargetPose { link, target, weights: [w[0], w[1], w[2], w[3], w[4], w[5]] }
@@ -677,7 +684,7 @@ fn stats_dict<'py>(py: Python<'py>, s: &crate::mppi::IterationStats) -> PyResult
 #[pymethods]
 impl PyPlanner {
     #[new]
-    #[pyo3(signature = (model, cost, rollouts, horizon, sigma, h, step_size, gradient_clip, keep_fraction, smoothing_window, smoothing_order, seed, threads=None, noise_interval=1))]
+    #[pyo3(signature = (model, cost, rollouts, horizon, sigma, h, step_size, gradient_clip, keep_fraction, smoothing_window, smoothing_order, seed, threads=None, noise_interval=1, input_limit=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         model: &PyRolloutModel,
@@ -694,9 +701,11 @@ impl PyPlanner {
         seed: u64,
         threads: Option<usize>,
         noise_interval: usize,
+        input_limit: Option<Vec<f64>>,
     ) -> PyResult<Self> {
         let config = MppiConfig {
             noise_interval,
+            input_limit,
             rollouts,
             horizon,
             sigma,
@@ -714,6 +723,17 @@ impl PyPlanner {
             Mppi::new(model.inner.clone(), config)
         })
         .map(|m| Self { inner: Mutex::new(m), cost: Mutex::new(cost.inner.clone()) })
+    }
+
+    #[getter]
+    fn noise_scale(&self) -> f64 {
+        self.inner.lock().unwrap_or_else(|e| e.into_inner()).noise_scale()
+    }
+
+    #[setter]
+    fn set_noise_scale(&self, scale: f64) -> PyResult<()> {
+        let mut planner = self.inner.lock().unwrap_or_else(|e| e.into_inner());
+        run(|| planner.set_noise_scale(scale))
     }
 
     fn set_cost(&self, cost: &PyCost) -> PyResult<()> {
