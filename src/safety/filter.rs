@@ -3,10 +3,11 @@
 //! Each call evaluates every ZBF row, then solves the smallest QP with the same solution:
 //! - if the command projected onto the input limits already meets every row, it *is* the QP's
 //!   solution (δ = 0; the objective's unconstrained minimiser over the box), and no solver runs;
-//! - rows that every admissible command meets (a·ũ ≥ b for all ũ in the input box, i.e.
-//!   b ≤ −Σ_j |a_j| v_j) can never bind and are left out; the rest go into the smallest of a few
-//!   pre-built Clarabel problems with that many dense row slots (2, 4, 8, 16), or into the full
-//!   problem (every row, its own sparsity) when more remain.
+//! - rows that every candidate optimum meets can never bind and are left out: the optimum lies in
+//!   the input box and within a distance of u_ref bounded by the cost of the projected command
+//!   (see `screen`); the rest go into the smallest of a few pre-built Clarabel problems with that
+//!   many dense row slots (2, 4, 8, 16), or into the full problem (every row, its own sparsity)
+//!   when more remain.
 //! Every Clarabel problem is built once at construction with a fixed pattern and updated in place.
 //! `SafetyConfig::screening = false` always solves the full problem (same solution, slower).
 
@@ -282,9 +283,29 @@ impl SafetyFilter {
 
     /// Finds the rows that can bind (`candidates`) and whether the box projection of u_ref,
     /// already in `output.u`, meets every row.
-    fn screen(&mut self) -> bool {
+    ///
+    /// A row can be left out when every candidate optimum meets it. Optima lie in the input box
+    /// and, because the projection ū with slacks δ̄_r = max(0, b_r − a_r ū) is feasible with cost
+    /// F̄ = ½‖ū − u_ref‖² + ½ΣΓ_r δ̄_r², also in the ball ‖u − u_ref‖ ≤ ρ = √(2F̄). So a row with
+    /// b_r ≤ max(−Σ_j |a_rj| v_j, a_r·u_ref − ρ‖a_r‖) is met by every optimum and cannot bind.
+    fn screen(&mut self, u_ref: &[f64]) -> bool {
         let nq = self.scene.nq();
+        let mut cost = 0.0;
+        for (u, r) in self.output.u.iter().zip(u_ref) {
+            cost += 0.5 * (u - r) * (u - r);
+        }
         let mut projection_feasible = true;
+        for r in 0..self.rows.len() {
+            if self.rows.live[r] {
+                let a = &self.rows.coef[r * nq..(r + 1) * nq];
+                let deficit = self.rows.bound[r] - a.iter().zip(&self.output.u).map(|(a, u)| a * u).sum::<f64>();
+                if deficit > 0.0 {
+                    cost += 0.5 * self.row_penalty[r] * deficit * deficit;
+                    projection_feasible = false;
+                }
+            }
+        }
+        let radius = (2.0 * cost).sqrt();
         self.candidates.clear();
         for r in 0..self.rows.len() {
             if !self.rows.live[r] {
@@ -292,15 +313,15 @@ impl SafetyFilter {
             }
             let a = &self.rows.coef[r * nq..(r + 1) * nq];
             let b = self.rows.bound[r];
-            let mut lhs = 0.0;
-            let mut lowest = 0.0;
+            let (mut box_lowest, mut at_ref, mut norm2) = (0.0, 0.0, 0.0);
             for j in 0..nq {
-                lhs += a[j] * self.output.u[j];
-                lowest -= a[j].abs() * self.velocity_limits[j];
+                box_lowest -= a[j].abs() * self.velocity_limits[j];
+                at_ref += a[j] * u_ref[j];
+                norm2 += a[j] * a[j];
             }
-            projection_feasible &= lhs >= b;
-            // Redundant only with a clear margin, so rounding never drops a row that could bind.
-            if b > lowest - 1e-9 * (1.0 + b.abs()) {
+            let lowest = f64::max(box_lowest, at_ref - radius * norm2.sqrt());
+            // Left out only with a clear margin, so rounding never drops a row that could bind.
+            if b > lowest - 1e-9 * (1.0 + b.abs() + lowest.abs()) {
                 self.candidates.push(r);
             }
         }
@@ -349,7 +370,7 @@ impl SafetyFilter {
             self.output.u[j] = u_ref[j].clamp(-self.velocity_limits[j], self.velocity_limits[j]);
         }
         self.output.slack.fill(0.0);
-        let projection_feasible = self.screen();
+        let projection_feasible = self.screen(u_ref);
         if self.config.screening && projection_feasible {
             // The box projection of u_ref minimises the objective over the box and meets every
             // row with δ = 0: it is the QP's solution.
