@@ -104,7 +104,7 @@ fn inner_tick(c: &mut Criterion) {
                 1,
                 0,
                 &mut trace,
-                Some(InnerSafety { filter: &mut f, tank: Some(&mut tank) }),
+                Some(InnerSafety { filter: Some(&mut f), tank: Some(&mut tank) }),
             )
             .expect("tick")
         })

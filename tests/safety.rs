@@ -470,7 +470,7 @@ fn inner_loop_filters_every_step_and_keeps_the_tank() {
         steps,
         1,
         &mut trace,
-        Some(InnerSafety { filter: &mut filter, tank: Some(&mut tank) }),
+        Some(InnerSafety { filter: Some(&mut filter), tank: Some(&mut tank) }),
     )
     .unwrap();
     assert_eq!(trace.filtered.len(), steps * nq);

@@ -122,19 +122,21 @@ pub struct TrackTrace {
     /// nq per row.
     pub tau_ext: Vec<f64>,
     pub contact: Vec<bool>,
-    /// With an inner safety stage only (else empty): nq per row, the filtered command that the
-    /// low-level controller tracked in that step.
+    /// With a filter only (else empty): nq per row, the filtered command that the low-level
+    /// controller tracked in that step.
     pub filtered: Vec<f64>,
-    /// With an inner safety stage and a tank only: tank energy after the step.
+    /// With a tank only: tank energy after the step.
     pub tank_energy: Vec<f64>,
-    /// With an inner safety stage only: the filter's status in that step.
+    /// With a filter only: the filter's status in that step.
     pub filter_status: Vec<FilterStatus>,
 }
 
 /// The optional safety stage of the inner loop: FILTER-QP at every plant step and, with a tank,
-/// its passivity row fed by the plant's measured τ_ext and the tank's energy.
+/// its passivity row fed by the plant's measured τ_ext and the tank's energy. A tank without a
+/// filter only keeps the books (the unfiltered Π_N baseline's energy).
+#[derive(Default)]
 pub struct InnerSafety<'a> {
-    pub filter: &'a mut SafetyFilter,
+    pub filter: Option<&'a mut SafetyFilter>,
     pub tank: Option<&'a mut EnergyTank>,
 }
 
@@ -173,15 +175,15 @@ pub fn follow_reference_safe(
     mut safety: Option<InnerSafety<'_>>,
 ) -> Result<()> {
     let nq = plant.scene().nq();
-    if reference.is_empty() || reference.len() % nq != 0 {
+    if reference.is_empty() || !reference.len().is_multiple_of(nq) {
         return Err(SabreError::shape("reference", format!("(K, {nq})"), format!("{} elements", reference.len())));
     }
     ensure_finite("reference", reference)?;
-    if !(dt.is_finite() && dt > 0.0) || !t0.is_finite() {
+    if !(dt.is_finite() && dt > 0.0 && t0.is_finite()) {
         return Err(SabreError::invalid("reference timing", "t0 must be finite and dt positive"));
     }
-    if let Some(s) = &safety {
-        if s.filter.scene().nq() != nq || s.filter.scene().nx() != plant.scene().nx() {
+    if let Some(f) = safety.as_ref().and_then(|s| s.filter.as_ref()) {
+        if f.scene().nq() != nq || f.scene().nx() != plant.scene().nx() {
             return Err(SabreError::invalid("safety filter", "was built for a different scene than the plant's"));
         }
     }
@@ -191,13 +193,13 @@ pub fn follow_reference_safe(
     for step in 0..steps {
         crate::mppi::interpolate(reference, nq, (plant.time() - t0) / dt, &mut u_ref);
         match safety.as_mut() {
-            Some(s) => {
-                let passivity = s.tank.as_ref().map(|t| (plant.interaction().tau_ext.as_slice(), t.energy()));
-                let out = s.filter.filter(plant.state(), &u_ref, passivity)?;
+            Some(InnerSafety { filter: Some(filter), tank }) => {
+                let passivity = tank.as_ref().map(|t| (plant.interaction().tau_ext.as_slice(), t.energy()));
+                let out = filter.filter(plant.state(), &u_ref, passivity)?;
                 u.copy_from_slice(&out.u);
                 status = out.status;
             }
-            None => u.copy_from_slice(&u_ref),
+            _ => u.copy_from_slice(&u_ref),
         }
         let tau = controller.torque(plant.state(), &u)?;
         plant.step(&tau)?;
@@ -214,8 +216,10 @@ pub fn follow_reference_safe(
             trace.tau_ext.extend_from_slice(&i.tau_ext);
             trace.contact.push(i.contact);
             if let Some(s) = &safety {
-                trace.filtered.extend_from_slice(&u);
-                trace.filter_status.push(status);
+                if s.filter.is_some() {
+                    trace.filtered.extend_from_slice(&u);
+                    trace.filter_status.push(status);
+                }
                 if let Some(tank) = &s.tank {
                     trace.tank_energy.push(tank.energy());
                 }
