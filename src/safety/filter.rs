@@ -8,6 +8,7 @@
 //!   (see `screen`); the rest go into the smallest of a few pre-built Clarabel problems with that
 //!   many dense row slots (2, 4, 8, 16), or into the full problem (every row, its own sparsity)
 //!   when more remain.
+//!
 //! Every Clarabel problem is built once at construction with a fixed pattern and updated in place.
 //! `SafetyConfig::screening = false` always solves the full problem (same solution, slower).
 
@@ -366,8 +367,8 @@ impl SafetyFilter {
         let nq = self.scene.nq();
         let r = self.rows.len();
         self.rows.evaluate(&x[..nq], &self.obstacles, passivity);
-        for j in 0..nq {
-            self.output.u[j] = u_ref[j].clamp(-self.velocity_limits[j], self.velocity_limits[j]);
+        for ((u, r), v) in self.output.u.iter_mut().zip(u_ref).zip(&self.velocity_limits) {
+            *u = r.clamp(-v, *v);
         }
         self.output.slack.fill(0.0);
         let projection_feasible = self.screen(u_ref);
