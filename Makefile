@@ -12,7 +12,7 @@ all: build
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet "maturin>=1.5,<2" "numpy>=1.24" "pytest>=7" "matplotlib>=3.7" "tqdm>=4.60" "mujoco>=3.1"
+	$(PY) -m pip install --quiet "maturin>=1.5,<2" "numpy>=1.24" "pytest>=7" "matplotlib>=3.7" "tqdm>=4.60" "mujoco>=3.1" "osqp>=0.6"
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -35,10 +35,12 @@ test: test-rust test-python
 bench-rust:
 	cargo bench --bench rollout
 	cargo bench --bench planning
+	cargo bench --bench safety
 
 bench-python: build
 	$(PY) benches/compare_mujoco.py
 	$(PY) benches/compare_planning.py
+	$(PY) benches/compare_osqp.py
 
 bench: bench-rust bench-python
 

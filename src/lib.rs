@@ -7,6 +7,7 @@ pub mod cost;
 pub mod error;
 pub mod model;
 pub mod mppi;
+pub mod safety;
 pub mod sim;
 
 #[cfg(feature = "python")]

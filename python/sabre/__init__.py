@@ -19,8 +19,9 @@ from .errors import (
 from . import costs, tasks
 from .controller import Controller, ControllerConfig, Episode, likelihood_weights, paper_start_state, run_episode
 from .scene import OBJECTS, ROBOTS, Scene
+from .safety import EnergyTank, FilterResult, Obstacle, SafetyConfig, SafetyFilter, SequenceResult
 from .scripted import ScriptedMotion, hook_and_pull
-from .sim import LowLevelController, Plant, RolloutModel, RolloutResult, default_threads
+from .sim import LowLevelController, Plant, RolloutModel, RolloutResult, Trace, default_threads
 
 __all__ = [
     "__version__",
@@ -30,7 +31,14 @@ __all__ = [
     "RolloutModel",
     "RolloutResult",
     "Plant",
+    "Trace",
     "LowLevelController",
+    "SafetyFilter",
+    "SafetyConfig",
+    "FilterResult",
+    "SequenceResult",
+    "Obstacle",
+    "EnergyTank",
     "default_threads",
     "costs",
     "tasks",

@@ -9,9 +9,11 @@ import numpy as np
 
 from . import _core
 from ._validate import as_count, as_float_array, as_non_negative, as_positive, readonly
+from .errors import InvalidValueError
+from .safety import EnergyTank, SafetyFilter
 from .scene import Scene
 
-__all__ = ["RolloutModel", "RolloutResult", "Plant", "LowLevelController", "default_threads", "MAX_THREADS"]
+__all__ = ["RolloutModel", "RolloutResult", "Plant", "Trace", "LowLevelController", "default_threads", "MAX_THREADS"]
 
 #: Largest worker-thread count accepted (pools are cached per size).
 MAX_THREADS = 256
@@ -149,6 +151,38 @@ class LowLevelController:
         return np.asarray(self._core.torque(x, u_ref), dtype=np.float64)
 
 
+@dataclass(frozen=True)
+class Trace:
+    """What :meth:`Plant.follow` recorded, one row per recorded plant step (M rows).
+
+    Attributes:
+        time: (M,) plant time after the step (s).
+        state: (M, nx) state after the step.
+        reference: (M, nq) interpolated reference command of the step.
+        filtered: (M, nq) command after the safety filter (what the low-level controller tracked),
+            or None without a filter.
+        filter_status: (M,) the filter's status per step (``"solved"``, ``"almost_solved"``,
+            ``"fallback"``), or None without a filter.
+        tank_energy: (M,) tank energy after the step (J), or None without a tank.
+        wrench: (M, 6) wrist wrench; tau_ext: (M, nq) measured external joint torques; contact: (M,) bool.
+    """
+
+    time: np.ndarray
+    state: np.ndarray
+    reference: np.ndarray
+    filtered: np.ndarray | None
+    filter_status: tuple[str, ...] | None
+    tank_energy: np.ndarray | None
+    wrench: np.ndarray
+    tau_ext: np.ndarray
+    contact: np.ndarray
+
+    @property
+    def fallback(self) -> np.ndarray | None:
+        """(M,) bool: the filter fell back to the safe stop in that step (None without a filter)."""
+        return None if self.filter_status is None else np.array([s == "fallback" for s in self.filter_status])
+
+
 class Plant:
     """The stand-in for the real robot: full rigid-body dynamics of robot and object in Rapier.
 
@@ -183,6 +217,63 @@ class Plant:
     def track(self, controller: LowLevelController, u_ref: Sequence[float] | np.ndarray, steps: int = 1) -> None:
         """Runs ``steps`` steps with the controller tracking the constant velocity reference u_ref (nq,)."""
         self._core.track(controller._core, as_float_array("u_ref", u_ref, (self.scene.nq,)), as_count("steps", steps, 0))
+
+    def follow(
+        self,
+        controller: LowLevelController,
+        reference: np.ndarray,
+        t0: float,
+        dt: float,
+        steps: int,
+        record_every: int = 1,
+        *,
+        safety: SafetyFilter | None = None,
+        tank: EnergyTank | None = None,
+    ) -> Trace:
+        """The inner loop for ``steps`` plant steps: the reference sequence (K, nq), sampled every
+        ``dt`` from time ``t0``, is interpolated at the plant's time and tracked by ``controller``.
+
+        With ``safety`` each step's command goes through the FILTER-QP first; with ``tank`` too,
+        its passivity row uses the plant's last measured τ_ext and the tank's energy, and the tank
+        integrates the filtered command against the newly measured τ_ext after the step. A tank
+        without a filter only keeps the books. Records every ``record_every``-th step.
+        """
+        if not isinstance(controller, LowLevelController):
+            raise TypeError(f"controller must be a sabre.LowLevelController, got {type(controller).__name__}")
+        if safety is not None and not isinstance(safety, SafetyFilter):
+            raise TypeError(f"safety must be a sabre.SafetyFilter, got {type(safety).__name__}")
+        if tank is not None and not isinstance(tank, EnergyTank):
+            raise TypeError(f"tank must be a sabre.EnergyTank, got {type(tank).__name__}")
+        if safety is not None and (safety.scene.nq != self.scene.nq or safety.scene.nx != self.scene.nx):
+            raise InvalidValueError("safety: the filter was built for a different scene than the plant's")
+        reference = as_float_array("reference", reference, (None, self.scene.nq))
+        if reference.shape[0] == 0:
+            raise InvalidValueError("reference: needs at least one step")
+        t0 = float(t0)
+        if not np.isfinite(t0):
+            raise InvalidValueError(f"t0: must be finite, got {t0}")
+        d = self._core.follow_safe(
+            controller._core,
+            reference,
+            t0,
+            as_positive("dt", dt),
+            as_count("steps", steps, 0),
+            as_count("record_every", record_every, 1),
+            None if safety is None else safety._core,
+            None if tank is None else tank._core,
+        )
+        status = d.get("filter_status")
+        return Trace(
+            time=readonly(d["time"]),
+            state=readonly(d["state"]),
+            reference=readonly(d["reference"]),
+            filtered=readonly(d["filtered"]) if "filtered" in d else None,
+            filter_status=None if status is None else tuple(status),
+            tank_energy=readonly(d["tank_energy"]) if "tank_energy" in d else None,
+            wrench=readonly(d["wrench"]),
+            tau_ext=readonly(d["tau_ext"]),
+            contact=readonly(d["contact"]),
+        )
 
     @property
     def state(self) -> np.ndarray:

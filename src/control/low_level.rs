@@ -1,4 +1,4 @@
-//! Low-level joint velocity controller (53): dynamics-compensated PI tracking of q̇* at the plant rate.
+//! Low-level joint velocity controller (53) and the inner loop around it (interpolation, optional safety stage, plant).
 
 use std::sync::Arc;
 
@@ -7,6 +7,7 @@ use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
 use crate::model::dynamics::{joint_space_terms, DynamicsWorkspace};
 use crate::model::scene::Scene;
+use crate::safety::{EnergyTank, FilterStatus, SafetyFilter};
 
 /// Gains of the velocity controller.
 #[derive(Debug, Clone, PartialEq)]
@@ -114,13 +115,29 @@ pub struct TrackTrace {
     pub time: Vec<f64>,
     /// nx per row.
     pub state: Vec<f64>,
-    /// nq per row: the interpolated velocity reference applied in that step.
+    /// nq per row: the interpolated velocity reference of that step.
     pub reference: Vec<f64>,
     /// 6 per row.
     pub wrench: Vec<f64>,
     /// nq per row.
     pub tau_ext: Vec<f64>,
     pub contact: Vec<bool>,
+    /// With a filter only (else empty): nq per row, the filtered command that the low-level
+    /// controller tracked in that step.
+    pub filtered: Vec<f64>,
+    /// With a tank only: tank energy after the step.
+    pub tank_energy: Vec<f64>,
+    /// With a filter only: the filter's status in that step.
+    pub filter_status: Vec<FilterStatus>,
+}
+
+/// The optional safety stage of the inner loop: FILTER-QP at every plant step and, with a tank,
+/// its passivity row fed by the plant's measured τ_ext and the tank's energy. A tank without a
+/// filter only keeps the books (the unfiltered Π_N baseline's energy).
+#[derive(Default)]
+pub struct InnerSafety<'a> {
+    pub filter: Option<&'a mut SafetyFilter>,
+    pub tank: Option<&'a mut EnergyTank>,
 }
 
 /// The inner loop: for `steps` plant steps, interpolate the reference sequence (K × nq starting at
@@ -137,27 +154,76 @@ pub fn follow_reference(
     record_every: usize,
     trace: &mut TrackTrace,
 ) -> Result<()> {
+    follow_reference_safe(plant, controller, reference, t0, dt, steps, record_every, trace, None)
+}
+
+/// [`follow_reference`] with an optional safety stage between the interpolation and the low-level
+/// controller (the paper's inner loop, Sec. IV): at each plant step, interpolate → FILTER-QP
+/// (with the passivity row when a tank is given: τ_ext of the last measured step, energy S) →
+/// low-level controller → plant step → tank update with the filtered command and the newly
+/// measured τ_ext. A filter fallback (u = 0) is tracked like any other command and recorded.
+#[allow(clippy::too_many_arguments)]
+pub fn follow_reference_safe(
+    plant: &mut crate::sim::Plant,
+    controller: &mut LowLevelController,
+    reference: &[f64],
+    t0: f64,
+    dt: f64,
+    steps: usize,
+    record_every: usize,
+    trace: &mut TrackTrace,
+    mut safety: Option<InnerSafety<'_>>,
+) -> Result<()> {
     let nq = plant.scene().nq();
-    if reference.is_empty() || reference.len() % nq != 0 {
+    if reference.is_empty() || !reference.len().is_multiple_of(nq) {
         return Err(SabreError::shape("reference", format!("(K, {nq})"), format!("{} elements", reference.len())));
     }
     ensure_finite("reference", reference)?;
-    if !(dt.is_finite() && dt > 0.0) || !t0.is_finite() {
+    if !(dt.is_finite() && dt > 0.0 && t0.is_finite()) {
         return Err(SabreError::invalid("reference timing", "t0 must be finite and dt positive"));
     }
+    if let Some(f) = safety.as_ref().and_then(|s| s.filter.as_ref()) {
+        if f.scene().nq() != nq || f.scene().nx() != plant.scene().nx() {
+            return Err(SabreError::invalid("safety filter", "was built for a different scene than the plant's"));
+        }
+    }
+    let mut u_ref = vec![0.0; nq];
     let mut u = vec![0.0; nq];
+    let mut status = FilterStatus::Solved;
     for step in 0..steps {
-        crate::mppi::interpolate(reference, nq, (plant.time() - t0) / dt, &mut u);
+        crate::mppi::interpolate(reference, nq, (plant.time() - t0) / dt, &mut u_ref);
+        match safety.as_mut() {
+            Some(InnerSafety { filter: Some(filter), tank }) => {
+                let passivity = tank.as_ref().map(|t| (plant.interaction().tau_ext.as_slice(), t.energy()));
+                let out = filter.filter(plant.state(), &u_ref, passivity)?;
+                u.copy_from_slice(&out.u);
+                status = out.status;
+            }
+            _ => u.copy_from_slice(&u_ref),
+        }
         let tau = controller.torque(plant.state(), &u)?;
         plant.step(&tau)?;
+        let plant_dt = plant.dt();
+        if let Some(tank) = safety.as_mut().and_then(|s| s.tank.as_deref_mut()) {
+            tank.step(&plant.interaction().tau_ext, &u, plant_dt)?;
+        }
         if record_every > 0 && step % record_every == 0 {
             trace.time.push(plant.time());
             trace.state.extend_from_slice(plant.state());
-            trace.reference.extend_from_slice(&u);
+            trace.reference.extend_from_slice(&u_ref);
             let i = plant.interaction();
             trace.wrench.extend_from_slice(&i.wrench);
             trace.tau_ext.extend_from_slice(&i.tau_ext);
             trace.contact.push(i.contact);
+            if let Some(s) = &safety {
+                if s.filter.is_some() {
+                    trace.filtered.extend_from_slice(&u);
+                    trace.filter_status.push(status);
+                }
+                if let Some(tank) = &s.tank {
+                    trace.tank_energy.push(tank.energy());
+                }
+            }
         }
     }
     Ok(())

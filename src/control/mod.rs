@@ -1,5 +1,5 @@
-//! The control cascade; for now the low-level joint velocity controller that drives the plant.
+//! The control cascade's inner loop: the low-level joint velocity controller that drives the plant, with an optional safety stage.
 
 pub mod low_level;
 
-pub use low_level::{follow_reference, LowLevelConfig, LowLevelController, TrackTrace};
+pub use low_level::{follow_reference, follow_reference_safe, InnerSafety, LowLevelConfig, LowLevelController, TrackTrace};

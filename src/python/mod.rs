@@ -9,11 +9,12 @@ use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyModule;
 
-use crate::control::{follow_reference, LowLevelConfig, LowLevelController, TrackTrace};
+use crate::control::{follow_reference, follow_reference_safe, InnerSafety, LowLevelConfig, LowLevelController, TrackTrace};
 use crate::cost::{Cost, PoseTarget, Term};
 use crate::mppi::{LikelihoodMapping, Mppi, MppiConfig};
 use crate::error::SabreError;
 use crate::model::scene::Scene;
+use crate::safety::{ConstraintClass, EnergyTank, FilterOutput, PerClass, SafetyConfig, SafetyFilter};
 use crate::sim::{Plant, PlantConfig, RolloutConfig, RolloutModel};
 
 /// Maps a core error to the matching class of `sabre.errors` (falling back to builtins if the
@@ -460,6 +461,59 @@ impl PyPlant {
         ))
     }
 
+    /// [`Self::follow`] with the optional inner safety stage (filter, tank, or both); returns the
+    /// trace as a dict: time, state, reference, wrench, tau_ext, contact, and with a filter
+    /// filtered (M, nq) and filter_status (list of str), with a tank tank_energy (M,).
+    #[pyo3(signature = (controller, reference, t0, dt, steps, record_every=1, safety=None, tank=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn follow_safe<'py>(
+        &self,
+        py: Python<'py>,
+        controller: &PyLowLevelController,
+        reference: PyReadonlyArrayDyn<'py, f64>,
+        t0: f64,
+        dt: f64,
+        steps: usize,
+        record_every: usize,
+        safety: Option<&PySafetyFilter>,
+        tank: Option<&PyEnergyTank>,
+    ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        let (nx, nq) = self.with(|p| Ok((p.scene().nx(), p.scene().nq())))?;
+        let reference = run(|| view("reference", &reference, &[-1, nq as isize]))?;
+        let plant = &self.inner;
+        let controller = &controller.inner;
+        let (has_filter, has_tank) = (safety.is_some(), tank.is_some());
+        let trace = run_detached(py, || {
+            let mut plant = plant.lock().unwrap_or_else(|e| e.into_inner());
+            let mut controller = controller.lock().unwrap_or_else(|e| e.into_inner());
+            let mut filter = safety.map(|f| f.inner.lock().unwrap_or_else(|e| e.into_inner()));
+            let mut tank = tank.map(|t| t.inner.lock().unwrap_or_else(|e| e.into_inner()));
+            let stage = InnerSafety {
+                filter: filter.as_deref_mut(),
+                tank: tank.as_deref_mut(),
+            };
+            let mut trace = TrackTrace::default();
+            follow_reference_safe(&mut plant, &mut controller, reference, t0, dt, steps, record_every, &mut trace, Some(stage))?;
+            Ok(trace)
+        })?;
+        let m = trace.time.len();
+        let d = pyo3::types::PyDict::new(py);
+        d.set_item("time", array(py, trace.time, &[m])?)?;
+        d.set_item("state", array(py, trace.state, &[m, nx])?)?;
+        d.set_item("reference", array(py, trace.reference, &[m, nq])?)?;
+        d.set_item("wrench", array(py, trace.wrench, &[m, 6])?)?;
+        d.set_item("tau_ext", array(py, trace.tau_ext, &[m, nq])?)?;
+        d.set_item("contact", trace.contact.into_pyarray(py).reshape(vec![m])?)?;
+        if has_filter {
+            d.set_item("filtered", array(py, trace.filtered, &[m, nq])?)?;
+            d.set_item("filter_status", trace.filter_status.iter().map(|s| s.name()).collect::<Vec<_>>())?;
+        }
+        if has_tank {
+            d.set_item("tank_energy", array(py, trace.tank_energy, &[m])?)?;
+        }
+        Ok(d)
+    }
+
     #[getter]
     fn state(&self) -> PyResult<Vec<f64>> {
         self.with(|p| Ok(p.state().to_vec()))
@@ -528,6 +582,299 @@ impl PyLowLevelController {
     fn torque(&self, x: PyReadonlyArrayDyn<'_, f64>, u_ref: PyReadonlyArrayDyn<'_, f64>) -> PyResult<Vec<f64>> {
         let mut c = self.inner.lock().unwrap_or_else(|e| e.into_inner());
         run(|| c.torque(view("x", &x, &[-1])?, view("u_ref", &u_ref, &[-1])?))
+    }
+}
+
+fn per_class<T: Copy>(name: &str, values: Vec<T>) -> crate::Result<PerClass<T>> {
+    let n = ConstraintClass::COUNT;
+    <[T; ConstraintClass::COUNT]>::try_from(values)
+        .map(PerClass)
+        .map_err(|v| SabreError::shape(name, format!("({n},)"), format!("({},)", v.len())))
+}
+
+/// (τ_ext, S) for the passivity row: both or neither.
+fn passivity_inputs<'a>(nq: usize, tau_ext: &'a Option<PyReadonlyArrayDyn<'_, f64>>, tank_energy: Option<f64>) -> crate::Result<Option<(&'a [f64], f64)>> {
+    match (tau_ext, tank_energy) {
+        (Some(tau), Some(energy)) => Ok(Some((view("tau_ext", tau, &[nq as isize])?, energy))),
+        (None, None) => Ok(None),
+        _ => Err(SabreError::invalid("passivity", "give both tau_ext and tank_energy, or neither")),
+    }
+}
+
+#[pyclass(name = "FilterResult", module = "sabre._core", frozen)]
+pub struct PyFilterResult {
+    #[pyo3(get)]
+    u: Py<PyArrayDyn<f64>>,
+    #[pyo3(get)]
+    slack: Py<PyArrayDyn<f64>>,
+    #[pyo3(get)]
+    barrier: Py<PyArrayDyn<f64>>,
+    #[pyo3(get)]
+    class_slack: Py<pyo3::types::PyDict>,
+    #[pyo3(get)]
+    active: Vec<String>,
+    #[pyo3(get)]
+    status: String,
+    #[pyo3(get)]
+    solver_status: String,
+    #[pyo3(get)]
+    solve_time: f64,
+    #[pyo3(get)]
+    iterations: u32,
+    #[pyo3(get)]
+    qp_rows: usize,
+}
+
+fn filter_result(py: Python<'_>, out: FilterOutput, active: Vec<String>) -> PyResult<PyFilterResult> {
+    let class_slack = pyo3::types::PyDict::new(py);
+    for c in ConstraintClass::ALL {
+        class_slack.set_item(c.name(), out.class_slack[c.index()])?;
+    }
+    let (r, nq) = (out.slack.len(), out.u.len());
+    Ok(PyFilterResult {
+        u: array(py, out.u, &[nq])?.unbind(),
+        slack: array(py, out.slack, &[r])?.unbind(),
+        barrier: array(py, out.barrier, &[r])?.unbind(),
+        class_slack: class_slack.unbind(),
+        active,
+        status: out.status.name().to_string(),
+        solver_status: format!("{:?}", out.solver_status),
+        solve_time: out.solve_time,
+        iterations: out.iterations,
+        qp_rows: out.qp_rows,
+    })
+}
+
+#[pyclass(name = "SafetyFilter", module = "sabre._core")]
+pub struct PySafetyFilter {
+    inner: Mutex<SafetyFilter>,
+    nq: usize,
+    nx: usize,
+}
+
+impl PySafetyFilter {
+    fn lock(&self) -> std::sync::MutexGuard<'_, SafetyFilter> {
+        self.inner.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+#[pymethods]
+impl PySafetyFilter {
+    /// Per-class lists follow ConstraintClass order: joint_limits, self_collision, arm_reach,
+    /// base_box, obstacles, passivity (gamma's passivity entry is α).
+    #[new]
+    #[pyo3(signature = (scene, gamma, penalty, margin, enabled, base_box, tank_floor, max_obstacles, max_iterations, tolerance, screening))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        scene: &PyScene,
+        gamma: Vec<f64>,
+        penalty: Vec<f64>,
+        margin: Vec<f64>,
+        enabled: Vec<bool>,
+        base_box: [f64; 4],
+        tank_floor: f64,
+        max_obstacles: usize,
+        max_iterations: u32,
+        tolerance: f64,
+        screening: bool,
+    ) -> PyResult<Self> {
+        run(|| {
+            let config = SafetyConfig {
+                gamma: per_class("gamma", gamma)?,
+                penalty: per_class("penalty", penalty)?,
+                margin: per_class("margin", margin)?,
+                enabled: per_class("enabled", enabled)?,
+                base_box,
+                tank_floor,
+                max_obstacles,
+                max_iterations,
+                tolerance,
+                screening,
+                ..SafetyConfig::default()
+            };
+            let filter = SafetyFilter::new(scene.inner.clone(), config)?;
+            Ok(Self { inner: Mutex::new(filter), nq: scene.inner.nq(), nx: scene.inner.nx() })
+        })
+    }
+
+    /// Filters u_ref (nq,) at state x (nx,); with tau_ext (nq,) and tank_energy the passivity row is on.
+    #[pyo3(signature = (x, u_ref, tau_ext=None, tank_energy=None))]
+    fn filter(
+        &self,
+        py: Python<'_>,
+        x: PyReadonlyArrayDyn<'_, f64>,
+        u_ref: PyReadonlyArrayDyn<'_, f64>,
+        tau_ext: Option<PyReadonlyArrayDyn<'_, f64>>,
+        tank_energy: Option<f64>,
+    ) -> PyResult<PyFilterResult> {
+        let x = run(|| view("x", &x, &[self.nx as isize]))?;
+        let u_ref = run(|| view("u_ref", &u_ref, &[self.nq as isize]))?;
+        let passivity = run(|| passivity_inputs(self.nq, &tau_ext, tank_energy))?;
+        let inner = &self.inner;
+        // The output and the names are taken under the same lock as the solve.
+        let (out, active) = run_detached(py, || {
+            let mut f = inner.lock().unwrap_or_else(|e| e.into_inner());
+            let out = f.filter(x, u_ref, passivity)?.clone();
+            let active = out.active.iter().map(|&i| f.constraint_name(i)).collect();
+            Ok((out, active))
+        })?;
+        filter_result(py, out, active)
+    }
+
+    /// Sequential FILTER-QP (Algorithm 1) of U (K, nq) from x0 with the rollout model; returns
+    /// (filtered U (K, nq), states (K+1, nx), status per step, fallbacks).
+    #[allow(clippy::type_complexity)]
+    fn filter_sequence<'py>(
+        &self,
+        py: Python<'py>,
+        x0: PyReadonlyArrayDyn<'py, f64>,
+        u: PyReadonlyArrayDyn<'py, f64>,
+        model: &PyRolloutModel,
+    ) -> PyResult<(Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>, Vec<String>, usize)> {
+        let x0 = run(|| view("x0", &x0, &[self.nx as isize]))?;
+        let u = run(|| view("U", &u, &[-1, self.nq as isize]))?;
+        let inner = &self.inner;
+        let model = model.inner.clone();
+        let out = run_detached(py, move || inner.lock().unwrap_or_else(|e| e.into_inner()).filter_sequence(&model, x0, u))?;
+        Ok((
+            array(py, out.u, &[out.k, self.nq])?,
+            array(py, out.states, &[out.k + 1, self.nx])?,
+            out.status.iter().map(|s| s.name().to_string()).collect(),
+            out.fallbacks,
+        ))
+    }
+
+    fn add_obstacle(&self, center: [f64; 3], radius: f64) -> PyResult<u64> {
+        run(|| self.lock().add_obstacle(center, radius))
+    }
+    fn move_obstacle(&self, id: u64, center: [f64; 3]) -> PyResult<()> {
+        run(|| self.lock().move_obstacle(id, center))
+    }
+    fn remove_obstacle(&self, id: u64) -> PyResult<()> {
+        run(|| self.lock().remove_obstacle(id))
+    }
+    /// (id, centre, radius) of each obstacle present.
+    #[getter]
+    fn obstacles(&self) -> Vec<(u64, [f64; 3], f64)> {
+        self.lock().obstacles().map(|o| (o.id, [o.center.x, o.center.y, o.center.z], o.radius)).collect()
+    }
+    #[getter]
+    fn row_names(&self) -> Vec<String> {
+        self.lock().row_names()
+    }
+    #[getter]
+    fn input_limits(&self) -> Vec<f64> {
+        self.lock().input_limits().to_vec()
+    }
+    #[getter]
+    fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        let s = *self.lock().stats();
+        let d = pyo3::types::PyDict::new(py);
+        d.set_item("calls", s.calls)?;
+        d.set_item("fallbacks", s.fallbacks)?;
+        d.set_item("mean_solve_time", s.mean_time())?;
+        d.set_item("max_solve_time", s.max_time)?;
+        d.set_item("total_iterations", s.total_iterations)?;
+        Ok(d)
+    }
+    fn reset_stats(&self) {
+        self.lock().reset_stats();
+    }
+
+    /// The rows at x: (a (R, nq), b (R,), h (R,)) with a·u ≥ b each row's condition without slack.
+    #[pyo3(signature = (x, tau_ext=None, tank_energy=None))]
+    #[allow(clippy::type_complexity)]
+    fn constraint_rows<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArrayDyn<'py, f64>,
+        tau_ext: Option<PyReadonlyArrayDyn<'py, f64>>,
+        tank_energy: Option<f64>,
+    ) -> PyResult<(Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>)> {
+        let x = run(|| view("x", &x, &[self.nx as isize]))?;
+        let passivity = run(|| passivity_inputs(self.nq, &tau_ext, tank_energy))?;
+        let mut f = self.lock();
+        let (a, b, h) = run(|| f.constraint_rows(x, passivity).map(|(a, b, h)| (a.to_vec(), b.to_vec(), h.to_vec())))?;
+        let r = b.len();
+        Ok((array(py, a, &[r, self.nq])?, array(py, b, &[r])?, array(py, h, &[r])?))
+    }
+
+    /// The full QP as dense arrays: min ½xᵀPx + qᵀx s.t. A x ≤ b, x = [u; δ]; dict P, q, A, b, nu.
+    #[pyo3(signature = (x, u_ref, tau_ext=None, tank_energy=None))]
+    fn qp_matrices<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArrayDyn<'py, f64>,
+        u_ref: PyReadonlyArrayDyn<'py, f64>,
+        tau_ext: Option<PyReadonlyArrayDyn<'py, f64>>,
+        tank_energy: Option<f64>,
+    ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        let x = run(|| view("x", &x, &[self.nx as isize]))?;
+        let u_ref = run(|| view("u_ref", &u_ref, &[self.nq as isize]))?;
+        let passivity = run(|| passivity_inputs(self.nq, &tau_ext, tank_energy))?;
+        let qp = run(|| self.lock().qp_matrices(x, u_ref, passivity))?;
+        let d = pyo3::types::PyDict::new(py);
+        d.set_item("P", array(py, qp.p, &[qp.n, qp.n])?)?;
+        d.set_item("q", array(py, qp.q, &[qp.n])?)?;
+        d.set_item("A", array(py, qp.a, &[qp.m, qp.n])?)?;
+        d.set_item("b", array(py, qp.b, &[qp.m])?)?;
+        d.set_item("nu", qp.nu)?;
+        Ok(d)
+    }
+}
+
+#[pyclass(name = "EnergyTank", module = "sabre._core")]
+pub struct PyEnergyTank {
+    inner: Mutex<EnergyTank>,
+}
+
+impl PyEnergyTank {
+    fn lock(&self) -> std::sync::MutexGuard<'_, EnergyTank> {
+        self.inner.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+#[pymethods]
+impl PyEnergyTank {
+    #[new]
+    #[pyo3(signature = (initial=10.0, floor=2.0, ceiling=None, record_history=true))]
+    fn new(initial: f64, floor: f64, ceiling: Option<f64>, record_history: bool) -> PyResult<Self> {
+        run(|| EnergyTank::new(initial, floor, ceiling, record_history)).map(|t| Self { inner: Mutex::new(t) })
+    }
+    /// One Euler step S += dt τ_extᵀu; returns the new energy.
+    fn step(&self, tau_ext: PyReadonlyArrayDyn<'_, f64>, u: PyReadonlyArrayDyn<'_, f64>, dt: f64) -> PyResult<f64> {
+        let tau = run(|| view("tau_ext", &tau_ext, &[-1]))?;
+        let u = run(|| view("u", &u, &[-1]))?;
+        run(|| self.lock().step(tau, u, dt))
+    }
+    fn reset(&self) {
+        self.lock().reset();
+    }
+    #[getter]
+    fn energy(&self) -> f64 {
+        self.lock().energy()
+    }
+    #[getter]
+    fn initial(&self) -> f64 {
+        self.lock().initial()
+    }
+    #[getter]
+    fn floor(&self) -> f64 {
+        self.lock().floor()
+    }
+    #[getter]
+    fn ceiling(&self) -> Option<f64> {
+        self.lock().ceiling()
+    }
+    #[getter]
+    fn residual(&self) -> f64 {
+        self.lock().residual()
+    }
+    #[getter]
+    fn history<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let h = self.lock().history().to_vec();
+        let n = h.len();
+        array(py, h, &[n])
     }
 }
 
@@ -872,6 +1219,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyLowLevelController>()?;
     m.add_class::<PyCost>()?;
     m.add_class::<PyPlanner>()?;
+    m.add_class::<PySafetyFilter>()?;
+    m.add_class::<PyFilterResult>()?;
+    m.add_class::<PyEnergyTank>()?;
     m.add_function(wrap_pyfunction!(default_threads, m)?)?;
     m.add_function(wrap_pyfunction!(likelihood_weights, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

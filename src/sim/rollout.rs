@@ -167,6 +167,33 @@ impl RolloutModel {
         self.config.dt
     }
 
+    /// A fresh world of this model (a copy of its pristine template) for stepping one command at a
+    /// time: place it with [`Self::reset_world`], advance it with [`SimWorld::step_once`].
+    pub fn new_world(&self) -> SimWorld {
+        self.template.clone()
+    }
+
+    /// Puts `world`, one of this model's, at state x0 with no contact history and a fresh servo.
+    pub fn reset_world(&self, world: &mut SimWorld, x0: &[f64]) -> Result<()> {
+        if !Arc::ptr_eq(&world.layout, &self.template.layout) {
+            return Err(SabreError::invalid("world", "belongs to a different rollout model"));
+        }
+        self.scene.check_state(x0)?;
+        world.restore_from(&self.template);
+        world.set_state(x0);
+        Ok(())
+    }
+
+    /// Runs `f` on a world of the pool that the batch rollouts use, placed at x0, and returns the
+    /// world to the pool; repeated single-world work (Sequential FILTER-QP) builds no new world.
+    /// A world whose user panicked is dropped, not returned.
+    pub fn with_world<T>(&self, x0: &[f64], f: impl FnOnce(&mut SimWorld) -> Result<T>) -> Result<T> {
+        let mut world = self.checkout();
+        let result = self.reset_world(&mut world, x0).and_then(|_| f(&mut world));
+        self.checkin(world);
+        result
+    }
+
     fn checkout(&self) -> SimWorld {
         let popped = self.worlds.lock().unwrap_or_else(|e| e.into_inner()).pop();
         popped.unwrap_or_else(|| self.template.clone())
@@ -188,10 +215,8 @@ impl RolloutModel {
         *out.cost = 0.0;
         for step in 0..k {
             let u_step = &u[step * nq..(step + 1) * nq];
-            world.set_velocity_command(u_step);
-            world.step();
             let x = &mut out.states[(step + 1) * nx..(step + 2) * nx];
-            world.read_state(x);
+            world.step_once(u_step, x);
             if x.iter().any(|v| !v.is_finite()) {
                 return Some(step);
             }

@@ -970,6 +970,14 @@ impl SimWorld {
         self.measure_interaction();
     }
 
+    /// One step under the velocity command `u` (projected onto the velocity limits); writes the
+    /// state after the step into `x` (nx). For the servo drives of the rollout model.
+    pub fn step_once(&mut self, u: &[f64], x: &mut [f64]) {
+        self.set_velocity_command(u);
+        self.step();
+        self.read_state(x);
+    }
+
     /// True when the object is at rest and statically held (dry friction at least its gravity
     /// torque, or gravity pressing it onto a limit), and no robot contact body can reach any object
     /// link within this step (bounding spheres, with the contact prediction distance and each

@@ -1,0 +1,364 @@
+"""Safety and passivity: the CBF safety filter (FILTER-QP, paper eq. 41), its sequential form and the energy tank.
+
+Every constraint is a zeroing barrier h(q) ≥ 0 turned into a row affine in the command u = q̇*:
+``∂h/∂q · u + δ ≥ −γ (h − Δ)`` (19, Remark 1) with a slack δ ≥ 0 per row, penalised by its class's
+Γ; the joint velocity limits are hard bounds. The QP runs in Rust (Clarabel), with the GIL released.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import TYPE_CHECKING, Mapping, Sequence
+
+import numpy as np
+
+from . import _core
+from ._validate import as_count, as_float_array, as_non_negative, as_positive, readonly
+from .errors import InvalidValueError
+from .scene import Scene
+
+if TYPE_CHECKING:
+    from .sim import RolloutModel
+
+__all__ = ["CLASSES", "SafetyConfig", "SafetyFilter", "FilterResult", "SequenceResult", "EnergyTank", "Obstacle"]
+
+#: Constraint classes, in the order the core uses.
+CLASSES: tuple[str, ...] = ("joint_limits", "self_collision", "arm_reach", "base_box", "obstacles", "passivity")
+
+#: ZBF rate γ (1/s) of the kinematic classes; passivity's rate is ``passivity_alpha``.
+DEFAULT_GAMMA = MappingProxyType({"joint_limits": 10.0, "self_collision": 10.0, "arm_reach": 10.0, "base_box": 10.0, "obstacles": 10.0})
+#: Slack penalties Γ (paper Table I: joint limits 10, self-collision 100, Cartesian 100, passivity 100).
+DEFAULT_PENALTY = MappingProxyType(
+    {"joint_limits": 10.0, "self_collision": 100.0, "arm_reach": 100.0, "base_box": 100.0, "obstacles": 100.0, "passivity": 100.0}
+)
+#: Margins Δ (Remark 1) in the units of each class's h: rad, m², m², m, m².
+DEFAULT_MARGIN = MappingProxyType({"joint_limits": 0.03, "self_collision": 0.01, "arm_reach": 0.01, "base_box": 0.01, "obstacles": 0.01})
+
+
+def _merged(name: str, given: Mapping[str, object], defaults: Mapping[str, object], allowed: Sequence[str]) -> dict:
+    if not isinstance(given, Mapping):
+        raise InvalidValueError(f"{name}: expected a mapping from constraint class to value, got {type(given).__name__}")
+    unknown = set(given) - set(allowed)
+    if unknown:
+        raise InvalidValueError(f"{name}: unknown constraint class(es) {sorted(unknown)}; known: {list(allowed)}")
+    return {**defaults, **given}
+
+
+@dataclass(frozen=True)
+class SafetyConfig:
+    """Settings of :class:`SafetyFilter`, validated on construction.
+
+    The mappings take overrides by class name (see :data:`CLASSES`); missing classes keep their
+    defaults. ``gamma``: ZBF rate γ (1/s), default 10 for every kinematic class — a joint
+    approaches its limit no faster than 10 × its distance. ``penalty``: slack penalty Γ (Table I).
+    ``margin``: Δ of Remark 1 in the units of that class's h (rad for joint limits, m for the base
+    box, m² for self-collision, arm reach and obstacles); the defaults keep the slack that the
+    penalties allow inside the true limits. ``enabled``: classes without rows. ``base_box``:
+    (x_min, x_max, y_min, y_max) in m, or None for no box. ``passivity_alpha``: α of (56)
+    (1/s; the paper's 1 avoids chattering). ``tank_floor``: ε (J). ``max_obstacles``: obstacle
+    slots (fixed QP structure). ``max_iterations``, ``tolerance``: Clarabel's bounds.
+    ``screening``: solve the smallest QP with the same solution (off: always the full QP).
+    """
+
+    gamma: Mapping[str, float] = field(default_factory=dict)
+    penalty: Mapping[str, float] = field(default_factory=dict)
+    margin: Mapping[str, float] = field(default_factory=dict)
+    enabled: Mapping[str, bool] = field(default_factory=dict)
+    base_box: tuple[float, float, float, float] | None = (-2.0, 2.0, -2.0, 2.0)
+    passivity_alpha: float = 1.0
+    tank_floor: float = 2.0
+    max_obstacles: int = 8
+    max_iterations: int = 50
+    tolerance: float = 1e-8
+    screening: bool = True
+
+    def __post_init__(self) -> None:
+        kinematic = CLASSES[:-1]
+        if "passivity" in self.gamma:
+            raise InvalidValueError("gamma: the passivity rate is passivity_alpha")
+        if "passivity" in self.margin:
+            raise InvalidValueError("margin: passivity has no margin (the tank floor is its margin)")
+        gamma = _merged("gamma", self.gamma, DEFAULT_GAMMA, kinematic)
+        penalty = _merged("penalty", self.penalty, DEFAULT_PENALTY, CLASSES)
+        margin = _merged("margin", self.margin, DEFAULT_MARGIN, kinematic)
+        enabled = _merged("enabled", self.enabled, {c: True for c in CLASSES}, CLASSES)
+        for c in kinematic:
+            gamma[c] = as_positive(f"gamma[{c}]", gamma[c])
+            margin[c] = as_non_negative(f"margin[{c}]", margin[c])
+        for c in CLASSES:
+            penalty[c] = as_positive(f"penalty[{c}]", penalty[c])
+            if not isinstance(enabled[c], (bool, np.bool_)):
+                raise InvalidValueError(f"enabled[{c}]: expected a bool, got {enabled[c]!r}")
+            enabled[c] = bool(enabled[c])
+        box = self.base_box
+        if box is None:
+            enabled["base_box"] = False
+        else:
+            box = tuple(as_float_array("base_box", box, (4,)).tolist())
+            if not (box[0] < box[1] and box[2] < box[3]):
+                raise InvalidValueError(f"base_box: needs x_min < x_max and y_min < y_max, got {box}")
+            object.__setattr__(self, "base_box", box)
+        object.__setattr__(self, "gamma", MappingProxyType(gamma))
+        object.__setattr__(self, "penalty", MappingProxyType(penalty))
+        object.__setattr__(self, "margin", MappingProxyType(margin))
+        object.__setattr__(self, "enabled", MappingProxyType(enabled))
+        object.__setattr__(self, "passivity_alpha", as_positive("passivity_alpha", self.passivity_alpha))
+        object.__setattr__(self, "tank_floor", as_non_negative("tank_floor", self.tank_floor))
+        as_count("max_obstacles", self.max_obstacles, 0, 64)
+        as_count("max_iterations", self.max_iterations, 1, 10_000)
+        tolerance = as_positive("tolerance", self.tolerance)
+        if tolerance >= 1.0:
+            raise InvalidValueError(f"tolerance: must be below 1, got {tolerance}")
+        if not isinstance(self.screening, (bool, np.bool_)):
+            raise InvalidValueError(f"screening: expected a bool, got {self.screening!r}")
+
+    def _core_args(self) -> tuple:
+        gamma = [self.gamma[c] for c in CLASSES[:-1]] + [self.passivity_alpha]
+        margin = [self.margin[c] for c in CLASSES[:-1]] + [0.0]
+        box = self.base_box if self.base_box is not None else (-2.0, 2.0, -2.0, 2.0)
+        return (
+            gamma,
+            [self.penalty[c] for c in CLASSES],
+            margin,
+            [self.enabled[c] for c in CLASSES],
+            list(box),
+            self.tank_floor,
+            self.max_obstacles,
+            self.max_iterations,
+            self.tolerance,
+            bool(self.screening),
+        )
+
+
+@dataclass(frozen=True)
+class FilterResult:
+    """One FILTER-QP call.
+
+    Attributes:
+        u: (nq,) filtered command, within the joint velocity limits.
+        slack: (R,) slack δ ≥ 0 of each row (order of :attr:`SafetyFilter.row_names`).
+        class_slack: largest slack per class.
+        barrier: (R,) barrier value h of each row (without the margin); NaN for rows off in this
+            call (empty obstacle slots, passivity without a tank).
+        active: names of the active constraints (tight or relaxed rows, input limits at a bound),
+            e.g. ``joint_limit:panda_joint4``, ``self_collision:panda_link1-panda_link7``,
+            ``arm_reach``, ``base_box:x``, ``obstacle:<id>:<link>``, ``passivity``,
+            ``input_limit:<joint>``.
+        status: ``"solved"``, ``"almost_solved"`` or ``"fallback"`` (the solver failed; u is the safe stop 0).
+        solver_status: Clarabel's verdict.
+        solve_time: wall time of the call in the core (s).
+        iterations: interior-point iterations (0 when the projected command met every row).
+        qp_rows: rows in the QP that was solved (0: no solver ran).
+    """
+
+    u: np.ndarray
+    slack: np.ndarray
+    class_slack: Mapping[str, float]
+    barrier: np.ndarray
+    active: tuple[str, ...]
+    status: str
+    solver_status: str
+    solve_time: float
+    iterations: int
+    qp_rows: int
+
+    @property
+    def fallback(self) -> bool:
+        return self.status == "fallback"
+
+
+@dataclass(frozen=True)
+class SequenceResult:
+    """Sequential FILTER-QP (Algorithm 1): the filtered sequence U (K, nq), the rollout states
+    (K+1, nx) it produces in the rollout model, each step's filter status and the fallback count."""
+
+    U: np.ndarray
+    states: np.ndarray
+    status: tuple[str, ...]
+    fallbacks: int
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    id: int
+    center: tuple[float, float, float]
+    radius: float
+
+
+class SafetyFilter:
+    """The CBF safety filter of the paper (FILTER-QP, eq. 41) for one scene.
+
+    Rows: joint limits (37) on every joint with finite limits, self-collision (39) on the scene's
+    sphere pairs, arm reach (40), base box, sphere obstacles (added at run time) against every
+    robot sphere, and the passivity row (56) ``τ_extᵀu + δ ≥ −α (S − ε)`` when ``tau_ext`` and
+    ``tank_energy`` are given. The QP is built once and updated in place; if the solver fails the
+    result is the safe stop u = 0 with ``status == "fallback"`` (counted in :attr:`stats`).
+    """
+
+    def __init__(self, scene: Scene, config: SafetyConfig | None = None) -> None:
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
+        config = SafetyConfig() if config is None else config
+        if not isinstance(config, SafetyConfig):
+            raise TypeError(f"config must be a sabre.SafetyConfig, got {type(config).__name__}")
+        self.scene = scene
+        self.config = config
+        self._core = _core.SafetyFilter(scene._core, *config._core_args())
+
+    def _passivity(self, tau_ext, tank_energy) -> tuple[np.ndarray | None, float | None]:
+        if (tau_ext is None) != (tank_energy is None):
+            raise InvalidValueError("passivity: give both tau_ext and tank_energy, or neither")
+        if tau_ext is None:
+            return None, None
+        tau = as_float_array("tau_ext", tau_ext, (self.scene.nq,))
+        energy = float(tank_energy)
+        if not math.isfinite(energy):
+            raise InvalidValueError(f"tank_energy: must be finite, got {energy}")
+        return tau, energy
+
+    def filter(
+        self,
+        x: Sequence[float] | np.ndarray,
+        u_ref: Sequence[float] | np.ndarray,
+        tau_ext: Sequence[float] | np.ndarray | None = None,
+        tank_energy: float | None = None,
+    ) -> FilterResult:
+        """Filters the command u_ref (nq,) at state x (nx,); with τ_ext (nq,) and the tank energy S
+        the passivity row is on (only in the inner loop, as in the paper)."""
+        x = as_float_array("x", x, (self.scene.nx,))
+        u_ref = as_float_array("u_ref", u_ref, (self.scene.nq,))
+        tau, energy = self._passivity(tau_ext, tank_energy)
+        r = self._core.filter(x, u_ref, tau, energy)
+        return FilterResult(
+            u=readonly(r.u),
+            slack=readonly(r.slack),
+            class_slack=MappingProxyType(dict(r.class_slack)),
+            barrier=readonly(r.barrier),
+            active=tuple(r.active),
+            status=r.status,
+            solver_status=r.solver_status,
+            solve_time=r.solve_time,
+            iterations=r.iterations,
+            qp_rows=r.qp_rows,
+        )
+
+    def filter_sequence(self, x0: Sequence[float] | np.ndarray, U: np.ndarray, model: RolloutModel) -> SequenceResult:
+        """Sequential FILTER-QP (Algorithm 1): filters U (K, nq) step by step while rolling it out
+        from x0 in ``model`` (no passivity row: the paper enforces passivity in the inner loop)."""
+        from .sim import RolloutModel
+
+        if not isinstance(model, RolloutModel):
+            raise TypeError(f"model must be a sabre.RolloutModel, got {type(model).__name__}")
+        x0 = as_float_array("x0", x0, (self.scene.nx,))
+        U = as_float_array("U", U, (None, self.scene.nq))
+        if U.shape[0] == 0:
+            raise InvalidValueError("U: needs at least one step")
+        u, states, status, fallbacks = self._core.filter_sequence(x0, U, model._core)
+        return SequenceResult(U=readonly(u), states=readonly(states), status=tuple(status), fallbacks=int(fallbacks))
+
+    # -- obstacles --------------------------------------------------------------------------
+    def add_obstacle(self, center: Sequence[float] | np.ndarray, radius: float) -> int:
+        """Adds a sphere obstacle (world centre (3,), radius in m); returns its id."""
+        center = as_float_array("center", center, (3,))
+        return self._core.add_obstacle(center.tolist(), as_positive("radius", radius))
+
+    def move_obstacle(self, obstacle_id: int, center: Sequence[float] | np.ndarray) -> None:
+        self._core.move_obstacle(as_count("obstacle_id", obstacle_id, 0), as_float_array("center", center, (3,)).tolist())
+
+    def remove_obstacle(self, obstacle_id: int) -> None:
+        self._core.remove_obstacle(as_count("obstacle_id", obstacle_id, 0))
+
+    @property
+    def obstacles(self) -> list[Obstacle]:
+        return [Obstacle(int(i), tuple(c), float(r)) for i, c, r in self._core.obstacles]
+
+    # -- inspection -------------------------------------------------------------------------
+    @property
+    def row_names(self) -> list[str]:
+        """Names of the R rows, in the order of ``FilterResult.slack`` and ``barrier``."""
+        return self._core.row_names
+
+    @property
+    def input_limits(self) -> np.ndarray:
+        """(nq,) joint velocity limits, the hard input bounds."""
+        return np.asarray(self._core.input_limits, dtype=np.float64)
+
+    @property
+    def stats(self) -> dict:
+        """calls, fallbacks, mean_solve_time and max_solve_time (s), total_iterations."""
+        return dict(self._core.stats)
+
+    def reset_stats(self) -> None:
+        self._core.reset_stats()
+
+    def constraint_rows(self, x, tau_ext=None, tank_energy=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(a (R, nq), b (R,), h (R,)) at state x: each row's condition is a·u + δ ≥ b, b = −γ (h − Δ)."""
+        x = as_float_array("x", x, (self.scene.nx,))
+        tau, energy = self._passivity(tau_ext, tank_energy)
+        a, b, h = self._core.constraint_rows(x, tau, energy)
+        return readonly(a), readonly(b), readonly(h)
+
+    def qp_matrices(self, x, u_ref, tau_ext=None, tank_energy=None) -> dict:
+        """The full QP as dense arrays, for cross-checks with other solvers: minimise
+        ½ zᵀPz + qᵀz subject to A z ≤ b over z = [u (nu); δ (R)] (keys P, q, A, b, nu)."""
+        x = as_float_array("x", x, (self.scene.nx,))
+        u_ref = as_float_array("u_ref", u_ref, (self.scene.nq,))
+        tau, energy = self._passivity(tau_ext, tank_energy)
+        return dict(self._core.qp_matrices(x, u_ref, tau, energy))
+
+    def __repr__(self) -> str:
+        return f"SafetyFilter({self.scene!r}, rows={len(self.row_names)})"
+
+
+class EnergyTank:
+    """The virtual energy tank (paper Sec. III-C, IV-C): S(0) = ``initial`` (10 J), floor ε (2 J).
+
+    ``step(tau_ext, u, dt)`` integrates Ṡ = τ_extᵀu (49) with explicit Euler: τ_ext is the external
+    torque on the robot, so the power the robot pushes into the environment, −τ_extᵀu, drains the
+    tank, and work done on the robot refills it (up to ``ceiling``, if given). The energy is never
+    clamped at the floor; keeping it there is the passivity row's job. ``history`` holds S(0) and
+    every step's energy when ``record_history``.
+    """
+
+    def __init__(self, initial: float = 10.0, floor: float = 2.0, *, ceiling: float | None = None, record_history: bool = True) -> None:
+        self._core = _core.EnergyTank(
+            float(initial), float(floor), None if ceiling is None else float(ceiling), bool(record_history)
+        )
+
+    def step(self, tau_ext: Sequence[float] | np.ndarray, u: Sequence[float] | np.ndarray, dt: float) -> float:
+        tau = as_float_array("tau_ext", tau_ext, (None,))
+        u = as_float_array("u", u, (tau.shape[0],))
+        return self._core.step(tau, u, as_positive("dt", dt))
+
+    def reset(self) -> None:
+        self._core.reset()
+
+    @property
+    def energy(self) -> float:
+        return self._core.energy
+
+    @property
+    def initial(self) -> float:
+        return self._core.initial
+
+    @property
+    def floor(self) -> float:
+        return self._core.floor
+
+    @property
+    def ceiling(self) -> float | None:
+        return self._core.ceiling
+
+    @property
+    def residual(self) -> float:
+        """S − ε: the energy the passivity row still lets the robot dissipate."""
+        return self._core.residual
+
+    @property
+    def history(self) -> np.ndarray:
+        return readonly(self._core.history)
+
+    def __repr__(self) -> str:
+        return f"EnergyTank(energy={self.energy:.3f}, floor={self.floor})"

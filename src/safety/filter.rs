@@ -1,0 +1,473 @@
+//! FILTER-QP (41): rows, exact screening, Clarabel solve, fallback, result and statistics.
+//!
+//! Each call evaluates every ZBF row, then solves the smallest QP with the same solution:
+//! - if the command projected onto the input limits already meets every row, it *is* the QP's
+//!   solution (δ = 0; the objective's unconstrained minimiser over the box), and no solver runs;
+//! - rows that every candidate optimum meets can never bind and are left out: the optimum lies in
+//!   the input box and within a distance of u_ref bounded by the cost of the projected command
+//!   (see `screen`); the rest go into the smallest of a few pre-built Clarabel problems with that
+//!   many dense row slots (2, 4, 8, 16), or into the full problem (every row, its own sparsity)
+//!   when more remain.
+//!
+//! Every Clarabel problem is built once at construction with a fixed pattern and updated in place.
+//! `SafetyConfig::screening = false` always solves the full problem (same solution, slower).
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use clarabel::solver::SolverStatus;
+
+use super::config::{ConstraintClass, SafetyConfig};
+use super::constraints::{Obstacle, Rows};
+use super::qp::{SlotQp, EMPTY};
+use crate::error::{ensure_finite, ensure_len, Result, SabreError};
+use crate::model::scene::Scene;
+
+/// How a call ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FilterStatus {
+    /// Clarabel converged to the requested tolerance.
+    #[default]
+    Solved,
+    /// Clarabel converged to its reduced tolerance; the solution is used (clipped to the input limits).
+    AlmostSolved,
+    /// Clarabel did not converge (iteration limit, numerical trouble): the output is the safe stop
+    /// u = 0, which meets the input limits; counted in [`FilterStats::fallbacks`].
+    Fallback,
+}
+
+impl FilterStatus {
+    pub fn name(self) -> &'static str {
+        match self {
+            FilterStatus::Solved => "solved",
+            FilterStatus::AlmostSolved => "almost_solved",
+            FilterStatus::Fallback => "fallback",
+        }
+    }
+}
+
+/// The outcome of one call; owned by the filter and overwritten by the next call.
+#[derive(Debug, Clone, Default)]
+pub struct FilterOutput {
+    /// Filtered command ũ (nq), always within the input limits.
+    pub u: Vec<f64>,
+    /// Slack δ_r ≥ 0 of each row (R): how far the row's ZBF condition is relaxed.
+    pub slack: Vec<f64>,
+    /// Largest slack of each class, in [`ConstraintClass::ALL`] order (0 for classes without rows).
+    pub class_slack: [f64; ConstraintClass::COUNT],
+    /// Barrier value h of each row (without the margin); NaN for rows switched off in this call.
+    pub barrier: Vec<f64>,
+    /// Active constraints: row indices r < R, or R + j for the input limit of joint j.
+    pub active: Vec<usize>,
+    pub status: FilterStatus,
+    /// Clarabel's own verdict (also for fallbacks).
+    pub solver_status: SolverStatus,
+    /// Wall time of the whole call (rows, update, solve, post-processing), seconds.
+    pub solve_time: f64,
+    pub iterations: u32,
+    /// Rows in the QP that was solved (0: the projected command met every row, no solver ran).
+    pub qp_rows: usize,
+}
+
+/// Running statistics of a filter.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FilterStats {
+    pub calls: u64,
+    pub fallbacks: u64,
+    pub total_time: f64,
+    pub max_time: f64,
+    pub total_iterations: u64,
+}
+
+impl FilterStats {
+    pub fn mean_time(&self) -> f64 {
+        if self.calls == 0 {
+            0.0
+        } else {
+            self.total_time / self.calls as f64
+        }
+    }
+}
+
+/// The QP data in Clarabel's form, for inspection and for cross-checking with other solvers:
+/// minimise ½xᵀPx + qᵀx subject to A x ≤ b, with x = [ũ; δ].
+#[derive(Debug, Clone, PartialEq)]
+pub struct QpMatrices {
+    pub n: usize,
+    pub m: usize,
+    pub nu: usize,
+    /// Dense row-major n × n, m × n.
+    pub p: Vec<f64>,
+    pub q: Vec<f64>,
+    pub a: Vec<f64>,
+    pub b: Vec<f64>,
+}
+
+/// Row-slot counts of the pre-built reduced problems, smallest first.
+const REDUCED_SIZES: [usize; 4] = [2, 4, 8, 16];
+
+/// The CBF safety filter (FILTER-QP, eq. 41) for one scene.
+pub struct SafetyFilter {
+    scene: Arc<Scene>,
+    config: SafetyConfig,
+    rows: Rows,
+    row_penalty: Vec<f64>,
+    obstacles: Vec<Option<Obstacle>>,
+    next_obstacle_id: u64,
+    velocity_limits: Vec<f64>,
+    /// Every row in its own slot with its own sparsity.
+    full: SlotQp,
+    /// Dense slots for the rows that survive screening (only sizes below the full row count).
+    reduced: Vec<SlotQp>,
+    /// Rows that can bind in this call, and the slot assignment handed to the solver.
+    candidates: Vec<usize>,
+    assignment: Vec<usize>,
+    output: FilterOutput,
+    stats: FilterStats,
+}
+
+impl SafetyFilter {
+    pub fn new(scene: Arc<Scene>, config: SafetyConfig) -> Result<Self> {
+        config.validate()?;
+        let nq = scene.nq();
+        let limits = scene.robot_limits();
+        let velocity_limits: Vec<f64> = limits.iter().map(|l| l.velocity).collect();
+        if let Some(j) = velocity_limits.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
+            return Err(SabreError::invalid(
+                "robot velocity limits",
+                format!("joint {j} has velocity limit {}; the filter needs finite positive input limits", velocity_limits[j]),
+            ));
+        }
+        let rows = Rows::new(scene.clone(), &config);
+        let r = rows.len();
+        let row_penalty: Vec<f64> = rows.rows.iter().map(|row| config.penalty.get(row.class)).collect();
+        let full_cols = rows.rows.iter().map(|row| row.cols.clone()).collect();
+        let full = SlotQp::new(nq, full_cols, &row_penalty, &velocity_limits, false, &config)?;
+        let mut reduced = Vec::new();
+        for &size in REDUCED_SIZES.iter().filter(|&&size| size < r) {
+            let dense = vec![(0..nq).collect::<Vec<_>>(); size];
+            reduced.push(SlotQp::new(nq, dense, &vec![1.0; size], &velocity_limits, true, &config)?);
+        }
+        let output = FilterOutput {
+            u: vec![0.0; nq],
+            slack: vec![0.0; r],
+            class_slack: [0.0; ConstraintClass::COUNT],
+            barrier: vec![0.0; r],
+            active: Vec::with_capacity(r + nq),
+            ..FilterOutput::default()
+        };
+        let mut obstacles = Vec::with_capacity(config.max_obstacles);
+        obstacles.resize(config.max_obstacles, None);
+        Ok(Self {
+            scene,
+            rows,
+            row_penalty,
+            obstacles,
+            next_obstacle_id: 0,
+            velocity_limits,
+            full,
+            reduced,
+            candidates: Vec::with_capacity(r),
+            assignment: Vec::with_capacity(r),
+            output,
+            stats: FilterStats::default(),
+            config,
+        })
+    }
+
+    pub fn scene(&self) -> &Arc<Scene> {
+        &self.scene
+    }
+    pub fn config(&self) -> &SafetyConfig {
+        &self.config
+    }
+    pub fn stats(&self) -> &FilterStats {
+        &self.stats
+    }
+    pub fn reset_stats(&mut self) {
+        self.stats = FilterStats::default();
+    }
+    /// The output of the last call.
+    pub fn output(&self) -> &FilterOutput {
+        &self.output
+    }
+    /// Number of soft (ZBF) rows R.
+    pub fn num_rows(&self) -> usize {
+        self.rows.len()
+    }
+    /// Class of row r.
+    pub fn row_class(&self, r: usize) -> ConstraintClass {
+        self.rows.rows[r].class
+    }
+    /// The input limits (velocity limits from the URDF) the filter enforces as hard bounds.
+    pub fn input_limits(&self) -> &[f64] {
+        &self.velocity_limits
+    }
+    /// Name of entry `i` of [`FilterOutput::active`]: a row name for i < R, else `input_limit:<joint>`.
+    pub fn constraint_name(&self, i: usize) -> String {
+        let r = self.rows.len();
+        if i < r {
+            self.rows.name(i, &self.obstacles)
+        } else {
+            let s = &self.scene.robot;
+            format!("input_limit:{}", s.joints[s.active_joints[i - r]].name)
+        }
+    }
+    /// Names of all R rows, in order.
+    pub fn row_names(&self) -> Vec<String> {
+        (0..self.rows.len()).map(|r| self.rows.name(r, &self.obstacles)).collect()
+    }
+
+    // -- obstacles ----------------------------------------------------------------------------
+
+    /// Adds a sphere obstacle (world centre, radius); returns its id. Fails when every slot is taken.
+    pub fn add_obstacle(&mut self, center: [f64; 3], radius: f64) -> Result<u64> {
+        ensure_finite("obstacle center", &center)?;
+        if !(radius.is_finite() && radius > 0.0) {
+            return Err(SabreError::invalid("obstacle radius", format!("must be finite and positive, got {radius}")));
+        }
+        if !self.config.enabled.get(ConstraintClass::Obstacles) {
+            return Err(SabreError::invalid("obstacles", "the obstacle class is disabled in this filter's config"));
+        }
+        let slot = self.obstacles.iter().position(|o| o.is_none()).ok_or_else(|| {
+            SabreError::invalid("obstacles", format!("all {} obstacle slots are in use; remove one first", self.obstacles.len()))
+        })?;
+        let id = self.next_obstacle_id;
+        self.next_obstacle_id += 1;
+        self.obstacles[slot] = Some(Obstacle { id, center: center.into(), radius });
+        Ok(id)
+    }
+
+    fn obstacle_slot(&self, id: u64) -> Result<usize> {
+        self.obstacles
+            .iter()
+            .position(|o| o.is_some_and(|o| o.id == id))
+            .ok_or_else(|| SabreError::invalid("obstacle id", format!("no obstacle with id {id}")))
+    }
+
+    pub fn move_obstacle(&mut self, id: u64, center: [f64; 3]) -> Result<()> {
+        ensure_finite("obstacle center", &center)?;
+        let slot = self.obstacle_slot(id)?;
+        if let Some(o) = self.obstacles[slot].as_mut() {
+            o.center = center.into();
+        }
+        Ok(())
+    }
+
+    pub fn remove_obstacle(&mut self, id: u64) -> Result<()> {
+        let slot = self.obstacle_slot(id)?;
+        self.obstacles[slot] = None;
+        Ok(())
+    }
+
+    /// The obstacles present, in slot order.
+    pub fn obstacles(&self) -> impl Iterator<Item = &Obstacle> {
+        self.obstacles.iter().flatten()
+    }
+
+    // -- the filter ---------------------------------------------------------------------------
+
+    fn check_inputs(&self, x: &[f64], u_ref: Option<&[f64]>, passivity: Option<(&[f64], f64)>) -> Result<()> {
+        let nq = self.scene.nq();
+        self.scene.check_state(x)?;
+        if let Some(u_ref) = u_ref {
+            ensure_len("u_ref", u_ref, nq)?;
+            ensure_finite("u_ref", u_ref)?;
+        }
+        if let Some((tau, energy)) = passivity {
+            ensure_len("tau_ext", tau, nq)?;
+            ensure_finite("tau_ext", tau)?;
+            ensure_finite("tank_energy", &[energy])?;
+        }
+        Ok(())
+    }
+
+    /// Finds the rows that can bind (`candidates`) and whether the box projection of u_ref,
+    /// already in `output.u`, meets every row.
+    ///
+    /// A row can be left out when every candidate optimum meets it. Optima lie in the input box
+    /// and, because the projection ū with slacks δ̄_r = max(0, b_r − a_r ū) is feasible with cost
+    /// F̄ = ½‖ū − u_ref‖² + ½ΣΓ_r δ̄_r², also in the ball ‖u − u_ref‖ ≤ ρ = √(2F̄). So a row with
+    /// b_r ≤ max(−Σ_j |a_rj| v_j, a_r·u_ref − ρ‖a_r‖) is met by every optimum and cannot bind.
+    fn screen(&mut self, u_ref: &[f64]) -> bool {
+        let nq = self.scene.nq();
+        let mut cost = 0.0;
+        for (u, r) in self.output.u.iter().zip(u_ref) {
+            cost += 0.5 * (u - r) * (u - r);
+        }
+        let mut projection_feasible = true;
+        for r in 0..self.rows.len() {
+            if self.rows.live[r] {
+                let a = &self.rows.coef[r * nq..(r + 1) * nq];
+                let deficit = self.rows.bound[r] - a.iter().zip(&self.output.u).map(|(a, u)| a * u).sum::<f64>();
+                if deficit > 0.0 {
+                    cost += 0.5 * self.row_penalty[r] * deficit * deficit;
+                    projection_feasible = false;
+                }
+            }
+        }
+        let radius = (2.0 * cost).sqrt();
+        self.candidates.clear();
+        for r in 0..self.rows.len() {
+            if !self.rows.live[r] {
+                continue;
+            }
+            let a = &self.rows.coef[r * nq..(r + 1) * nq];
+            let b = self.rows.bound[r];
+            let (mut box_lowest, mut at_ref, mut norm2) = (0.0, 0.0, 0.0);
+            for j in 0..nq {
+                box_lowest -= a[j].abs() * self.velocity_limits[j];
+                at_ref += a[j] * u_ref[j];
+                norm2 += a[j] * a[j];
+            }
+            let lowest = f64::max(box_lowest, at_ref - radius * norm2.sqrt());
+            // Left out only with a clear margin, so rounding never drops a row that could bind.
+            if b > lowest - 1e-9 * (1.0 + b.abs() + lowest.abs()) {
+                self.candidates.push(r);
+            }
+        }
+        projection_feasible
+    }
+
+    /// Chooses the problem for this call, loads it and solves it; returns the index of the reduced
+    /// problem used (None = full), the solver status and the iteration count.
+    fn solve(&mut self, u_ref: &[f64]) -> Result<(Option<usize>, SolverStatus, u32)> {
+        let pick = if self.config.screening {
+            self.reduced.iter().position(|qp| qp.slots() >= self.candidates.len())
+        } else {
+            None
+        };
+        self.assignment.clear();
+        let qp = match pick {
+            Some(i) => {
+                self.assignment.extend_from_slice(&self.candidates);
+                self.assignment.resize(self.reduced[i].slots(), EMPTY);
+                &mut self.reduced[i]
+            }
+            None => {
+                // Every row in its own slot; rows switched off this call hold 0·ũ + δ ≥ −1.
+                self.assignment.extend(0..self.rows.len());
+                &mut self.full
+            }
+        };
+        qp.load(&self.assignment, &self.rows.coef, &self.rows.bound, &self.row_penalty, u_ref)?;
+        let (status, iterations) = qp.solve();
+        Ok((pick, status, iterations))
+    }
+
+    /// Filters `u_ref` (nq) at state `x` (nx). `passivity` = (τ_ext (nq), tank energy S) switches
+    /// the passivity row on for this call (if the class is enabled; otherwise it is ignored).
+    /// Returns the filter's output buffer.
+    ///
+    /// Bad input (wrong lengths, NaN) is an error; a solver failure is not: it yields the safe
+    /// stop u = 0 with status [`FilterStatus::Fallback`]. A command is never passed through unfiltered.
+    pub fn filter(&mut self, x: &[f64], u_ref: &[f64], passivity: Option<(&[f64], f64)>) -> Result<&FilterOutput> {
+        let start = Instant::now();
+        self.check_inputs(x, Some(u_ref), passivity)?;
+        let nq = self.scene.nq();
+        let r = self.rows.len();
+        self.rows.evaluate(&x[..nq], &self.obstacles, passivity);
+        for ((u, r), v) in self.output.u.iter_mut().zip(u_ref).zip(&self.velocity_limits) {
+            *u = r.clamp(-v, *v);
+        }
+        self.output.slack.fill(0.0);
+        let projection_feasible = self.screen(u_ref);
+        if self.config.screening && projection_feasible {
+            // The box projection of u_ref minimises the objective over the box and meets every
+            // row with δ = 0: it is the QP's solution.
+            let out = &mut self.output;
+            out.status = FilterStatus::Solved;
+            out.solver_status = SolverStatus::Solved;
+            out.iterations = 0;
+            out.qp_rows = 0;
+        } else {
+            let (pick, status, iterations) = self.solve(u_ref)?;
+            let qp = match pick {
+                Some(i) => &self.reduced[i],
+                None => &self.full,
+            };
+            let x = qp.primal();
+            let out = &mut self.output;
+            out.solver_status = status;
+            out.iterations = iterations;
+            out.qp_rows = self.assignment.iter().filter(|&&a| a != EMPTY).count();
+            let converged = matches!(status, SolverStatus::Solved | SolverStatus::AlmostSolved) && x.iter().all(|v| v.is_finite());
+            if converged {
+                out.status = if status == SolverStatus::Solved { FilterStatus::Solved } else { FilterStatus::AlmostSolved };
+                // Interior-point iterates sit within the tolerance of the bounds; clip so the input
+                // limits hold exactly.
+                for j in 0..nq {
+                    out.u[j] = x[j].clamp(-self.velocity_limits[j], self.velocity_limits[j]);
+                }
+                for (s, &row) in self.assignment.iter().enumerate() {
+                    if row != EMPTY {
+                        out.slack[row] = x[nq + s].max(0.0);
+                    }
+                }
+            } else {
+                out.status = FilterStatus::Fallback;
+                out.u.fill(0.0);
+                // The slack the safe stop needs: the deficit of each live row at u = 0.
+                for ri in 0..r {
+                    out.slack[ri] = if self.rows.live[ri] { self.rows.bound[ri].max(0.0) } else { 0.0 };
+                }
+            }
+        }
+        let out = &mut self.output;
+        out.barrier.copy_from_slice(&self.rows.barrier);
+        out.active.clear();
+        out.class_slack = [0.0; ConstraintClass::COUNT];
+        let tol = self.config.active_tolerance;
+        for ri in 0..r {
+            if !self.rows.live[ri] {
+                continue;
+            }
+            let a = &self.rows.coef[ri * nq..(ri + 1) * nq];
+            let b = self.rows.bound[ri];
+            let lhs: f64 = a.iter().zip(&out.u).map(|(a, u)| a * u).sum::<f64>() + out.slack[ri];
+            if lhs - b <= tol * (1.0 + b.abs()) || out.slack[ri] > tol {
+                out.active.push(ri);
+            }
+            let c = self.rows.rows[ri].class.index();
+            out.class_slack[c] = out.class_slack[c].max(out.slack[ri]);
+        }
+        for j in 0..nq {
+            let v = self.velocity_limits[j];
+            if out.u[j].abs() >= v - tol * (1.0 + v) {
+                out.active.push(r + j);
+            }
+        }
+        let elapsed = start.elapsed().as_secs_f64();
+        out.solve_time = elapsed;
+        let s = &mut self.stats;
+        s.calls += 1;
+        s.fallbacks += u64::from(out.status == FilterStatus::Fallback);
+        s.total_time += elapsed;
+        s.max_time = s.max_time.max(elapsed);
+        s.total_iterations += u64::from(out.iterations);
+        Ok(&self.output)
+    }
+
+    /// The ZBF rows at x: (∂h/∂q per row, R × nq row-major; bounds b, R; barrier values h, R), so
+    /// that a·u ≥ b is each row's condition without slack. Rows switched off in this call have
+    /// zero gradient, b = −1 and h = NaN. Does not touch the solver.
+    pub fn constraint_rows(&mut self, x: &[f64], passivity: Option<(&[f64], f64)>) -> Result<(&[f64], &[f64], &[f64])> {
+        self.check_inputs(x, None, passivity)?;
+        let nq = self.scene.nq();
+        self.rows.evaluate(&x[..nq], &self.obstacles, passivity);
+        Ok((&self.rows.coef, &self.rows.bound, &self.rows.barrier))
+    }
+
+    /// The full QP (every row) for these inputs, densely, in Clarabel's form; [`Self::filter`]
+    /// solves this problem or an exactly equivalent smaller one (see the module notes).
+    pub fn qp_matrices(&mut self, x: &[f64], u_ref: &[f64], passivity: Option<(&[f64], f64)>) -> Result<QpMatrices> {
+        self.check_inputs(x, Some(u_ref), passivity)?;
+        let nq = self.scene.nq();
+        self.rows.evaluate(&x[..nq], &self.obstacles, passivity);
+        self.assignment.clear();
+        self.assignment.extend(0..self.rows.len());
+        self.full.load(&self.assignment, &self.rows.coef, &self.rows.bound, &self.row_penalty, u_ref)?;
+        let (n, m, p, q, a, b) = self.full.dense();
+        Ok(QpMatrices { n, m, nu: nq, p, q, a, b })
+    }
+}

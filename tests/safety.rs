@@ -1,0 +1,549 @@
+//! Safety filter, energy tank, Sequential FILTER-QP and the filtered inner loop, each checked against
+//! something independent of Clarabel: the rows' own definition, optimality conditions rebuilt from
+//! the returned primal, a projected-gradient solution of the same problem, finite differences of
+//! h, the cost terms' notion of violation, closed-form tank energies and simulated rollouts.
+
+use std::sync::Arc;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use sabre::control::{follow_reference_safe, InnerSafety, LowLevelConfig, LowLevelController, TrackTrace};
+use sabre::cost::{Cost, StepView, Term};
+use sabre::model::kinematics::Frames;
+use sabre::model::Scene;
+use sabre::safety::{ConstraintClass, EnergyTank, FilterStatus, SafetyConfig, SafetyFilter};
+use sabre::sim::{Plant, PlantConfig, RolloutConfig, RolloutModel};
+use sabre::SabreError;
+
+fn scene() -> Arc<Scene> {
+    Arc::new(Scene::load("royalpanda", "shelf", None).expect("built-in scene"))
+}
+
+fn joint(scene: &Scene, name: &str) -> usize {
+    scene.robot.active_joint_names().iter().position(|n| n == name).expect("joint exists")
+}
+
+/// A filter with eight obstacles scattered around the robot's workspace.
+fn filter_with_obstacles(scene: &Arc<Scene>, config: SafetyConfig, rng: &mut ChaCha8Rng) -> SafetyFilter {
+    let mut f = SafetyFilter::new(scene.clone(), config).expect("filter");
+    for _ in 0..8 {
+        let c = [rng.random_range(-0.5..1.5), rng.random_range(-1.0..1.0), rng.random_range(0.2..1.5)];
+        f.add_obstacle(c, rng.random_range(0.05..0.3)).expect("slot free");
+    }
+    f
+}
+
+/// A state with a third of the coordinates near or beyond a limit (joint limits; base within
+/// [−2.3, 2.3]², so sometimes outside the [−2, 2]² box), random velocities.
+fn random_state(scene: &Scene, rng: &mut ChaCha8Rng) -> Vec<f64> {
+    let mut x = scene.default_state();
+    let nq = scene.nq();
+    for (j, l) in scene.robot_limits().iter().enumerate() {
+        let (lo, hi) = if j < 2 { (-2.2, 2.2) } else { (l.lower.max(-6.0), l.upper.min(6.0)) };
+        x[j] = if rng.random_bool(0.33) {
+            // Near a limit, up to 0.05 beyond it.
+            if rng.random_bool(0.5) {
+                lo + rng.random_range(-0.05..0.1)
+            } else {
+                hi - rng.random_range(-0.05..0.1)
+            }
+        } else {
+            rng.random_range(lo..hi)
+        };
+        x[nq + j] = rng.random_range(-0.5..0.5);
+    }
+    x
+}
+
+fn random_command(scene: &Scene, rng: &mut ChaCha8Rng) -> Vec<f64> {
+    // Up to 1.5× the velocity limits: the filter must also bring over-limit commands in.
+    scene.robot_limits().iter().map(|l| rng.random_range(-1.5..1.5) * l.velocity).collect()
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// Rows at x, copied out of the filter: (a R × nq, b, h).
+fn rows(f: &mut SafetyFilter, x: &[f64], passivity: Option<(&[f64], f64)>) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let (a, b, h) = f.constraint_rows(x, passivity).expect("rows");
+    (a.to_vec(), b.to_vec(), h.to_vec())
+}
+
+fn penalties(f: &SafetyFilter) -> Vec<f64> {
+    (0..f.num_rows()).map(|r| f.config().penalty.get(f.row_class(r))).collect()
+}
+
+/// The FILTER-QP without Clarabel: min over the input box of ½‖u − u_ref‖² + ½ Σ Γ_r max(0, b_r − a_r u)²
+/// (the slack eliminated), a smooth strongly convex problem, solved by accelerated projected
+/// gradient with adaptive restart. Rows that no admissible u can violate (b_r ≤ −Σ|a_r|v) add
+/// nothing to the objective on the box and are left out of the step-size bound.
+fn projected_gradient(a: &[f64], b: &[f64], gamma: &[f64], v: &[f64], u_ref: &[f64]) -> Vec<f64> {
+    let nq = v.len();
+    let row = |r: usize| &a[r * nq..(r + 1) * nq];
+    let relevant: Vec<usize> = (0..b.len()).filter(|&r| b[r] > -dot(&row(r).iter().map(|x| x.abs()).collect::<Vec<_>>(), v)).collect();
+    let lipschitz = 1.0 + relevant.iter().map(|&r| gamma[r] * dot(row(r), row(r))).sum::<f64>();
+    let project = |u: &mut Vec<f64>| u.iter_mut().zip(v).for_each(|(x, l)| *x = x.clamp(-l, *l));
+    let gradient = |u: &[f64]| {
+        let mut g: Vec<f64> = u.iter().zip(u_ref).map(|(x, r)| x - r).collect();
+        for &r in &relevant {
+            let deficit = b[r] - dot(row(r), u);
+            if deficit > 0.0 {
+                g.iter_mut().zip(row(r)).for_each(|(gi, ai)| *gi -= gamma[r] * deficit * ai);
+            }
+        }
+        g
+    };
+    let mut u = u_ref.to_vec();
+    project(&mut u);
+    let mut y = u.clone();
+    let mut t = 1.0_f64;
+    for _ in 0..60_000 {
+        let g = gradient(&y);
+        let mut next: Vec<f64> = y.iter().zip(&g).map(|(yi, gi)| yi - gi / lipschitz).collect();
+        project(&mut next);
+        // Restart the momentum when it points uphill (O'Donoghue & Candès): linear convergence.
+        let uphill: f64 = y.iter().zip(&next).zip(&u).map(|((yi, ni), ui)| (yi - ni) * (ni - ui)).sum();
+        if uphill > 0.0 {
+            t = 1.0;
+        }
+        let t_next = 0.5 * (1.0 + (1.0 + 4.0 * t * t).sqrt());
+        y = next.iter().zip(&u).map(|(n, o)| n + (t - 1.0) / t_next * (n - o)).collect();
+        u = next;
+        t = t_next;
+    }
+    u
+}
+
+#[test]
+fn random_states_meet_input_limits_exactly_and_every_row_up_to_its_slack() {
+    let scene = scene();
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let mut screened = filter_with_obstacles(&scene, SafetyConfig::default(), &mut rng);
+    let mut rng_full = ChaCha8Rng::seed_from_u64(11);
+    let mut full = filter_with_obstacles(&scene, SafetyConfig { screening: false, ..SafetyConfig::default() }, &mut rng_full);
+    let nq = scene.nq();
+    let v = screened.input_limits().to_vec();
+    let mut solver_calls = 0;
+    for _ in 0..400 {
+        let x = random_state(&scene, &mut rng);
+        let u_ref = random_command(&scene, &mut rng);
+        let tau: Vec<f64> = (0..nq).map(|_| rng.random_range(-5.0..5.0)).collect();
+        let energy = rng.random_range(1.5..10.0);
+        let out = screened.filter(&x, &u_ref, Some((&tau, energy))).expect("filter").clone();
+        assert_ne!(out.status, FilterStatus::Fallback, "at {x:?}");
+        solver_calls += usize::from(out.qp_rows > 0);
+        for j in 0..nq {
+            assert!(out.u[j].abs() <= v[j] + 1e-9, "input limit {j}: {} > {}", out.u[j], v[j]);
+        }
+        let (a, b, _) = rows(&mut screened, &x, Some((&tau, energy)));
+        for r in 0..b.len() {
+            let lhs = dot(&a[r * nq..(r + 1) * nq], &out.u) + out.slack[r];
+            assert!(lhs >= b[r] - 1e-6, "row {} violated: {lhs} < {}", screened.constraint_name(r), b[r]);
+            assert!(out.slack[r] >= 0.0);
+        }
+        // The full problem (no screening) has the same solution, to the solver's accuracy: about
+        // 1e-9 in general, up to ~1e-5 where a bound is active with a vanishing multiplier
+        // (degenerate), where interior-point iterates stop short of the bound.
+        let reference = full.filter(&x, &u_ref, Some((&tau, energy))).expect("filter");
+        for j in 0..nq {
+            assert!((reference.u[j] - out.u[j]).abs() < 1e-4, "screened and full QP differ in u[{j}]: {} vs {}", out.u[j], reference.u[j]);
+        }
+    }
+    assert!(solver_calls > 300, "the random states should mostly need the solver, got {solver_calls}");
+    assert_eq!(screened.stats().calls, 400);
+    assert_eq!(screened.stats().fallbacks, 0);
+}
+
+#[test]
+fn a_safe_command_far_from_every_limit_comes_back_unchanged() {
+    let scene = scene();
+    for screening in [true, false] {
+        let mut f = SafetyFilter::new(scene.clone(), SafetyConfig { screening, ..SafetyConfig::default() }).unwrap();
+        f.add_obstacle([3.0, 3.0, 1.0], 0.2).unwrap();
+        let x = scene.default_state();
+        let u_ref = [0.1, -0.1, 0.05, 0.2, -0.2, 0.1, 0.1, -0.1, 0.2, 0.1];
+        // Small τ_ext and a full tank: the passivity row is far from binding too.
+        let tau = [0.1; 10];
+        let out = f.filter(&x, &u_ref, Some((&tau, 10.0))).unwrap().clone();
+        assert_eq!(out.status, FilterStatus::Solved);
+        for j in 0..10 {
+            assert!((out.u[j] - u_ref[j]).abs() < 1e-6, "screening={screening}: u[{j}] {} vs {}", out.u[j], u_ref[j]);
+        }
+        assert!(out.active.is_empty(), "screening={screening}: {:?}", out.active);
+        assert!(out.slack.iter().all(|&s| s < 1e-6));
+        assert_eq!(out.qp_rows, if screening { 0 } else { f.num_rows() });
+    }
+}
+
+#[test]
+fn optimality_conditions_hold_and_match_an_independent_solution() {
+    let scene = scene();
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let mut f = filter_with_obstacles(&scene, SafetyConfig::default(), &mut rng);
+    let nq = scene.nq();
+    let v = f.input_limits().to_vec();
+    let gamma = penalties(&f);
+    let mut checked = 0;
+    for trial in 0..60 {
+        let x = random_state(&scene, &mut rng);
+        let u_ref = random_command(&scene, &mut rng);
+        let tau: Vec<f64> = (0..nq).map(|_| rng.random_range(-5.0..5.0)).collect();
+        let energy = rng.random_range(1.5..10.0);
+        let out = f.filter(&x, &u_ref, Some((&tau, energy))).unwrap().clone();
+        let (a, b, _) = rows(&mut f, &x, Some((&tau, energy)));
+        // KKT of min ½‖u − u_ref‖² + ½ΣΓδ² s.t. a_r u + δ_r ≥ b_r, |u| ≤ v, from the primal alone:
+        // ∂/∂δ_r gives the multiplier λ_r = Γ_r δ_r ≥ 0; complementarity: λ_r > 0 ⇒ the row is tight;
+        // ∂/∂u: g = u − u_ref − Σ λ_r a_r must vanish off the bounds, g ≤ 0 at +v, g ≥ 0 at −v.
+        let mut g: Vec<f64> = out.u.iter().zip(&u_ref).map(|(u, r)| u - r).collect();
+        for r in 0..b.len() {
+            let lambda = gamma[r] * out.slack[r];
+            let row = &a[r * nq..(r + 1) * nq];
+            let residual = dot(row, &out.u) + out.slack[r] - b[r];
+            assert!(lambda * residual.abs() < 1e-5, "trial {trial}: complementarity of {}: λ {lambda}, residual {residual}", f.constraint_name(r));
+            g.iter_mut().zip(row).for_each(|(gi, ai)| *gi -= lambda * ai);
+        }
+        for j in 0..nq {
+            // An interior-point solution sits up to ~1e-7 inside a bound it presses against.
+            let tol = 1e-5;
+            if out.u[j] >= v[j] - 1e-5 {
+                assert!(g[j] <= tol, "trial {trial}: stationarity at the upper bound of {j}: {}", g[j]);
+            } else if out.u[j] <= -v[j] + 1e-5 {
+                assert!(g[j] >= -tol, "trial {trial}: stationarity at the lower bound of {j}: {}", g[j]);
+            } else {
+                assert!(g[j].abs() <= tol, "trial {trial}: stationarity of {j}: {}", g[j]);
+            }
+        }
+        if trial < 25 {
+            let independent = projected_gradient(&a, &b, &gamma, &v, &u_ref);
+            for j in 0..nq {
+                assert!((independent[j] - out.u[j]).abs() < 1e-4, "trial {trial}: u[{j}] {} vs projected gradient {}", out.u[j], independent[j]);
+            }
+        }
+        checked += 1;
+    }
+    assert_eq!(checked, 60);
+}
+
+#[test]
+fn row_gradients_match_finite_differences_of_the_barriers() {
+    let scene = scene();
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let mut f = filter_with_obstacles(&scene, SafetyConfig::default(), &mut rng);
+    let nq = scene.nq();
+    let eps = 1e-6;
+    let mut compared = 0;
+    for _ in 0..50 {
+        let x = random_state(&scene, &mut rng);
+        let dir: Vec<f64> = (0..nq).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let (a, _, h) = rows(&mut f, &x, None);
+        let shifted = |s: f64| {
+            let mut y = x.clone();
+            y.iter_mut().zip(&dir).for_each(|(q, d)| *q += s * d);
+            y
+        };
+        let (_, _, h_plus) = rows(&mut f, &shifted(eps), None);
+        let (_, _, h_minus) = rows(&mut f, &shifted(-eps), None);
+        for r in 0..h.len() {
+            if !h[r].is_finite() {
+                continue; // rows switched off in this call (passivity without a tank)
+            }
+            let numeric = (h_plus[r] - h_minus[r]) / (2.0 * eps);
+            let analytic = dot(&a[r * nq..(r + 1) * nq], &dir);
+            assert!((numeric - analytic).abs() < 1e-6 * (1.0 + analytic.abs()), "{}: ḣ {analytic} vs finite difference {numeric}", f.constraint_name(r));
+            compared += 1;
+        }
+    }
+    // 10 joints + 3 pairs + reach + 2 box + 8 × 5 obstacle rows per state.
+    assert_eq!(compared, 50 * 56);
+}
+
+#[test]
+fn barriers_agree_with_the_sampler_cost_terms() {
+    let scene = scene();
+    let mut rng = ChaCha8Rng::seed_from_u64(8);
+    let mut f = SafetyFilter::new(scene.clone(), SafetyConfig::default()).unwrap();
+    let (center, radius) = ([0.6, 0.0, 0.8], 0.25);
+    let id = f.add_obstacle(center, radius).unwrap();
+    let names = f.row_names();
+    let reach = scene.arm_reach.clone().unwrap();
+    let term = |t: Term| Cost::new(vec![t]);
+    let costs = [
+        ("self_collision:", term(Term::SelfCollision { pairs: scene.sphere_pairs.clone(), weight: 1.0, weight_slope: 0.0 })),
+        ("base_box:", term(Term::BaseBox { lower: [-2.0, -2.0], upper: [2.0, 2.0], weight: 1.0, weight_slope: 0.0 })),
+        ("arm_reach", term(Term::ArmReach { base_link: reach.base_link, frame_link: reach.frame_link, r_max: reach.max, weight: 1.0, weight_slope: 0.0 })),
+        (
+            "obstacle:",
+            term(Term::Obstacles { spheres: vec![(center.into(), radius)], weight: 1.0, weight_slope: 0.0 }),
+        ),
+    ];
+    assert!(names.iter().any(|n| n == &format!("obstacle:{id}:panda_hand")), "{names:?}");
+    let (mut frames, object) = (Frames::default(), Frames::default());
+    let mut disagreements = 0;
+    for _ in 0..400 {
+        let mut x = random_state(&scene, &mut rng);
+        x[0] = rng.random_range(-0.4..0.4) + if rng.random_bool(0.5) { 2.0 } else { -2.0 };
+        let (_, _, h) = rows(&mut f, &x, None);
+        scene.robot.update_frames(&nalgebra::Isometry3::identity(), &x[..scene.nq()], &mut frames);
+        for (prefix, cost) in &costs {
+            let view = StepView { x: &x, u: &[0.0; 10], tau_ext: &[0.0; 10], contact: false, robot: &frames, object: &object };
+            // The cost counts one unit per violated constraint; the filter's rows of that kind
+            // must have exactly as many negative barriers.
+            let violated_by_cost = cost.step(&scene, &view).round() as usize;
+            let violated_by_rows = names.iter().zip(&h).filter(|(n, h)| n.starts_with(prefix) && **h < 0.0).count();
+            disagreements += usize::from(violated_by_cost != violated_by_rows);
+        }
+    }
+    assert_eq!(disagreements, 0);
+}
+
+#[test]
+fn passivity_row_stops_dissipation_at_the_tank_floor() {
+    let scene = scene();
+    let mut config = SafetyConfig::default();
+    // With Γ_pass = 1e6 the row's slack, λ/Γ, is negligible: at S = ε the filter must leave no
+    // dissipation. With the default Γ = 100 a slack of λ/100 remains, bounded by the tests above.
+    config.penalty.set(ConstraintClass::Passivity, 1e6);
+    let mut f = SafetyFilter::new(scene.clone(), config).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(21);
+    let x = scene.default_state();
+    for _ in 0..50 {
+        let tau: Vec<f64> = (0..10).map(|_| rng.random_range(-10.0..10.0)).collect();
+        // A command that pushes against τ_ext: −τᵀu > 0 (dissipating).
+        let u_ref: Vec<f64> = tau.iter().map(|t| -0.05 * t.signum()).collect();
+        assert!(-dot(&tau, &u_ref) > 0.0);
+        let out = f.filter(&x, &u_ref, Some((&tau, 2.0))).unwrap().clone();
+        let dissipated = -dot(&tau, &out.u);
+        assert!(dissipated <= 1e-4, "P_diss = {dissipated} at the floor");
+        assert!(out.active.iter().any(|&i| f.constraint_name(i) == "passivity"));
+        // Above the floor the same command may dissipate up to α (S − ε) = 1 W.
+        let out = f.filter(&x, &u_ref, Some((&tau, 3.0))).unwrap();
+        assert!(-dot(&tau, &out.u) <= 1.0 + 1e-4);
+    }
+    // Without τ_ext the row is off.
+    let out = f.filter(&x, &[0.05; 10], None).unwrap();
+    assert!(out.barrier.last().unwrap().is_nan());
+}
+
+#[test]
+fn tank_integrates_constant_power_exactly_and_respects_its_ceiling() {
+    let mut tank = EnergyTank::new(10.0, 2.0, None, true).unwrap();
+    let tau = [2.0, -1.0, 0.5];
+    let u = [-0.2, 0.1, 0.2]; // τᵀu = −0.4 W: the robot dissipates, the tank drains
+    for _ in 0..1000 {
+        tank.step(&tau, &u, 1e-3).unwrap();
+    }
+    assert!((tank.energy() - (10.0 - 0.4)).abs() < 1e-12, "{}", tank.energy());
+    let h = tank.history();
+    assert_eq!(h.len(), 1001);
+    for (k, s) in h.iter().enumerate() {
+        assert!((s - (10.0 - 0.4 * k as f64 * 1e-3)).abs() < 1e-12);
+    }
+    assert!((tank.residual() - 7.6).abs() < 1e-12);
+    // Power from the environment refills up to the ceiling.
+    let mut capped = EnergyTank::new(10.0, 2.0, Some(10.5), false).unwrap();
+    for _ in 0..2000 {
+        capped.step(&[1.0], &[1.0], 1e-3).unwrap();
+    }
+    assert_eq!(capped.energy(), 10.5);
+    assert!(capped.history().is_empty());
+    capped.reset();
+    assert_eq!(capped.energy(), 10.0);
+    assert!(matches!(tank.step(&[1.0, f64::NAN, 0.0], &u, 1e-3), Err(SabreError::InvalidValue { .. })));
+    assert!(matches!(tank.step(&[1.0], &u, 1e-3), Err(SabreError::Shape { .. })));
+    assert!(tank.step(&tau, &u, 0.0).is_err());
+    assert!(EnergyTank::new(1.0, 2.0, None, false).is_err());
+    assert!(EnergyTank::new(10.0, 2.0, Some(5.0), false).is_err());
+}
+
+#[test]
+fn solver_failure_falls_back_to_the_safe_stop_and_is_counted() {
+    let scene = scene();
+    // One interior-point iteration cannot converge: every solver call must take the fallback.
+    let config = SafetyConfig { max_iterations: 1, ..SafetyConfig::default() };
+    let mut f = SafetyFilter::new(scene.clone(), config).unwrap();
+    let mut x = scene.default_state();
+    let j4 = joint(&scene, "panda_joint4");
+    x[j4] = -0.08; // 1 cm from the upper limit
+    let mut u_ref = vec![0.0; 10];
+    u_ref[j4] = 2.0;
+    let out = f.filter(&x, &u_ref, None).unwrap();
+    assert_eq!(out.status, FilterStatus::Fallback);
+    assert!(out.u.iter().all(|&u| u == 0.0));
+    assert!(out.qp_rows > 0);
+    assert_eq!(f.stats().fallbacks, 1);
+    // A command the projection already makes safe needs no solver, so it cannot fail.
+    let out = f.filter(&scene.default_state(), &[0.01; 10], None).unwrap();
+    assert_eq!(out.status, FilterStatus::Solved);
+    assert_eq!(f.stats().fallbacks, 1);
+    assert_eq!(f.stats().calls, 2);
+}
+
+#[test]
+fn joint_limit_is_approached_no_faster_than_the_barrier_allows() {
+    let scene = scene();
+    let mut f = SafetyFilter::new(scene.clone(), SafetyConfig::default()).unwrap();
+    let j4 = joint(&scene, "panda_joint4");
+    let upper = scene.robot_limits()[j4].upper;
+    let mut x = scene.default_state();
+    x[j4] = upper - 0.05;
+    let mut u_ref = vec![0.0; 10];
+    u_ref[j4] = 2.0;
+    let out = f.filter(&x, &u_ref, None).unwrap().clone();
+    assert!(out.u[j4] < 2.0 && out.u[j4] > 0.0, "{}", out.u[j4]);
+    let name = f.constraint_name(out.active[0]);
+    assert_eq!(name, "joint_limit:panda_joint4");
+    assert!(out.class_slack[ConstraintClass::JointLimits.index()] > 0.0);
+    // Beyond the limit the filter drives the joint back in.
+    x[j4] = upper + 0.02;
+    let out = f.filter(&x, &u_ref, None).unwrap();
+    assert!(out.u[j4] < 0.0, "{}", out.u[j4]);
+}
+
+#[test]
+fn sequential_filter_keeps_the_rollout_inside_limits_the_raw_sequence_violates() {
+    let scene = scene();
+    let model = RolloutModel::new(scene.clone(), RolloutConfig::default()).unwrap();
+    let mut f = SafetyFilter::new(scene.clone(), SafetyConfig::default()).unwrap();
+    let (nq, nx, k) = (scene.nq(), scene.nx(), 66);
+    let j4 = joint(&scene, "panda_joint4");
+    let upper = scene.robot_limits()[j4].upper;
+    let mut x0 = scene.default_state();
+    x0[j4] = upper - 0.4;
+    x0[0] = 1.6; // base 0.4 m from the box edge
+    let mut u = vec![0.0; k * nq];
+    for step in 0..k {
+        u[step * nq + j4] = 1.5; // 1.5 rad/s for 1 s: 1.1 rad past the limit
+        u[step * nq] = 0.8; // 0.8 m/s for 1 s: 0.4 m past the box
+    }
+    let raw = model.rollout(&x0, &u, 1, k, Some(1)).unwrap();
+    let raw_q4 = (0..=k).map(|s| raw.states[s * nx + j4]).fold(f64::MIN, f64::max);
+    let raw_x = (0..=k).map(|s| raw.states[s * nx]).fold(f64::MIN, f64::max);
+    // The model's joints stop hard at their limits; unfiltered, joint 4 runs into the stop.
+    assert!(raw_q4 >= upper - 1e-9, "{raw_q4}");
+    assert!(raw_x > 2.0, "{raw_x}");
+    let out = f.filter_sequence(&model, &x0, &u).unwrap();
+    assert_eq!(out.k, k);
+    assert_eq!(out.fallbacks, 0);
+    assert_eq!(&out.states[..nx], &x0[..]);
+    for s in 0..=k {
+        let q4 = out.states[s * nx + j4];
+        let bx = out.states[s * nx];
+        assert!(q4 < upper - 1e-3, "step {s}: q4 = {q4}, limit {upper}");
+        assert!(bx <= 2.0, "step {s}: base x = {bx}");
+    }
+    // Far from the limits the filtered sequence is the raw one.
+    let filtered_first = out.u[j4];
+    assert!((filtered_first - 1.5).abs() < 1e-6, "{filtered_first}");
+    // The filtered states are exactly a rollout of the filtered inputs.
+    let replay = model.rollout(&x0, &out.u, 1, k, Some(1)).unwrap();
+    for (a, b) in replay.states.iter().zip(&out.states) {
+        assert!((a - b).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn inner_loop_filters_every_step_and_keeps_the_tank() {
+    let scene = scene();
+    let mut plant = Plant::new(scene.clone(), PlantConfig::default()).unwrap();
+    let mut controller = LowLevelController::new(scene.clone(), 0.001, LowLevelConfig::default()).unwrap();
+    let mut filter = SafetyFilter::new(scene.clone(), SafetyConfig::default()).unwrap();
+    let mut tank = EnergyTank::new(10.0, 2.0, None, true).unwrap();
+    let (nq, nx) = (scene.nq(), scene.nx());
+    let j4 = joint(&scene, "panda_joint4");
+    let upper = scene.robot_limits()[j4].upper;
+    let mut x0 = scene.default_state();
+    x0[j4] = upper - 0.15;
+    plant.reset(&x0).unwrap();
+    let mut reference = vec![0.0; 10 * nq];
+    for k in 0..10 {
+        reference[k * nq + j4] = 1.0;
+    }
+    let mut trace = TrackTrace::default();
+    let steps = 400;
+    follow_reference_safe(
+        &mut plant,
+        &mut controller,
+        &reference,
+        0.0,
+        0.015,
+        steps,
+        1,
+        &mut trace,
+        Some(InnerSafety { filter: Some(&mut filter), tank: Some(&mut tank) }),
+    )
+    .unwrap();
+    assert_eq!(trace.filtered.len(), steps * nq);
+    assert_eq!(trace.tank_energy.len(), steps);
+    assert_eq!(trace.filter_status.len(), steps);
+    assert_eq!(filter.stats().calls, steps as u64);
+    assert!(trace.filter_status.iter().all(|s| *s != FilterStatus::Fallback));
+    // The reference asks for 1 rad/s into the limit for 0.4 s; the filtered command brakes.
+    let last = &trace.filtered[(steps - 1) * nq..];
+    assert!(last[j4] < 0.2, "{}", last[j4]);
+    for s in 0..steps {
+        assert!(trace.state[s * nx + j4] < upper, "step {s}");
+    }
+    // No contact, no exchange with the tank.
+    assert!(trace.tank_energy.iter().all(|&e| (e - 10.0).abs() < 1e-9));
+    assert_eq!(tank.history().len(), steps + 1);
+}
+
+#[test]
+fn obstacles_are_added_moved_and_removed_in_fixed_slots() {
+    let scene = scene();
+    let mut f = SafetyFilter::new(scene.clone(), SafetyConfig { max_obstacles: 2, ..SafetyConfig::default() }).unwrap();
+    let rows_before = f.num_rows();
+    let a = f.add_obstacle([1.0, 0.0, 1.0], 0.1).unwrap();
+    let b = f.add_obstacle([0.0, 1.0, 1.0], 0.1).unwrap();
+    assert!(matches!(f.add_obstacle([0.0, 0.0, 0.0], 0.1), Err(SabreError::InvalidValue { .. })));
+    assert_eq!(f.num_rows(), rows_before, "slots are part of the fixed structure");
+    let x = scene.default_state();
+    let index = |f: &SafetyFilter, name: &str| f.row_names().iter().position(|n| n == name).unwrap();
+    let (_, _, h) = rows(&mut f, &x, None);
+    let ra = index(&f, &format!("obstacle:{a}:panda_hand"));
+    let before = h[ra];
+    f.move_obstacle(a, [3.0, 0.0, 1.0]).unwrap();
+    let (_, _, h) = rows(&mut f, &x, None);
+    assert!(h[ra] > before);
+    f.remove_obstacle(a).unwrap();
+    let (_, _, h) = rows(&mut f, &x, None);
+    assert!(h[ra].is_nan(), "an empty slot has no barrier");
+    assert!(f.remove_obstacle(a).is_err());
+    assert!(f.move_obstacle(a, [0.0; 3]).is_err());
+    assert_eq!(f.obstacles().map(|o| o.id).collect::<Vec<_>>(), vec![b]);
+    let c = f.add_obstacle([2.0, 2.0, 1.0], 0.3).unwrap();
+    assert!(c > b, "ids are never reused");
+    assert!(f.add_obstacle([0.0, 0.0, f64::NAN], 0.1).is_err());
+    assert!(f.add_obstacle([0.0, 0.0, 0.0], -0.1).is_err());
+}
+
+#[test]
+fn classes_can_be_switched_off_and_bad_input_is_an_error() {
+    let scene = scene();
+    let mut config = SafetyConfig::default();
+    config.enabled.set(ConstraintClass::Obstacles, false);
+    config.enabled.set(ConstraintClass::BaseBox, false);
+    let mut f = SafetyFilter::new(scene.clone(), config).unwrap();
+    let names = f.row_names();
+    assert!(!names.iter().any(|n| n.starts_with("obstacle") || n.starts_with("base_box")), "{names:?}");
+    assert_eq!(names.len(), 10 + 3 + 1 + 1);
+    assert!(f.add_obstacle([0.0; 3], 0.1).is_err());
+    let x = scene.default_state();
+    assert!(matches!(f.filter(&x[..5], &[0.0; 10], None), Err(SabreError::Shape { .. })));
+    assert!(matches!(f.filter(&x, &[0.0; 9], None), Err(SabreError::Shape { .. })));
+    let mut bad = x.clone();
+    bad[3] = f64::NAN;
+    assert!(matches!(f.filter(&bad, &[0.0; 10], None), Err(SabreError::InvalidValue { .. })));
+    assert!(matches!(f.filter(&x, &[f64::INFINITY; 10], None), Err(SabreError::InvalidValue { .. })));
+    assert!(matches!(f.filter(&x, &[0.0; 10], Some((&[0.0; 3], 5.0))), Err(SabreError::Shape { .. })));
+    assert!(matches!(f.filter(&x, &[0.0; 10], Some((&[0.0; 10], f64::NAN))), Err(SabreError::InvalidValue { .. })));
+    assert_eq!(f.stats().calls, 0, "rejected calls are not counted");
+    let mut config = SafetyConfig::default();
+    config.gamma.set(ConstraintClass::JointLimits, -1.0);
+    assert!(SafetyFilter::new(scene.clone(), config).is_err());
+    assert!(SafetyFilter::new(scene.clone(), SafetyConfig { base_box: [1.0, -1.0, -2.0, 2.0], ..SafetyConfig::default() }).is_err());
+    let model = RolloutModel::new(scene.clone(), RolloutConfig::default()).unwrap();
+    assert!(f.filter_sequence(&model, &x, &[0.0; 15]).is_err());
+    assert!(f.filter_sequence(&model, &x, &[]).is_err());
+}
