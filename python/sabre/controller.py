@@ -18,11 +18,16 @@ from . import _core
 from ._validate import as_count, as_float_array, as_positive
 from .costs import Batch, CompiledCost
 from .errors import InvalidValueError
+from .safety import CLASSES, EnergyTank, SafetyConfig, SafetyFilter
 from .scene import Scene
 from .sim import MAX_THREADS, LowLevelController, Plant, RolloutModel
 from .tasks import Task
 
-__all__ = ["ControllerConfig", "Controller", "Episode", "run_episode", "paper_start_state", "likelihood_weights"]
+__all__ = ["ControllerConfig", "Controller", "Episode", "run_episode", "paper_start_state", "likelihood_weights", "VARIANTS"]
+
+#: Controller variants (SPEC §8): N no filter, I inner FILTER-QP with the tank, O sequential
+#: FILTER-QP in the outer loop, IO both.
+VARIANTS = ("N", "I", "O", "IO")
 
 
 @dataclass(frozen=True)
@@ -54,8 +59,20 @@ class ControllerConfig:
     #: Rollout-model settings (the closed loop the sampler predicts with).
     servo_bandwidth: float = 40.0
     contact_friction: float = 0.2
+    #: "N" (no filter), "I" (1 kHz FILTER-QP with the energy tank), "O" (Sequential FILTER-QP on
+    #: the optimised sequence, which warm-starts the next round) or "IO" (both).
+    variant: str = "N"
+    #: constraints, slack penalties and passivity settings of both filters (None: the defaults).
+    safety: SafetyConfig | None = None
+    #: energy tank: S(0) (J); its floor ε is ``safety.tank_floor``.
+    tank_initial: float = 10.0
 
     def __post_init__(self) -> None:
+        if self.variant not in VARIANTS:
+            raise InvalidValueError(f"variant must be one of {VARIANTS}, got {self.variant!r}")
+        if self.safety is not None and not isinstance(self.safety, SafetyConfig):
+            raise InvalidValueError(f"safety must be a sabre.SafetyConfig, got {type(self.safety).__name__}")
+        as_positive("tank_initial", self.tank_initial)
         as_count("rollouts", self.rollouts, 3)
         as_positive("horizon", self.horizon)
         as_positive("dt", self.dt)
@@ -79,6 +96,18 @@ class ControllerConfig:
             sigma = np.asarray(self.sigma, dtype=float)
             if sigma.ndim != 1 or np.any(~np.isfinite(sigma)) or np.any(sigma < 0):
                 raise InvalidValueError("sigma must be a sequence of finite, non-negative variances")
+
+    @property
+    def safety_config(self) -> SafetyConfig:
+        return SafetyConfig() if self.safety is None else self.safety
+
+    @property
+    def inner_filter(self) -> bool:
+        return "I" in self.variant
+
+    @property
+    def outer_filter(self) -> bool:
+        return "O" in self.variant
 
     @property
     def horizon_steps(self) -> int:
@@ -132,6 +161,13 @@ class Controller:
         )
         self._stats: dict = {}
         self.phase_history: list[tuple[float, str]] = [(0.0, self.phase)]
+        safety = c.safety_config
+        #: Sequential FILTER-QP of the outer loop (variants O, IO), else None.
+        self.outer_filter = SafetyFilter(scene, safety) if c.outer_filter else None
+        #: FILTER-QP of the 1 kHz inner loop with the passivity row (variants I, IO), else None.
+        self.inner_filter = SafetyFilter(scene, safety) if c.inner_filter else None
+        #: The energy tank of the inner loop; without the inner filter it only keeps the books.
+        self.tank = EnergyTank(c.tank_initial, safety.tank_floor)
 
     def _compile(self, phase: str) -> CompiledCost:
         if phase not in self._compiled:
@@ -145,6 +181,30 @@ class Controller:
         self._cost = self._compile(self.phase)
         self._planner.set_cost(self._cost.core)
         self.phase_history = [(float(t0), self.phase)]
+        self.tank.reset()
+        for f in (self.outer_filter, self.inner_filter):
+            if f is not None:
+                f.reset_stats()
+
+    @property
+    def filters(self) -> tuple[SafetyFilter, ...]:
+        return tuple(f for f in (self.outer_filter, self.inner_filter) if f is not None)
+
+    def add_obstacle(self, center: Sequence[float] | np.ndarray, radius: float) -> int | None:
+        """Adds a sphere obstacle to the filters of this variant (the same id in each); None
+        for variant N, which has no filter (give the sampler an ``Obstacles`` cost term too)."""
+        ids = {f.add_obstacle(center, radius) for f in self.filters}
+        if len(ids) > 1:
+            raise InvalidValueError("the inner and outer filters disagree on obstacle ids; manage them through the controller only")
+        return ids.pop() if ids else None
+
+    def move_obstacle(self, obstacle_id: int, center: Sequence[float] | np.ndarray) -> None:
+        for f in self.filters:
+            f.move_obstacle(obstacle_id, center)
+
+    def remove_obstacle(self, obstacle_id: int) -> None:
+        for f in self.filters:
+            f.remove_obstacle(obstacle_id)
 
     def set_phase(self, phase: str, t: float = 0.0) -> None:
         """Switches the task phase by hand (the task's own rule keeps running afterwards)."""
@@ -183,6 +243,15 @@ class Controller:
                 costs = costs + term.evaluate(self.scene, batch)
             stats = self._planner.update(costs)
             stats["iteration_time"] = time.perf_counter() - start
+        if self.outer_filter is not None:
+            # Algorithm 1: filter the optimised sequence step by step along its rollout; the
+            # filtered sequence is the reference and the next round's nominal.
+            start = time.perf_counter()
+            seq = self.outer_filter.filter_sequence(x, self.nominal, self.model)
+            self._planner.set_nominal(np.ascontiguousarray(seq.U), self.nominal_t0)
+            stats["sequential_time"] = time.perf_counter() - start
+            stats["sequential_fallbacks"] = seq.fallbacks
+            stats["iteration_time"] += stats["sequential_time"]
         stats["phase"] = self.phase
         stats["noise_scale"] = scale
         self._stats = stats
@@ -204,7 +273,8 @@ class Controller:
     @property
     def stats(self) -> dict:
         """Last iteration: iteration_time, rollout_time (s), cost_min/mean/max, nominal_cost,
-        effective_sample_size, failed_rollouts, phase."""
+        effective_sample_size, failed_rollouts, phase, noise_scale; with the sequential filter
+        also sequential_time (s, included in iteration_time) and sequential_fallbacks."""
         return dict(self._stats)
 
 
@@ -212,8 +282,11 @@ class Controller:
 class Episode:
     """Traces of a closed-loop run, one row per recorded plant step.
 
-    time (M,), state (M, nx), reference (M, nu), wrench (M, 6), tau_ext (M, nq), contact (M,),
-    cost (M,) nominal cost of the latest plan, phase (M,) phase index into ``phases``.
+    time (M,), state (M, nx), reference (M, nu) the interpolated outer-loop reference, command
+    (M, nu) what the low-level controller tracked (the reference after the inner filter, if any),
+    wrench (M, 6), tau_ext (M, nq), contact (M,), cost (M,) nominal cost of the latest plan, phase
+    (M,) phase index into ``phases``, tank_energy (M,) the energy tank after each step (J),
+    filter_fallbacks: inner-loop steps where the FILTER-QP fell back to the safe stop.
     """
 
     scene: Scene
@@ -230,6 +303,11 @@ class Episode:
     time_to_success: float | None
     planning_times: np.ndarray = field(default_factory=lambda: np.zeros(0))
     wall_time: float = 0.0
+    command: np.ndarray | None = None
+    tank_energy: np.ndarray | None = None
+    variant: str = "N"
+    filter_fallbacks: int = 0
+    tank_floor: float = 2.0
 
     @property
     def opening(self) -> np.ndarray:
@@ -249,9 +327,27 @@ class Episode:
         return float(norms[mask].mean()) if mask.any() else 0.0
 
     def dissipated_energy(self) -> float:
-        """Σ −uᵀ τ_ext dt over the episode (58), J."""
+        """Σ −uᵀ τ_ext dt over the episode (58) with u the tracked command, J."""
+        u = self.reference if self.command is None else self.command
         dt = np.diff(self.time, prepend=0.0)
-        return float(np.sum(-np.einsum("ij,ij->i", self.reference, self.tau_ext) * dt))
+        return float(np.sum(-np.einsum("ij,ij->i", u, self.tau_ext) * dt))
+
+    def violations(self, config: SafetyConfig | None = None) -> dict[str, float]:
+        """Cumulative constraint violation per ZBF class, Δ_tot = Σ_k max(0, −h(x_k)) over the
+        recorded states (SPEC §9), with the rows of a filter built from ``config`` (default
+        settings: the paper's base box)."""
+        f = SafetyFilter(self.scene, config)
+        names = f.row_names
+        classes = [n.split(":")[0] for n in names]
+        key = {"joint_limit": "joint_limits", "self_collision": "self_collision", "arm_reach": "arm_reach",
+               "base_box": "base_box", "obstacle": "obstacles", "passivity": "passivity"}
+        total = {c: 0.0 for c in CLASSES if c != "passivity"}
+        for x in self.state:
+            h = f.constraint_rows(x)[2]
+            for c, v in zip(classes, h):
+                if np.isfinite(v) and v < 0.0 and key.get(c) in total:
+                    total[key[c]] += -float(v)
+        return total
 
 
 def paper_start_state(scene: Scene) -> np.ndarray:
@@ -312,7 +408,8 @@ def run_episode(
             bar = tqdm(total=round(duration, 3), unit="s sim", leave=False, desc=f"{scene.object_name}")
         except ImportError:
             bar = None
-    chunks: dict[str, list[np.ndarray]] = {k: [] for k in ("time", "state", "reference", "wrench", "tau_ext", "contact", "cost", "phase")}
+    chunks: dict[str, list[np.ndarray]] = {k: [] for k in ("time", "state", "reference", "command", "tank", "wrench", "tau_ext", "contact", "cost", "phase")}
+
     planning_times = []
     success_time = None
     wall = time.perf_counter()
@@ -323,14 +420,17 @@ def run_episode(
             on_replan(t, x, plant, controller)
         stats = controller.update(x, t)
         planning_times.append(stats["iteration_time"])
-        trace = plant._core.follow(low_level._core, controller.nominal, controller.nominal_t0, controller.config.dt, steps_per_plan, record_every)
-        times, states, refs, wrench, tau, contact = trace
+        trace = plant.follow(low_level, controller.nominal, controller.nominal_t0, controller.config.dt, steps_per_plan, record_every,
+                             safety=controller.inner_filter, tank=controller.tank)
+        times = trace.time
         chunks["time"].append(times)
-        chunks["state"].append(states)
-        chunks["reference"].append(refs)
-        chunks["wrench"].append(wrench)
-        chunks["tau_ext"].append(tau)
-        chunks["contact"].append(contact)
+        chunks["state"].append(trace.state)
+        chunks["reference"].append(trace.reference)
+        chunks["command"].append(trace.reference if trace.filtered is None else trace.filtered)
+        chunks["tank"].append(trace.tank_energy)
+        chunks["wrench"].append(trace.wrench)
+        chunks["tau_ext"].append(trace.tau_ext)
+        chunks["contact"].append(trace.contact)
         chunks["cost"].append(np.full(len(times), stats["nominal_cost"]))
         chunks["phase"].append(np.full(len(times), controller.task.phases.index(controller.phase)))
         if bar is not None:
@@ -358,6 +458,11 @@ def run_episode(
         time_to_success=success_time,
         planning_times=np.asarray(planning_times),
         wall_time=wall,
+        command=data["command"],
+        tank_energy=data["tank"],
+        variant=controller.config.variant,
+        filter_fallbacks=0 if controller.inner_filter is None else int(controller.inner_filter.stats["fallbacks"]),
+        tank_floor=controller.tank.floor,
     )
 
 
