@@ -17,13 +17,17 @@ from .errors import (
     UrdfError,
 )
 from . import costs, tasks
-from .controller import Controller, ControllerConfig, Episode, likelihood_weights, paper_start_state, run_episode
+from .controller import VARIANTS, Controller, ControllerConfig, Episode, likelihood_weights, paper_start_state, run_episode
+from .realtime import RealtimeCascade, TickResult
 from .scene import OBJECTS, ROBOTS, Scene
 from .safety import EnergyTank, FilterResult, Obstacle, SafetyConfig, SafetyFilter, SequenceResult
 from .scripted import ScriptedMotion, hook_and_pull
 from .sim import LowLevelController, Plant, RolloutModel, RolloutResult, Trace, default_threads
 
 __all__ = [
+    "VARIANTS",
+    "RealtimeCascade",
+    "TickResult",
     "__version__",
     "Scene",
     "ROBOTS",

@@ -1,4 +1,6 @@
-"""Command line: ``python -m sabre demo [--object shelf]``."""
+"""Command line: ``python -m sabre demo [--object shelf] [--variant IO]`` (closed-loop opening from
+the paper's starting condition), ``python -m sabre episode ...`` (the same with more options) and
+``python -m sabre scripted [--object shelf]`` (the open-loop hook-and-pull check of the simulators)."""
 
 from __future__ import annotations
 
@@ -10,6 +12,7 @@ import numpy as np
 
 from . import (
     OBJECTS,
+    VARIANTS,
     Controller,
     ControllerConfig,
     LowLevelController,
@@ -90,17 +93,23 @@ def plot_episode(episode, path: str) -> None:
     plt.close(fig)
 
 
-def episode_command(obj: str, duration: float, start: str, seed: int, replan_rate: float, plot: str | None) -> int:
+def episode_command(obj: str, duration: float, start: str, seed: int, replan_rate: float, plot: str | None,
+                    variant: str = "N", threads: int | None = None) -> int:
     """Closed-loop opening with the sampling-based controller in the plant."""
     scene = Scene.load(obj=obj)
     task = tasks.OpenObject()
-    controller = Controller(scene, task, ControllerConfig(seed=seed))
+    controller = Controller(scene, task, ControllerConfig(seed=seed, variant=variant, threads=threads))
     x0 = paper_start_state(scene) if start == "paper" else scene.default_state()
+    print(f"[{obj}] variant {variant}, seed {seed}: up to {duration:.0f} s of simulated time from the "
+          f"{'paper' if start == 'paper' else 'default'} start, re-planning at {replan_rate:.0f} Hz")
     episode = run_episode(scene, controller, duration, seed=seed, x0=x0, replan_rate=replan_rate)
+    when = "—" if episode.time_to_success is None else f"{episode.time_to_success:.1f} s"
     print(f"[{obj}] success: {episode.success}, final opening {episode.opening[-1]:.3f} "
-          f"(target {task.target_opening(scene):.3f}), time to open: {episode.time_to_success}")
-    print(f"  phases: {controller.phase_history}")
-    print(f"  mean wrench in contact {episode.mean_wrench():.1f} N, dissipated energy {episode.dissipated_energy():.2f} J")
+          f"(target {task.target_opening(scene):.3f}, success at {task.success_fraction:.0%}), time to open: {when}")
+    print(f"  phases: {[(round(t, 2), p) for t, p in controller.phase_history]}")
+    power = episode.dissipated_energy() / max(episode.duration, 1e-9)
+    print(f"  mean wrench in contact {episode.mean_wrench():.1f} N, dissipated energy {episode.dissipated_energy():.2f} J "
+          f"(mean dissipated power {power:.2f} W), tank at the end {episode.tank_energy[-1]:.2f} J")
     print(f"  planning iteration median {1e3 * np.median(episode.planning_times):.1f} ms, "
           f"real-time factor {episode.real_time_factor:.2f}")
     if plot:
@@ -112,9 +121,15 @@ def episode_command(obj: str, duration: float, start: str, seed: int, replan_rat
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m sabre", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="open an articulated object")
+    demo = sub.add_parser("demo", help="open an articulated object from the paper's starting condition")
     demo.add_argument("--object", choices=OBJECTS, default="shelf")
+    demo.add_argument("--variant", choices=VARIANTS, default="N")
+    demo.add_argument("--seed", type=int, default=0)
     demo.add_argument("--threads", type=int, default=None)
+    demo.add_argument("--plot", default=None, help="PNG path (default: sabre_demo_<object>.png)")
+    scripted = sub.add_parser("scripted", help="open-loop scripted hook-and-pull in the rollout model and the plant")
+    scripted.add_argument("--object", choices=OBJECTS, default="shelf")
+    scripted.add_argument("--threads", type=int, default=None)
     ep = sub.add_parser("episode", help="closed-loop opening with the sampling-based controller")
     ep.add_argument("--object", choices=OBJECTS, default="shelf")
     ep.add_argument("--duration", type=float, default=30.0)
@@ -122,11 +137,16 @@ def main(argv: list[str] | None = None) -> int:
     ep.add_argument("--seed", type=int, default=0)
     ep.add_argument("--replan-rate", type=float, default=100.0)
     ep.add_argument("--plot", default=None, help="write a PNG of opening, wrench and base path")
+    ep.add_argument("--variant", choices=VARIANTS, default="N")
     args = parser.parse_args(argv)
     if args.command == "demo":
+        plot = args.plot or f"sabre_demo_{args.object}.png"
+        episode_command(args.object, 60.0, "paper", args.seed, 50.0, plot, args.variant, args.threads)
+        return 0  # the demo reports; `episode` exits non-zero on failure
+    if args.command == "scripted":
         return scripted_demo(args.object, args.threads)
     if args.command == "episode":
-        return episode_command(args.object, args.duration, args.start, args.seed, args.replan_rate, args.plot)
+        return episode_command(args.object, args.duration, args.start, args.seed, args.replan_rate, args.plot, args.variant)
     return 2
 
 

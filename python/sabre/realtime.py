@@ -1,0 +1,151 @@
+"""Real-time mode of the cascade: the outer loop re-plans on its own thread, the inner loop is
+driven by incoming state (e.g. a ROS 2 joint-state callback at 1 kHz).
+
+``RealtimeCascade.tick(x, tau_ext, t)`` is the inner loop of SPEC §8: it interpolates the latest
+reference at time t, runs the controller's inner FILTER-QP with the energy tank (variants I, IO),
+integrates the tank, and returns the command (and, with a low-level controller, the torque). The
+planner runs ``Controller.update`` in a background thread on the most recent state it was given;
+its iterations release the GIL, so ticks are not held up by planning. The reference the inner loop
+reads is a snapshot swapped in after each iteration, never the planner's working copy.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from ._validate import as_float_array, as_positive
+from .controller import Controller
+from .errors import InvalidValueError
+from .sim import LowLevelController
+
+__all__ = ["RealtimeCascade", "TickResult"]
+
+
+@dataclass(frozen=True)
+class TickResult:
+    """One inner-loop tick: reference (nu,) from the plan, command (nu,) after the filter, torque
+    (nq,) from the low-level controller (None without one), tank energy (J), filter status."""
+
+    reference: np.ndarray
+    command: np.ndarray
+    torque: np.ndarray | None
+    tank_energy: float
+    status: str
+
+
+class RealtimeCascade:
+    """Runs `controller` as a real-time cascade. Use as a context manager or call start/stop."""
+
+    def __init__(self, controller: Controller, *, low_level: LowLevelController | None = None, inner_dt: float = 0.001,
+                 min_replan_period: float = 0.0) -> None:
+        if not isinstance(controller, Controller):
+            raise TypeError(f"controller must be a sabre.Controller, got {type(controller).__name__}")
+        self.controller = controller
+        self.low_level = low_level
+        self.inner_dt = as_positive("inner_dt", inner_dt)
+        self.min_replan_period = float(min_replan_period)
+        self._lock = threading.Lock()
+        self._latest: tuple[np.ndarray, float] | None = None
+        self._plan: tuple[np.ndarray, float, float] | None = None  # (nominal, t0, dt)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._error: BaseException | None = None
+        self.iterations = 0
+        self.ticks = 0
+
+    # Outer loop -----------------------------------------------------------------------------
+    def start(self, x0: Sequence[float] | np.ndarray, t0: float = 0.0) -> "RealtimeCascade":
+        """Resets the controller, plans once from x0 (so the first tick has a reference) and starts
+        the planning thread."""
+        if self._thread is not None:
+            raise InvalidValueError("the cascade is already running")
+        x0 = as_float_array("x0", x0, (self.controller.scene.nx,))
+        self.controller.reset(t0=float(t0))
+        if self.low_level is not None:
+            self.low_level.reset()
+        self._latest = (x0, float(t0))
+        self._plan_once()
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="sabre-outer-loop", daemon=True)
+        self._thread.start()
+        return self
+
+    def _plan_once(self) -> None:
+        with self._lock:
+            x, t = self._latest
+        self.controller.update(x, t)
+        plan = (np.array(self.controller.nominal), float(self.controller.nominal_t0), float(self.controller.config.dt))
+        with self._lock:
+            self._plan = plan
+        self.iterations += 1
+
+    def _run(self) -> None:
+        try:
+            while not self._stop.is_set():
+                started = time.perf_counter()
+                self._plan_once()
+                rest = self.min_replan_period - (time.perf_counter() - started)
+                if rest > 0:
+                    self._stop.wait(rest)
+        except BaseException as exc:  # surfaced on the next tick
+            self._error = exc
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+            self._thread = None
+
+    def __enter__(self) -> "RealtimeCascade":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    # Inner loop -----------------------------------------------------------------------------
+    def reference(self, t: float) -> np.ndarray:
+        """(nu,) the latest plan linearly interpolated at time t (held at its ends)."""
+        with self._lock:
+            plan = self._plan
+        if plan is None:
+            raise InvalidValueError("no plan yet: call start() first")
+        nominal, t0, dt = plan
+        s = np.clip((float(t) - t0) / dt, 0.0, len(nominal) - 1)
+        i = int(np.floor(s))
+        j = min(i + 1, len(nominal) - 1)
+        a = s - i
+        return (1.0 - a) * nominal[i] + a * nominal[j]
+
+    def tick(self, x: Sequence[float] | np.ndarray, tau_ext: Sequence[float] | np.ndarray, t: float) -> TickResult:
+        """One inner-loop step from the measured state x (nx,) and external torques τ_ext (nq,)
+        at time t: reference → FILTER-QP with the tank (variants I, IO) → tank → low-level torque.
+        The state also becomes the outer loop's next starting point."""
+        if self._error is not None:
+            raise self._error
+        scene = self.controller.scene
+        x = as_float_array("x", x, (scene.nx,))
+        tau_ext = as_float_array("tau_ext", tau_ext, (scene.nq,))
+        t = float(t)
+        with self._lock:
+            self._latest = (x, t)
+        u_ref = self.reference(t)
+        tank = self.controller.tank
+        status = "unfiltered"
+        u = u_ref
+        f = self.controller.inner_filter
+        if f is not None:
+            r = f.filter(x, u_ref, tau_ext, tank.energy)
+            u, status = np.asarray(r.u), r.status
+        energy = tank.step(tau_ext, u, self.inner_dt)
+        torque = None if self.low_level is None else self.low_level.torque(x, u)
+        self.ticks += 1
+        return TickResult(reference=u_ref, command=np.asarray(u), torque=torque, tank_energy=float(energy), status=status)
