@@ -149,8 +149,11 @@ class FilterResult:
         status: ``"solved"``, ``"almost_solved"`` or ``"fallback"`` (the solver failed; u is the safe stop 0).
         solver_status: Clarabel's verdict.
         solve_time: wall time of the call in the core (s).
-        iterations: interior-point iterations (0 when the projected command met every row).
-        qp_rows: rows in the QP that was solved (0: no solver ran).
+        iterations: interior-point iterations (0 without Clarabel).
+        qp_rows: rows in the QP that was solved (0: no solver ran; active rows for ``active_set``).
+        method: how the command was found: ``"projection"`` (the command clipped to the input
+            limits met every row), ``"active_set"`` (the previous call's active set, re-solved and
+            verified against every optimality condition) or ``"interior_point"`` (Clarabel).
     """
 
     u: np.ndarray
@@ -163,6 +166,7 @@ class FilterResult:
     solve_time: float
     iterations: int
     qp_rows: int
+    method: str
 
     @property
     def fallback(self) -> bool:
@@ -195,6 +199,11 @@ class SafetyFilter:
     robot sphere, and the passivity row (56) ``τ_extᵀu + δ ≥ −α (S − ε)`` when ``tau_ext`` and
     ``tank_energy`` are given. The QP is built once and updated in place; if the solver fails the
     result is the safe stop u = 0 with ``status == "fallback"`` (counted in :attr:`stats`).
+
+    Each call takes the cheapest exact route to the QP's solution: the command clipped to the
+    input limits when it already meets every row; else the previous call's active set, re-solved
+    and accepted only if it meets every optimality condition; else Clarabel on the rows that can
+    bind. ``SafetyConfig(screening=False)`` always runs Clarabel on the full problem.
     """
 
     def __init__(self, scene: Scene, config: SafetyConfig | None = None) -> None:
@@ -242,6 +251,7 @@ class SafetyFilter:
             solve_time=r.solve_time,
             iterations=r.iterations,
             qp_rows=r.qp_rows,
+            method=r.method,
         )
 
     def filter_sequence(self, x0: Sequence[float] | np.ndarray, U: np.ndarray, model: RolloutModel) -> SequenceResult:
@@ -287,11 +297,17 @@ class SafetyFilter:
 
     @property
     def stats(self) -> dict:
-        """calls, fallbacks, mean_solve_time and max_solve_time (s), total_iterations."""
+        """calls, fallbacks, mean_solve_time and max_solve_time (s), total_iterations,
+        interior_point_calls (calls that ran Clarabel)."""
         return dict(self._core.stats)
 
     def reset_stats(self) -> None:
         self._core.reset_stats()
+
+    def forget_active_set(self) -> None:
+        """The next call ignores the previous active set (never needed for correctness: a
+        remembered active set is used only after it passes every optimality check)."""
+        self._core.forget_active_set()
 
     def constraint_rows(self, x, tau_ext=None, tank_energy=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(a (R, nq), b (R,), h (R,)) at state x: each row's condition is a·u + δ ≥ b, b = −γ (h − Δ)."""
