@@ -37,6 +37,14 @@ DEFAULT_PENALTY = MappingProxyType(
 DEFAULT_MARGIN = MappingProxyType({"joint_limits": 0.03, "self_collision": 0.01, "arm_reach": 0.01, "base_box": 0.01, "obstacles": 0.01})
 
 
+def _vector(name: str, value, n: int) -> np.ndarray:
+    """`value` as a float64 (n,) array; ready-made arrays pass untouched (the core checks their
+    values and raises the same errors), anything else goes through the full conversion."""
+    if type(value) is np.ndarray and value.dtype == np.float64 and value.shape == (n,) and value.flags.c_contiguous:
+        return value
+    return as_float_array(name, value, (n,))
+
+
 def _merged(name: str, given: Mapping[str, object], defaults: Mapping[str, object], allowed: Sequence[str]) -> dict:
     if not isinstance(given, Mapping):
         raise InvalidValueError(f"{name}: expected a mapping from constraint class to value, got {type(given).__name__}")
@@ -221,7 +229,7 @@ class SafetyFilter:
             raise InvalidValueError("passivity: give both tau_ext and tank_energy, or neither")
         if tau_ext is None:
             return None, None
-        tau = as_float_array("tau_ext", tau_ext, (self.scene.nq,))
+        tau = _vector("tau_ext", tau_ext, self.scene.nq)
         energy = float(tank_energy)
         if not math.isfinite(energy):
             raise InvalidValueError(f"tank_energy: must be finite, got {energy}")
@@ -236,8 +244,8 @@ class SafetyFilter:
     ) -> FilterResult:
         """Filters the command u_ref (nq,) at state x (nx,); with τ_ext (nq,) and the tank energy S
         the passivity row is on (only in the inner loop, as in the paper)."""
-        x = as_float_array("x", x, (self.scene.nx,))
-        u_ref = as_float_array("u_ref", u_ref, (self.scene.nq,))
+        x = _vector("x", x, self.scene.nx)
+        u_ref = _vector("u_ref", u_ref, self.scene.nq)
         tau, energy = self._passivity(tau_ext, tank_energy)
         r = self._core.filter(x, u_ref, tau, energy)
         return FilterResult(
