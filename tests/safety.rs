@@ -11,7 +11,7 @@ use sabre::control::{follow_reference_safe, InnerSafety, LowLevelConfig, LowLeve
 use sabre::cost::{Cost, StepView, Term};
 use sabre::model::kinematics::Frames;
 use sabre::model::Scene;
-use sabre::safety::{ConstraintClass, EnergyTank, FilterStatus, SafetyConfig, SafetyFilter};
+use sabre::safety::{ConstraintClass, EnergyTank, FilterStatus, SafetyConfig, SafetyFilter, SolveMethod};
 use sabre::sim::{Plant, PlantConfig, RolloutConfig, RolloutModel};
 use sabre::SabreError;
 
@@ -223,6 +223,52 @@ fn optimality_conditions_hold_and_match_an_independent_solution() {
         checked += 1;
     }
     assert_eq!(checked, 60);
+}
+
+#[test]
+fn warm_active_set_reproduces_the_full_qp_along_a_slow_trajectory() {
+    // A 1 kHz-like sequence: the state creeps towards joint 4's limit and the base box edge with
+    // an obstacle near the hand, the command keeps pressing. Most calls should take the
+    // active-set path, and every call must match the full QP solved by Clarabel.
+    let scene = scene();
+    let mut fast = SafetyFilter::new(scene.clone(), SafetyConfig::default()).unwrap();
+    // The reference solves the full QP with Clarabel to a much tighter tolerance: where a row is
+    // about to bind (multiplier and residual both near zero) an interior-point solution is only
+    // accurate to about the square root of its tolerance.
+    let tight = SafetyConfig { screening: false, tolerance: 1e-12, max_iterations: 200, ..SafetyConfig::default() };
+    let mut full = SafetyFilter::new(scene.clone(), tight).unwrap();
+    for f in [&mut fast, &mut full] {
+        f.add_obstacle([0.85, 0.0, 0.95], 0.1).unwrap();
+    }
+    let j4 = joint(&scene, "panda_joint4");
+    let upper = scene.robot_limits()[j4].upper;
+    let mut x = scene.default_state();
+    let mut u_ref = vec![0.0; 10];
+    u_ref[0] = 0.9;
+    u_ref[j4] = 1.2;
+    u_ref[3] = 0.4;
+    let tau = [0.0, 0.0, 0.0, -2.0, -2.0, 1.0, 0.5, 0.0, 0.3, 0.0];
+    let mut methods = [0usize; 3];
+    for k in 0..400 {
+        x[0] = 1.80 + 0.0004 * k as f64;
+        x[j4] = upper - 0.12 + 0.0002 * k as f64;
+        u_ref[5] = 0.3 * (k as f64 * 0.01).sin();
+        let energy = 2.5 - 0.001 * k as f64;
+        let a = fast.filter(&x, &u_ref, Some((&tau, energy))).unwrap().clone();
+        let b = full.filter(&x, &u_ref, Some((&tau, energy))).unwrap();
+        assert_ne!(b.status, FilterStatus::Fallback);
+        for j in 0..10 {
+            assert!((a.u[j] - b.u[j]).abs() < 2e-6, "step {k} ({:?}): u[{j}] {} vs full QP {}", a.method, a.u[j], b.u[j]);
+        }
+        for (sa, sb) in a.slack.iter().zip(&b.slack) {
+            assert!((sa - sb).abs() < 2e-6, "step {k} ({:?}): slack {sa} vs {sb}", a.method);
+        }
+        methods[a.method as usize] += 1;
+    }
+    eprintln!("methods (projection, active set, interior point): {methods:?}");
+    let active_set = methods[SolveMethod::ActiveSet as usize];
+    assert!(active_set > 300, "active-set path taken {active_set} times of 400 ({methods:?})");
+    assert_eq!(fast.stats().interior_point_calls as usize, methods[SolveMethod::InteriorPoint as usize]);
 }
 
 #[test]

@@ -37,6 +37,14 @@ DEFAULT_PENALTY = MappingProxyType(
 DEFAULT_MARGIN = MappingProxyType({"joint_limits": 0.03, "self_collision": 0.01, "arm_reach": 0.01, "base_box": 0.01, "obstacles": 0.01})
 
 
+def _vector(name: str, value, n: int) -> np.ndarray:
+    """`value` as a float64 (n,) array; ready-made arrays pass untouched (the core checks their
+    values and raises the same errors), anything else goes through the full conversion."""
+    if type(value) is np.ndarray and value.dtype == np.float64 and value.shape == (n,) and value.flags.c_contiguous:
+        return value
+    return as_float_array(name, value, (n,))
+
+
 def _merged(name: str, given: Mapping[str, object], defaults: Mapping[str, object], allowed: Sequence[str]) -> dict:
     if not isinstance(given, Mapping):
         raise InvalidValueError(f"{name}: expected a mapping from constraint class to value, got {type(given).__name__}")
@@ -149,8 +157,11 @@ class FilterResult:
         status: ``"solved"``, ``"almost_solved"`` or ``"fallback"`` (the solver failed; u is the safe stop 0).
         solver_status: Clarabel's verdict.
         solve_time: wall time of the call in the core (s).
-        iterations: interior-point iterations (0 when the projected command met every row).
-        qp_rows: rows in the QP that was solved (0: no solver ran).
+        iterations: interior-point iterations (0 without Clarabel).
+        qp_rows: rows in the QP that was solved (0: no solver ran; active rows for ``active_set``).
+        method: how the command was found: ``"projection"`` (the command clipped to the input
+            limits met every row), ``"active_set"`` (the previous call's active set, re-solved and
+            verified against every optimality condition) or ``"interior_point"`` (Clarabel).
     """
 
     u: np.ndarray
@@ -163,6 +174,7 @@ class FilterResult:
     solve_time: float
     iterations: int
     qp_rows: int
+    method: str
 
     @property
     def fallback(self) -> bool:
@@ -195,6 +207,11 @@ class SafetyFilter:
     robot sphere, and the passivity row (56) ``τ_extᵀu + δ ≥ −α (S − ε)`` when ``tau_ext`` and
     ``tank_energy`` are given. The QP is built once and updated in place; if the solver fails the
     result is the safe stop u = 0 with ``status == "fallback"`` (counted in :attr:`stats`).
+
+    Each call takes the cheapest exact route to the QP's solution: the command clipped to the
+    input limits when it already meets every row; else the previous call's active set, re-solved
+    and accepted only if it meets every optimality condition; else Clarabel on the rows that can
+    bind. ``SafetyConfig(screening=False)`` always runs Clarabel on the full problem.
     """
 
     def __init__(self, scene: Scene, config: SafetyConfig | None = None) -> None:
@@ -212,7 +229,7 @@ class SafetyFilter:
             raise InvalidValueError("passivity: give both tau_ext and tank_energy, or neither")
         if tau_ext is None:
             return None, None
-        tau = as_float_array("tau_ext", tau_ext, (self.scene.nq,))
+        tau = _vector("tau_ext", tau_ext, self.scene.nq)
         energy = float(tank_energy)
         if not math.isfinite(energy):
             raise InvalidValueError(f"tank_energy: must be finite, got {energy}")
@@ -227,8 +244,8 @@ class SafetyFilter:
     ) -> FilterResult:
         """Filters the command u_ref (nq,) at state x (nx,); with τ_ext (nq,) and the tank energy S
         the passivity row is on (only in the inner loop, as in the paper)."""
-        x = as_float_array("x", x, (self.scene.nx,))
-        u_ref = as_float_array("u_ref", u_ref, (self.scene.nq,))
+        x = _vector("x", x, self.scene.nx)
+        u_ref = _vector("u_ref", u_ref, self.scene.nq)
         tau, energy = self._passivity(tau_ext, tank_energy)
         r = self._core.filter(x, u_ref, tau, energy)
         return FilterResult(
@@ -242,6 +259,7 @@ class SafetyFilter:
             solve_time=r.solve_time,
             iterations=r.iterations,
             qp_rows=r.qp_rows,
+            method=r.method,
         )
 
     def filter_sequence(self, x0: Sequence[float] | np.ndarray, U: np.ndarray, model: RolloutModel) -> SequenceResult:
@@ -287,11 +305,17 @@ class SafetyFilter:
 
     @property
     def stats(self) -> dict:
-        """calls, fallbacks, mean_solve_time and max_solve_time (s), total_iterations."""
+        """calls, fallbacks, mean_solve_time and max_solve_time (s), total_iterations,
+        interior_point_calls (calls that ran Clarabel)."""
         return dict(self._core.stats)
 
     def reset_stats(self) -> None:
         self._core.reset_stats()
+
+    def forget_active_set(self) -> None:
+        """The next call ignores the previous active set (never needed for correctness: a
+        remembered active set is used only after it passes every optimality check)."""
+        self._core.forget_active_set()
 
     def constraint_rows(self, x, tau_ext=None, tank_energy=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(a (R, nq), b (R,), h (R,)) at state x: each row's condition is a·u + δ ≥ b, b = −γ (h − Δ)."""

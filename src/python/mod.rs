@@ -623,6 +623,8 @@ pub struct PyFilterResult {
     iterations: u32,
     #[pyo3(get)]
     qp_rows: usize,
+    #[pyo3(get)]
+    method: String,
 }
 
 fn filter_result(py: Python<'_>, out: FilterOutput, active: Vec<String>) -> PyResult<PyFilterResult> {
@@ -642,6 +644,7 @@ fn filter_result(py: Python<'_>, out: FilterOutput, active: Vec<String>) -> PyRe
         solve_time: out.solve_time,
         iterations: out.iterations,
         qp_rows: out.qp_rows,
+        method: out.method.name().to_string(),
     })
 }
 
@@ -775,10 +778,14 @@ impl PySafetyFilter {
         d.set_item("mean_solve_time", s.mean_time())?;
         d.set_item("max_solve_time", s.max_time)?;
         d.set_item("total_iterations", s.total_iterations)?;
+        d.set_item("interior_point_calls", s.interior_point_calls)?;
         Ok(d)
     }
     fn reset_stats(&self) {
         self.lock().reset_stats();
+    }
+    fn forget_active_set(&self) {
+        self.lock().forget_active_set();
     }
 
     /// The rows at x: (a (R, nq), b (R,), h (R,)) with a·u ≥ b each row's condition without slack.

@@ -3,6 +3,8 @@
 //! Each call evaluates every ZBF row, then solves the smallest QP with the same solution:
 //! - if the command projected onto the input limits already meets every row, it *is* the QP's
 //!   solution (δ = 0; the objective's unconstrained minimiser over the box), and no solver runs;
+//! - else the previous call's active set is re-solved as a small linear system and accepted if it
+//!   meets every optimality condition (`active_set`), which is the common case at 1 kHz;
 //! - rows that every candidate optimum meets can never bind and are left out: the optimum lies in
 //!   the input box and within a distance of u_ref bounded by the cost of the projected command
 //!   (see `screen`); the rest go into the smallest of a few pre-built Clarabel problems with that
@@ -10,13 +12,15 @@
 //!   when more remain.
 //!
 //! Every Clarabel problem is built once at construction with a fixed pattern and updated in place.
-//! `SafetyConfig::screening = false` always solves the full problem (same solution, slower).
+//! `SafetyConfig::screening = false` skips all three shortcuts and always solves the full problem
+//! with Clarabel (same solution, slower).
 
 use std::sync::Arc;
 use std::time::Instant;
 
 use clarabel::solver::SolverStatus;
 
+use super::active_set::ActiveSet;
 use super::config::{ConstraintClass, SafetyConfig};
 use super::constraints::{Obstacle, Rows};
 use super::qp::{SlotQp, EMPTY};
@@ -46,6 +50,28 @@ impl FilterStatus {
     }
 }
 
+/// How a call found its command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SolveMethod {
+    /// The command projected onto the input limits met every row.
+    #[default]
+    Projection,
+    /// The previous active set, re-solved and checked against every optimality condition.
+    ActiveSet,
+    /// Clarabel's interior-point method (also when it failed and the call fell back).
+    InteriorPoint,
+}
+
+impl SolveMethod {
+    pub fn name(self) -> &'static str {
+        match self {
+            SolveMethod::Projection => "projection",
+            SolveMethod::ActiveSet => "active_set",
+            SolveMethod::InteriorPoint => "interior_point",
+        }
+    }
+}
+
 /// The outcome of one call; owned by the filter and overwritten by the next call.
 #[derive(Debug, Clone, Default)]
 pub struct FilterOutput {
@@ -65,8 +91,10 @@ pub struct FilterOutput {
     /// Wall time of the whole call (rows, update, solve, post-processing), seconds.
     pub solve_time: f64,
     pub iterations: u32,
-    /// Rows in the QP that was solved (0: the projected command met every row, no solver ran).
+    /// Rows in the QP that was solved (0: the projected command met every row, no solver ran;
+    /// for the active-set method the number of active rows).
     pub qp_rows: usize,
+    pub method: SolveMethod,
 }
 
 /// Running statistics of a filter.
@@ -77,6 +105,8 @@ pub struct FilterStats {
     pub total_time: f64,
     pub max_time: f64,
     pub total_iterations: u64,
+    /// Calls that ran Clarabel.
+    pub interior_point_calls: u64,
 }
 
 impl FilterStats {
@@ -122,6 +152,7 @@ pub struct SafetyFilter {
     /// Rows that can bind in this call, and the slot assignment handed to the solver.
     candidates: Vec<usize>,
     assignment: Vec<usize>,
+    active_set: ActiveSet,
     output: FilterOutput,
     stats: FilterStats,
 }
@@ -169,6 +200,7 @@ impl SafetyFilter {
             reduced,
             candidates: Vec::with_capacity(r),
             assignment: Vec::with_capacity(r),
+            active_set: ActiveSet::new(nq),
             output,
             stats: FilterStats::default(),
             config,
@@ -186,6 +218,12 @@ impl SafetyFilter {
     }
     pub fn reset_stats(&mut self) {
         self.stats = FilterStats::default();
+    }
+    /// Makes the next call ignore the previous call's active set (it then runs the interior-point
+    /// solver unless the projected command is safe). Never needed for correctness, since a
+    /// remembered active set is only used after it passes every optimality check; for benchmarks.
+    pub fn forget_active_set(&mut self) {
+        self.active_set.forget();
     }
     /// The output of the last call.
     pub fn output(&self) -> &FilterOutput {
@@ -372,14 +410,30 @@ impl SafetyFilter {
         }
         self.output.slack.fill(0.0);
         let projection_feasible = self.screen(u_ref);
+        // Multipliers and bound distances above this count as active when remembering a solution.
+        const REMEMBER: f64 = 1e-6;
         if self.config.screening && projection_feasible {
             // The box projection of u_ref minimises the objective over the box and meets every
             // row with δ = 0: it is the QP's solution.
             let out = &mut self.output;
             out.status = FilterStatus::Solved;
             out.solver_status = SolverStatus::Solved;
+            out.method = SolveMethod::Projection;
             out.iterations = 0;
             out.qp_rows = 0;
+            self.active_set.remember(&self.rows, &self.row_penalty, &out.slack, &out.u, &self.velocity_limits, REMEMBER);
+        } else if let Some(k) = self
+            .config
+            .screening
+            .then(|| self.active_set.try_solve(&self.rows, &self.row_penalty, &self.velocity_limits, u_ref, &mut self.output.u, &mut self.output.slack))
+            .flatten()
+        {
+            let out = &mut self.output;
+            out.status = FilterStatus::Solved;
+            out.solver_status = SolverStatus::Solved;
+            out.method = SolveMethod::ActiveSet;
+            out.iterations = 0;
+            out.qp_rows = k;
         } else {
             let (pick, status, iterations) = self.solve(u_ref)?;
             let qp = match pick {
@@ -389,8 +443,10 @@ impl SafetyFilter {
             let x = qp.primal();
             let out = &mut self.output;
             out.solver_status = status;
+            out.method = SolveMethod::InteriorPoint;
             out.iterations = iterations;
             out.qp_rows = self.assignment.iter().filter(|&&a| a != EMPTY).count();
+            self.stats.interior_point_calls += 1;
             let converged = matches!(status, SolverStatus::Solved | SolverStatus::AlmostSolved) && x.iter().all(|v| v.is_finite());
             if converged {
                 out.status = if status == SolverStatus::Solved { FilterStatus::Solved } else { FilterStatus::AlmostSolved };
@@ -404,6 +460,7 @@ impl SafetyFilter {
                         out.slack[row] = x[nq + s].max(0.0);
                     }
                 }
+                self.active_set.remember(&self.rows, &self.row_penalty, &out.slack, &out.u, &self.velocity_limits, REMEMBER);
             } else {
                 out.status = FilterStatus::Fallback;
                 out.u.fill(0.0);
@@ -411,6 +468,7 @@ impl SafetyFilter {
                 for ri in 0..r {
                     out.slack[ri] = if self.rows.live[ri] { self.rows.bound[ri].max(0.0) } else { 0.0 };
                 }
+                self.active_set.forget();
             }
         }
         let out = &mut self.output;

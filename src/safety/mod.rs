@@ -4,6 +4,7 @@
 //! u = q̇*: ∂h/∂q · u + δ ≥ −γ (h − Δ) (19, Remark 1), with a slack δ ≥ 0 per row penalised by the
 //! class's Γ. Input limits are hard bounds. Pure Rust; the Python bindings live in `crate::python`.
 
+mod active_set;
 pub mod config;
 mod constraints;
 pub mod filter;
@@ -13,6 +14,6 @@ pub mod tank;
 
 pub use config::{ConstraintClass, PerClass, SafetyConfig, MAX_OBSTACLE_SLOTS};
 pub use constraints::Obstacle;
-pub use filter::{FilterOutput, FilterStats, FilterStatus, QpMatrices, SafetyFilter};
+pub use filter::{FilterOutput, FilterStats, FilterStatus, QpMatrices, SafetyFilter, SolveMethod};
 pub use sequential::SequenceOutput;
 pub use tank::EnergyTank;
