@@ -16,7 +16,7 @@ from .errors import (
     UnknownFrameError,
     UrdfError,
 )
-from . import costs, tasks
+from . import costs, scenarios, tasks
 from .controller import VARIANTS, Controller, ControllerConfig, Episode, likelihood_weights, paper_start_state, run_episode
 from .realtime import RealtimeCascade, TickResult
 from .scene import OBJECTS, ROBOTS, Scene
@@ -46,6 +46,7 @@ __all__ = [
     "default_threads",
     "costs",
     "tasks",
+    "scenarios",
     "Controller",
     "ControllerConfig",
     "Episode",

@@ -1,0 +1,280 @@
+"""The paper's evaluation scenarios (SPEC §10) as functions returning small frozen results.
+
+- :func:`stuck_door`: hooked on the shelf handle, the door is held fixed while the robot pulls,
+  then released (Fig. 11, 13).
+- :func:`tank_chattering`: the stuck door with the passivity rate α of (56) (Fig. 12).
+- :func:`obstacle_corridor`: target reaching with the base in a narrow corridor and a sphere
+  obstacle that appears when the hand comes within 1 cm of it (Fig. 9, 10).
+- :func:`object_manipulation`: reach the handle from the paper's start and open (Fig. 8).
+
+Every function is deterministic for its ``seed`` and takes the controller ``variant``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import costs, tasks
+from .controller import Controller, ControllerConfig, Episode, paper_start_state, run_episode
+from .safety import EnergyTank, SafetyConfig, SafetyFilter
+from .scene import Scene
+from .scripted import hook_and_pull
+from .sim import LowLevelController, Plant
+
+__all__ = [
+    "StuckDoorResult",
+    "ChatteringResult",
+    "CorridorResult",
+    "ManipulationResult",
+    "hooked_state",
+    "stuck_door",
+    "tank_chattering",
+    "obstacle_corridor",
+    "object_manipulation",
+    "power_sign_changes_per_s",
+]
+
+
+# -- helpers -----------------------------------------------------------------------------------
+def hooked_state(scene: Scene, engage: float = 0.6) -> np.ndarray:
+    """Plays :func:`~sabre.scripted.hook_and_pull` on the plant from the default state through the
+    approach, insert and hook and ``engage`` s into the pull (tip against the bar), then zeroes
+    the robot's velocities. Returns the state (nx,)."""
+    motion = hook_and_pull(scene, scene.default_state())
+    plant = Plant(scene)
+    low = LowLevelController(scene, dt=plant.dt)
+    plant.reset(scene.default_state())
+    per = int(round(motion.dt / plant.dt))
+    n = int(np.argmax(motion.phases == 3)) + int(round(engage / motion.dt))
+    for u in motion.U[:n]:
+        plant.track(low, u, steps=per)
+    x = plant.state
+    x[scene.nq : 2 * scene.nq] = 0.0
+    return x
+
+
+@dataclass
+class _OpenFromHooked(tasks.OpenObject):
+    """OpenObject starting in phase "open" (the scripted hook has no hand pitch: approach_pitch 0)."""
+
+    def initial_phase(self) -> str:
+        return "open"
+
+
+def power_sign_changes_per_s(episode: Episode, mask: np.ndarray, near: float = 0.5) -> float:
+    """Sign changes per second of the filtered power τ_extᵀu over the samples in ``mask`` whose
+    tank energy is within ``near`` J of the floor (consecutive such samples only)."""
+    u = episode.reference if episode.command is None else episode.command
+    p = np.einsum("ij,ij->i", episode.tau_ext, u)
+    if episode.tank_energy is None or len(episode.tank_energy) != len(p):
+        return 0.0
+    sel = mask & (episode.tank_energy - episode.tank_floor < near)
+    if sel.sum() < 2:
+        return 0.0
+    dt = float(np.median(np.diff(episode.time))) if len(episode.time) > 1 else 1e-3
+    s = np.sign(p)
+    pairs = sel[1:] & sel[:-1] & (s[1:] != 0) & (s[:-1] != 0)
+    changes = int(np.count_nonzero(pairs & (s[1:] != s[:-1])))
+    return changes / (sel.sum() * dt)
+
+
+def _scripted_episode(scene, variant, safety, x0, hold_seconds, release_seconds, tank_initial):
+    """Scripted pull (the rest of hook_and_pull's pull phase) as the outer-loop reference through
+    the inner loop of `variant` (filter + tank for I/IO), door held for hold_seconds."""
+    motion = hook_and_pull(scene, scene.default_state())
+    start = int(np.argmax(motion.phases == 3))
+    U = np.asarray(motion.U[start:], dtype=float)
+    plant = Plant(scene)
+    low = LowLevelController(scene, dt=plant.dt)
+    plant.reset(x0)
+    low.reset()
+    inner = SafetyFilter(scene, safety) if "I" in variant else None
+    tank = EnergyTank(tank_initial, safety.tank_floor)
+    chunks = {k: [] for k in ("time", "state", "reference", "command", "tank", "wrench", "tau_ext", "contact")}
+    total = hold_seconds + release_seconds
+    t = 0.0
+    chunk = 0.05
+    while t < total - 1e-9:
+        plant.hold_object(t < hold_seconds - 1e-9)
+        tr = plant.follow(low, U, 0.0, motion.dt, int(round(chunk / plant.dt)), 1, safety=inner, tank=tank)
+        chunks["time"].append(tr.time)
+        chunks["state"].append(tr.state)
+        chunks["reference"].append(tr.reference)
+        chunks["command"].append(tr.reference if tr.filtered is None else tr.filtered)
+        chunks["tank"].append(tr.tank_energy)
+        chunks["wrench"].append(tr.wrench)
+        chunks["tau_ext"].append(tr.tau_ext)
+        chunks["contact"].append(tr.contact)
+        t = plant.time
+    d = {k: np.concatenate(v) for k, v in chunks.items()}
+    return Episode(scene=scene, time=d["time"], state=d["state"], reference=d["reference"], wrench=d["wrench"],
+                   tau_ext=d["tau_ext"], contact=d["contact"].astype(bool), cost=np.zeros(len(d["time"])),
+                   phase=np.zeros(len(d["time"]), dtype=int), phases=("pull",), success=False, time_to_success=None,
+                   command=d["command"], tank_energy=d["tank"], variant=variant,
+                   filter_fallbacks=0 if inner is None else int(inner.stats["fallbacks"]), tank_floor=tank.floor)
+
+
+# -- stuck door --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class StuckDoorResult:
+    episode: Episode = field(repr=False)
+    variant: str
+    driver: str
+    hold_seconds: float
+    mean_wrench_stuck: float
+    tank_energy: np.ndarray = field(repr=False)
+    tank_floor: float
+    tank_min: float
+    opening_after_release: float
+    power_sign_changes_per_s: float
+
+
+def stuck_door(variant: str = "IO", seed: int = 0, hold_seconds: float = 5.0, release_seconds: float = 5.0,
+               obj: str = "shelf", alpha: float = 1.0, *, driver: str = "controller", replan_rate: float = 20.0,
+               tank_initial: float = 10.0) -> StuckDoorResult:
+    """Hooked on the handle (scripted), the robot pulls while the door is held for hold_seconds,
+    then released.
+
+    driver "controller": the sampling-based controller (OpenObject, phase "open") closes the loop.
+    driver "scripted": the rest of the scripted pull is the outer-loop reference (deterministic,
+    always loads the held door), through the inner loop of ``variant``.
+    """
+    scene = Scene.load(obj=obj)
+    safety = SafetyConfig(passivity_alpha=alpha)
+    x0 = hooked_state(scene)
+    duration = hold_seconds + release_seconds
+    if driver == "scripted":
+        ep = _scripted_episode(scene, variant, safety, x0, hold_seconds, release_seconds, tank_initial)
+    elif driver == "controller":
+        task = _OpenFromHooked(approach_pitch=0.0)
+        ctrl = Controller(scene, task, ControllerConfig(variant=variant, safety=safety, seed=seed, tank_initial=tank_initial))
+
+        def hold(t, x, plant, controller):
+            plant.hold_object(t < hold_seconds - 1e-9)
+
+        ep = run_episode(scene, ctrl, duration, seed=seed, x0=x0, replan_rate=replan_rate, record_every=1,
+                         stop_on_success=False, progress=False, on_replan=hold)
+    else:
+        raise ValueError(f"driver must be 'controller' or 'scripted', got {driver!r}")
+    stuck = ep.time <= hold_seconds + 1e-9
+    norms = np.linalg.norm(ep.wrench[:, :3], axis=1)
+    i_rel = int(np.count_nonzero(stuck)) - 1
+    return StuckDoorResult(
+        episode=ep, variant=variant, driver=driver, hold_seconds=hold_seconds,
+        mean_wrench_stuck=float(norms[stuck].mean()) if stuck.any() else 0.0,
+        tank_energy=np.asarray(ep.tank_energy), tank_floor=float(ep.tank_floor),
+        tank_min=float(np.min(ep.tank_energy)),
+        opening_after_release=float(ep.opening[-1] - ep.opening[max(i_rel, 0)]),
+        power_sign_changes_per_s=power_sign_changes_per_s(ep, stuck),
+    )
+
+
+@dataclass(frozen=True)
+class ChatteringResult:
+    episode: Episode = field(repr=False)
+    alpha: float
+    power_sign_changes_per_s: float
+    tank_min: float
+
+
+def tank_chattering(alpha: float, seed: int = 0, hold_seconds: float = 5.0, release_seconds: float = 0.5, *,
+                    driver: str = "controller", obj: str = "shelf") -> ChatteringResult:
+    """The stuck door with variant IO and passivity rate α; α = 1000 should chatter at the floor."""
+    r = stuck_door("IO", seed, hold_seconds, release_seconds, obj, alpha, driver=driver)
+    return ChatteringResult(episode=r.episode, alpha=float(alpha), power_sign_changes_per_s=r.power_sign_changes_per_s, tank_min=r.tank_min)
+
+
+# -- obstacle corridor -------------------------------------------------------------------------
+@dataclass
+class _CorridorReach(tasks.Reach):
+    """Reach with two phases whose costs differ: "obstacle" adds the sphere obstacle term."""
+
+    obstacle_center: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    obstacle_radius: float = 0.1
+
+    phases = ("free", "obstacle")
+
+    def cost(self, scene: Scene, phase: str) -> costs.Cost:
+        base = super().cost(scene, phase)
+        if phase == "obstacle":
+            base = base + costs.Obstacles([self.obstacle_center], [self.obstacle_radius], weight=1000.0, weight_slope=1000.0)
+        return base
+
+
+@dataclass(frozen=True)
+class CorridorResult:
+    episode: Episode = field(repr=False)
+    variant: str
+    appeared_at: float | None
+    cartesian_violation: float
+    reached: bool
+
+
+#: corridor for the base: x ∈ [−0.5, 0.5] m, y ∈ [−0.1, 0.1] m.
+CORRIDOR = (-0.5, 0.5, -0.1, 0.1)
+
+
+def obstacle_corridor(variant: str = "IO", seed: int = 0, duration: float = 6.0, *, replan_rate: float = 20.0,
+                      obstacle_radius: float = 0.08) -> CorridorResult:
+    """Reach a grasp target 0.5 m to the side with the base confined to :data:`CORRIDOR`; a sphere
+    obstacle sits half-way on the straight path and appears (filters + sampler cost) when the grasp
+    frame comes within 1 cm of its surface. cartesian_violation: Σ_k max(0, −h) over the obstacle
+    and base-box rows from the appearance on (m² for obstacle rows, m for the box)."""
+    scene = Scene.load(obj="shelf")
+    x0 = scene.default_state()
+    start = scene.fk(x0[: scene.nq], "grasp")
+    target = start.copy()
+    target[:3, 3] = start[:3, 3] + np.array([-0.15, 0.5, 0.0])
+    center = 0.5 * (start[:3, 3] + target[:3, 3])
+    box = CORRIDOR
+    task = _CorridorReach(target_pose=target, extra=costs.Cost([costs.BaseBox((box[0], box[2]), (box[1], box[3]))]),
+                          obstacle_center=tuple(center), obstacle_radius=obstacle_radius)
+    safety = SafetyConfig(base_box=box)
+    ctrl = Controller(scene, task, ControllerConfig(variant=variant, safety=safety, seed=seed))
+    appeared: list[float] = []
+
+    def appear(t, x, plant, controller):
+        if appeared:
+            return
+        p = scene.fk(x[: scene.nq], "grasp")[:3, 3]
+        if np.linalg.norm(p - center) - obstacle_radius <= 0.01:
+            appeared.append(t)
+            controller.add_obstacle(center, obstacle_radius)
+            controller.set_phase("obstacle", t)
+
+    ep = run_episode(scene, ctrl, duration, seed=seed, x0=x0, replan_rate=replan_rate, record_every=10,
+                     stop_on_success=False, progress=False, on_replan=appear)
+    t_app = appeared[0] if appeared else None
+    check = SafetyFilter(scene, safety)
+    check.add_obstacle(center, obstacle_radius)
+    rows = np.array([n.startswith(("obstacle", "base_box")) for n in check.row_names])
+    violation = 0.0
+    if t_app is not None:
+        for x in ep.state[ep.time >= t_app]:
+            h = np.asarray(check.constraint_rows(x)[2])[rows]
+            h = h[np.isfinite(h)]
+            violation += float(np.sum(np.maximum(0.0, -h)))
+    reached = bool(any(task.success(scene, x) for x in ep.state))
+    return CorridorResult(episode=ep, variant=variant, appeared_at=t_app, cartesian_violation=violation, reached=reached)
+
+
+# -- object manipulation -----------------------------------------------------------------------
+@dataclass(frozen=True)
+class ManipulationResult:
+    episode: Episode = field(repr=False)
+    variant: str
+    obj: str
+    success: bool
+    violations: dict
+
+
+def object_manipulation(variant: str = "IO", obj: str = "shelf", seed: int = 0, duration: float = 60.0, *,
+                        replan_rate: float = 20.0) -> ManipulationResult:
+    """OpenObject from :func:`~sabre.controller.paper_start_state`; violations per ZBF class."""
+    scene = Scene.load(obj=obj)
+    ctrl = Controller(scene, tasks.OpenObject(), ControllerConfig(variant=variant, seed=seed))
+    ep = run_episode(scene, ctrl, duration, seed=seed, x0=paper_start_state(scene), replan_rate=replan_rate,
+                     record_every=10, progress=False)
+    return ManipulationResult(episode=ep, variant=variant, obj=obj, success=bool(ep.success), violations=ep.violations())
