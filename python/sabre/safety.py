@@ -67,7 +67,8 @@ class SafetyConfig:
     (x_min, x_max, y_min, y_max) in m, or None for no box. ``passivity_alpha``: α of (56)
     (1/s; the paper's 1 avoids chattering). ``tank_floor``: ε (J). ``max_obstacles``: obstacle
     slots (fixed QP structure). ``max_iterations``, ``tolerance``: Clarabel's bounds.
-    ``screening``: solve the smallest QP with the same solution (off: always the full QP).
+    ``screening``: take the exact shortcuts (projected command, remembered active set, rows that
+    cannot bind left out); off, every call runs Clarabel on the full QP. Same solution either way.
     """
 
     gamma: Mapping[str, float] = field(default_factory=dict)

@@ -93,7 +93,8 @@ pub struct SafetyConfig {
     pub tolerance: f64,
     /// A row counts as active when its residual or its slack is below / above this.
     pub active_tolerance: f64,
-    /// Solve the smallest equivalent QP (see `safety::filter`); off, every call solves the full one.
+    /// Take the exact shortcuts of `safety::filter` (projection, remembered active set, rows that
+    /// cannot bind left out); off, every call runs Clarabel on the full QP. Same solution either way.
     pub screening: bool,
 }
 
