@@ -282,7 +282,6 @@ def _place_grasp(scene, x, target, iterations=200):
     for _ in range(iterations):
         q = x[: scene.nq]
         pose = scene.fk(q, "grasp")
-        r = pose[:3, :3].T @ target[:3, :3]
         xi = _se3_log(np.linalg.solve(pose, target))
         err = np.r_[pose[:3, :3] @ xi[:3], pose[:3, :3] @ xi[3:]]
         j = scene.jacobian(q, "grasp")[:, 3:]
