@@ -315,3 +315,100 @@ def _translation(x, y, z):
     t = np.eye(4)
     t[:3, 3] = [x, y, z]
     return t
+
+
+def test_guides_enter_the_next_batch_once(scene):
+    """Guides sit after the nominal and the zero sequence in the next batch only, projected onto
+    the input limits like every sample; wrong shapes and non-finite values are refused."""
+    planner = _planner(scene, costs.Cost([costs.Power()]), rollouts=8)
+    k = planner.horizon_steps
+    rng = np.random.default_rng(0)
+    guides = 0.1 * rng.standard_normal((3, k, scene.nu))
+    guides[0, 0, 3] = 100.0  # beyond every velocity limit
+    planner.set_guides(guides)
+    batch = planner.sample(0.0)
+    expected = np.clip(guides, -scene.dq_limit, scene.dq_limit)
+    np.testing.assert_array_equal(batch[2:5], expected)
+    again = planner.sample(0.0)
+    assert not any(np.allclose(again[i], expected[j]) for i in range(2, 8) for j in range(3))
+    with pytest.raises(sabre.errors.ShapeError):
+        planner.set_guides(np.zeros((7, k, scene.nu)))  # more than rollouts − 2
+    with pytest.raises(sabre.errors.ShapeError):
+        planner.set_guides(np.zeros((1, k + 1, scene.nu)))
+    bad = np.zeros((1, k, scene.nu))
+    bad[0, 3, 2] = np.nan
+    with pytest.raises(sabre.errors.SabreError):
+        planner.set_guides(bad)
+
+
+@pytest.fixture(scope="module")
+def hooked(scene):
+    """The plant after the scripted approach and hook (level hand), tip against the bar."""
+    return sabre.scenarios.hooked_state(scene)
+
+
+def test_servo_guide_tracks_a_moving_target_on_the_kinematics(scene, hooked):
+    """Integrating the guide's velocities (explicit Euler, as the guide assumes) brings the grasp
+    frame onto a target moving along a circle, and never takes a joint past its limits."""
+    from sabre.guides import servo_guide
+
+    x = hooked
+    start = scene.fk(x[: scene.nq], "grasp")
+    dt, k = 0.015, 66
+    # The target starts at the grasp frame and swings 0.4 rad about a vertical axis 0.27 m to the side.
+    pivot = start[:3, 3] + np.array([0.0, 0.27, 0.0])
+    targets = []
+    for a in np.linspace(0.0, 0.4, k + 1):
+        rot = np.eye(4)
+        rot[:3, :3] = [[np.cos(a), np.sin(a), 0], [-np.sin(a), np.cos(a), 0], [0, 0, 1]]
+        rot[:3, 3] = pivot - rot[:3, :3] @ pivot
+        targets.append(rot @ start)
+    targets = np.array(targets)
+    u = servo_guide(scene, x[: scene.nq], targets, dt, max_linear=1.0, max_angular=2.0)
+    assert u.shape == (k, scene.nu)
+    q = x[: scene.nq] + dt * np.cumsum(u, axis=0)
+    assert np.all(q >= scene.q_lower - 1e-9) and np.all(q <= scene.q_upper + 1e-9)
+    assert np.all(np.abs(u) <= scene.dq_limit + 1e-12)
+    final = scene.fk(q[-1], "grasp")
+    assert np.linalg.norm(final[:3, 3] - targets[-1][:3, 3]) < 0.005
+    cos = (np.trace(targets[-1][:3, :3].T @ final[:3, :3]) - 1.0) / 2.0
+    assert np.arccos(np.clip(cos, -1.0, 1.0)) < 0.02
+    # Without the feed-forward term (a target that jumps to the end) the servo lags behind.
+    lagging = servo_guide(scene, x[: scene.nq], np.broadcast_to(targets[-1], targets.shape), dt, gain=0.5, max_linear=1.0, max_angular=2.0)
+    q_lag = x[: scene.nq] + dt * lagging.sum(axis=0)
+    assert np.linalg.norm(scene.fk(q_lag, "grasp")[:3, 3] - targets[-1][:3, 3]) > 0.02
+
+
+def test_open_object_guides_follow_the_handle(scene, hooked):
+    """From a hooked state, the opening guides, rolled out with the rollout model, open the door
+    about as far as their handle speeds say (standing still does not); the approach guide moves
+    the grasp frame toward its target."""
+    task = sabre.tasks.OpenObject(approach_pitch=0.0)
+    k, dt = 66, 0.015
+    guides = task.guides(scene, hooked, "open", k, dt)
+    assert guides.shape == (len(task.open_speeds), k, scene.nu)
+    result = sabre.RolloutModel(scene).rollout(hooked, np.concatenate([guides, np.zeros((1, k, scene.nu))]))
+    opened = result.states[:, -1, 2 * scene.nq] - hooked[2 * scene.nq]
+    expected = np.asarray(task.open_speeds) * k * dt / task.handle_travel(scene, 0.0)
+    np.testing.assert_allclose(opened[:2], expected, rtol=0.35)
+    assert abs(opened[2]) < 0.02
+    (approach,) = task.guides(scene, scene.default_state(), "approach", k, dt)
+    distance, angle = task.approach_error(scene, scene.default_state(), "approach")
+    x_end = scene.default_state()
+    x_end[: scene.nq] += dt * approach.sum(axis=0)
+    distance_end, angle_end = task.approach_error(scene, x_end, "approach")
+    assert distance_end < distance - 0.05 and angle_end < 0.1 * angle
+    assert sabre.tasks.OpenObject(guide_speed=0.0).guides(scene, scene.default_state(), "approach", k, dt) is None
+
+
+def test_object_setpoint_clears_the_power_balance(scene):
+    """The object cost's set-point lies beyond the requested opening by twice the gap where the
+    power cost (36) cancels the object cost's pull: w_p τ_r / (W_o T), τ_r from the URDF."""
+    task = sabre.tasks.OpenObject()
+    travel = task.handle_travel(scene, 0.0)
+    # Handle radius about the hinge from the URDF: bar 0.061 m out and 0.265 m across.
+    assert travel == pytest.approx(np.hypot(0.061, 0.265), rel=1e-3)
+    resisting = 4.0 + 2.0 * task.open_speeds[0] / travel  # shelf friction 4 N·m, damping 2
+    gap = 10.0 * resisting / (100.0 * 1.0)
+    assert task.object_setpoint(scene) == pytest.approx(task.target_opening(scene) + 2 * gap, rel=1e-3)
+    assert sabre.tasks.OpenObject(object_overshoot=0.1).object_setpoint(scene) == pytest.approx(task.target_opening(scene) + 0.1)

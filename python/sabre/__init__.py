@@ -22,7 +22,7 @@ from .realtime import RealtimeCascade, TickResult
 from .scene import OBJECTS, ROBOTS, Scene
 from .safety import EnergyTank, FilterResult, Obstacle, SafetyConfig, SafetyFilter, SequenceResult
 from .scripted import ScriptedMotion, hook_and_pull
-from .sim import LowLevelController, Plant, RolloutModel, RolloutResult, Trace, default_threads
+from .sim import Contact, LowLevelController, Plant, RolloutModel, RolloutResult, Trace, default_threads
 
 __all__ = [
     "VARIANTS",

@@ -17,7 +17,7 @@ import numpy as np
 from . import _core
 from ._validate import as_count, as_float_array, as_positive
 from .costs import Batch, CompiledCost
-from .errors import InvalidValueError
+from .errors import InvalidValueError, ShapeError
 from .safety import CLASSES, EnergyTank, SafetyConfig, SafetyFilter
 from .scene import Scene
 from .sim import MAX_THREADS, LowLevelController, Plant, RolloutModel
@@ -232,6 +232,13 @@ class Controller:
             raise InvalidValueError(f"task.noise_scale returned {scale}; it must be positive and finite")
         self._planner.noise_scale = scale
         start = time.perf_counter()
+        guides = self.task.guides(self.scene, x, self.phase, self.config.horizon_steps, self.config.dt)
+        if guides is not None and len(guides):
+            guides = np.asarray(guides, dtype=np.float64)
+            if guides.ndim != 3 or guides.shape[1:] != (self.config.horizon_steps, self.scene.nu):
+                raise ShapeError(f"task.guides: expected (M, {self.config.horizon_steps}, {self.scene.nu}), got {guides.shape}")
+            self._planner.set_guides(np.ascontiguousarray(guides[: self.config.rollouts - 2]))
+        guide_time = time.perf_counter() - start
         if not self._cost.python_terms:
             stats = self._planner.iterate(x, t)
         else:
@@ -252,6 +259,8 @@ class Controller:
             stats["sequential_time"] = time.perf_counter() - start
             stats["sequential_fallbacks"] = seq.fallbacks
             stats["iteration_time"] += stats["sequential_time"]
+        stats["guide_time"] = guide_time
+        stats["iteration_time"] += guide_time if not self._cost.python_terms else 0.0
         stats["phase"] = self.phase
         stats["noise_scale"] = scale
         self._stats = stats
@@ -273,7 +282,8 @@ class Controller:
     @property
     def stats(self) -> dict:
         """Last iteration: iteration_time, rollout_time (s), cost_min/mean/max, nominal_cost,
-        effective_sample_size, failed_rollouts, phase, noise_scale; with the sequential filter
+        effective_sample_size, failed_rollouts, phase, noise_scale, guide_time (s, the task's
+        guides, included in iteration_time); with the sequential filter
         also sequential_time (s, included in iteration_time) and sequential_fallbacks."""
         return dict(self._stats)
 

@@ -183,6 +183,18 @@ class Trace:
         return None if self.filter_status is None else np.array([s == "fallback" for s in self.filter_status])
 
 
+@dataclass(frozen=True)
+class Contact:
+    """One robot–object contact point of a plant step (world frame)."""
+
+    robot_link: str
+    object_link: str
+    point: np.ndarray
+    """(3,) contact point (m)."""
+    force: np.ndarray
+    """(3,) force acting on the robot at the point (N)."""
+
+
 class Plant:
     """The stand-in for the real robot: full rigid-body dynamics of robot and object in Rapier.
 
@@ -292,7 +304,18 @@ class Plant:
 
     @property
     def contact(self) -> bool:
+        """Whether any robot–object contact carried force in the last step."""
         return self._core.contact
+
+    def contacts(self) -> list[Contact]:
+        """Every robot–object contact point of the last step, with the force it put on the robot.
+
+        For diagnosing what the robot touches (which link against which object part); it
+        allocates, so call it between steps, not inside a tight loop."""
+        return [
+            Contact(robot_link=r, object_link=o, point=np.array(p, dtype=np.float64), force=np.array(f, dtype=np.float64))
+            for r, o, p, f in self._core.contacts()
+        ]
 
     @property
     def applied_torque(self) -> np.ndarray:

@@ -14,6 +14,7 @@ import numpy as np
 
 from . import costs
 from ._validate import as_float_array
+from .guides import servo_guide
 from .scene import Scene
 
 __all__ = ["Task", "Reach", "OpenObject", "SafetyWeights"]
@@ -79,6 +80,15 @@ class Task:
         """
         return 1.0
 
+    def guides(self, scene: Scene, x: np.ndarray, phase: str, steps: int, dt: float) -> np.ndarray | None:
+        """Input sequences (M, steps, nu) to put into the next batch, row 0 applying now, or None.
+
+        Guides are samples like any other: the sampler rolls them out and weighs them by their
+        cost, so they can only help. A task proposes what it knows and the sampler cannot find by
+        chance, e.g. following a handle along its arc (see :func:`sabre.guides.servo_guide`).
+        """
+        return None
+
     def on_step(self, scene: Scene, x: np.ndarray, t: float, controller) -> None:
         """Hook called once per planning iteration, after the phase update."""
 
@@ -135,7 +145,8 @@ class OpenObject(Task):
 
     Switches happen when the grasp frame is within ``switch_position`` (m) and ``switch_angle``
     (rad) of the current phase's target (twice that for the approach, ``hook_tolerance`` for the
-    hook). If the bar leaves the pocket while opening (the grasp frame more than
+    hook; for inserting and hooking only the distance across the bar counts, and along the bar
+    ``along_tolerance``). If the bar leaves the pocket while opening (the grasp frame more than
     ``slip_distance`` from its target), the task starts over from the approach. Success: opening
     ≥ 90 % of the target.
     """
@@ -148,6 +159,10 @@ class OpenObject(Task):
     #: current opening, so the hand is led along the opening path (0: the handle as it is).
     open_lead: float = 0.0
     object_weight: float = 100.0
+    #: o* of the object cost lies this far (rad or m) beyond ``opening``; None: from the power
+    #: balance (see :meth:`object_setpoint`), with ``horizon`` the controller's horizon T (s).
+    object_overshoot: float | None = None
+    horizon: float = 1.0
     contact_weight: float = 100.0
     safety: SafetyWeights = field(default_factory=SafetyWeights)
     #: grasp pose in the handle frame while approaching (in front of and beside the bar), inserting
@@ -165,6 +180,8 @@ class OpenObject(Task):
     switch_position: float = 0.015
     switch_angle: float = 0.15
     hook_tolerance: float = 0.006
+    #: how far (m) along the bar the grasp frame may be from its target when inserting and hooking
+    along_tolerance: float = 0.03
     slip_distance: float = 0.05
     slip_lateral: float = 0.01
     success_fraction: float = 0.9
@@ -178,6 +195,14 @@ class OpenObject(Task):
     noise_distance: float = 0.5
     noise_floor: float = 1e-3
     noise_open: float = 0.01
+    #: guides (see ``Task.guides``): a pose servo toward the phase's target, capped at
+    #: ``guide_speed`` (m/s) while approaching and ``guide_fine_speed`` when inserting and hooking;
+    #: while opening, servos that follow the handle along its path at each of ``open_speeds``
+    #: (m/s of the handle). Empty ``open_speeds`` and ``guide_speed = 0`` turn guides off.
+    guide_speed: float = 0.3
+    guide_fine_speed: float = 0.05
+    guide_gain: float = 2.0
+    open_speeds: tuple[float, ...] = (0.1, 0.05)
     extra: costs.Cost = field(default_factory=costs.Cost)
 
     phases = ("approach", "insert", "hook", "open")
@@ -206,6 +231,32 @@ class OpenObject(Task):
         if self.opening is not None:
             return float(self.opening)
         return float(scene.o_lower[0] + 0.75 * (scene.o_upper[0] - scene.o_lower[0]))
+
+    def handle_travel(self, scene: Scene, o: float) -> float:
+        """Distance (m) the handle moves per unit of opening (rad or m) at opening o."""
+        h = 1e-4 * (scene.o_upper[0] - scene.o_lower[0])
+        lo, hi = np.clip([o - h, o + h], scene.o_lower[0], scene.o_upper[0])
+        moved = scene.object_fk([hi], "handle_frame")[:3, 3] - scene.object_fk([lo], "handle_frame")[:3, 3]
+        return float(np.linalg.norm(moved) / max(hi - lo, 1e-12))
+
+    def object_setpoint(self, scene: Scene) -> float:
+        """o* of the object cost (34): ``opening`` plus ``object_overshoot``.
+
+        The power cost (36) charges w_p·τ_r·ȯ per step for moving the object against its
+        resisting torque τ_r (friction, damping), and over a horizon T the object cost's pull
+        on the opening rate is worth W_o·(o* − o)·T per step. The two balance at
+        o* − o = w_p·τ_r / (W_o·T): with Table I weights and the shelf's 4 N·m friction, 0.47 rad
+        before o*. With o* at the requested opening the object would stall that far short of it,
+        so by default o* lies twice that gap beyond it (the object ends up a gap past the
+        opening, or at its limit).
+        """
+        if self.object_overshoot is not None:
+            return self.target_opening(scene) + float(self.object_overshoot)
+        speed = self.open_speeds[0] if self.open_speeds else 0.1
+        rate = speed / max(self.handle_travel(scene, float(scene.o_lower[0])), 1e-6)
+        resisting = float(scene.object_friction[0] + scene.object_damping[0] * rate)
+        gap = self.safety.power * resisting / (max(self.object_weight, 1e-12) * self.horizon)
+        return self.target_opening(scene) + 2.0 * gap
 
     def grasp_offset(self, scene: Scene, phase: str) -> np.ndarray:
         """Pose of the grasp target in the handle frame for `phase`."""
@@ -238,7 +289,7 @@ class OpenObject(Task):
         return (
             costs.TargetPose(self.grasp_offset(scene, phase), "grasp", "handle_frame", weights=tuple(self.open_pose_weights),
                              lead=self.lead(scene), lead_limit=self.target_opening(scene))
-            + costs.ObjectState([self.target_opening(scene)], self.object_weight)
+            + costs.ObjectState([self.object_setpoint(scene)], self.object_weight)
             + self.safety.terms(scene)
             + self.extra
         )
@@ -252,24 +303,59 @@ class OpenObject(Task):
         cos = (np.trace(target[:3, :3].T @ pose[:3, :3]) - 1.0) / 2.0
         return dp, float(np.arccos(np.clip(cos, -1.0, 1.0)))
 
+    def pocket_error(self, scene: Scene, x: np.ndarray, phase: str) -> tuple[float, float]:
+        """(across, along) distance (m) of the grasp frame from the target of `phase`: across the
+        bar (handle frame y and z) and along it (x). Sliding along the bar does not matter for
+        hooking; only the position across it does."""
+        nq, no = scene.nq, scene.no
+        handle = scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame")
+        target = handle @ self.grasp_offset(scene, phase)
+        e = handle[:3, :3].T @ (scene.fk(x[:nq], "grasp")[:3, 3] - target[:3, 3])
+        return float(np.hypot(e[1], e[2])), float(abs(e[0]))
+
     def next_phase(self, scene: Scene, x: np.ndarray, t: float, phase: str) -> str:
         if phase == "approach":
             dp, angle = self.approach_error(scene, x, "approach")
             if dp < 2.0 * self.switch_position and angle < self.switch_angle:
                 return "insert"
         if phase == "insert":
-            dp, angle = self.approach_error(scene, x, "insert")
-            if dp < self.switch_position and angle < self.switch_angle:
+            _, angle = self.approach_error(scene, x, "insert")
+            across, along = self.pocket_error(scene, x, "insert")
+            if across < self.switch_position and along < self.along_tolerance and angle < self.switch_angle:
                 return "hook"
         if phase == "hook":
-            dp, angle = self.approach_error(scene, x, "hook")
-            if dp < self.hook_tolerance and angle < self.switch_angle:
+            _, angle = self.approach_error(scene, x, "hook")
+            across, along = self.pocket_error(scene, x, "hook")
+            if across < self.hook_tolerance and along < self.along_tolerance and angle < self.switch_angle:
                 return "open"
         if phase == "open" and not self.success(scene, x):
             dp, _ = self.approach_error(scene, x, "open")
             if dp > self.slip_distance or abs(self.lateral_error(scene, x)) > self.slip_lateral:
                 return "approach"
         return phase
+
+    def guides(self, scene: Scene, x: np.ndarray, phase: str, steps: int, dt: float) -> np.ndarray | None:
+        nq, no = scene.nq, scene.no
+        q, o = x[:nq], x[2 * nq : 2 * nq + no]
+        offset = self.grasp_offset(scene, phase)
+        if phase != "open":
+            if self.guide_speed <= 0.0:
+                return None
+            target = scene.object_fk(o, "handle_frame") @ offset
+            speed = self.guide_speed if phase == "approach" else self.guide_fine_speed
+            targets = np.broadcast_to(target, (steps + 1, 4, 4))
+            return servo_guide(scene, q, targets, dt, gain=self.guide_gain, max_linear=speed, max_angular=4.0 * speed)[None]
+        if not self.open_speeds:
+            return None
+        travel = self.handle_travel(scene, float(o[0]))
+        end = min(self.object_setpoint(scene), scene.o_upper[0])
+        out = []
+        for speed in self.open_speeds:
+            rate = speed / max(travel, 1e-6)
+            openings = np.minimum(o[0] + rate * dt * np.arange(steps + 1), max(end, o[0]))
+            targets = np.stack([scene.object_fk([v], "handle_frame") @ offset for v in openings])
+            out.append(servo_guide(scene, q, targets, dt, gain=self.guide_gain, max_linear=2.0 * speed + 0.05, max_angular=2.0))
+        return np.stack(out)
 
     def noise_scale(self, scene: Scene, x: np.ndarray, phase: str) -> float:
         if phase == "open":

@@ -106,6 +106,8 @@ pub struct Mppi {
     previous_weights: Vec<f64>,
     previous_t0: f64,
     have_previous: bool,
+    /// Task-proposed sequences for the next batch only (M × K × nu).
+    guides: Vec<f64>,
     weights: Vec<f64>,
     smoother: Option<SavitzkyGolay>,
     rng: ChaCha8Rng,
@@ -197,6 +199,7 @@ impl Mppi {
             previous_weights: vec![0.0; n],
             previous_t0: 0.0,
             have_previous: false,
+            guides: Vec::new(),
             weights: vec![0.0; n],
             smoother,
             rng: ChaCha8Rng::seed_from_u64(config.seed),
@@ -245,6 +248,7 @@ impl Mppi {
         self.nominal.fill(0.0);
         self.nominal_t0 = t0;
         self.have_previous = false;
+        self.guides.clear();
         self.rng = ChaCha8Rng::seed_from_u64(seed);
         self.config.seed = seed;
         self.noise_scale = 1.0;
@@ -263,6 +267,27 @@ impl Mppi {
 
     pub fn noise_scale(&self) -> f64 {
         self.noise_scale
+    }
+
+    /// Puts `guides` (M × K × nu, row 0 applying at the time of the next [`Self::sample`]) into
+    /// the next batch after the nominal and the zero sequence, in place of as many kept or fresh
+    /// samples. They are rolled out and weighted like every other sample, so a bad guide costs
+    /// nothing but its slot; they are used once. This is how a task proposes what it knows (a
+    /// path along a moving handle, a servo step toward a pose) without bypassing the sampler.
+    pub fn set_guides(&mut self, guides: &[f64]) -> Result<()> {
+        let row = self.k * self.nu;
+        let slots = self.config.rollouts - 2;
+        if guides.len() % row != 0 || guides.len() / row > slots {
+            return Err(SabreError::shape(
+                "guides",
+                format!("(M, {}, {}) with M <= {slots}", self.k, self.nu),
+                format!("{} elements", guides.len()),
+            ));
+        }
+        ensure_finite("guides", guides)?;
+        self.guides.clear();
+        self.guides.extend_from_slice(guides);
+        Ok(())
     }
 
     /// Replaces the policy mean (e.g. with a filtered sequence), K × nu starting at time `t0`.
@@ -303,8 +328,12 @@ impl Mppi {
         self.samples[..row].copy_from_slice(&self.nominal);
         self.samples[row..2 * row].fill(0.0);
         let mut filled = 2;
+        let guided = self.guides.len() / row;
+        self.samples[filled * row..(filled + guided) * row].copy_from_slice(&self.guides);
+        filled += guided;
+        self.guides.clear();
         if self.have_previous {
-            let keep = ((self.config.keep_fraction * n as f64).floor() as usize).min(n - 2);
+            let keep = ((self.config.keep_fraction * n as f64).floor() as usize).min(n - filled);
             let mut order: Vec<usize> = (0..n).filter(|&i| self.previous_weights[i] > 0.0).collect();
             // Highest weight first; ties by index keep the choice deterministic.
             order.sort_by(|&a, &b| self.previous_weights[b].total_cmp(&self.previous_weights[a]).then(a.cmp(&b)));

@@ -530,6 +530,24 @@ impl PyPlant {
     fn contact(&self) -> PyResult<bool> {
         self.with(|p| Ok(p.interaction().contact))
     }
+    /// Contact points of the last step: (robot link, object link, point (3,), force on the robot (3,)).
+    fn contacts(&self) -> PyResult<Vec<(String, String, [f64; 3], [f64; 3])>> {
+        self.with(|p| {
+            let scene = p.scene();
+            Ok(p
+                .contacts()
+                .into_iter()
+                .map(|c| {
+                    (
+                        scene.robot.links[c.robot_link].name.clone(),
+                        scene.object.links[c.object_link].name.clone(),
+                        c.point,
+                        c.force,
+                    )
+                })
+                .collect())
+        })
+    }
     #[getter]
     fn applied_torque(&self) -> PyResult<Vec<f64>> {
         self.with(|p| Ok(p.applied_torque().to_vec()))
@@ -1171,6 +1189,14 @@ impl PyPlanner {
     #[getter]
     fn nominal_t0(&self) -> f64 {
         self.inner.lock().unwrap_or_else(|e| e.into_inner()).nominal_t0()
+    }
+
+    /// Sequences (M, K, nu) placed in the next batch after the nominal and the zero sequence.
+    fn set_guides(&self, guides: PyReadonlyArrayDyn<'_, f64>) -> PyResult<()> {
+        let mut planner = self.inner.lock().unwrap_or_else(|e| e.into_inner());
+        let (k, nu) = (planner.horizon_steps() as isize, planner.model().scene().nu() as isize);
+        let guides = run(|| view("guides", &guides, &[-1, k, nu]))?;
+        run(|| planner.set_guides(guides))
     }
 
     fn set_nominal(&self, nominal: PyReadonlyArrayDyn<'_, f64>, t0: f64) -> PyResult<()> {

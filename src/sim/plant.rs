@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use super::world::{Interaction, RobotColliders, RobotDrive, SimWorld, WorldConfig};
+use super::world::{ContactReport, Interaction, RobotColliders, RobotDrive, SimWorld, WorldConfig};
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
 use crate::model::scene::Scene;
 
@@ -119,6 +119,10 @@ impl Plant {
     }
     pub fn interaction(&self) -> &Interaction {
         &self.interaction
+    }
+    /// Every robot–object contact point of the last step with its force on the robot.
+    pub fn contacts(&self) -> Vec<ContactReport> {
+        self.world.contacts()
     }
     /// Torques actually applied in the last step, after the effort limits.
     pub fn applied_torque(&self) -> &[f64] {

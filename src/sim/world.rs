@@ -165,6 +165,19 @@ pub struct Interaction {
     pub wrench: [f64; 6],
 }
 
+/// One robot–object contact point that carried force in the last step.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ContactReport {
+    /// Index of the robot link (in the robot tree) whose collider touches.
+    pub robot_link: usize,
+    /// Index of the object link (in the object tree) whose collider touches.
+    pub object_link: usize,
+    /// Contact point, world frame (m).
+    pub point: [f64; 3],
+    /// Force acting on the robot at the point, world frame (N).
+    pub force: [f64; 3],
+}
+
 /// The mutable Rapier state; cloning it is how a world is reset to a pristine snapshot.
 #[derive(Clone)]
 struct PhysicsState {
@@ -1039,6 +1052,62 @@ impl SimWorld {
         &self.state.last
     }
 
+    /// Every robot–object contact point that carried force in the last step, with the force on
+    /// the robot; for diagnosing what the robot touches (allocates, not for the hot path).
+    pub fn contacts(&self) -> Vec<ContactReport> {
+        let mut out = Vec::new();
+        let inv_dt = 1.0 / self.params.dt;
+        for pair in self.state.narrow_phase.contact_pairs() {
+            let (Some(c1), Some(c2)) = (self.state.colliders.get(pair.collider1), self.state.colliders.get(pair.collider2)) else {
+                continue;
+            };
+            let owner = |c: &Collider| c.user_data & !0xffff_ffff_ffff_ffff;
+            let index = |c: &Collider| (c.user_data & 0xffff_ffff) as usize;
+            let (robot_link, object_link, robot_is_first) = match (owner(c1), owner(c2)) {
+                (OWNER_ROBOT, OWNER_OBJECT) => (index(c1), index(c2), true),
+                (OWNER_OBJECT, OWNER_ROBOT) => (index(c2), index(c1), false),
+                _ => continue,
+            };
+            for manifold in pair.solver_manifolds() {
+                for sc in manifold.data.solver_contacts.iter() {
+                    let Some((p, force)) = Self::contact_force(manifold, sc, &self.state.bodies, robot_is_first, inv_dt) else {
+                        continue;
+                    };
+                    out.push(ContactReport {
+                        robot_link,
+                        object_link,
+                        point: [p.x, p.y, p.z],
+                        force: [force.x, force.y, force.z],
+                    });
+                }
+            }
+        }
+        out
+    }
+
+    /// Point and force on the robot of one solver contact, or None if it carried no impulse.
+    fn contact_force(
+        manifold: &ContactManifold,
+        sc: &SolverContact,
+        bodies: &RigidBodySet,
+        robot_is_first: bool,
+        inv_dt: f64,
+    ) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        let contact_index = (sc.contact_id[0] & !NEW_CONTACT_BIT) as usize;
+        let point = manifold.points.get(contact_index)?;
+        let normal_impulse = point.data.impulse;
+        let tangent_impulse = point.data.warmstart_tangent_world;
+        if normal_impulse <= 0.0 && tangent_impulse.length_squared() == 0.0 {
+            return None;
+        }
+        // The normal points from the first collider to the second; the normal impulse pushes the
+        // first collider back along −normal.
+        let on_first = -(manifold.data.normal * normal_impulse) + tangent_impulse;
+        let impulse = if robot_is_first { on_first } else { -on_first };
+        let (p1, p2) = manifold.data.solver_contact_world_points(sc, bodies);
+        Some((vec_from_rapier((p1 + p2) * 0.5), vec_from_rapier(impulse * inv_dt)))
+    }
+
     fn measure_interaction(&mut self) {
         let nq = self.layout.nq;
         let mut last = std::mem::replace(
@@ -1067,20 +1136,9 @@ impl SimWorld {
             };
             for manifold in pair.solver_manifolds() {
                 for sc in manifold.data.solver_contacts.iter() {
-                    let contact_index = (sc.contact_id[0] & !NEW_CONTACT_BIT) as usize;
-                    let Some(point) = manifold.points.get(contact_index) else { continue };
-                    let normal_impulse = point.data.impulse;
-                    let tangent_impulse = point.data.warmstart_tangent_world;
-                    if normal_impulse <= 0.0 && tangent_impulse.length_squared() == 0.0 {
+                    let Some((p, force)) = Self::contact_force(manifold, sc, &self.state.bodies, robot_is_first, inv_dt) else {
                         continue;
-                    }
-                    // The normal points from the first collider to the second; the normal impulse
-                    // pushes the first collider back along −normal.
-                    let on_first = -(manifold.data.normal * normal_impulse) + tangent_impulse;
-                    let impulse = if robot_is_first { on_first } else { -on_first };
-                    let force = vec_from_rapier(impulse * inv_dt);
-                    let (p1, p2) = manifold.data.solver_contact_world_points(sc, &self.state.bodies);
-                    let p = vec_from_rapier((p1 + p2) * 0.5);
+                    };
                     last.contact = true;
                     if !poses_ready {
                         let mut q = std::mem::take(&mut self.scratch);

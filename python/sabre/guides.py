@@ -1,0 +1,97 @@
+"""Guide sequences: input sequences a task proposes to the sampler.
+
+A guide is one more sample in the batch (see ``Task.guides``): it is rolled out and weighted like
+every other, so a poor guide only costs its slot, while a good one pulls the policy mean toward
+what the task knows. :func:`servo_guide` is the usual one: a resolved-rate (damped least squares)
+servo of a robot frame along a sequence of target poses, integrated on the kinematics over the
+horizon.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._validate import as_float_array
+from .errors import InvalidValueError
+from .scene import Scene
+
+__all__ = ["servo_guide", "rotation_log"]
+
+
+def rotation_log(r: np.ndarray) -> np.ndarray:
+    """(3,) rotation vector of a rotation matrix (3, 3)."""
+    cos = np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0)
+    angle = np.arccos(cos)
+    w = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+    if angle < 1e-9:
+        return 0.5 * w
+    if np.pi - angle < 1e-6:
+        # Near π the antisymmetric part vanishes; take the axis from the symmetric part.
+        axis = np.sqrt(np.maximum((np.diag(r) + 1.0) / 2.0, 0.0))
+        k = int(np.argmax(axis))
+        others = np.arange(3) != k
+        axis[others] *= np.sign(r[k, others] + r[others, k])
+        return angle * axis / np.linalg.norm(axis)
+    return angle / (2.0 * np.sin(angle)) * w
+
+
+def _twist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """World-frame (linear, angular) displacement taking pose a to pose b."""
+    return np.r_[b[:3, 3] - a[:3, 3], rotation_log(b[:3, :3] @ a[:3, :3].T)]
+
+
+def servo_guide(
+    scene: Scene,
+    q0: np.ndarray,
+    targets: np.ndarray,
+    dt: float,
+    frame: str = "grasp",
+    gain: float = 2.0,
+    max_linear: float = 0.3,
+    max_angular: float = 0.6,
+    velocity_limit: np.ndarray | None = None,
+    damping: float = 1e-3,
+    joint_margin: float = 0.05,
+) -> np.ndarray:
+    """(K, nu) joint velocities that servo ``frame`` along ``targets`` (K+1, 4, 4) from q0 (nq,).
+
+    Step k commands v_k = J⁺(ξ_k + gain·e_k): ξ_k the targets' own motion from k to k+1 (feed
+    forward), e_k the pose error at k (world frame, linear then rotation vector), the Cartesian
+    rate capped at ``max_linear`` (m/s) and ``max_angular`` (rad/s), J⁺ the damped least-squares
+    inverse of the frame's Jacobian. Velocities are clipped to ``velocity_limit`` (default: the
+    URDF limits) and to what keeps every joint ``joint_margin`` (rad or m) inside its limits; q is
+    integrated with step dt, so the guide is what the servo would do on the kinematics alone.
+    """
+    q = as_float_array("q0", q0, (scene.nq,)).copy()
+    targets = np.asarray(targets, dtype=np.float64)
+    if targets.ndim != 3 or targets.shape[1:] != (4, 4) or len(targets) < 2:
+        raise InvalidValueError(f"targets: expected shape (K+1, 4, 4) with K >= 1, got {targets.shape}")
+    if not (np.isfinite(dt) and dt > 0.0):
+        raise InvalidValueError(f"dt must be positive and finite, got {dt}")
+    limit = scene.dq_limit if velocity_limit is None else np.minimum(scene.dq_limit, np.asarray(velocity_limit, dtype=np.float64))
+    lower = scene.q_lower + joint_margin
+    upper = scene.q_upper - joint_margin
+    core = scene._core
+    k_steps = len(targets) - 1
+    out = np.zeros((k_steps, scene.nu))
+    eye = damping * np.eye(6)
+    for k in range(k_steps):
+        pose = core.fk(q, frame)
+        jac = core.jacobian(q, frame)
+        rate = _twist(targets[k], targets[k + 1]) / dt + gain * _twist(pose, targets[k])
+        lin, ang = np.linalg.norm(rate[:3]), np.linalg.norm(rate[3:])
+        if lin > max_linear:
+            rate[:3] *= max_linear / lin
+        if ang > max_angular:
+            rate[3:] *= max_angular / ang
+        v = jac.T @ np.linalg.solve(jac @ jac.T + eye, rate)
+        # One common factor keeps the direction when a joint saturates.
+        over = np.max(np.abs(v) / limit)
+        if over > 1.0:
+            v /= over
+        # Stop a joint at its margin rather than carry it through the limit.
+        v = np.where((q + dt * v > upper) & (v > 0.0), np.maximum(upper - q, 0.0) / dt, v)
+        v = np.where((q + dt * v < lower) & (v < 0.0), np.minimum(lower - q, 0.0) / dt, v)
+        out[k] = v
+        q = q + dt * v
+    return out
