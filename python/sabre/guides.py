@@ -59,7 +59,8 @@ def servo_guide(
     forward), e_k the pose error at k (world frame, linear then rotation vector), the Cartesian
     rate capped at ``max_linear`` (m/s) and ``max_angular`` (rad/s), J⁺ the damped least-squares
     inverse of the frame's Jacobian. Velocities are clipped to ``velocity_limit`` (default: the
-    URDF limits) and to what keeps every joint ``joint_margin`` (rad or m) inside its limits; q is
+    URDF limits); a joint that would cross ``joint_margin`` (rad or m) inside its limits is held
+    there and the others re-solved for the rest of the rate. q is
     integrated with step dt, so the guide is what the servo would do on the kinematics alone.
     """
     q = as_float_array("q0", q0, (scene.nq,)).copy()
@@ -84,14 +85,27 @@ def servo_guide(
             rate[:3] *= max_linear / lin
         if ang > max_angular:
             rate[3:] *= max_angular / ang
-        v = jac.T @ np.linalg.solve(jac @ jac.T + eye, rate)
-        # One common factor keeps the direction when a joint saturates.
+        # Joints that would cross their margin are held at it and the rest re-solved for the
+        # remaining rate (clamp and re-solve), so the other joints, the base among them, take over.
+        free = np.ones(scene.nq, dtype=bool)
+        fixed_v = np.zeros(scene.nq)
+        for _ in range(3):
+            jf = jac[:, free]
+            v = fixed_v.copy()
+            v[free] = jf.T @ np.linalg.solve(jf @ jf.T + eye, rate - jac[:, ~free] @ fixed_v[~free])
+            stop_up = free & (q + dt * v > upper) & (v > 0.0)
+            stop_down = free & (q + dt * v < lower) & (v < 0.0)
+            if not (stop_up.any() or stop_down.any()):
+                break
+            fixed_v[stop_up] = np.maximum(upper - q, 0.0)[stop_up] / dt
+            fixed_v[stop_down] = np.minimum(lower - q, 0.0)[stop_down] / dt
+            free &= ~(stop_up | stop_down)
+        v = np.where((q + dt * v > upper) & (v > 0.0), np.maximum(upper - q, 0.0) / dt, v)
+        v = np.where((q + dt * v < lower) & (v < 0.0), np.minimum(lower - q, 0.0) / dt, v)
+        # One common factor keeps the direction when a joint saturates its speed.
         over = np.max(np.abs(v) / limit)
         if over > 1.0:
             v /= over
-        # Stop a joint at its margin rather than carry it through the limit.
-        v = np.where((q + dt * v > upper) & (v > 0.0), np.maximum(upper - q, 0.0) / dt, v)
-        v = np.where((q + dt * v < lower) & (v < 0.0), np.minimum(lower - q, 0.0) / dt, v)
         out[k] = v
         q = q + dt * v
     return out

@@ -203,6 +203,8 @@ class OpenObject(Task):
     guide_fine_speed: float = 0.05
     guide_gain: float = 2.0
     open_speeds: tuple[float, ...] = (0.1, 0.05)
+    #: handle speed (m/s) above which the object is taken to open by itself (see running_ahead)
+    runaway_speed: float = 0.15
     extra: costs.Cost = field(default_factory=costs.Cost)
 
     phases = ("approach", "insert", "hook", "open")
@@ -328,7 +330,7 @@ class OpenObject(Task):
             across, along = self.pocket_error(scene, x, "hook")
             if across < self.hook_tolerance and along < self.along_tolerance and angle < self.switch_angle:
                 return "open"
-        if phase == "open" and not self.success(scene, x):
+        if phase == "open" and not self.success(scene, x) and not self.running_ahead(scene, x):
             dp, _ = self.approach_error(scene, x, "open")
             if dp > self.slip_distance or abs(self.lateral_error(scene, x)) > self.slip_lateral:
                 return "approach"
@@ -350,12 +352,24 @@ class OpenObject(Task):
         travel = self.handle_travel(scene, float(o[0]))
         end = min(self.object_setpoint(scene), scene.o_upper[0])
         out = []
-        for speed in self.open_speeds:
+        speeds = list(self.open_speeds)
+        own = float(x[2 * nq + no]) * travel
+        if own > max(speeds):
+            speeds.insert(0, own)  # follow the object at its own pace
+        for speed in speeds:
             rate = speed / max(travel, 1e-6)
             openings = np.minimum(o[0] + rate * dt * np.arange(steps + 1), max(end, o[0]))
             targets = np.stack([scene.object_fk([v], "handle_frame") @ offset for v in openings])
             out.append(servo_guide(scene, q, targets, dt, gain=self.guide_gain, max_linear=2.0 * speed + 0.05, max_angular=2.0))
         return np.stack(out)
+
+    def running_ahead(self, scene: Scene, x: np.ndarray) -> bool:
+        """Whether the object opens by itself faster than ``runaway_speed`` (m/s at the handle), as
+        a dishwasher door does past its balance point. The hand then rides along (its finger sits
+        in the door's path) instead of starting over from the approach."""
+        nq, no = scene.nq, scene.no
+        rate = float(x[2 * nq + no])
+        return rate * self.handle_travel(scene, float(x[2 * nq])) > self.runaway_speed
 
     def noise_scale(self, scene: Scene, x: np.ndarray, phase: str) -> float:
         if phase == "open":
