@@ -16,7 +16,7 @@ from .errors import (
     UnknownFrameError,
     UrdfError,
 )
-from . import costs, scenarios, tasks
+from . import costs, guides, scenarios, tasks
 from .controller import VARIANTS, Controller, ControllerConfig, Episode, likelihood_weights, paper_start_state, run_episode
 from .realtime import RealtimeCascade, TickResult
 from .scene import OBJECTS, ROBOTS, Scene
@@ -36,6 +36,7 @@ __all__ = [
     "RolloutResult",
     "Plant",
     "Trace",
+    "Contact",
     "LowLevelController",
     "SafetyFilter",
     "SafetyConfig",

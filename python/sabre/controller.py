@@ -394,7 +394,8 @@ def run_episode(
 
     The controller re-plans every 1/replan_rate s of simulated time from the plant's state; in
     between, the inner loop interpolates its reference and tracks it with the low-level controller.
-    ``on_replan(t, x, plant, controller)`` runs before each re-plan (for disturbances). Stops
+    ``on_replan(t, x, plant, controller)`` runs before each re-plan (for disturbances); returning
+    True ends the episode there. Stops
     ``settle_time`` after the task succeeds if ``stop_on_success``. A progress bar (tqdm) shows for
     runs longer than 10 s of simulated time unless ``progress=False``.
     """
@@ -426,8 +427,8 @@ def run_episode(
     for _ in range(n_plans):
         x = plant.state
         t = plant.time
-        if on_replan is not None:
-            on_replan(t, x, plant, controller)
+        if on_replan is not None and on_replan(t, x, plant, controller) is True:
+            break
         stats = controller.update(x, t)
         planning_times.append(stats["iteration_time"])
         trace = plant.follow(low_level, controller.nominal, controller.nominal_t0, controller.config.dt, steps_per_plan, record_every,
