@@ -284,3 +284,27 @@ def test_skipping_quiescent_steps_changes_nothing(scenes, motions, name):
     np.testing.assert_allclose(a.states[:, :, O + 1], b.states[:, :, O + 1], atol=2e-3)
     np.testing.assert_array_equal(a.contact, b.contact)
     assert not a.contact[:, :200].any()
+
+
+def test_contact_report_sums_to_the_wrist_wrench():
+    """Plant.contacts() lists the contact points of the last step: pulling on the hooked handle,
+    the hook touches the handle, and the forces on the links beyond the wrist sensor add up to
+    the sensor's force reading; with nothing touching the list is empty."""
+    scene = sabre.Scene.load(obj="shelf")
+    hooked = sabre.scenarios.hooked_state(scene)
+    plant = sabre.Plant(scene)
+    low = sabre.LowLevelController(scene, dt=plant.dt)
+    plant.reset(hooked)
+    pull = np.zeros(scene.nq)
+    pull[0] = -0.05  # back the base away from the door
+    plant.track(low, pull, steps=100)
+    contacts = plant.contacts()
+    assert contacts and plant.contact
+    assert {c.robot_link for c in contacts} <= {"panda_hand", "hook_finger", "panda_link7", "panda_link5", "panda_link6"}
+    assert "handle" in {c.object_link for c in contacts}
+    beyond_sensor = sum(c.force for c in contacts if c.robot_link in ("panda_hand", "hook_finger"))
+    np.testing.assert_allclose(beyond_sensor, plant.wrench[:3], atol=1e-6 + 1e-9 * np.abs(plant.wrench[:3]).max())
+    assert np.linalg.norm(plant.wrench[:3]) > 1.0
+    plant.reset(scene.default_state())
+    plant.step(np.zeros(scene.nq))
+    assert plant.contacts() == []
