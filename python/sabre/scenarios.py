@@ -287,7 +287,7 @@ class ManipulationResult:
 
 
 def object_manipulation(variant: str = "IO", obj: str = "shelf", seed: int = 0, duration: float = 60.0, *,
-                        replan_rate: float = 20.0) -> ManipulationResult:
+                        replan_rate: float = 50.0) -> ManipulationResult:
     """OpenObject from :func:`~sabre.controller.paper_start_state`; violations per ZBF class."""
     scene = Scene.load(obj=obj)
     ctrl = Controller(scene, tasks.OpenObject(), ControllerConfig(variant=variant, seed=seed))
