@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._validate import as_float_array, as_positive
+from .guides import rotation_log
 from .scene import Scene
 
 __all__ = ["ScriptedMotion", "hook_and_pull"]
@@ -33,22 +34,6 @@ class ScriptedMotion:
     phases: np.ndarray
     planned_states: np.ndarray
     planned_opening: np.ndarray
-
-
-def _log_rotation(r: np.ndarray) -> np.ndarray:
-    """Rotation vector of a rotation matrix."""
-    cos = np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0)
-    angle = np.arccos(cos)
-    w = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
-    if angle < 1e-9:
-        return 0.5 * w
-    if np.pi - angle < 1e-6:
-        # Near π the antisymmetric part vanishes; take the axis from the symmetric part.
-        axis = np.sqrt(np.maximum((np.diag(r) + 1.0) / 2.0, 0.0))
-        k = int(np.argmax(axis))
-        axis[np.arange(3) != k] *= np.sign(r[k, np.arange(3) != k] + r[np.arange(3) != k, k])
-        return angle * axis / np.linalg.norm(axis)
-    return angle / (2.0 * np.sin(angle)) * w
 
 
 def _offset(pose: np.ndarray, xyz: tuple[float, float, float]) -> np.ndarray:
@@ -109,7 +94,7 @@ def hook_and_pull(
         out = np.eye(4)
         out[:3, 3] = (1 - s) * a[:3, 3] + s * b[:3, 3]
         rel = a[:3, :3].T @ b[:3, :3]
-        w = _log_rotation(rel) * s
+        w = rotation_log(rel) * s
         angle = np.linalg.norm(w)
         if angle < 1e-12:
             out[:3, :3] = a[:3, :3]
@@ -161,7 +146,7 @@ def hook_and_pull(
             s = (i + 1) / steps
             desired = pose_at(s)
             current = scene.fk(q, "grasp")
-            err = np.concatenate([desired[:3, 3] - current[:3, 3], _log_rotation(desired[:3, :3] @ current[:3, :3].T)])
+            err = np.concatenate([desired[:3, 3] - current[:3, 3], rotation_log(desired[:3, :3] @ current[:3, :3].T)])
             twist = err / dt * 0.5
             J = scene.jacobian(q, "grasp")
             Jw = J * w_inv
