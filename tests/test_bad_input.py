@@ -321,6 +321,8 @@ FRAME_CALLS = {
     "jacobian unknown": lambda s: s.jacobian(np.zeros(s.nq), "tool0"),
     "object_fk robot frame": lambda s: s.object_fk(np.zeros(s.no), "grasp"),
     "object_fk unknown": lambda s: s.object_fk(np.zeros(s.no), "knob"),
+    "object_fk_many unknown": lambda s: s.object_fk_many(np.zeros((3, s.no)), "knob"),
+    "servo_guide unknown": lambda s: sabre.guides.servo_guide(s, np.zeros(s.nq), np.stack([np.eye(4)] * 3), 0.015, frame="gripper"),
 }
 
 
@@ -426,6 +428,7 @@ CORE_CALLS = {
     "Scene.jacobian": (lambda c, a: c.scene.jacobian(a, "grasp"), "nq"),
     "Scene.object_fk": (lambda c, a: c.scene.object_fk(a, "handle_frame"), "no"),
     "Scene.mass_matrix_and_gravity": (lambda c, a: c.scene.mass_matrix_and_gravity(a), "nq"),
+    "Scene.servo_guide q0": (lambda c, a: c.scene.servo_guide(a, np.stack([np.eye(4)] * 3), 0.015, "grasp", 2.0, 0.3, 0.6, None, 1e-3, 0.05), "nq"),
     "RolloutModel.rollout x0": (lambda c, a: c.model.rollout(a, np.zeros((1, 1, c.nq)), None), "nx"),
     "Plant.reset": (lambda c, a: c.plant.reset(a), "nx"),
     "Plant.step": (lambda c, a: c.plant.step(a), "nq"),

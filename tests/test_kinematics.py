@@ -162,6 +162,12 @@ def test_handle_follows_the_documented_path(name):
             # the drawer translates by exactly o along its axis, orientation unchanged
             np.testing.assert_allclose(T[:3, 3] - closed[:3, 3], o * axis, atol=1e-12)
             np.testing.assert_allclose(T[:3, :3], closed[:3, :3], atol=1e-12)
+    # The batched call (used by guides) gives the poses just checked, in any leading shape.
+    openings = np.linspace(0.0, spec["upper"], 6).reshape(2, 3, 1)
+    batch = scene.object_fk_many(openings, "handle_frame")
+    assert batch.shape == (2, 3, 4, 4)
+    for o, T in zip(openings.reshape(-1), batch.reshape(-1, 4, 4)):
+        np.testing.assert_array_equal(T, scene.object_fk([o], "handle_frame"))
 
 
 def test_default_object_placement_is_documented():

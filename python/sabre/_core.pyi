@@ -52,6 +52,20 @@ class Scene:
     def fk_many(self, q: npt.NDArray[np.float64], frame: str) -> npt.NDArray[np.float64]: ...
     def jacobian(self, q: npt.NDArray[np.float64], frame: str) -> npt.NDArray[np.float64]: ...
     def object_fk(self, o: npt.NDArray[np.float64], frame: str) -> npt.NDArray[np.float64]: ...
+    def object_fk_many(self, o: npt.NDArray[np.float64], frame: str) -> npt.NDArray[np.float64]: ...
+    def servo_guide(
+        self,
+        q0: npt.NDArray[np.float64],
+        targets: npt.NDArray[np.float64],
+        dt: float,
+        frame: str,
+        gain: float,
+        max_linear: float,
+        max_angular: float,
+        velocity_limit: npt.NDArray[np.float64] | None,
+        damping: float,
+        joint_margin: float,
+    ) -> npt.NDArray[np.float64]: ...
     def mass_matrix_and_gravity(self, q: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
 
 class RolloutResult:

@@ -222,6 +222,14 @@ class Scene:
         """(4, 4) world pose of an object frame (e.g. ``handle_frame``) at object configuration o (no,)."""
         return self._core.object_fk(as_float_array("o", o, (self.no,)), str(frame))
 
+    def object_fk_many(self, o: np.ndarray, frame: str) -> np.ndarray:
+        """(..., 4, 4) world poses of an object frame for object configurations o (..., no), computed in Rust."""
+        o = np.asarray(o)
+        if o.ndim < 1 or o.shape[-1] != self.no:
+            raise ShapeError(f"o: expected shape (..., {self.no}), got {o.shape}")
+        flat = as_float_array("o", o.reshape(-1, self.no), (None, self.no))
+        return self._core.object_fk_many(flat, str(frame)).reshape(o.shape[:-1] + (4, 4))
+
     def mass_matrix(self, q: Sequence[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Robot joint-space mass matrix (nq, nq) and gravity torque (nq,) at q."""
         return self._core.mass_matrix_and_gravity(as_float_array("q", q, (self.nq,)))

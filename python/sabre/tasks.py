@@ -359,7 +359,7 @@ class OpenObject(Task):
         for speed in speeds:
             rate = speed / max(travel, 1e-6)
             openings = np.minimum(o[0] + rate * dt * np.arange(steps + 1), max(end, o[0]))
-            targets = np.stack([scene.object_fk([v], "handle_frame") @ offset for v in openings])
+            targets = scene.object_fk_many(openings[:, None], "handle_frame") @ offset
             out.append(servo_guide(scene, q, targets, dt, gain=self.guide_gain, max_linear=2.0 * speed + 0.05, max_angular=2.0))
         return np.stack(out)
 

@@ -1,6 +1,7 @@
 //! The MPPI-style sampler (paper Sec. III-A and V): Gaussian policy, cost-scale-invariant weights, clipped
 //! gradient step, nominal and zero sequences always sampled, best samples reused, receding horizon, smoothing.
 
+pub mod guide;
 pub mod smoothing;
 pub mod weights;
 
@@ -14,6 +15,7 @@ use rand_distr::{Distribution, StandardNormal};
 use crate::cost::Cost;
 use crate::error::{ensure_finite, Result, SabreError};
 use crate::sim::{RolloutBatch, RolloutModel};
+pub use guide::{servo_guide, ServoGuideConfig};
 pub use smoothing::SavitzkyGolay;
 pub use weights::{effective_sample_size, weights, LikelihoodMapping};
 

@@ -249,6 +249,59 @@ impl PyScene {
         array(py, j.transpose().as_slice().to_vec(), &[6, self.inner.nq()])
     }
 
+    /// Joint velocities (K, nu) servoing `frame` along target poses (K+1, 4, 4) from q0 (nq,):
+    /// the resolved-rate guide of `sabre.guides.servo_guide`.
+    #[pyo3(signature = (q0, targets, dt, frame, gain, max_linear, max_angular, velocity_limit, damping, joint_margin))]
+    #[allow(clippy::too_many_arguments)]
+    fn servo_guide<'py>(
+        &self,
+        py: Python<'py>,
+        q0: PyReadonlyArrayDyn<'py, f64>,
+        targets: PyReadonlyArrayDyn<'py, f64>,
+        dt: f64,
+        frame: &str,
+        gain: f64,
+        max_linear: f64,
+        max_angular: f64,
+        velocity_limit: Option<PyReadonlyArrayDyn<'py, f64>>,
+        damping: f64,
+        joint_margin: f64,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let nq = self.inner.nq();
+        let (out, steps) = run(|| {
+            let q0 = view("q0", &q0, &[nq as isize])?;
+            let targets = view("targets", &targets, &[-1, 4, 4])?;
+            let poses: Vec<nalgebra::Isometry3<f64>> = targets.chunks(16).map(|m| isometry("targets", m)).collect::<crate::Result<_>>()?;
+            let velocity_limit = match &velocity_limit {
+                Some(v) => Some(view("velocity_limit", v, &[nq as isize])?.to_vec()),
+                None => None,
+            };
+            let config = crate::mppi::ServoGuideConfig { gain, max_linear, max_angular, velocity_limit, damping, joint_margin };
+            let out = crate::mppi::servo_guide(&self.inner, q0, &poses, dt, frame, &config)?;
+            Ok((out, poses.len().saturating_sub(1)))
+        })?;
+        array(py, out, &[steps, nq])
+    }
+
+    /// World poses (M, 4, 4) of an object frame for M object configurations (M, no).
+    fn object_fk_many<'py>(&self, py: Python<'py>, o: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let no = self.inner.no();
+        let m = o.shape().first().copied().unwrap_or(0);
+        let poses = run(|| {
+            let o = view("o", &o, &[-1, no as isize])?;
+            crate::error::ensure_finite("o", o)?;
+            let link = self.inner.object.require_link(frame)?;
+            let mut poses = Vec::new();
+            let mut out = Vec::with_capacity(m * 16);
+            for row in o.chunks(no.max(1)) {
+                self.inner.object.link_poses_into(&self.inner.object_pose, row, &mut poses);
+                out.extend_from_slice(poses[link].to_homogeneous().transpose().as_slice());
+            }
+            Ok(out)
+        })?;
+        array(py, poses, &[m, 4, 4])
+    }
+
     fn object_fk<'py>(&self, py: Python<'py>, o: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let no = self.inner.no() as isize;
         let pose = run(|| self.inner.object_fk(view("o", &o, &[no])?, frame))?;
