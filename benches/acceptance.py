@@ -30,7 +30,8 @@ def run(obj: str, seed: int, args) -> dict:
     ep = sabre.run_episode(scene, controller, args.duration, seed=seed, replan_rate=args.replan_rate, progress=False)
     wall = time.perf_counter() - start
     phases = [ep.phases[i] for i in ep.phase]
-    slips = sum(1 for a, b in zip(phases, phases[1:]) if a == "open" and b == "approach")
+    slips = sum(1 for a, b in zip(phases, phases[1:]) if a == "open" and b in ("approach", "release"))
+    releases = sum(1 for a, b in zip(phases, phases[1:]) if a != "release" and b == "release")
     return {
         "object": obj,
         "seed": seed,
@@ -41,6 +42,7 @@ def run(obj: str, seed: int, args) -> dict:
         "target_opening": task.target_opening(scene),
         "mean_wrench": ep.mean_wrench(),
         "slips": slips,
+        "releases": releases,
         "simulated": float(ep.duration),
         "wall": wall,
         "real_time_factor": float(ep.real_time_factor),
@@ -66,7 +68,7 @@ def main() -> None:
             rows.append(r)
             when = "-" if r["time_to_success"] is None else f"{r['time_to_success']:.1f} s"
             print(f"{obj:10s} seed {seed:2d}: success={r['success']!s:5s} at {when:>7s}  opening {r['final_opening']:.3f}"
-                  f"  wrench {r['mean_wrench']:.1f} N  slips {r['slips']}  rtf {r['real_time_factor']:.2f}"
+                  f"  wrench {r['mean_wrench']:.1f} N  slips {r['slips']}  releases {r['releases']}  rtf {r['real_time_factor']:.2f}"
                   f"  plan {r['plan_ms_median']:.1f} ms", flush=True)
     out = pathlib.Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

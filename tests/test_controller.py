@@ -412,3 +412,81 @@ def test_object_setpoint_clears_the_power_balance(scene):
     gap = 10.0 * resisting / (100.0 * 1.0)
     assert task.object_setpoint(scene) == pytest.approx(task.target_opening(scene) + 2 * gap, rel=1e-3)
     assert sabre.tasks.OpenObject(object_overshoot=0.1).object_setpoint(scene) == pytest.approx(task.target_opening(scene) + 0.1)
+
+
+def test_base_clearance_keeps_the_base_out_of_a_falling_door():
+    """Dishwasher door lying open (at its limit): the base clearance cost switches on where the
+    base's footprint cylinder (radius 0.53 m in the URDF, plus the margin) reaches the door's tip,
+    computed here from the door box of the URDF (the points include the box's corners), and grows as
+    w + w_s·p² with the penetration p."""
+    scene = sabre.Scene.load(obj="dishwasher")
+    term = costs.BaseClearance(margin=0.05, spacing=0.1, weight=100.0, weight_slope=1e4)
+    planner = _planner(scene, costs.Cost([term]), rollouts=3, horizon=0.015)
+    planner.set_nominal(np.zeros((1, scene.nu)), 0.0)
+    opening = scene.o_upper[0]
+    tip = scene.object_fk(np.array([opening]), "door") @ np.array([0.015, 0.0, 0.58, 1.0])  # far edge of the door box
+    reach = 0.53 + 0.05
+
+    def cost(base_x):
+        x = scene.default_state()
+        x[0] = base_x
+        x[2 * scene.nq] = opening
+        planner.sample(0.0)
+        return planner.evaluate(x)[0][1]  # the zero sequence
+
+    assert cost(tip[0] - reach - 0.2) == 0.0
+    lo, hi = tip[0] - reach - 0.2, tip[0] - reach + 0.2
+    assert cost(hi) > 0.0
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if cost(mid) == 0.0 else (lo, mid)
+    assert abs(hi - (tip[0] - reach)) <= 2e-3
+    # 0.1 m past the boundary the penetration is 0.1 m (to the step's drift of the door and base).
+    deeper = cost(hi + 0.1)
+    assert 100.0 + 1e4 * 0.098**2 <= deeper <= 100.0 + 1e4 * 0.102**2
+    # A door that is closed is out of the way of a base in front of it.
+    x = scene.default_state()
+    x[0] = tip[0] - reach
+    planner.sample(0.0)
+    assert planner.evaluate(x)[0][1] == 0.0
+    with pytest.raises(InvalidValueError):
+        costs.BaseClearance(spacing=0.0).compile(scene)
+    with pytest.raises(sabre.UnknownFrameError):
+        costs.BaseClearance(link="chassis").compile(scene)
+
+
+def test_a_door_that_falls_open_is_released_not_held():
+    """The dishwasher door (4 kg, centre of mass 0.29 m above the hinge and 0.015 m in front of it,
+    0.5 N·m friction, from the URDF) opens by itself where gravity's torque beats friction; a slip
+    while opening it then leads to the release phase, whose guide backs the hand off, and release
+    ends when the door no longer opens by itself. A shelf door (vertical hinge) never falls open."""
+    scene = sabre.Scene.load(obj="dishwasher")
+    task = sabre.tasks.OpenObject()
+    nq = scene.nq
+    for opening in (0.0, 0.05, 0.3, 0.6, 1.0):
+        x = scene.default_state()
+        x[2 * nq] = opening
+        net = 4.0 * 9.81 * (0.29 * np.sin(opening) - 0.015 * np.cos(opening)) - 0.5
+        assert task.self_opening(scene, x) == (net > 0.0), opening
+    x = scene.default_state()
+    x[2 * nq] = 0.6  # hand far from the handle: slipped
+    assert task.next_phase(scene, x, 0.0, "open") == "release"
+    assert task.next_phase(scene, x, 0.0, "approach") == "release"
+    assert task.next_phase(scene, x, 0.0, "release") == "release"
+    (guide,) = task.guides(scene, x, "release", 66, 0.015)
+    start = scene.fk(x[:nq], "grasp")
+    end = scene.fk(x[:nq] + 0.015 * guide.sum(axis=0), "grasp")
+    # Half away from the door (grasp −z), half away from the hinge axis (world y, at z = 0.07 m and
+    # the dishwasher's x = 1.2 m): the hand leaves the door's sweep.
+    radial = start[:3, 3] - np.array([1.2, start[1, 3], 0.07])
+    way = -start[:3, 2] + radial / np.linalg.norm(radial)
+    way /= np.linalg.norm(way)
+    expected = min(task.release_speed * 66 * 0.015, task.release_distance)
+    np.testing.assert_allclose(end[:3, 3] - start[:3, 3], expected * way, atol=0.01)
+    x[2 * nq] = 0.0
+    assert task.next_phase(scene, x, 0.0, "release") == "approach"
+    shelf = sabre.Scene.load(obj="shelf")
+    y = shelf.default_state()
+    y[2 * shelf.nq] = 0.6
+    assert not task.self_opening(shelf, y)
+    assert task.next_phase(shelf, y, 0.0, "open") == "approach"

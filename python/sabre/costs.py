@@ -45,6 +45,7 @@ __all__ = [
     "Power",
     "BaseBox",
     "Obstacles",
+    "BaseClearance",
     "PythonTerm",
     "CompiledCost",
 ]
@@ -264,6 +265,45 @@ class Obstacles(Term):
             "kind": "obstacles",
             "centers": centers.ravel().tolist(),
             "radii": radii.tolist(),
+            "weight": _weight("weight", self.weight),
+            "weight_slope": _weight("weight_slope", self.weight_slope),
+        }
+
+
+@dataclass(frozen=True)
+class BaseClearance(Term):
+    """Keeps the robot base's footprint clear of the object's moving parts: w + w_s · p².
+
+    The footprint is a vertical cylinder about ``link``'s origin, (radius, bottom, top) in metres
+    with heights relative to the link origin; by default the cylinder that bounds the link's URDF
+    collision primitives. It is grown by ``margin`` on every side. The moving parts are points
+    spread at most ``spacing`` apart over the collision primitives of the object's moving links; p
+    is the deepest planar penetration of a point that lies within the footprint's height band.
+    A dishwasher door falls toward the robot; the rollout model gives the base no collider, so
+    without this term the sampler cannot see the door landing on the base.
+    """
+
+    link: str = "base_link"
+    footprint: Sequence[float] | None = None
+    margin: float = 0.05
+    spacing: float = 0.1
+    weight: float = 100.0
+    weight_slope: float = 10000.0
+
+    def spec(self, scene: Scene) -> dict:
+        footprint = None
+        if self.footprint is not None:
+            footprint = as_float_array("footprint", self.footprint, (3,)).tolist()
+            if footprint[0] < 0.0 or footprint[1] > footprint[2]:
+                raise InvalidValueError(f"footprint: expected (radius >= 0, bottom, top >= bottom), got {footprint}")
+        if not (np.isfinite(self.spacing) and self.spacing > 0.0):
+            raise InvalidValueError(f"spacing must be positive and finite, got {self.spacing}")
+        return {
+            "kind": "base_clearance",
+            "link": str(self.link),
+            "footprint": footprint,
+            "margin": _weight("margin", self.margin),
+            "spacing": float(self.spacing),
             "weight": _weight("weight", self.weight),
             "weight_slope": _weight("weight_slope", self.weight_slope),
         }

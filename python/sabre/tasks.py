@@ -32,6 +32,11 @@ class SafetyWeights:
     self_collision_slope: float = 100.0
     power: float = 10.0
     p_max: float = 0.0
+    #: Keeps the base out of the sweep of the object's moving parts (not in Table I; see
+    #: :class:`sabre.costs.BaseClearance`). Zero weights leave it out.
+    base_clearance: float = 100.0
+    base_clearance_slope: float = 10000.0
+    base_link: str = "base_link"
 
     def terms(self, scene: Scene) -> costs.Cost:
         out = costs.Cost([
@@ -41,6 +46,8 @@ class SafetyWeights:
         ])
         if scene.arm_reach is not None:
             out = out + costs.ArmReach(weight=self.reach, weight_slope=self.reach_slope)
+        if (self.base_clearance > 0.0 or self.base_clearance_slope > 0.0) and self.base_link in scene.frame_names:
+            out = out + costs.BaseClearance(self.base_link, weight=self.base_clearance, weight_slope=self.base_clearance_slope)
         return out
 
 
@@ -205,9 +212,18 @@ class OpenObject(Task):
     open_speeds: tuple[float, ...] = (0.1, 0.05)
     #: handle speed (m/s) above which the object is taken to open by itself (see running_ahead)
     runaway_speed: float = 0.15
+    #: An object that opens by itself once free (see ``self_opening``) and is not held by the hook
+    #: is let go: the "release" phase backs the hand off at ``release_speed`` (m/s), up to
+    #: ``release_distance`` (m), away from the door and out of its sweep (``release_direction``),
+    #: with the object and contact costs.
+    release_speed: float = 0.4
+    release_distance: float = 0.3
+    #: opening rate (rad/s or m/s) that counts as opening by itself, within ``release_probe`` s
+    release_rate: float = 0.05
+    release_probe: float = 0.15
     extra: costs.Cost = field(default_factory=costs.Cost)
 
-    phases = ("approach", "insert", "hook", "open")
+    phases = ("approach", "insert", "hook", "open", "release")
 
     def posture_term(self, scene: Scene) -> costs.Cost:
         names = scene.joint_names
@@ -281,10 +297,20 @@ class OpenObject(Task):
         return out
 
     def cost(self, scene: Scene, phase: str) -> costs.Cost:
+        if phase == "release":
+            return (
+                costs.ObjectState([self.object_setpoint(scene)], self.object_weight)
+                + costs.Contact(self.contact_weight)
+                + self.safety.terms(scene)
+                + self.extra
+            )
         if phase in ("approach", "insert", "hook"):
             return (
                 costs.TargetPose(self.grasp_offset(scene, phase), "grasp", "handle_frame", self.approach_weight, self.approach_weight)
                 + (costs.Contact(self.contact_weight) + self.posture_term(scene) if phase == "approach" else costs.Cost())
+                # Also before the hook holds: a door that can open by itself (a dishwasher past its
+                # balance point, resting on the hand after a slip) should be let go, not held.
+                + costs.ObjectState([self.object_setpoint(scene)], self.object_weight)
                 + self.safety.terms(scene)
                 + self.extra
             )
@@ -315,7 +341,64 @@ class OpenObject(Task):
         e = handle[:3, :3].T @ (scene.fk(x[:nq], "grasp")[:3, 3] - target[:3, 3])
         return float(np.hypot(e[1], e[2])), float(abs(e[0]))
 
+    def self_opening(self, scene: Scene, x: np.ndarray) -> bool:
+        """Whether the object, left alone, opens further by itself (a dishwasher door past its
+        balance point): the rollout model run for ``release_probe`` s from x with the robot at rest
+        and moved 5 m away from the object, checked against ``release_rate``."""
+        nq, no = scene.nq, scene.no
+        if self.success(scene, x) or float(x[2 * nq]) >= scene.o_upper[0] - 1e-3:
+            return False
+        model = self._probe_model(scene)
+        free = np.array(x, dtype=np.float64)
+        away = free[:2] - scene.object_pose[:2, 3]
+        norm = float(np.linalg.norm(away))
+        free[:2] = scene.object_pose[:2, 3] + 5.0 * (away / norm if norm > 1e-9 else np.array([-1.0, 0.0]))
+        free[nq : 2 * nq] = 0.0
+        steps = max(1, int(round(self.release_probe / model.dt)))
+        end = model.rollout(free, np.zeros((1, steps, scene.nu))).states[0, -1]
+        return float(end[2 * nq + no]) > self.release_rate
+
+    def release_direction(self, scene: Scene, x: np.ndarray) -> np.ndarray:
+        """(3,) unit direction in which the hand backs off when releasing: away from the door
+        (the grasp frame's −z) and, for a hinged door, out of its sweep (away from the hinge axis,
+        found as the centre of the circle through three handle positions about the current
+        opening), half each."""
+        nq = scene.nq
+        pose = scene.fk(x[:nq], "grasp")
+        back = -pose[:3, 2]
+        if not scene.object_is_revolute:
+            return back
+        o = float(x[2 * nq])
+        p0, p1, p2 = scene.object_fk_many(np.array([[o - 0.1], [o], [o + 0.1]]), "handle_frame")[:, :3, 3]
+        a, b = p0 - p1, p2 - p1
+        normal = np.cross(a, b)
+        nn = float(normal @ normal)
+        if nn < 1e-12:
+            return back
+        centre = p1 + (float(a @ a) * np.cross(b, normal) + float(b @ b) * np.cross(normal, a)) / (2.0 * nn)
+        radial = pose[:3, 3] - centre
+        axis = normal / np.sqrt(nn)
+        radial -= float(radial @ axis) * axis
+        norm = float(np.linalg.norm(radial))
+        if norm < 1e-9:
+            return back
+        way = back + radial / norm
+        return way / float(np.linalg.norm(way))
+
+    def _probe_model(self, scene: Scene):
+        from .sim import RolloutModel
+
+        cache = self.__dict__.setdefault("_probe_models", {})
+        if id(scene) not in cache:
+            cache.clear()
+            cache[id(scene)] = (scene, RolloutModel(scene))
+        return cache[id(scene)][1]
+
     def next_phase(self, scene: Scene, x: np.ndarray, t: float, phase: str) -> str:
+        if phase == "release":
+            return "release" if self.self_opening(scene, x) else "approach"
+        if phase in ("approach", "insert", "hook") and float(x[2 * scene.nq]) > 0.0 and self.self_opening(scene, x):
+            return "release"
         if phase == "approach":
             dp, angle = self.approach_error(scene, x, "approach")
             if dp < 2.0 * self.switch_position and angle < self.switch_angle:
@@ -330,15 +413,27 @@ class OpenObject(Task):
             across, along = self.pocket_error(scene, x, "hook")
             if across < self.hook_tolerance and along < self.along_tolerance and angle < self.switch_angle:
                 return "open"
-        if phase == "open" and not self.success(scene, x) and not self.running_ahead(scene, x):
+        if phase == "open" and not self.success(scene, x):
             dp, _ = self.approach_error(scene, x, "open")
             if dp > self.slip_distance or abs(self.lateral_error(scene, x)) > self.slip_lateral:
-                return "approach"
+                if self.self_opening(scene, x):
+                    return "release"
+                if not self.running_ahead(scene, x):
+                    return "approach"
         return phase
 
     def guides(self, scene: Scene, x: np.ndarray, phase: str, steps: int, dt: float) -> np.ndarray | None:
         nq, no = scene.nq, scene.no
         q, o = x[:nq], x[2 * nq : 2 * nq + no]
+        if phase == "release":
+            if self.release_speed <= 0.0:
+                return None
+            pose = scene.fk(q, "grasp")
+            way = self.release_direction(scene, x)
+            back = np.minimum(self.release_speed * dt * np.arange(steps + 1), self.release_distance)
+            targets = np.repeat(pose[None], steps + 1, axis=0)
+            targets[:, :3, 3] += back[:, None] * way
+            return servo_guide(scene, q, targets, dt, gain=self.guide_gain, max_linear=2.0 * self.release_speed, max_angular=1.0)[None]
         offset = self.grasp_offset(scene, phase)
         if phase != "open":
             if self.guide_speed <= 0.0:
@@ -372,7 +467,7 @@ class OpenObject(Task):
         return rate * self.handle_travel(scene, float(x[2 * nq])) > self.runaway_speed
 
     def noise_scale(self, scene: Scene, x: np.ndarray, phase: str) -> float:
-        if phase == "open":
+        if phase in ("open", "release"):
             return self.noise_open
         d, _ = self.approach_error(scene, x, phase)
         return float(np.clip((d / self.noise_distance) ** 2, self.noise_floor, 1.0))

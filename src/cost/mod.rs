@@ -64,6 +64,76 @@ pub enum Term {
     BaseBox { lower: [f64; 2], upper: [f64; 2], weight: f64, weight_slope: f64 },
     /// Sphere obstacles (centre, radius) against the robot's collision spheres: w + w_s · penetration².
     Obstacles { spheres: Vec<(Point3<f64>, f64)>, weight: f64, weight_slope: f64 },
+    /// The robot base's footprint, a vertical cylinder about `base_link`'s origin (radius, and
+    /// heights `bottom`..`top` above it), kept clear of the object's moving parts, which are
+    /// represented by `points` (object link, point in the link frame): w + w_s · p², with p the
+    /// deepest planar penetration of a point inside the height band. Keeps the base out of the
+    /// sweep of a door that opens toward the robot (a dishwasher), which the rollout model, whose
+    /// base has no collider, cannot otherwise foresee.
+    BaseClearance { base_link: usize, radius: f64, bottom: f64, top: f64, points: Vec<(usize, Point3<f64>)>, weight: f64, weight_slope: f64 },
+}
+
+/// Points spread over the collision primitives of the object's moving links (in their link frames),
+/// at most `spacing` apart along each axis of each primitive's bounding box.
+pub fn moving_object_points(scene: &Scene, spacing: f64) -> Vec<(usize, Point3<f64>)> {
+    use crate::model::kinematics::Shape;
+    let tree = &scene.object;
+    let mut out = Vec::new();
+    for (link, l) in tree.links.iter().enumerate() {
+        if tree.ancestor_active_joints(link).is_empty() {
+            continue;
+        }
+        for c in &l.collisions {
+            let half = match c.shape {
+                Shape::Box { half_extents } => half_extents,
+                Shape::Sphere { radius } => nalgebra::Vector3::repeat(radius),
+                Shape::Cylinder { radius, half_length } => nalgebra::Vector3::new(radius, radius, half_length),
+                Shape::Capsule { radius, half_length } => nalgebra::Vector3::new(radius, radius, half_length + radius),
+            };
+            // Vertices of a grid over the bounding box: corners and edges, where a box first meets
+            // the footprint, are always among the points.
+            let cells = half.map(|h| ((2.0 * h / spacing).ceil() as usize).max(1));
+            for i in 0..=cells.x {
+                for j in 0..=cells.y {
+                    for k in 0..=cells.z {
+                        let at = |n: usize, of: usize, h: f64| -h + 2.0 * h * n as f64 / of as f64;
+                        let local = Point3::new(at(i, cells.x, half.x), at(j, cells.y, half.y), at(k, cells.z, half.z));
+                        out.push((link, c.origin * local));
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// (radius, bottom, top) of the vertical cylinder about a robot link's origin that bounds its
+/// collision primitives, heights relative to the link origin; None if it has none.
+pub fn link_footprint(scene: &Scene, link: usize) -> Option<(f64, f64, f64)> {
+    use crate::model::kinematics::Shape;
+    let l = scene.robot.links.get(link)?;
+    let mut bound: Option<(f64, f64, f64)> = None;
+    for c in &l.collisions {
+        let half = match c.shape {
+            Shape::Box { half_extents } => half_extents,
+            Shape::Sphere { radius } => nalgebra::Vector3::repeat(radius),
+            Shape::Cylinder { radius, half_length } => nalgebra::Vector3::new(radius, radius, half_length),
+            Shape::Capsule { radius, half_length } => nalgebra::Vector3::new(radius, radius, half_length + radius),
+        };
+        // Corners of the primitive's bounding box; an upright round primitive's own radius is tighter.
+        for corner in 0..8 {
+            let sign = |bit: usize| if corner & bit == 0 { -1.0 } else { 1.0 };
+            let p = c.origin * Point3::new(sign(1) * half.x, sign(2) * half.y, sign(4) * half.z);
+            let upright = c.origin.rotation.angle() < 1e-9;
+            let round = upright && matches!(c.shape, Shape::Cylinder { .. } | Shape::Capsule { .. } | Shape::Sphere { .. });
+            let r = if round { c.origin.translation.vector.xy().norm() + half.x } else { p.coords.xy().norm() };
+            bound = Some(match bound {
+                None => (r, p.z, p.z),
+                Some((rr, lo, hi)) => (rr.max(r), lo.min(p.z), hi.max(p.z)),
+            });
+        }
+    }
+    bound
 }
 
 /// What a term sees of one rollout step.
@@ -155,6 +225,15 @@ impl Cost {
                         finite("obstacle", &[c.x, c.y, c.z, *r])?;
                     }
                 }
+                Term::BaseClearance { base_link, radius, bottom, top, points, weight, weight_slope } => {
+                    if *base_link >= scene.robot.links.len() || points.iter().any(|(l, _)| *l >= scene.object.links.len()) {
+                        return bad("base clearance cost", "link index out of range".into());
+                    }
+                    finite("base clearance", &[*radius, *bottom, *top, *weight, *weight_slope])?;
+                    if *radius < 0.0 || bottom > top {
+                        return bad("base clearance cost", format!("needs radius >= 0 and bottom <= top, got {radius}, {bottom}..{top}"));
+                    }
+                }
             }
         }
         Ok(())
@@ -164,7 +243,7 @@ impl Cost {
     pub fn needs_object_frames(&self) -> bool {
         self.terms
             .iter()
-            .any(|t| matches!(t, Term::TargetPose { target: PoseTarget::ObjectLink { .. }, .. }))
+            .any(|t| matches!(t, Term::TargetPose { target: PoseTarget::ObjectLink { .. }, .. } | Term::BaseClearance { .. }))
     }
 
     /// Cost of one step.
@@ -237,6 +316,18 @@ impl Cost {
                         }
                     }
                     sum
+                }
+                Term::BaseClearance { base_link, radius, bottom, top, points, weight, weight_slope } => {
+                    let base = view.robot.poses[*base_link].translation.vector;
+                    let mut deepest = f64::NEG_INFINITY;
+                    for (link, local) in points {
+                        let p = view.object.poses[*link] * local;
+                        let height = p.z - base.z;
+                        if height >= *bottom && height <= *top {
+                            deepest = deepest.max(radius - ((p.x - base.x).powi(2) + (p.y - base.y).powi(2)).sqrt());
+                        }
+                    }
+                    hinge_square(deepest, *weight, *weight_slope)
                 }
             };
         }
