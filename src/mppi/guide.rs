@@ -73,7 +73,7 @@ pub fn servo_guide(scene: &Scene, q0: &[f64], targets: &[Isometry3<f64>], dt: f6
             return Err(SabreError::invalid(name, format!("must be positive and finite, got {value}")));
         }
     }
-    if !(config.gain.is_finite() && config.gain >= 0.0) || !config.joint_margin.is_finite() {
+    if !(config.gain.is_finite() && config.gain >= 0.0 && config.joint_margin.is_finite()) {
         return Err(SabreError::invalid("gain, joint_margin", "gain must be non-negative and finite, joint_margin finite"));
     }
     let link = scene.robot.require_link(frame)?;
