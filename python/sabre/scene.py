@@ -208,11 +208,15 @@ class Scene:
 
     def fk_many(self, q: np.ndarray, frame: str) -> np.ndarray:
         """(..., 4, 4) world poses of a robot frame for configurations q (..., nq), computed in Rust."""
-        q = np.asarray(q)
-        if q.ndim < 1 or q.shape[-1] != self.nq:
-            raise ShapeError(f"q: expected shape (..., {self.nq}), got {q.shape}")
-        flat = as_float_array("q", q.reshape(-1, self.nq), (None, self.nq))
-        return self._core.fk_many(flat, str(frame)).reshape(q.shape[:-1] + (4, 4))
+        return self._poses_many("q", q, self.nq, self._core.fk_many, frame)
+
+    @staticmethod
+    def _poses_many(name: str, values: np.ndarray, n: int, batched, frame: str) -> np.ndarray:
+        values = np.asarray(values)
+        if values.ndim < 1 or values.shape[-1] != n:
+            raise ShapeError(f"{name}: expected shape (..., {n}), got {values.shape}")
+        flat = as_float_array(name, values.reshape(-1, n), (None, n))
+        return batched(flat, str(frame)).reshape(values.shape[:-1] + (4, 4))
 
     def jacobian(self, q: Sequence[float] | np.ndarray, frame: str) -> np.ndarray:
         """(6, nq) geometric Jacobian of a robot frame's origin: world frame, linear rows first."""
@@ -224,11 +228,7 @@ class Scene:
 
     def object_fk_many(self, o: np.ndarray, frame: str) -> np.ndarray:
         """(..., 4, 4) world poses of an object frame for object configurations o (..., no), computed in Rust."""
-        o = np.asarray(o)
-        if o.ndim < 1 or o.shape[-1] != self.no:
-            raise ShapeError(f"o: expected shape (..., {self.no}), got {o.shape}")
-        flat = as_float_array("o", o.reshape(-1, self.no), (None, self.no))
-        return self._core.object_fk_many(flat, str(frame)).reshape(o.shape[:-1] + (4, 4))
+        return self._poses_many("o", o, self.no, self._core.object_fk_many, frame)
 
     def mass_matrix(self, q: Sequence[float] | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Robot joint-space mass matrix (nq, nq) and gravity torque (nq,) at q."""

@@ -76,7 +76,6 @@ pub enum Term {
 /// Points spread over the collision primitives of the object's moving links (in their link frames),
 /// at most `spacing` apart along each axis of each primitive's bounding box.
 pub fn moving_object_points(scene: &Scene, spacing: f64) -> Vec<(usize, Point3<f64>)> {
-    use crate::model::kinematics::Shape;
     let tree = &scene.object;
     let mut out = Vec::new();
     for (link, l) in tree.links.iter().enumerate() {
@@ -84,12 +83,7 @@ pub fn moving_object_points(scene: &Scene, spacing: f64) -> Vec<(usize, Point3<f
             continue;
         }
         for c in &l.collisions {
-            let half = match c.shape {
-                Shape::Box { half_extents } => half_extents,
-                Shape::Sphere { radius } => nalgebra::Vector3::repeat(radius),
-                Shape::Cylinder { radius, half_length } => nalgebra::Vector3::new(radius, radius, half_length),
-                Shape::Capsule { radius, half_length } => nalgebra::Vector3::new(radius, radius, half_length + radius),
-            };
+            let half = c.shape.half_extents();
             // Vertices of a grid over the bounding box: corners and edges, where a box first meets
             // the footprint, are always among the points.
             let cells = half.map(|h| ((2.0 * h / spacing).ceil() as usize).max(1));
@@ -114,12 +108,7 @@ pub fn link_footprint(scene: &Scene, link: usize) -> Option<(f64, f64, f64)> {
     let l = scene.robot.links.get(link)?;
     let mut bound: Option<(f64, f64, f64)> = None;
     for c in &l.collisions {
-        let half = match c.shape {
-            Shape::Box { half_extents } => half_extents,
-            Shape::Sphere { radius } => nalgebra::Vector3::repeat(radius),
-            Shape::Cylinder { radius, half_length } => nalgebra::Vector3::new(radius, radius, half_length),
-            Shape::Capsule { radius, half_length } => nalgebra::Vector3::new(radius, radius, half_length + radius),
-        };
+        let half = c.shape.half_extents();
         // Corners of the primitive's bounding box; an upright round primitive's own radius is tighter.
         for corner in 0..8 {
             let sign = |bit: usize| if corner & bit == 0 { -1.0 } else { 1.0 };

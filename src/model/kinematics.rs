@@ -52,6 +52,18 @@ pub enum Shape {
     Capsule { radius: f64, half_length: f64 },
 }
 
+impl Shape {
+    /// Half extents of the primitive's bounding box in its own frame.
+    pub fn half_extents(&self) -> Vector3<f64> {
+        match *self {
+            Shape::Box { half_extents } => half_extents,
+            Shape::Sphere { radius } => Vector3::repeat(radius),
+            Shape::Cylinder { radius, half_length } => Vector3::new(radius, radius, half_length),
+            Shape::Capsule { radius, half_length } => Vector3::new(radius, radius, half_length + radius),
+        }
+    }
+}
+
 #[derive(Debug, Clone)]
 pub struct Collision {
     pub name: Option<String>,

@@ -226,21 +226,7 @@ impl PyScene {
 
     /// World poses (M, 4, 4) of a robot frame for M configurations (M, nq).
     fn fk_many<'py>(&self, py: Python<'py>, q: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        let nq = self.inner.nq();
-        let m = q.shape().first().copied().unwrap_or(0);
-        let poses = run(|| {
-            let q = view("q", &q, &[-1, nq as isize])?;
-            crate::error::ensure_finite("q", q)?;
-            let link = self.inner.robot.require_link(frame)?;
-            let mut frames = crate::model::kinematics::Frames::default();
-            let mut out = Vec::with_capacity(m * 16);
-            for row in q.chunks(nq) {
-                self.inner.robot.update_frames(&nalgebra::Isometry3::identity(), row, &mut frames);
-                out.extend_from_slice(frames.poses[link].to_homogeneous().transpose().as_slice());
-            }
-            Ok(out)
-        })?;
-        array(py, poses, &[m, 4, 4])
+        poses_many(py, &self.inner.robot, &nalgebra::Isometry3::identity(), "q", &q, frame)
     }
 
     fn jacobian<'py>(&self, py: Python<'py>, q: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
@@ -285,21 +271,7 @@ impl PyScene {
 
     /// World poses (M, 4, 4) of an object frame for M object configurations (M, no).
     fn object_fk_many<'py>(&self, py: Python<'py>, o: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        let no = self.inner.no();
-        let m = o.shape().first().copied().unwrap_or(0);
-        let poses = run(|| {
-            let o = view("o", &o, &[-1, no as isize])?;
-            crate::error::ensure_finite("o", o)?;
-            let link = self.inner.object.require_link(frame)?;
-            let mut poses = Vec::new();
-            let mut out = Vec::with_capacity(m * 16);
-            for row in o.chunks(no.max(1)) {
-                self.inner.object.link_poses_into(&self.inner.object_pose, row, &mut poses);
-                out.extend_from_slice(poses[link].to_homogeneous().transpose().as_slice());
-            }
-            Ok(out)
-        })?;
-        array(py, poses, &[m, 4, 4])
+        poses_many(py, &self.inner.object, &self.inner.object_pose, "o", &o, frame)
     }
 
     fn object_fk<'py>(&self, py: Python<'py>, o: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
@@ -954,6 +926,32 @@ impl PyEnergyTank {
         let n = h.len();
         array(py, h, &[n])
     }
+}
+
+/// World poses (M, 4, 4) of one frame of `tree` (root at `root`) for M configurations (M, n).
+fn poses_many<'py>(
+    py: Python<'py>,
+    tree: &crate::model::KinematicTree,
+    root: &nalgebra::Isometry3<f64>,
+    name: &str,
+    values: &PyReadonlyArrayDyn<'py, f64>,
+    frame: &str,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    let n = tree.nq();
+    let m = values.shape().first().copied().unwrap_or(0);
+    let poses = run(|| {
+        let values = view(name, values, &[-1, n as isize])?;
+        crate::error::ensure_finite(name, values)?;
+        let link = tree.require_link(frame)?;
+        let mut frames = crate::model::kinematics::Frames::default();
+        let mut out = Vec::with_capacity(m * 16);
+        for i in 0..m {
+            tree.update_frames(root, &values[i * n..(i + 1) * n], &mut frames);
+            out.extend_from_slice(frames.poses[link].to_homogeneous().transpose().as_slice());
+        }
+        Ok(out)
+    })?;
+    array(py, poses, &[m, 4, 4])
 }
 
 fn isometry(name: &str, m: &[f64]) -> crate::Result<nalgebra::Isometry3<f64>> {
