@@ -82,7 +82,7 @@ def cases(scene: sabre.Scene, rng: np.random.Generator) -> dict[str, list[tuple]
     trace = plant.follow(controller, reference, 0.0, 0.015, 500, safety=make_filter(scene, True), tank=tank)
     energies = np.concatenate([[10.0], trace.tank_energy[:-1]])
     states = np.vstack([x0, trace.state[:-1]])
-    taus = np.vstack([np.zeros(nq), trace.tau_ext[:-1]])
+    taus = np.vstack([np.zeros(nq), trace.tau_ext_measured[:-1]])  # what the filter read before each step
     out["inner loop"] = [(states[k], trace.reference[k], taus[k], energies[k]) for k in range(500)]
 
     lower, upper = np.maximum(scene.q_lower, -6.0), np.minimum(scene.q_upper, 6.0)

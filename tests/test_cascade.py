@@ -76,7 +76,7 @@ def test_realtime_cascade_plans_in_the_background_while_ticking(scene):
     with sabre.RealtimeCascade(controller, low_level=low, inner_dt=plant.dt).start(x0) as cascade:
         first = cascade.iterations
         for _ in range(400):
-            r = cascade.tick(plant.state, plant.tau_ext, plant.time)
+            r = cascade.tick(plant.state, plant.measured_tau_ext, plant.time)
             assert np.all(np.isfinite(r.command)) and np.all(np.abs(r.command) <= scene.dq_limit + 1e-9)
             plant.step(r.torque)
         assert cascade.running

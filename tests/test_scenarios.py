@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from sabre import scenarios
 
@@ -19,6 +20,43 @@ def test_stuck_door_loads_the_held_door_and_io_keeps_the_tank_above_its_floor():
     # deterministic
     again = scenarios.stuck_door("IO", hold_seconds=2.0, release_seconds=0.2, driver="scripted")
     assert again.mean_wrench_stuck == io.mean_wrench_stuck and again.tank_min == io.tank_min
+
+
+@pytest.mark.parametrize("alpha", [1.0, 1000.0])
+def test_io_tank_books_the_measured_power_and_obeys_its_discrete_barrier(alpha):
+    """From 2.5 J, just above the 2 J floor, pulling on the held door: the tank changes each step
+    by dt·τ̂ᵀu (the measurement from before the step against the command tracked in it,
+    recomputed here from the trace), and the passivity row with rate α gives, in discrete time,
+    S_{k+1} − ε ≥ (1 − α dt)(S_k − ε): the tank never crosses its floor. The row's slack (penalty
+    Γ = 100 against ‖ũ − u‖²) relaxes it by about b/(1 + Γ‖τ̂‖²) when active, so each step may
+    fall short by dt times that (within 1 µJ here), and at the floor (where α = 1/dt leaves no
+    margin) the shortfalls may add up to the stated tolerance of 0.1 mJ."""
+    r = scenarios.stuck_door("IO", hold_seconds=3.0, release_seconds=0.2, driver="scripted", alpha=alpha, tank_initial=2.5)
+    ep = r.episode
+    dt = float(np.median(np.diff(ep.time)))
+    energy = np.concatenate([[2.5], ep.tank_energy])
+    power = np.einsum("ij,ij->i", np.vstack([np.zeros((1, 10)), ep.tau_ext_measured[:-1]]), ep.command)
+    np.testing.assert_allclose(np.diff(energy), dt * power, rtol=1e-9, atol=1e-12)
+    assert energy.min() - r.tank_floor < 0.5 * (2.5 - r.tank_floor), "the pull must drain the tank toward its floor"
+    residual = energy - r.tank_floor
+    above = residual[:-1] > 1e-3
+    assert np.all(residual[1:][above] >= (1.0 - alpha * dt) * residual[:-1][above] - 1e-6)
+    assert residual.min() >= -1e-4
+    assert ep.filter_fallbacks == 0
+
+
+def test_alpha_1000_chatters_at_the_tank_floor_and_alpha_1_does_not():
+    """Fig. 12 and Sec. V: the passivity row bounds the dissipated power by α (S − ε). From 2.05 J,
+    50 mJ above the floor, α = 1 can never dissipate more than 0.05 W and fades out smoothly; α =
+    1/dt lets through bursts of much higher power that stop dead at the floor, so the power
+    jumps. Both keep the floor."""
+    fast = scenarios.tank_chattering(1000.0, hold_seconds=3.0, release_seconds=0.2, driver="scripted", tank_initial=2.05)
+    slow = scenarios.tank_chattering(1.0, hold_seconds=3.0, release_seconds=0.2, driver="scripted", tank_initial=2.05)
+    assert slow.floor_power.seconds > 2.5 and fast.floor_power.seconds > 2.5
+    assert slow.floor_power.peak_dissipation <= 1.0 * 0.05 + 1e-4
+    assert fast.floor_power.peak_dissipation > 5.0 * slow.floor_power.peak_dissipation
+    assert fast.floor_power.variation_per_s > 5.0 * slow.floor_power.variation_per_s
+    assert min(fast.tank_min, slow.tank_min) >= 2.0 - 1e-4
 
 
 def test_power_sign_changes_counts_only_near_the_floor():

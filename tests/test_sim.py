@@ -308,3 +308,44 @@ def test_contact_report_sums_to_the_wrist_wrench():
     plant.reset(scene.default_state())
     plant.step(np.zeros(scene.nq))
     assert plant.contacts() == []
+
+
+def test_measured_tau_ext_is_a_first_order_low_pass_of_the_contact_torques():
+    """The plant's τ_ext measurement is the contact torque through a first-order low-pass of
+    bandwidth f_c: without a cutoff it equals the contact torque at every step; with one, it never
+    exceeds the largest contact torque seen so far, and once the contact ends it decays by the
+    continuous-time filter's factor e^{−2π f_c dt} per step. Pulling the hooked handle and then
+    backing off produces both contact and contact-free steps."""
+    scene = sabre.Scene.load(obj="shelf")
+    hooked = sabre.scenarios.hooked_state(scene)
+    cutoff = 30.0
+    raw_plant = sabre.Plant(scene, tau_ext_cutoff=None)
+    plant = sabre.Plant(scene, tau_ext_cutoff=cutoff)
+    decay = np.exp(-2.0 * np.pi * cutoff * plant.dt)
+    for p in (raw_plant, plant):
+        p.reset(hooked)
+    lows = [sabre.LowLevelController(scene, dt=plant.dt) for _ in range(2)]
+    pull, away = np.zeros(scene.nq), np.zeros(scene.nq)
+    pull[0], away[0] = -0.05, 0.3
+    raw, measured, raw_measured = [], [], []
+    for k in range(400):
+        u = pull if k < 200 else away
+        for p, low in zip((raw_plant, plant), lows):
+            p.step(low.torque(p.state, u))
+        raw.append(plant.tau_ext)
+        measured.append(plant.measured_tau_ext)
+        raw_measured.append((raw_plant.tau_ext, raw_plant.measured_tau_ext))
+    raw, measured = np.array(raw), np.array(measured)
+    for r, m in raw_measured:
+        np.testing.assert_array_equal(r, m)
+    assert np.abs(raw).max() > 1.0, "the pull must load the handle"
+    peak = np.maximum.accumulate(np.abs(raw), axis=0)
+    assert np.all(np.abs(measured) <= peak + 1e-12)
+    free = np.flatnonzero(np.all(raw[1:] == 0.0, axis=1)) + 1
+    free = free[np.linalg.norm(measured[free - 1], axis=1) > 1e-6]
+    assert len(free) > 20, "backing off must leave contact while the measurement still reads"
+    np.testing.assert_allclose(measured[free], decay * measured[free - 1], rtol=1e-12, atol=1e-300)
+    with pytest.raises(sabre.InvalidValueError):
+        sabre.Plant(scene, tau_ext_cutoff=0.0)
+    with pytest.raises(sabre.InvalidValueError):
+        sabre.Plant(scene, tau_ext_cutoff=float("nan"))

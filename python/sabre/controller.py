@@ -296,6 +296,8 @@ class Episode:
     (M, nu) what the low-level controller tracked (the reference after the inner filter, if any),
     wrench (M, 6), tau_ext (M, nq), contact (M,), cost (M,) nominal cost of the latest plan, phase
     (M,) phase index into ``phases``, tank_energy (M,) the energy tank after each step (J),
+    tau_ext_measured (M, nq) the plant's τ_ext measurement after each step (what the tank and the
+    passivity row read; ``tau_ext`` is the contact torque of the step itself),
     filter_fallbacks: inner-loop steps where the FILTER-QP fell back to the safe stop.
     """
 
@@ -318,6 +320,7 @@ class Episode:
     variant: str = "N"
     filter_fallbacks: int = 0
     tank_floor: float = 2.0
+    tau_ext_measured: np.ndarray | None = None
 
     @property
     def opening(self) -> np.ndarray:
@@ -419,7 +422,7 @@ def run_episode(
             bar = tqdm(total=round(duration, 3), unit="s sim", leave=False, desc=f"{scene.object_name}")
         except ImportError:
             bar = None
-    chunks: dict[str, list[np.ndarray]] = {k: [] for k in ("time", "state", "reference", "command", "tank", "wrench", "tau_ext", "contact", "cost", "phase")}
+    chunks: dict[str, list[np.ndarray]] = {k: [] for k in ("time", "state", "reference", "command", "tank", "wrench", "tau_ext", "tau_ext_measured", "contact", "cost", "phase")}
 
     planning_times = []
     success_time = None
@@ -441,6 +444,7 @@ def run_episode(
         chunks["tank"].append(trace.tank_energy)
         chunks["wrench"].append(trace.wrench)
         chunks["tau_ext"].append(trace.tau_ext)
+        chunks["tau_ext_measured"].append(trace.tau_ext_measured)
         chunks["contact"].append(trace.contact)
         chunks["cost"].append(np.full(len(times), stats["nominal_cost"]))
         chunks["phase"].append(np.full(len(times), controller.task.phases.index(controller.phase)))
@@ -461,6 +465,7 @@ def run_episode(
         reference=data["reference"],
         wrench=data["wrench"],
         tau_ext=data["tau_ext"],
+        tau_ext_measured=data["tau_ext_measured"],
         contact=data["contact"].astype(bool),
         cost=data["cost"],
         phase=data["phase"].astype(int),

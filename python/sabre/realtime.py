@@ -128,6 +128,10 @@ class RealtimeCascade:
     def tick(self, x: Sequence[float] | np.ndarray, tau_ext: Sequence[float] | np.ndarray, t: float) -> TickResult:
         """One inner-loop step from the measured state x (nx,) and external torques τ_ext (nq,)
         at time t: reference → FILTER-QP with the tank (variants I, IO) → tank → low-level torque.
+        The tank integrates this τ_ext against the returned command, the same pair the passivity
+        row constrained, so the floor holds step by step. τ_ext should be a band-limited estimate
+        (a momentum observer, a filtered wrist sensor; in simulation :attr:`Plant.measured_tau_ext`):
+        raw impact spikes that vanish between steps let the command through in between and chatter.
         The state also becomes the outer loop's next starting point."""
         if self._error is not None:
             raise self._error

@@ -34,6 +34,9 @@ __all__ = [
     "obstacle_corridor",
     "object_manipulation",
     "power_sign_changes_per_s",
+    "tank_power",
+    "FloorPower",
+    "power_near_floor",
 ]
 
 
@@ -63,11 +66,23 @@ class _OpenFromHooked(tasks.OpenObject):
         return "open"
 
 
-def power_sign_changes_per_s(episode: Episode, mask: np.ndarray, near: float = 0.5) -> float:
-    """Sign changes per second of the filtered power τ_extᵀu over the samples in ``mask`` whose
-    tank energy is within ``near`` J of the floor (consecutive such samples only)."""
+def tank_power(episode: Episode) -> np.ndarray:
+    """(M,) the power τ̂ᵀu the energy tank integrated in each recorded step: the command tracked in
+    the step against the τ_ext measurement from before it (the previous row's
+    ``tau_ext_measured``; zero before the first). Needs every step recorded (``record_every=1``)."""
     u = episode.reference if episode.command is None else episode.command
-    p = np.einsum("ij,ij->i", episode.tau_ext, u)
+    tau = episode.tau_ext if episode.tau_ext_measured is None else episode.tau_ext_measured
+    before = np.vstack([np.zeros((1, tau.shape[1])), tau[:-1]]) if len(tau) else tau
+    return np.einsum("ij,ij->i", before, u)
+
+
+def power_sign_changes_per_s(episode: Episode, mask: np.ndarray, near: float = 0.5, deadband: float = 0.01) -> float:
+    """Sign changes per second of the filtered power τ̂ᵀu (:func:`tank_power`) over the samples in
+    ``mask`` whose tank energy is within ``near`` J of the floor (consecutive such samples only).
+    Power within ``deadband`` W of zero has no sign: at the floor the row holds τ̂ᵀu near 0 and its
+    µW-scale solver residue flips sign at random, which is not the chattering of Fig. 12."""
+    p = tank_power(episode)
+    p = np.where(np.abs(p) > deadband, p, 0.0)
     if episode.tank_energy is None or len(episode.tank_energy) != len(p):
         return 0.0
     sel = mask & (episode.tank_energy - episode.tank_floor < near)
@@ -78,6 +93,40 @@ def power_sign_changes_per_s(episode: Episode, mask: np.ndarray, near: float = 0
     pairs = sel[1:] & sel[:-1] & (s[1:] != 0) & (s[:-1] != 0)
     changes = int(np.count_nonzero(pairs & (s[1:] != s[:-1])))
     return changes / (sel.sum() * dt)
+
+
+@dataclass(frozen=True)
+class FloorPower:
+    """How the tank's power behaves near its floor (Fig. 12): over the samples of a mask whose tank
+    energy is within ``near`` J of the floor. The passivity row bounds the dissipation there by
+    α·(S − ε), so with α = 1 it fades out smoothly, while α = 1/dt still lets through bursts of
+    high power that stop dead at the floor: the chattering the paper describes.
+
+    seconds: time spent near the floor; peak_dissipation: largest −τ̂ᵀu (W);
+    variation_per_s: total variation of τ̂ᵀu per second (W/s), how hard the power jumps;
+    sign_changes_per_s: :func:`power_sign_changes_per_s` over the same samples.
+    """
+
+    seconds: float
+    peak_dissipation: float
+    variation_per_s: float
+    sign_changes_per_s: float
+
+
+def power_near_floor(episode: Episode, mask: np.ndarray, near: float = 0.05) -> FloorPower:
+    """:class:`FloorPower` of an episode recorded at every step, over ``mask`` (M,)."""
+    p = tank_power(episode)
+    if episode.tank_energy is None or len(episode.tank_energy) != len(p):
+        return FloorPower(0.0, 0.0, 0.0, 0.0)
+    dt = float(np.median(np.diff(episode.time))) if len(episode.time) > 1 else 1e-3
+    sel = mask & (episode.tank_energy - episode.tank_floor < near)
+    pairs = sel[1:] & sel[:-1]
+    return FloorPower(
+        seconds=float(sel.sum() * dt),
+        peak_dissipation=float(max(0.0, (-p[sel]).max())) if sel.any() else 0.0,
+        variation_per_s=float(np.abs(np.diff(p))[pairs].sum() / (pairs.sum() * dt)) if pairs.any() else 0.0,
+        sign_changes_per_s=power_sign_changes_per_s(episode, mask, near=near),
+    )
 
 
 def _scripted_episode(scene, variant, safety, x0, hold_seconds, release_seconds, tank_initial):
@@ -92,7 +141,7 @@ def _scripted_episode(scene, variant, safety, x0, hold_seconds, release_seconds,
     low.reset()
     inner = SafetyFilter(scene, safety) if "I" in variant else None
     tank = EnergyTank(tank_initial, safety.tank_floor)
-    chunks = {k: [] for k in ("time", "state", "reference", "command", "tank", "wrench", "tau_ext", "contact")}
+    chunks = {k: [] for k in ("time", "state", "reference", "command", "tank", "wrench", "tau_ext", "tau_ext_measured", "contact")}
     total = hold_seconds + release_seconds
     t = 0.0
     chunk = 0.05
@@ -106,11 +155,12 @@ def _scripted_episode(scene, variant, safety, x0, hold_seconds, release_seconds,
         chunks["tank"].append(tr.tank_energy)
         chunks["wrench"].append(tr.wrench)
         chunks["tau_ext"].append(tr.tau_ext)
+        chunks["tau_ext_measured"].append(tr.tau_ext_measured)
         chunks["contact"].append(tr.contact)
         t = plant.time
     d = {k: np.concatenate(v) for k, v in chunks.items()}
     return Episode(scene=scene, time=d["time"], state=d["state"], reference=d["reference"], wrench=d["wrench"],
-                   tau_ext=d["tau_ext"], contact=d["contact"].astype(bool), cost=np.zeros(len(d["time"])),
+                   tau_ext=d["tau_ext"], tau_ext_measured=d["tau_ext_measured"], contact=d["contact"].astype(bool), cost=np.zeros(len(d["time"])),
                    phase=np.zeros(len(d["time"]), dtype=int), phases=("pull",), success=False, time_to_success=None,
                    command=d["command"], tank_energy=d["tank"], variant=variant,
                    filter_fallbacks=0 if inner is None else int(inner.stats["fallbacks"]), tank_floor=tank.floor)
@@ -131,24 +181,29 @@ class StuckDoorResult:
     tank_min: float
     opening_after_release: float
     power_sign_changes_per_s: float
+    #: the power near the tank floor during the stuck period (within 0.05 J)
+    floor_power: FloorPower
 
 
 def stuck_door(variant: str = "IO", seed: int = 0, hold_seconds: float = 5.0, release_seconds: float = 10.0,
                obj: str = "shelf", alpha: float = 1.0, *, driver: str = "controller", replan_rate: float = 50.0,
-               tank_initial: float = 10.0, reach_timeout: float = 30.0) -> StuckDoorResult:
+               tank_initial: float = 10.0, reach_timeout: float = 30.0, hold_at: float = 0.2) -> StuckDoorResult:
     """The door is held for hold_seconds while the robot pulls on it, then released.
 
     driver "controller" (the paper's experiment): the sampling-based controller opens the object
     from the paper's start (``OpenObject``, Table I defaults, slip recovery on); the door is held
-    from the moment the open phase has moved it by 0.02 (rad or m) — within ``reach_timeout`` s —
-    for ``hold_seconds``, then runs free for ``release_seconds``. The stuck period (for
-    ``mean_wrench_stuck``) is the hold window.
+    where it is once the robot has opened it to the prescribed position ``hold_at`` (rad or m from
+    its closed limit, in whichever phase: the hand sometimes drags the door while it still settles
+    the bar in the hook), within ``reach_timeout`` s, for ``hold_seconds``, then runs free for
+    ``release_seconds``. The stuck period (for ``mean_wrench_stuck``) is the hold window.
     driver "scripted": hooked by the scripted motion, the rest of the scripted pull is the
     outer-loop reference (deterministic, always loads the held door), through the inner loop of
     ``variant``; the hold starts at once.
     """
     scene = Scene.load(obj=obj)
     safety = SafetyConfig(passivity_alpha=alpha)
+    if not (np.isfinite(hold_at) and 0.0 < hold_at < scene.o_upper[0] - scene.o_lower[0]):
+        raise ValueError(f"hold_at must lie inside the object's range, got {hold_at}")
     if driver == "scripted":
         ep = _scripted_episode(scene, variant, safety, hooked_state(scene), hold_seconds, release_seconds, tank_initial)
         hold_start = 0.0
@@ -158,7 +213,7 @@ def stuck_door(variant: str = "IO", seed: int = 0, hold_seconds: float = 5.0, re
         held: dict[str, float | None] = {"from": None}
 
         def hold(t, x, plant, controller):
-            if held["from"] is None and controller.phase == "open" and x[2 * scene.nq] - scene.o_lower[0] > 0.02:
+            if held["from"] is None and x[2 * scene.nq] - scene.o_lower[0] >= hold_at:
                 held["from"] = t
             start = held["from"]
             plant.hold_object(start is not None and t < start + hold_seconds - 1e-9)
@@ -180,6 +235,7 @@ def stuck_door(variant: str = "IO", seed: int = 0, hold_seconds: float = 5.0, re
         tank_min=float(np.min(ep.tank_energy)),
         opening_after_release=float(ep.opening[-1] - ep.opening[i_rel]),
         power_sign_changes_per_s=power_sign_changes_per_s(ep, stuck),
+        floor_power=power_near_floor(ep, stuck),
     )
 
 
@@ -193,13 +249,16 @@ class ChatteringResult:
     alpha: float
     power_sign_changes_per_s: float
     tank_min: float
+    floor_power: FloorPower
 
 
 def tank_chattering(alpha: float, seed: int = 0, hold_seconds: float = 5.0, release_seconds: float = 0.5, *,
-                    driver: str = "controller", obj: str = "shelf") -> ChatteringResult:
-    """The stuck door with variant IO and passivity rate α; α = 1000 should chatter at the floor."""
-    r = stuck_door("IO", seed, hold_seconds, release_seconds, obj, alpha, driver=driver)
-    return ChatteringResult(episode=r.episode, alpha=float(alpha), power_sign_changes_per_s=r.power_sign_changes_per_s, tank_min=r.tank_min)
+                    driver: str = "controller", obj: str = "shelf", tank_initial: float = 10.0) -> ChatteringResult:
+    """The stuck door with variant IO and passivity rate α; α = 1000 should chatter at the floor.
+    A ``tank_initial`` just above the floor (2 J) reaches it sooner."""
+    r = stuck_door("IO", seed, hold_seconds, release_seconds, obj, alpha, driver=driver, tank_initial=tank_initial)
+    return ChatteringResult(episode=r.episode, alpha=float(alpha), power_sign_changes_per_s=r.power_sign_changes_per_s, tank_min=r.tank_min,
+                            floor_power=r.floor_power)
 
 
 # -- obstacle corridor -------------------------------------------------------------------------

@@ -13,6 +13,9 @@ from .errors import InvalidValueError
 from .safety import EnergyTank, SafetyFilter
 from .scene import Scene
 
+#: Default bandwidth (Hz) of :attr:`Plant.measured_tau_ext`.
+DEFAULT_TAU_EXT_CUTOFF: float = _core.DEFAULT_TAU_EXT_CUTOFF
+
 __all__ = ["RolloutModel", "RolloutResult", "Plant", "Trace", "LowLevelController", "default_threads", "MAX_THREADS"]
 
 #: Largest worker-thread count accepted (pools are cached per size).
@@ -164,7 +167,9 @@ class Trace:
         filter_status: (M,) the filter's status per step (``"solved"``, ``"almost_solved"``,
             ``"fallback"``), or None without a filter.
         tank_energy: (M,) tank energy after the step (J), or None without a tank.
-        wrench: (M, 6) wrist wrench; tau_ext: (M, nq) measured external joint torques; contact: (M,) bool.
+        wrench: (M, 6) wrist wrench; tau_ext: (M, nq) external joint torques from the contact
+            forces of the step; tau_ext_measured: (M, nq) the plant's τ_ext measurement after the
+            step (:attr:`Plant.measured_tau_ext`); contact: (M,) bool.
     """
 
     time: np.ndarray
@@ -175,6 +180,7 @@ class Trace:
     tank_energy: np.ndarray | None
     wrench: np.ndarray
     tau_ext: np.ndarray
+    tau_ext_measured: np.ndarray
     contact: np.ndarray
 
     @property
@@ -200,9 +206,17 @@ class Plant:
 
     Joint-torque input (clamped to the effort limits), gravity, every collider of robot and object,
     a wrist force-torque reading from contact forces, and fault injection (:meth:`hold_object`).
+
+    ``tau_ext_cutoff`` (Hz, or None) is the bandwidth of the external-torque measurement
+    (:attr:`measured_tau_ext`) that the inner loop's passivity row and energy tank read: a
+    first-order low-pass of the contact torques, like a real robot's momentum observer or filtered
+    wrist sensor. Rigid contacts in the simulator deliver force as per-step impulses (a finger
+    bouncing on a held door reads 0, 300, 0 N·m on consecutive steps); a controller reacting to
+    that raw signal lets the full command through between impacts and chatters.
     """
 
-    def __init__(self, scene: Scene, dt: float = 0.001, *, contact_friction: float = 0.2, solver_iterations: int = 4) -> None:
+    def __init__(self, scene: Scene, dt: float = 0.001, *, contact_friction: float = 0.2, solver_iterations: int = 4,
+                 tau_ext_cutoff: float | None = DEFAULT_TAU_EXT_CUTOFF) -> None:
         if not isinstance(scene, Scene):
             raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
         self.scene = scene
@@ -211,6 +225,7 @@ class Plant:
             as_positive("dt", dt),
             as_non_negative("contact_friction", contact_friction),
             as_count("solver_iterations", solver_iterations),
+            None if tau_ext_cutoff is None else as_positive("tau_ext_cutoff", tau_ext_cutoff),
         )
 
     @property
@@ -284,6 +299,7 @@ class Plant:
             tank_energy=readonly(d["tank_energy"]) if "tank_energy" in d else None,
             wrench=readonly(d["wrench"]),
             tau_ext=readonly(d["tau_ext"]),
+            tau_ext_measured=readonly(d["tau_ext_measured"]),
             contact=readonly(d["contact"]),
         )
 
@@ -301,6 +317,12 @@ class Plant:
     def tau_ext(self) -> np.ndarray:
         """(nq,) external joint torques of the last step, τ_ext = Σ J_cᵀ f_c."""
         return np.asarray(self._core.tau_ext, dtype=np.float64)
+
+    @property
+    def measured_tau_ext(self) -> np.ndarray:
+        """(nq,) the external-torque measurement after the last step: :attr:`tau_ext` through a
+        first-order low-pass at ``tau_ext_cutoff`` Hz (equal to it without a cutoff)."""
+        return np.asarray(self._core.measured_tau_ext, dtype=np.float64)
 
     @property
     def contact(self) -> bool:

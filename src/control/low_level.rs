@@ -119,8 +119,10 @@ pub struct TrackTrace {
     pub reference: Vec<f64>,
     /// 6 per row.
     pub wrench: Vec<f64>,
-    /// nq per row.
+    /// nq per row: the simulator's contact τ_ext of the step.
     pub tau_ext: Vec<f64>,
+    /// nq per row: the plant's τ_ext measurement after the step (`Plant::measured_tau_ext`).
+    pub tau_ext_measured: Vec<f64>,
     pub contact: Vec<bool>,
     /// With a filter only (else empty): nq per row, the filtered command that the low-level
     /// controller tracked in that step.
@@ -134,6 +136,11 @@ pub struct TrackTrace {
 /// The optional safety stage of the inner loop: FILTER-QP at every plant step and, with a tank,
 /// its passivity row fed by the plant's measured τ_ext and the tank's energy. A tank without a
 /// filter only keeps the books (the unfiltered Π_N baseline's energy).
+///
+/// The tank is integrated with the same measurement the passivity row saw and the command the
+/// filter returned, S ← S + dt τ̂_kᵀ u_k, as a controller on a real robot must (it cannot know
+/// the next reading). Then a row met without slack gives S_{k+1} − ε ≥ (1 − α dt)(S_k − ε): the
+/// floor holds by construction in discrete time, and any dip below it is slack the filter used.
 #[derive(Default)]
 pub struct InnerSafety<'a> {
     pub filter: Option<&'a mut SafetyFilter>,
@@ -159,9 +166,9 @@ pub fn follow_reference(
 
 /// [`follow_reference`] with an optional safety stage between the interpolation and the low-level
 /// controller (the paper's inner loop, Sec. IV): at each plant step, interpolate → FILTER-QP
-/// (with the passivity row when a tank is given: τ_ext of the last measured step, energy S) →
-/// low-level controller → plant step → tank update with the filtered command and the newly
-/// measured τ_ext. A filter fallback (u = 0) is tracked like any other command and recorded.
+/// (with the passivity row when a tank is given: the plant's current τ_ext measurement, energy S)
+/// → tank update with that measurement and the filtered command → low-level controller → plant
+/// step. A filter fallback (u = 0) is tracked like any other command and recorded.
 #[allow(clippy::too_many_arguments)]
 pub fn follow_reference_safe(
     plant: &mut crate::sim::Plant,
@@ -190,23 +197,23 @@ pub fn follow_reference_safe(
     let mut u_ref = vec![0.0; nq];
     let mut u = vec![0.0; nq];
     let mut status = FilterStatus::Solved;
+    let plant_dt = plant.dt();
     for step in 0..steps {
         crate::mppi::interpolate(reference, nq, (plant.time() - t0) / dt, &mut u_ref);
         match safety.as_mut() {
             Some(InnerSafety { filter: Some(filter), tank }) => {
-                let passivity = tank.as_ref().map(|t| (plant.interaction().tau_ext.as_slice(), t.energy()));
+                let passivity = tank.as_ref().map(|t| (plant.measured_tau_ext(), t.energy()));
                 let out = filter.filter(plant.state(), &u_ref, passivity)?;
                 u.copy_from_slice(&out.u);
                 status = out.status;
             }
             _ => u.copy_from_slice(&u_ref),
         }
+        if let Some(tank) = safety.as_mut().and_then(|s| s.tank.as_deref_mut()) {
+            tank.step(plant.measured_tau_ext(), &u, plant_dt)?;
+        }
         let tau = controller.torque(plant.state(), &u)?;
         plant.step(&tau)?;
-        let plant_dt = plant.dt();
-        if let Some(tank) = safety.as_mut().and_then(|s| s.tank.as_deref_mut()) {
-            tank.step(&plant.interaction().tau_ext, &u, plant_dt)?;
-        }
         if record_every > 0 && step % record_every == 0 {
             trace.time.push(plant.time());
             trace.state.extend_from_slice(plant.state());
@@ -214,6 +221,7 @@ pub fn follow_reference_safe(
             let i = plant.interaction();
             trace.wrench.extend_from_slice(&i.wrench);
             trace.tau_ext.extend_from_slice(&i.tau_ext);
+            trace.tau_ext_measured.extend_from_slice(plant.measured_tau_ext());
             trace.contact.push(i.contact);
             if let Some(s) = &safety {
                 if s.filter.is_some() {

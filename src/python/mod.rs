@@ -403,12 +403,13 @@ impl PyPlant {
 #[pymethods]
 impl PyPlant {
     #[new]
-    #[pyo3(signature = (scene, dt=0.001, contact_friction=0.2, solver_iterations=4))]
-    fn new(scene: &PyScene, dt: f64, contact_friction: f64, solver_iterations: usize) -> PyResult<Self> {
+    #[pyo3(signature = (scene, dt=0.001, contact_friction=0.2, solver_iterations=4, tau_ext_cutoff=Some(crate::sim::DEFAULT_TAU_EXT_CUTOFF)))]
+    fn new(scene: &PyScene, dt: f64, contact_friction: f64, solver_iterations: usize, tau_ext_cutoff: Option<f64>) -> PyResult<Self> {
         let config = PlantConfig {
             dt,
             contact_friction,
             solver_iterations,
+            tau_ext_cutoff,
         };
         run(|| Plant::new(scene.inner.clone(), config)).map(|p| Self { inner: Mutex::new(p) })
     }
@@ -528,6 +529,7 @@ impl PyPlant {
         d.set_item("reference", array(py, trace.reference, &[m, nq])?)?;
         d.set_item("wrench", array(py, trace.wrench, &[m, 6])?)?;
         d.set_item("tau_ext", array(py, trace.tau_ext, &[m, nq])?)?;
+        d.set_item("tau_ext_measured", array(py, trace.tau_ext_measured, &[m, nq])?)?;
         d.set_item("contact", trace.contact.into_pyarray(py).reshape(vec![m])?)?;
         if has_filter {
             d.set_item("filtered", array(py, trace.filtered, &[m, nq])?)?;
@@ -550,6 +552,10 @@ impl PyPlant {
     #[getter]
     fn tau_ext(&self) -> PyResult<Vec<f64>> {
         self.with(|p| Ok(p.interaction().tau_ext.clone()))
+    }
+    #[getter]
+    fn measured_tau_ext(&self) -> PyResult<Vec<f64>> {
+        self.with(|p| Ok(p.measured_tau_ext().to_vec()))
     }
     #[getter]
     fn contact(&self) -> PyResult<bool> {
@@ -1331,5 +1337,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(default_threads, m)?)?;
     m.add_function(wrap_pyfunction!(likelihood_weights, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("DEFAULT_TAU_EXT_CUTOFF", crate::sim::DEFAULT_TAU_EXT_CUTOFF)?;
     Ok(())
 }

@@ -4,6 +4,6 @@ pub mod plant;
 pub mod rollout;
 pub mod world;
 
-pub use plant::{Plant, PlantConfig};
+pub use plant::{Plant, PlantConfig, DEFAULT_TAU_EXT_CUTOFF};
 pub use rollout::{default_threads, RolloutBatch, RolloutConfig, RolloutModel};
 pub use world::{Interaction, SimWorld};

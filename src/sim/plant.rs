@@ -6,12 +6,19 @@ use super::world::{ContactReport, Interaction, RobotColliders, RobotDrive, SimWo
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
 use crate::model::scene::Scene;
 
+/// Default bandwidth of the plant's external-torque measurement (Hz), see [`PlantConfig::tau_ext_cutoff`].
+pub const DEFAULT_TAU_EXT_CUTOFF: f64 = 30.0;
+
 /// Settings of the plant.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlantConfig {
     pub dt: f64,
     pub contact_friction: f64,
     pub solver_iterations: usize,
+    /// Bandwidth (Hz) of the external-torque measurement: a first-order low-pass of the contact
+    /// τ_ext, standing in for a real robot's momentum observer or filtered wrist sensor. `None`
+    /// measures the solver's per-step contact torques as they are (impulse spikes included).
+    pub tau_ext_cutoff: Option<f64>,
 }
 
 impl Default for PlantConfig {
@@ -20,6 +27,7 @@ impl Default for PlantConfig {
             dt: 0.001,
             contact_friction: 0.2,
             solver_iterations: 4,
+            tau_ext_cutoff: Some(DEFAULT_TAU_EXT_CUTOFF),
         }
     }
 }
@@ -31,6 +39,10 @@ pub struct Plant {
     world: SimWorld,
     x: Vec<f64>,
     interaction: Interaction,
+    /// The low-passed τ_ext (see [`PlantConfig::tau_ext_cutoff`]).
+    measured_tau_ext: Vec<f64>,
+    /// Per-step blend factor of the measurement low-pass, 1 − e^{−2π f_c dt} (None: no low-pass).
+    measurement_blend: Option<f64>,
     applied_torque: Vec<f64>,
     time: f64,
     object_held: bool,
@@ -41,6 +53,11 @@ impl Plant {
         if !(config.contact_friction.is_finite() && config.contact_friction >= 0.0) {
             return Err(SabreError::invalid("contact_friction", "must be finite and non-negative"));
         }
+        let measurement_blend = match config.tau_ext_cutoff {
+            None => None,
+            Some(f) if f.is_finite() && f > 0.0 => Some(1.0 - (-2.0 * std::f64::consts::PI * f * config.dt).exp()),
+            Some(f) => return Err(SabreError::invalid("tau_ext_cutoff", format!("must be finite and positive (Hz) or None, got {f}"))),
+        };
         let world_config = WorldConfig {
             dt: config.dt,
             colliders: RobotColliders::All,
@@ -58,6 +75,8 @@ impl Plant {
                 tau_ext: vec![0.0; nq],
                 wrench: [0.0; 6],
             },
+            measured_tau_ext: vec![0.0; nq],
+            measurement_blend,
             applied_torque: vec![0.0; nq],
             time: 0.0,
             object_held: false,
@@ -87,6 +106,7 @@ impl Plant {
         self.interaction.contact = false;
         self.interaction.tau_ext.iter_mut().for_each(|v| *v = 0.0);
         self.interaction.wrench = [0.0; 6];
+        self.measured_tau_ext.iter_mut().for_each(|v| *v = 0.0);
         self.applied_torque.iter_mut().for_each(|v| *v = 0.0);
         self.time = 0.0;
         self.object_held = false;
@@ -109,6 +129,14 @@ impl Plant {
             )));
         }
         self.interaction.clone_from(self.world.interaction());
+        match self.measurement_blend {
+            Some(blend) => {
+                for (m, t) in self.measured_tau_ext.iter_mut().zip(&self.interaction.tau_ext) {
+                    *m += blend * (t - *m);
+                }
+            }
+            None => self.measured_tau_ext.copy_from_slice(&self.interaction.tau_ext),
+        }
         self.x = x;
         self.time += self.world.dt();
         Ok(())
@@ -119,6 +147,12 @@ impl Plant {
     }
     pub fn interaction(&self) -> &Interaction {
         &self.interaction
+    }
+    /// The external-torque measurement after the last step: τ_ext through the first-order
+    /// low-pass of [`PlantConfig::tau_ext_cutoff`]. This is what a controller on a real robot
+    /// would read; [`Interaction::tau_ext`] is the simulator's ground truth.
+    pub fn measured_tau_ext(&self) -> &[f64] {
+        &self.measured_tau_ext
     }
     /// Every robot–object contact point of the last step with its force on the robot.
     pub fn contacts(&self) -> Vec<ContactReport> {
