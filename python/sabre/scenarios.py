@@ -113,7 +113,7 @@ class FloorPower:
     sign_changes_per_s: float
 
 
-def power_near_floor(episode: Episode, mask: np.ndarray, near: float = 0.05) -> FloorPower:
+def power_near_floor(episode: Episode, mask: np.ndarray, near: float = 0.5) -> FloorPower:
     """:class:`FloorPower` of an episode recorded at every step, over ``mask`` (M,)."""
     p = tank_power(episode)
     if episode.tank_energy is None or len(episode.tank_energy) != len(p):
@@ -181,7 +181,7 @@ class StuckDoorResult:
     tank_min: float
     opening_after_release: float
     power_sign_changes_per_s: float
-    #: the power near the tank floor during the stuck period (within 0.05 J)
+    #: the power near the tank floor (within 0.5 J) during the stuck period
     floor_power: FloorPower
 
 
