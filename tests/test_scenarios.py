@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import sabre
 from sabre import scenarios
 
 
@@ -65,3 +66,11 @@ def test_power_sign_changes_counts_only_near_the_floor():
     # the tank starts at 10 J, far above the 2 J floor: nothing to count within 0.5 J of it
     assert scenarios.power_sign_changes_per_s(ep, mask, near=0.5) == 0.0
     assert scenarios.power_sign_changes_per_s(ep, mask, near=100.0) >= 0.0
+
+
+def test_stuck_door_rejects_a_hold_position_outside_the_range_and_unknown_drivers():
+    for hold_at in (0.0, -0.1, 2.0, float("nan")):
+        with pytest.raises(sabre.InvalidValueError):
+            scenarios.stuck_door("IO", hold_at=hold_at)
+    with pytest.raises(sabre.InvalidValueError):
+        scenarios.stuck_door("IO", driver="teleop")

@@ -18,6 +18,7 @@ import numpy as np
 
 from . import costs, tasks
 from .controller import Controller, ControllerConfig, Episode, paper_start_state, run_episode
+from .errors import InvalidValueError
 from .safety import EnergyTank, SafetyConfig, SafetyFilter
 from .scene import Scene
 from .scripted import hook_and_pull
@@ -203,7 +204,7 @@ def stuck_door(variant: str = "IO", seed: int = 0, hold_seconds: float = 5.0, re
     scene = Scene.load(obj=obj)
     safety = SafetyConfig(passivity_alpha=alpha)
     if not (np.isfinite(hold_at) and 0.0 < hold_at < scene.o_upper[0] - scene.o_lower[0]):
-        raise ValueError(f"hold_at must lie inside the object's range, got {hold_at}")
+        raise InvalidValueError(f"hold_at must lie inside the object's range, got {hold_at}")
     if driver == "scripted":
         ep = _scripted_episode(scene, variant, safety, hooked_state(scene), hold_seconds, release_seconds, tank_initial)
         hold_start = 0.0
@@ -224,7 +225,7 @@ def stuck_door(variant: str = "IO", seed: int = 0, hold_seconds: float = 5.0, re
                          on_replan=lambda t, x, plant, c: hold(t, x, plant, c) or _ended(held, hold_seconds + release_seconds, t))
         hold_start = held["from"] if held["from"] is not None else float(ep.time[-1])
     else:
-        raise ValueError(f"driver must be 'controller' or 'scripted', got {driver!r}")
+        raise InvalidValueError(f"driver must be 'controller' or 'scripted', got {driver!r}")
     stuck = (ep.time >= hold_start - 1e-9) & (ep.time <= hold_start + hold_seconds + 1e-9)
     norms = np.linalg.norm(ep.wrench[:, :3], axis=1)
     i_rel = int(np.nonzero(stuck)[0][-1]) if stuck.any() else len(ep.time) - 1
