@@ -1,5 +1,6 @@
 //! Criterion bench of one planning iteration (sample, 40 × 67-step rollouts with the cost, update) on
-//! 1 and 2 threads: the shelf scene, the approach-phase cost, from the default state.
+//! 1 and 2 threads, on the shelf: the approach-phase cost from the default state (free space), and
+//! the open-phase cost from the hook on the handle (in contact; `benches/data/shelf_hooked.json`).
 
 use std::sync::Arc;
 
@@ -35,24 +36,51 @@ fn approach_cost(scene: &Scene) -> Cost {
     ])
 }
 
+/// The open phase: pull on the bar from the pocket and drive the door toward 1.18 rad.
+fn open_cost(scene: &Scene) -> Cost {
+    let mut terms = approach_cost(scene).terms;
+    terms[0] = Term::TargetPose {
+        link: scene.robot.link_id("grasp").expect("grasp frame"),
+        target: PoseTarget::ObjectLink {
+            link: scene.object.link_id("handle_frame").expect("handle frame"),
+            offset: Isometry3::translation(0.0, 0.003, -0.016),
+            lead: 0.0,
+            lead_limit: f64::INFINITY,
+        },
+        weights: [100.0, 10000.0, 1000.0, 1000.0, 1000.0, 1000.0],
+    };
+    terms[1] = Term::ObjectState { target: vec![1.18], weights: vec![100.0] };
+    Cost::new(terms)
+}
+
+fn hooked_state() -> Vec<f64> {
+    let data: serde_json::Value =
+        serde_json::from_str(include_str!("data/shelf_hooked.json")).expect("benches/data/shelf_hooked.json is valid JSON");
+    data["x0"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect()
+}
+
 fn planning(c: &mut Criterion) {
     let scene = Arc::new(Scene::load("royalpanda", "shelf", None).expect("built-in scene"));
     let model = Arc::new(RolloutModel::new(scene.clone(), RolloutConfig::default()).expect("model"));
-    let cost = approach_cost(&scene);
-    let x0 = scene.default_state();
     let mut group = c.benchmark_group("planning_iteration_shelf_40x67");
     group.sample_size(40);
-    for threads in [1usize, 2] {
-        let mut config = MppiConfig::paper_defaults(scene.nu());
-        config.threads = Some(threads);
-        let mut mppi = Mppi::new(model.clone(), config).expect("sampler");
-        let mut t = 0.0;
-        group.bench_with_input(BenchmarkId::from_parameter(format!("{threads}_threads")), &threads, |b, _| {
-            b.iter(|| {
-                t += 0.01;
-                mppi.iterate(&x0, t, &cost).expect("iteration").iteration_time
-            })
-        });
+    for (name, x0, cost) in [("free", scene.default_state(), approach_cost(&scene)), ("in_contact", hooked_state(), open_cost(&scene))] {
+        for threads in [1usize, 2] {
+            let mut config = MppiConfig::paper_defaults(scene.nu());
+            config.threads = Some(threads);
+            let mut mppi = Mppi::new(model.clone(), config).expect("sampler");
+            // The controller's open phase samples with Σ × 0.01 (OpenObject.noise_open).
+            if name == "in_contact" {
+                mppi.set_noise_scale(0.01).expect("noise scale");
+            }
+            let mut t = 0.0;
+            group.bench_with_input(BenchmarkId::new(name, format!("{threads}_threads")), &threads, |b, _| {
+                b.iter(|| {
+                    t += 0.01;
+                    mppi.iterate(&x0, t, &cost).expect("iteration").iteration_time
+                })
+            });
+        }
     }
     group.finish();
 }
