@@ -59,14 +59,6 @@ def hooked_state(scene: Scene, engage: float = 0.6) -> np.ndarray:
     return x
 
 
-@dataclass
-class _OpenFromHooked(tasks.OpenObject):
-    """OpenObject starting in phase "open" (the scripted hook has no hand pitch: approach_pitch 0)."""
-
-    def initial_phase(self) -> str:
-        return "open"
-
-
 def tank_power(episode: Episode) -> np.ndarray:
     """(M,) the power τ̂ᵀu the energy tank integrated in each recorded step: the command tracked in
     the step against the τ_ext measurement from before it (the previous row's
@@ -93,7 +85,7 @@ def power_sign_changes_per_s(episode: Episode, mask: np.ndarray, near: float = 0
     s = np.sign(p)
     pairs = sel[1:] & sel[:-1] & (s[1:] != 0) & (s[:-1] != 0)
     changes = int(np.count_nonzero(pairs & (s[1:] != s[:-1])))
-    return changes / (sel.sum() * dt)
+    return float(changes / (sel.sum() * dt))
 
 
 @dataclass(frozen=True)
