@@ -363,6 +363,34 @@ class Episode:
         return total
 
 
+class TraceChunks:
+    """The plant traces of consecutive inner-loop runs (:meth:`Plant.follow`), gathered into the
+    arrays of one :class:`Episode`. ``append(trace, **per_run)`` adds a run; each keyword is a value
+    that holds for every recorded step of that run (e.g. the plan's cost)."""
+
+    FIELDS = ("time", "state", "reference", "command", "tank", "wrench", "tau_ext", "tau_ext_measured", "contact")
+
+    def __init__(self, *per_run: str) -> None:
+        self._parts: dict[str, list[np.ndarray]] = {k: [] for k in self.FIELDS + per_run}
+
+    def append(self, trace, **per_run: float) -> None:
+        p = self._parts
+        p["time"].append(trace.time)
+        p["state"].append(trace.state)
+        p["reference"].append(trace.reference)
+        p["command"].append(trace.reference if trace.filtered is None else trace.filtered)
+        p["tank"].append(trace.tank_energy)
+        p["wrench"].append(trace.wrench)
+        p["tau_ext"].append(trace.tau_ext)
+        p["tau_ext_measured"].append(trace.tau_ext_measured)
+        p["contact"].append(trace.contact)
+        for k, v in per_run.items():
+            p[k].append(np.full(len(trace.time), v))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {k: np.concatenate(v) if v else np.zeros(0) for k, v in self._parts.items()}
+
+
 def paper_start_state(scene: Scene) -> np.ndarray:
     """The paper's starting condition: base at (−3, −3), arm folded near its joint limits and close
     to self-collision (shoulder back, elbow fully bent), everything at rest, object closed."""
@@ -422,7 +450,7 @@ def run_episode(
             bar = tqdm(total=round(duration, 3), unit="s sim", leave=False, desc=f"{scene.object_name}")
         except ImportError:
             bar = None
-    chunks: dict[str, list[np.ndarray]] = {k: [] for k in ("time", "state", "reference", "command", "tank", "wrench", "tau_ext", "tau_ext_measured", "contact", "cost", "phase")}
+    chunks = TraceChunks("cost", "phase")
 
     planning_times = []
     success_time = None
@@ -436,18 +464,7 @@ def run_episode(
         planning_times.append(stats["iteration_time"])
         trace = plant.follow(low_level, controller.nominal, controller.nominal_t0, controller.config.dt, steps_per_plan, record_every,
                              safety=controller.inner_filter, tank=controller.tank)
-        times = trace.time
-        chunks["time"].append(times)
-        chunks["state"].append(trace.state)
-        chunks["reference"].append(trace.reference)
-        chunks["command"].append(trace.reference if trace.filtered is None else trace.filtered)
-        chunks["tank"].append(trace.tank_energy)
-        chunks["wrench"].append(trace.wrench)
-        chunks["tau_ext"].append(trace.tau_ext)
-        chunks["tau_ext_measured"].append(trace.tau_ext_measured)
-        chunks["contact"].append(trace.contact)
-        chunks["cost"].append(np.full(len(times), stats["nominal_cost"]))
-        chunks["phase"].append(np.full(len(times), controller.task.phases.index(controller.phase)))
+        chunks.append(trace, cost=stats["nominal_cost"], phase=controller.task.phases.index(controller.phase))
         if bar is not None:
             bar.update(round(steps_per_plan * plant.dt, 3))
         if success_time is None and controller.task.success(scene, plant.state):
@@ -457,7 +474,7 @@ def run_episode(
     if bar is not None:
         bar.close()
     wall = time.perf_counter() - wall
-    data = {k: np.concatenate(v) if v else np.zeros(0) for k, v in chunks.items()}
+    data = chunks.arrays()
     return Episode(
         scene=scene,
         time=data["time"],

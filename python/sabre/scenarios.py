@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import costs, tasks
-from .controller import Controller, ControllerConfig, Episode, paper_start_state, run_episode
+from .controller import Controller, ControllerConfig, Episode, TraceChunks, paper_start_state, run_episode
 from .errors import InvalidValueError
 from .safety import EnergyTank, SafetyConfig, SafetyFilter
 from .scene import Scene
@@ -134,24 +134,15 @@ def _scripted_episode(scene, variant, safety, x0, hold_seconds, release_seconds,
     low.reset()
     inner = SafetyFilter(scene, safety) if "I" in variant else None
     tank = EnergyTank(tank_initial, safety.tank_floor)
-    chunks = {k: [] for k in ("time", "state", "reference", "command", "tank", "wrench", "tau_ext", "tau_ext_measured", "contact")}
+    chunks = TraceChunks()
     total = hold_seconds + release_seconds
     t = 0.0
     chunk = 0.05
     while t < total - 1e-9:
         plant.hold_object(t < hold_seconds - 1e-9)
-        tr = plant.follow(low, U, 0.0, motion.dt, int(round(chunk / plant.dt)), 1, safety=inner, tank=tank)
-        chunks["time"].append(tr.time)
-        chunks["state"].append(tr.state)
-        chunks["reference"].append(tr.reference)
-        chunks["command"].append(tr.reference if tr.filtered is None else tr.filtered)
-        chunks["tank"].append(tr.tank_energy)
-        chunks["wrench"].append(tr.wrench)
-        chunks["tau_ext"].append(tr.tau_ext)
-        chunks["tau_ext_measured"].append(tr.tau_ext_measured)
-        chunks["contact"].append(tr.contact)
+        chunks.append(plant.follow(low, U, 0.0, motion.dt, int(round(chunk / plant.dt)), 1, safety=inner, tank=tank))
         t = plant.time
-    d = {k: np.concatenate(v) for k, v in chunks.items()}
+    d = chunks.arrays()
     return Episode(scene=scene, time=d["time"], state=d["state"], reference=d["reference"], wrench=d["wrench"],
                    tau_ext=d["tau_ext"], tau_ext_measured=d["tau_ext_measured"], contact=d["contact"].astype(bool), cost=np.zeros(len(d["time"])),
                    phase=np.zeros(len(d["time"]), dtype=int), phases=("pull",), success=False, time_to_success=None,
