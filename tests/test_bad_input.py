@@ -666,3 +666,19 @@ def test_absurd_thread_count_fails_fast():
     except subprocess.TimeoutExpired:
         pytest.fail("rollout(threads=100_000) was still starting threads after 8 s")
     assert proc.returncode == 0, proc.stderr[-1500:]
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"slip_distance": -0.01},
+        {"drag_speed": float("nan")},
+        {"hook_tolerance": "tight"},
+        {"noise_distance": 0.0},
+        {"success_fraction": 1.5},
+        {"opening": float("inf")},
+    ],
+)
+def test_open_object_rejects_bad_parameters(kwargs):
+    with pytest.raises(InvalidValueError):
+        sabre.tasks.OpenObject(**kwargs)

@@ -311,6 +311,45 @@ def test_open_object_walks_through_its_phases_and_recovers_from_a_slip(scene):
         min(1.0, (task.approach_error(scene, scene.default_state(), "approach")[0] / task.noise_distance) ** 2))
 
 
+def test_a_finger_that_already_drags_the_handle_open_switches_to_opening(scene):
+    """While hooking, the bar may sit in the pocket 1 cm off the hook target (outside
+    hook_tolerance) and still be pulled open: that is the open phase, whatever the hook test says.
+    Not when the handle stands still or closes, nor when the hand is beyond the slip distance, nor
+    before the handle is drag_distance from closed."""
+    task = sabre.tasks.OpenObject()
+    nq, no = scene.nq, scene.no
+    x = scene.default_state()
+    x[0] = 0.939 - 0.75
+    x[2 * nq] = 0.2
+    handle = scene.object_fk(np.array([0.2]), "handle_frame")
+    off_target = _place_grasp(scene, x, handle @ task.grasp_offset(scene, "hook") @ _translation(0.0, 0.0, -0.01))
+    across, _ = task.pocket_error(scene, off_target, "hook")
+    assert task.hook_tolerance < across < task.slip_distance
+    rate = 2.0 * task.drag_speed / task.handle_travel(scene, 0.2)  # handle at twice drag_speed
+    moving = off_target.copy()
+    moving[2 * nq + no] = rate
+    assert task.next_phase(scene, off_target, 0.0, "hook") == "hook"
+    assert task.next_phase(scene, moving, 0.0, "hook") == "open"
+    assert task.next_phase(scene, moving, 0.0, "insert") == "open"
+    closing = off_target.copy()
+    closing[2 * nq + no] = -rate
+    assert task.next_phase(scene, closing, 0.0, "hook") == "hook"
+    slow = off_target.copy()
+    slow[2 * nq + no] = 0.5 * task.drag_speed / task.handle_travel(scene, 0.2)
+    assert task.next_phase(scene, slow, 0.0, "hook") == "hook"
+    far = _place_grasp(scene, x, handle @ task.grasp_offset(scene, "hook") @ _translation(0.0, 0.0, -0.08))
+    far[2 * nq + no] = rate
+    assert task.next_phase(scene, far, 0.0, "hook") == "hook"
+    assert sabre.tasks.OpenObject(drag_speed=0.0).next_phase(scene, moving, 0.0, "hook") == "hook"
+    # the same pull 2 cm from closed (shelf handle about 0.27 m from the hinge): not yet
+    near = 0.02 / task.handle_travel(scene, 0.0)
+    handle = scene.object_fk(np.array([near]), "handle_frame")
+    x[2 * nq] = near
+    early = _place_grasp(scene, x, handle @ task.grasp_offset(scene, "hook") @ _translation(0.0, 0.0, -0.01))
+    early[2 * nq + no] = rate
+    assert task.next_phase(scene, early, 0.0, "hook") == "hook"
+
+
 def _translation(x, y, z):
     t = np.eye(4)
     t[:3, 3] = [x, y, z]

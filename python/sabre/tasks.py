@@ -13,7 +13,8 @@ from typing import Sequence
 import numpy as np
 
 from . import costs
-from ._validate import as_float_array
+from ._validate import as_float_array, as_non_negative, as_positive
+from .errors import InvalidValueError
 from .guides import servo_guide
 from .scene import Scene
 
@@ -62,14 +63,6 @@ class Task:
     def cost(self, scene: Scene, phase: str) -> costs.Cost:
         """The cost the controller minimises during `phase`."""
         return costs.Cost()
-
-    def lateral_error(self, scene: Scene, x: np.ndarray) -> float:
-        """Sideways offset (m) of the grasp frame from its open-phase target, along the handle
-        frame's y axis: how far the bar has moved toward leaving the finger's pocket."""
-        nq, no = scene.nq, scene.no
-        handle = scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame")
-        grasp = np.linalg.solve(handle, scene.fk(x[:nq], "grasp"))
-        return float(grasp[1, 3] - self.open_offset[1])
 
     def next_phase(self, scene: Scene, x: np.ndarray, t: float, phase: str) -> str:
         """The phase to use from state x at time t (called before every planning iteration)."""
@@ -153,7 +146,8 @@ class OpenObject(Task):
     Switches happen when the grasp frame is within ``switch_position`` (m) and ``switch_angle``
     (rad) of the current phase's target (twice that for the approach, ``hook_tolerance`` for the
     hook; for inserting and hooking only the distance across the bar counts, and along the bar
-    ``along_tolerance``). If the bar leaves the pocket while opening (the grasp frame more than
+    ``along_tolerance``). A handle the finger already drags open while inserting or hooking
+    (``pulling``) also switches to opening. If the bar leaves the pocket while opening (the grasp frame more than
     ``slip_distance`` from its target), the task starts over from the approach. Success: opening
     ≥ 90 % of the target.
     """
@@ -190,6 +184,12 @@ class OpenObject(Task):
     #: how far (m) along the bar the grasp frame may be from its target when inserting and hooking
     along_tolerance: float = 0.03
     slip_distance: float = 0.05
+    #: handle speed (m/s, opening direction) that, with the grasp frame within the slip bounds,
+    #: counts as the finger already pulling while inserting or hooking (see ``pulling``); 0: off.
+    drag_speed: float = 0.02
+    #: ... once the handle is this far (m) from closed: a door that falls open once moved (a
+    #: dishwasher) is found opening by itself first and released instead.
+    drag_distance: float = 0.03
     slip_lateral: float = 0.01
     success_fraction: float = 0.9
     #: optional preferred arm posture while approaching (joint targets; None: a Panda posture that
@@ -224,6 +224,21 @@ class OpenObject(Task):
     extra: costs.Cost = field(default_factory=costs.Cost)
 
     phases = ("approach", "insert", "hook", "open", "release")
+
+    def __post_init__(self) -> None:
+        for name in ("approach_weight", "object_weight", "contact_weight", "switch_position", "switch_angle",
+                     "hook_tolerance", "along_tolerance", "slip_distance", "slip_lateral", "drag_speed", "drag_distance",
+                     "posture_weight", "noise_floor", "noise_open", "guide_speed", "guide_fine_speed",
+                     "guide_gain", "runaway_speed", "release_speed", "release_distance", "release_rate"):
+            setattr(self, name, as_non_negative(name, getattr(self, name)))
+        for name in ("horizon", "noise_distance", "release_probe"):
+            setattr(self, name, as_positive(name, getattr(self, name)))
+        for name in ("opening", "object_overshoot", "open_lead", "approach_pitch"):
+            value = getattr(self, name)
+            if value is not None and not np.isfinite(value):
+                raise InvalidValueError(f"{name} must be finite, got {value}")
+        if not 0.0 < self.success_fraction <= 1.0:
+            raise InvalidValueError(f"success_fraction must be in (0, 1], got {self.success_fraction}")
 
     def posture_term(self, scene: Scene) -> costs.Cost:
         names = scene.joint_names
@@ -341,6 +356,14 @@ class OpenObject(Task):
         e = handle[:3, :3].T @ (scene.fk(x[:nq], "grasp")[:3, 3] - target[:3, 3])
         return float(np.hypot(e[1], e[2])), float(abs(e[0]))
 
+    def lateral_error(self, scene: Scene, x: np.ndarray) -> float:
+        """Sideways offset (m) of the grasp frame from its open-phase target, along the handle
+        frame's y axis: how far the bar has moved toward leaving the finger's pocket."""
+        nq, no = scene.nq, scene.no
+        handle = scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame")
+        grasp = np.linalg.solve(handle, scene.fk(x[:nq], "grasp"))
+        return float(grasp[1, 3] - self.open_offset[1])
+
     def self_opening(self, scene: Scene, x: np.ndarray) -> bool:
         """Whether the object, left alone, opens further by itself (a dishwasher door past its
         balance point): the rollout model run for ``release_probe`` s from x with the robot at rest
@@ -413,6 +436,8 @@ class OpenObject(Task):
             across, along = self.pocket_error(scene, x, "hook")
             if across < self.hook_tolerance and along < self.along_tolerance and angle < self.switch_angle:
                 return "open"
+        if phase in ("insert", "hook") and self.pulling(scene, x):
+            return "open"
         if phase == "open" and not self.success(scene, x):
             dp, _ = self.approach_error(scene, x, "open")
             if dp > self.slip_distance or abs(self.lateral_error(scene, x)) > self.slip_lateral:
@@ -457,6 +482,25 @@ class OpenObject(Task):
             targets = scene.object_fk_many(openings[:, None], "handle_frame") @ offset
             out.append(servo_guide(scene, q, targets, dt, gain=self.guide_gain, max_linear=2.0 * speed + 0.05, max_angular=2.0))
         return np.stack(out)
+
+    def pulling(self, scene: Scene, x: np.ndarray) -> bool:
+        """Whether the finger already pulls the object open before the hook test passed: the
+        handle opens faster than ``drag_speed`` (m/s) while the grasp frame is within the open
+        phase's slip bounds (the bar sits in the pocket, just not where the hook target put it),
+        and the handle is at least ``drag_distance`` (m) from closed. An object that opens by
+        itself is caught by ``self_opening`` first."""
+        if self.drag_speed <= 0.0:
+            return False
+        nq, no = scene.nq, scene.no
+        o = x[2 * nq : 2 * nq + no]
+        closed = scene.object_fk(np.asarray(scene.o_lower, dtype=np.float64), "handle_frame")[:3, 3]
+        if float(np.linalg.norm(scene.object_fk(o, "handle_frame")[:3, 3] - closed)) < self.drag_distance:
+            return False
+        speed = float(x[2 * nq + no]) * self.handle_travel(scene, float(o[0]))
+        if speed <= self.drag_speed:
+            return False
+        dp, _ = self.approach_error(scene, x, "open")
+        return dp <= self.slip_distance and abs(self.lateral_error(scene, x)) <= self.slip_lateral
 
     def running_ahead(self, scene: Scene, x: np.ndarray) -> bool:
         """Whether the object opens by itself faster than ``runaway_speed`` (m/s at the handle), as
