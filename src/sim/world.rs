@@ -217,8 +217,10 @@ pub struct SimWorld {
     /// Scratch buffer (joint displacements, next configuration, state) reused every step.
     scratch: Vec<f64>,
     dynamics: DynamicsWorkspace,
-    /// Robot and object link poses for cost evaluation (caches keyed by the configuration).
-    cost_frames: (Frames, Frames),
+    /// Object link poses for cost evaluation (a cache keyed by the configuration). The robot's
+    /// are `dynamics.frames`: one step places the proxies, takes contact Jacobians and evaluates the
+    /// cost at the same configuration, so one cache computes them once.
+    object_frames: Frames,
     mass_matrix: DMatrix<f64>,
     gravity_torque: DVector<f64>,
 }
@@ -235,7 +237,7 @@ impl Clone for SimWorld {
             jacobian: self.jacobian.clone(),
             scratch: self.scratch.clone(),
             dynamics: self.dynamics.clone(),
-            cost_frames: self.cost_frames.clone(),
+            object_frames: self.object_frames.clone(),
             mass_matrix: self.mass_matrix.clone(),
             gravity_torque: self.gravity_torque.clone(),
         }
@@ -663,7 +665,7 @@ impl SimWorld {
             jacobian: vec![0.0; 6 * nq],
             scratch: Vec::new(),
             dynamics,
-            cost_frames: Default::default(),
+            object_frames: Default::default(),
             mass_matrix,
             gravity_torque,
             scene,
@@ -1024,23 +1026,30 @@ impl SimWorld {
             let object_poses = self.scene.object.link_poses(&self.scene.object_pose, o);
             let dt = self.params.dt;
             let margin = self.params.normalized_prediction_distance * self.params.length_unit + 0.02;
-            'outer: for &(link, center, radius) in &self.layout.robot_spheres {
+            for &(link, center, radius) in &self.layout.robot_spheres {
                 let c = frames.poses[link] * center;
-                // Travel bound of this body over the step: its link's linear speed at the centre.
-                let mut jac = std::mem::take(&mut self.jacobian);
-                self.scene.robot.frames_jacobian_into(frames, link, &c, &mut jac);
-                let mut v = Vector3::zeros();
-                for (col, &rate) in self.state.robot_qd.iter().enumerate() {
-                    v += Vector3::new(jac[6 * col], jac[6 * col + 1], jac[6 * col + 2]) * rate;
-                }
-                self.jacobian = jac;
-                let reach = radius + v.norm() * dt + margin;
-                for (olink, origin, shape) in &self.layout.object_shapes {
-                    if distance_to_shape(&(object_poses[*olink] * origin), shape, &c) < reach {
-                        quiet = false;
-                        break 'outer;
+                let nearest = self
+                    .layout
+                    .object_shapes
+                    .iter()
+                    .map(|(olink, origin, shape)| distance_to_shape(&(object_poses[*olink] * origin), shape, &c))
+                    .fold(f64::INFINITY, f64::min);
+                if nearest >= radius + margin {
+                    // Travel bound of this body over the step: its link's linear speed at the
+                    // centre (only needed when the static clearance does not already decide).
+                    let mut jac = std::mem::take(&mut self.jacobian);
+                    self.scene.robot.frames_jacobian_into(frames, link, &c, &mut jac);
+                    let mut v = Vector3::zeros();
+                    for (col, &rate) in self.state.robot_qd.iter().enumerate() {
+                        v += Vector3::new(jac[6 * col], jac[6 * col + 1], jac[6 * col + 2]) * rate;
+                    }
+                    self.jacobian = jac;
+                    if nearest >= radius + v.norm() * dt + margin {
+                        continue;
                     }
                 }
+                quiet = false;
+                break;
             }
         }
         self.scratch = x;
@@ -1172,7 +1181,8 @@ impl SimWorld {
     pub fn step_cost(&mut self, cost: &Cost, x: &[f64], u: &[f64]) -> f64 {
         let interaction = &self.state.last;
         let (nq, no) = (self.layout.nq, self.layout.no);
-        let (robot_frames, object_frames) = &mut self.cost_frames;
+        let robot_frames = &mut self.dynamics.frames;
+        let object_frames = &mut self.object_frames;
         self.scene.robot.update_frames(&Isometry3::identity(), &x[..nq], robot_frames);
         if cost.needs_object_frames() {
             self.scene.object.update_frames(&self.scene.object_pose, &x[2 * nq..2 * nq + no], object_frames);
