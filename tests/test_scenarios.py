@@ -74,3 +74,14 @@ def test_stuck_door_rejects_a_hold_position_outside_the_range_and_unknown_driver
             scenarios.stuck_door("IO", hold_at=hold_at)
     with pytest.raises(sabre.InvalidValueError):
         scenarios.stuck_door("IO", driver="teleop")
+
+
+def test_a_hold_that_never_starts_is_reported_as_such():
+    """From the paper's start the door cannot reach 0.2 rad within 0.3 s: nothing is held, and the
+    stuck-period numbers say so instead of describing the episode's last step."""
+    r = scenarios.stuck_door("IO", hold_seconds=0.1, release_seconds=0.1, reach_timeout=0.3)
+    assert not r.held
+    assert r.hold_start == pytest.approx(float(r.episode.time[-1]))
+    assert np.isnan(r.mean_wrench_stuck) and np.isnan(r.opening_after_release)
+    assert r.floor_power.seconds == 0.0 and r.power_sign_changes_per_s == 0.0
+    assert scenarios.stuck_door("N", hold_seconds=0.2, release_seconds=0.1, driver="scripted").held

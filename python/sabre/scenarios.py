@@ -157,6 +157,10 @@ class StuckDoorResult:
     variant: str
     driver: str
     hold_seconds: float
+    #: whether the door reached ``hold_at`` within ``reach_timeout`` and was held; if not,
+    #: hold_start is the episode's end and the stuck-period numbers are NaN (wrench, opening after
+    #: release) or empty (power statistics)
+    held: bool
     #: simulated time (s) at which the hold began
     hold_start: float
     mean_wrench_stuck: float
@@ -209,15 +213,16 @@ def stuck_door(variant: str = "IO", seed: int = 0, hold_seconds: float = 5.0, re
         hold_start = held["from"] if held["from"] is not None else float(ep.time[-1])
     else:
         raise InvalidValueError(f"driver must be 'controller' or 'scripted', got {driver!r}")
-    stuck = (ep.time >= hold_start - 1e-9) & (ep.time <= hold_start + hold_seconds + 1e-9)
+    was_held = driver == "scripted" or held["from"] is not None
+    stuck = (ep.time >= hold_start - 1e-9) & (ep.time <= hold_start + hold_seconds + 1e-9) & was_held
     norms = np.linalg.norm(ep.wrench[:, :3], axis=1)
     i_rel = int(np.nonzero(stuck)[0][-1]) if stuck.any() else len(ep.time) - 1
     return StuckDoorResult(
-        episode=ep, variant=variant, driver=driver, hold_seconds=hold_seconds, hold_start=float(hold_start),
-        mean_wrench_stuck=float(norms[stuck].mean()) if stuck.any() else 0.0,
+        episode=ep, variant=variant, driver=driver, hold_seconds=hold_seconds, held=was_held, hold_start=float(hold_start),
+        mean_wrench_stuck=float(norms[stuck].mean()) if stuck.any() else float("nan"),
         tank_energy=np.asarray(ep.tank_energy), tank_floor=float(ep.tank_floor),
         tank_min=float(np.min(ep.tank_energy)),
-        opening_after_release=float(ep.opening[-1] - ep.opening[i_rel]),
+        opening_after_release=float(ep.opening[-1] - ep.opening[i_rel]) if was_held else float("nan"),
         power_sign_changes_per_s=power_sign_changes_per_s(ep, stuck),
         floor_power=power_near_floor(ep, stuck),
     )
