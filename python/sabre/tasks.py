@@ -147,9 +147,9 @@ class OpenObject(Task):
     (rad) of the current phase's target (twice that for the approach, ``hook_tolerance`` for the
     hook; for inserting and hooking only the distance across the bar counts, and along the bar
     ``along_tolerance``). A handle the finger already drags open while inserting or hooking
-    (``pulling``) also switches to opening. If the bar leaves the pocket while opening (the grasp frame more than
-    ``slip_distance`` from its target), the task starts over from the approach. Success: opening
-    ≥ 90 % of the target.
+    (``pulling``) also switches to opening. If the bar leaves the pocket while opening (the grasp
+    frame more than ``slip_distance`` from its target), the task starts over from the approach.
+    Success: opening ≥ 90 % of the target.
     """
 
     opening: float | None = None
@@ -187,8 +187,8 @@ class OpenObject(Task):
     #: handle speed (m/s, opening direction) that, with the grasp frame within the slip bounds,
     #: counts as the finger already pulling while inserting or hooking (see ``pulling``); 0: off.
     drag_speed: float = 0.02
-    #: ... once the handle is this far (m) from closed: a door that falls open once moved (a
-    #: dishwasher) is found opening by itself first and released instead.
+    #: distance (m) of the handle from closed below which ``pulling`` never fires: a door that
+    #: falls open once moved (a dishwasher) is found opening by itself first and released instead.
     drag_distance: float = 0.03
     slip_lateral: float = 0.01
     success_fraction: float = 0.9
