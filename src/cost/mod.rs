@@ -110,11 +110,11 @@ pub fn link_footprint(scene: &Scene, link: usize) -> Option<(f64, f64, f64)> {
     for c in &l.collisions {
         let half = c.shape.half_extents();
         // Corners of the primitive's bounding box; an upright round primitive's own radius is tighter.
+        let upright = c.origin.rotation.angle() < 1e-9;
+        let round = upright && matches!(c.shape, Shape::Cylinder { .. } | Shape::Capsule { .. } | Shape::Sphere { .. });
         for corner in 0..8 {
             let sign = |bit: usize| if corner & bit == 0 { -1.0 } else { 1.0 };
             let p = c.origin * Point3::new(sign(1) * half.x, sign(2) * half.y, sign(4) * half.z);
-            let upright = c.origin.rotation.angle() < 1e-9;
-            let round = upright && matches!(c.shape, Shape::Cylinder { .. } | Shape::Capsule { .. } | Shape::Sphere { .. });
             let r = if round { c.origin.translation.vector.xy().norm() + half.x } else { p.coords.xy().norm() };
             bound = Some(match bound {
                 None => (r, p.z, p.z),
