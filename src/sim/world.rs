@@ -655,6 +655,10 @@ impl SimWorld {
             // Contacts are predicted 1 cm ahead (Rapier's default is 2 cm): a hand moving below
             // 0.6 m/s covers less than that in a 15 ms step, and fewer speculative pairs are solved.
             params.normalized_prediction_distance = 0.01;
+            // CCD cannot act here: proxies are re-placed from the kinematics before every step, so
+            // a swept clamp of their end pose is discarded, and the object never meets fixed
+            // colliders (collision groups). Off, Rapier also skips the per-body CCD bookkeeping.
+            params.max_ccd_substeps = 0;
         }
         let mut world = Self {
             state,
