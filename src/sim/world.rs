@@ -216,6 +216,8 @@ pub struct SimWorld {
     jacobian: Vec<f64>,
     /// Scratch buffer (joint displacements, next configuration, state) reused every step.
     scratch: Vec<f64>,
+    /// Object coordinates at the start of the step (servo drives; see `step`).
+    object_coords: Vec<f64>,
     dynamics: DynamicsWorkspace,
     /// Object link poses for cost evaluation (a cache keyed by the configuration). The robot's
     /// are `dynamics.frames`: one step places the proxies, takes contact Jacobians and evaluates the
@@ -236,6 +238,7 @@ impl Clone for SimWorld {
             scene: self.scene.clone(),
             jacobian: self.jacobian.clone(),
             scratch: self.scratch.clone(),
+            object_coords: self.object_coords.clone(),
             dynamics: self.dynamics.clone(),
             object_frames: self.object_frames.clone(),
             mass_matrix: self.mass_matrix.clone(),
@@ -668,6 +671,7 @@ impl SimWorld {
             layout: Arc::new(layout),
             jacobian: vec![0.0; 6 * nq],
             scratch: Vec::new(),
+            object_coords: Vec::new(),
             dynamics,
             object_frames: Default::default(),
             mass_matrix,
@@ -970,6 +974,10 @@ impl SimWorld {
                 return;
             }
         }
+        let servo = matches!(self.layout.drive, RobotDrive::KinematicServo { .. });
+        if servo {
+            self.record_object_coords();
+        }
         let s = &mut self.state;
         self.pipeline.step(
             self.gravity,
@@ -986,7 +994,38 @@ impl SimWorld {
             &(),
             &(),
         );
+        if servo {
+            self.object_velocity_from_displacement();
+        }
         self.measure_interaction();
+    }
+
+    fn record_object_coords(&mut self) {
+        let (mb, _) = self.state.multibody_joints.get(self.layout.object_handle).expect("object");
+        self.object_coords.clear();
+        for d in &self.layout.object_dofs {
+            self.object_coords.push(mb.link(d.link_id).expect("link").joint().coords()[d.coord]);
+        }
+    }
+
+    /// Sets the object's joint velocities to its displacement over the step just taken.
+    ///
+    /// With 15 ms steps the proxies are placed a little inside what they push, and Rapier moves
+    /// the object out by position correction, a velocity it discards after the step; the joint's
+    /// dry-friction row then leaves a velocity of the wrong sign (a door pulled open at 0.18 rad/s
+    /// read −0.07 rad/s, with 1 to 8 solver iterations alike; without dry friction the two agree).
+    /// The object would start every step from rest or moving backwards, and the state handed to
+    /// costs would say so. The displacement rate is the velocity the object actually had.
+    fn object_velocity_from_displacement(&mut self) {
+        let dt = self.params.dt;
+        let (mb, _) = self.state.multibody_joints.get_mut(self.layout.object_handle).expect("object");
+        for (d, coord) in self.layout.object_dofs.iter().zip(self.object_coords.iter_mut()) {
+            *coord = (mb.link(d.link_id).expect("link").joint().coords()[d.coord] - *coord) / dt;
+        }
+        let mut v = mb.generalized_velocity_mut();
+        for (d, rate) in self.layout.object_dofs.iter().zip(&self.object_coords) {
+            v[d.dof] = *rate;
+        }
     }
 
     /// One step under the velocity command `u` (projected onto the velocity limits); writes the
