@@ -216,7 +216,7 @@ pub struct SimWorld {
     jacobian: Vec<f64>,
     /// Scratch buffer (joint displacements, next configuration, state) reused every step.
     scratch: Vec<f64>,
-    /// Object coordinates at the start of the step (servo drives; see `step`).
+    /// Object coordinates at the start of the step (servo drives; see `step_once`).
     object_coords: Vec<f64>,
     dynamics: DynamicsWorkspace,
     /// Object link poses for cost evaluation (a cache keyed by the configuration). The robot's
@@ -658,10 +658,6 @@ impl SimWorld {
             // Contacts are predicted 1 cm ahead (Rapier's default is 2 cm): a hand moving below
             // 0.6 m/s covers less than that in a 15 ms step, and fewer speculative pairs are solved.
             params.normalized_prediction_distance = 0.01;
-            // CCD cannot act here: proxies are re-placed from the kinematics before every step, so
-            // a swept clamp of their end pose is discarded, and the object never meets fixed
-            // colliders (collision groups). Off, Rapier also skips the per-body CCD bookkeeping.
-            params.max_ccd_substeps = 0;
         }
         let mut world = Self {
             state,
@@ -974,10 +970,6 @@ impl SimWorld {
                 return;
             }
         }
-        let servo = matches!(self.layout.drive, RobotDrive::KinematicServo { .. });
-        if servo {
-            self.record_object_coords();
-        }
         let s = &mut self.state;
         self.pipeline.step(
             self.gravity,
@@ -994,10 +986,34 @@ impl SimWorld {
             &(),
             &(),
         );
-        if servo {
-            self.object_velocity_from_displacement();
-        }
         self.measure_interaction();
+    }
+
+    /// One step under the velocity command `u` (projected onto the velocity limits); writes the
+    /// state after the step into `x` (nx). For the servo drives of the rollout model.
+    ///
+    /// The object's velocity in `x` is the rate at which it moved over the step. With 15 ms steps
+    /// the proxies are placed a little inside what they push, and Rapier moves the object out by
+    /// position correction, a velocity it discards after the step; the joint's dry-friction row then
+    /// leaves a velocity of the wrong sign (a door pulled open at 0.18 rad/s read −0.07 rad/s, with 1
+    /// to 8 solver iterations alike; without dry friction the two agree). The engine keeps its own
+    /// velocity: writing the displacement rate back changes the contact dynamics (the door coasts
+    /// between steps) and with them the closed loop, whose plans were validated without it.
+    pub fn step_once(&mut self, u: &[f64], x: &mut [f64]) {
+        self.set_velocity_command(u);
+        let servo = matches!(self.layout.drive, RobotDrive::KinematicServo { .. });
+        if servo {
+            self.record_object_coords();
+        }
+        self.step();
+        self.read_state(x);
+        if servo {
+            let (nq, no) = (self.layout.nq, self.layout.no);
+            let dt = self.params.dt;
+            for (i, before) in self.object_coords.iter().enumerate() {
+                x[2 * nq + no + i] = (x[2 * nq + i] - before) / dt;
+            }
+        }
     }
 
     fn record_object_coords(&mut self) {
@@ -1006,34 +1022,6 @@ impl SimWorld {
         for d in &self.layout.object_dofs {
             self.object_coords.push(mb.link(d.link_id).expect("link").joint().coords()[d.coord]);
         }
-    }
-
-    /// Sets the object's joint velocities to its displacement over the step just taken.
-    ///
-    /// With 15 ms steps the proxies are placed a little inside what they push, and Rapier moves
-    /// the object out by position correction, a velocity it discards after the step; the joint's
-    /// dry-friction row then leaves a velocity of the wrong sign (a door pulled open at 0.18 rad/s
-    /// read −0.07 rad/s, with 1 to 8 solver iterations alike; without dry friction the two agree).
-    /// The object would start every step from rest or moving backwards, and the state handed to
-    /// costs would say so. The displacement rate is the velocity the object actually had.
-    fn object_velocity_from_displacement(&mut self) {
-        let dt = self.params.dt;
-        let (mb, _) = self.state.multibody_joints.get_mut(self.layout.object_handle).expect("object");
-        for (d, coord) in self.layout.object_dofs.iter().zip(self.object_coords.iter_mut()) {
-            *coord = (mb.link(d.link_id).expect("link").joint().coords()[d.coord] - *coord) / dt;
-        }
-        let mut v = mb.generalized_velocity_mut();
-        for (d, rate) in self.layout.object_dofs.iter().zip(&self.object_coords) {
-            v[d.dof] = *rate;
-        }
-    }
-
-    /// One step under the velocity command `u` (projected onto the velocity limits); writes the
-    /// state after the step into `x` (nx). For the servo drives of the rollout model.
-    pub fn step_once(&mut self, u: &[f64], x: &mut [f64]) {
-        self.set_velocity_command(u);
-        self.step();
-        self.read_state(x);
     }
 
     /// True when the object is at rest and statically held (dry friction at least its gravity
