@@ -32,7 +32,8 @@ class RolloutResult:
     """Outputs of N rollouts of K steps (all float64 unless noted).
 
     Attributes:
-        states: (N, K+1, nx) states; ``states[:, 0]`` is x0.
+        states: (N, K+1, nx) states; ``states[:, 0]`` is x0. The object's velocity ȯ after each step
+            is the rate at which it moved over that step.
         tau_ext: (N, K, nq) external joint torques τ_ext = Σ J_cᵀ f_c during each step (forces on the robot).
         wrench: (N, K, 6) force (N) and torque (N·m) on the hand and hook about the wrist flange, world frame.
         contact: (N, K) bool, robot–object contact carried force in that step.

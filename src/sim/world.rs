@@ -216,7 +216,7 @@ pub struct SimWorld {
     jacobian: Vec<f64>,
     /// Scratch buffer (joint displacements, next configuration, state) reused every step.
     scratch: Vec<f64>,
-    /// Object coordinates at the start of the step (servo drives; see `step_once`).
+    /// Object coordinates at the start of the step (see `step_once`).
     object_coords: Vec<f64>,
     dynamics: DynamicsWorkspace,
     /// Object link poses for cost evaluation (a cache keyed by the configuration). The robot's
@@ -1001,18 +1001,13 @@ impl SimWorld {
     /// between steps) and with them the closed loop, whose plans were validated without it.
     pub fn step_once(&mut self, u: &[f64], x: &mut [f64]) {
         self.set_velocity_command(u);
-        let servo = matches!(self.layout.drive, RobotDrive::KinematicServo { .. });
-        if servo {
-            self.record_object_coords();
-        }
+        self.record_object_coords();
         self.step();
         self.read_state(x);
-        if servo {
-            let (nq, no) = (self.layout.nq, self.layout.no);
-            let dt = self.params.dt;
-            for (i, before) in self.object_coords.iter().enumerate() {
-                x[2 * nq + no + i] = (x[2 * nq + i] - before) / dt;
-            }
+        let (nq, no) = (self.layout.nq, self.layout.no);
+        let dt = self.params.dt;
+        for (i, before) in self.object_coords.iter().enumerate() {
+            x[2 * nq + no + i] = (x[2 * nq + i] - before) / dt;
         }
     }
 
