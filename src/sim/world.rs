@@ -77,6 +77,13 @@ struct DofRef {
     child_body: RigidBodyHandle,
 }
 
+impl DofRef {
+    /// This coordinate's current value in multibody `mb`.
+    fn value(&self, mb: &Multibody) -> f64 {
+        mb.link(self.link_id).expect("link").joint().coords()[self.coord]
+    }
+}
+
 /// Static facts about a built world, shared by every copy of it.
 #[derive(Debug)]
 pub struct WorldLayout {
@@ -705,7 +712,7 @@ impl SimWorld {
         displacement.clear();
         displacement.resize(mb.ndofs(), 0.0);
         for (i, d) in dofs.iter().enumerate() {
-            let current = mb.link(d.link_id).expect("link").joint().coords()[d.coord];
+            let current = d.value(mb);
             displacement[d.dof] = q[i] - current;
         }
         mb.apply_displacements(displacement);
@@ -780,7 +787,8 @@ impl SimWorld {
         }
     }
 
-    /// Writes the current state into `x` (length nx).
+    /// Writes the current state into `x` (length nx): the engine's own velocities, which for the
+    /// object in a servo world are not its motion (see [`Self::step_once`], which reports that).
     pub fn read_state(&self, x: &mut [f64]) {
         let (nq, no) = (self.layout.nq, self.layout.no);
         let mbs = &self.state.multibody_joints;
@@ -789,7 +797,7 @@ impl SimWorld {
                 let (robot, _) = mbs.get(handle).expect("robot");
                 let rv = robot.generalized_velocity();
                 for (i, d) in self.layout.robot_dofs.iter().enumerate() {
-                    x[i] = robot.link(d.link_id).expect("link").joint().coords()[d.coord];
+                    x[i] = d.value(robot);
                     x[nq + i] = rv[d.dof];
                 }
             }
@@ -801,7 +809,7 @@ impl SimWorld {
         let (object, _) = mbs.get(self.layout.object_handle).expect("object");
         let ov = object.generalized_velocity();
         for (i, d) in self.layout.object_dofs.iter().enumerate() {
-            x[2 * nq + i] = object.link(d.link_id).expect("link").joint().coords()[d.coord];
+            x[2 * nq + i] = d.value(object);
             x[2 * nq + no + i] = ov[d.dof];
         }
     }
@@ -864,7 +872,7 @@ impl SimWorld {
         let object_limits = self.scene.object_limits();
         let (mb, _) = self.state.multibody_joints.get_mut(self.layout.object_handle).expect("object");
         for (i, d) in self.layout.object_dofs.iter().enumerate() {
-            let value = mb.link(d.link_id).expect("link").joint().coords()[d.coord];
+            let value = d.value(mb);
             if let Some(link) = mb.link_mut(d.link_id) {
                 let limits = if hold { [value, value] } else { [object_limits[i].lower, object_limits[i].upper] };
                 link.joint.data.set_limits(d.axis, limits);
@@ -1015,7 +1023,7 @@ impl SimWorld {
         let (mb, _) = self.state.multibody_joints.get(self.layout.object_handle).expect("object");
         self.object_coords.clear();
         for d in &self.layout.object_dofs {
-            self.object_coords.push(mb.link(d.link_id).expect("link").joint().coords()[d.coord]);
+            self.object_coords.push(d.value(mb));
         }
     }
 
@@ -1231,7 +1239,7 @@ impl SimWorld {
             Some(handle) => {
                 let (robot, _) = self.state.multibody_joints.get(handle).expect("robot");
                 for (i, d) in self.layout.robot_dofs.iter().enumerate() {
-                    q[i] = robot.link(d.link_id).expect("link").joint().coords()[d.coord];
+                    q[i] = d.value(robot);
                 }
             }
             None => q.copy_from_slice(&self.state.robot_q),
