@@ -1,16 +1,18 @@
 //! Criterion bench of one planning iteration (sample, 40 × 67-step rollouts with the cost, update) on
-//! 1 and 2 threads, on the shelf: the approach-phase cost from the default state (free space), and
-//! the open-phase cost from the hook on the handle (in contact; `benches/data/shelf_hooked.json`).
-//! Every timed iteration starts from the same planner state (the plan after WARM_ITERATIONS
-//! iterations from that state, same seed), so each does the same work: repeated iterations from one
-//! state otherwise let the plan drift into harder or softer contact, and the time with it.
+//! 1 and 2 threads, on the shelf: the approach-phase cost from the default state (free space); the
+//! open-phase cost from the hook on the handle (in contact; `benches/data/shelf_hooked.json`); and
+//! the closed loop's own iteration while it pulls the door open (`open_phase`: state, plan, guides,
+//! noise and the task's full cost recorded from the `make demo` episode by
+//! `benches/capture_open_phase.py`). Every timed iteration starts from the same planner state, so
+//! each does the same work: repeated iterations from one state otherwise let the plan drift into
+//! harder or softer contact, and the time with it.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use nalgebra::Isometry3;
-use sabre::cost::{Cost, PoseTarget, Term};
+use nalgebra::{Isometry3, Matrix4};
+use sabre::cost::{link_footprint, moving_object_points, Cost, PoseTarget, Term};
 use sabre::model::Scene;
 use sabre::mppi::{Mppi, MppiConfig};
 use sabre::sim::{RolloutConfig, RolloutModel};
@@ -63,6 +65,69 @@ fn hooked_state() -> Vec<f64> {
     data["x0"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect()
 }
 
+fn floats(v: &serde_json::Value) -> Vec<f64> {
+    match v {
+        serde_json::Value::Array(items) => items.iter().flat_map(floats).collect(),
+        other => vec![other.as_f64().expect("a number")],
+    }
+}
+
+/// A re-plan of the closed loop in the open phase: where it starts and the cost the task gave it.
+struct OpenPhase {
+    x0: Vec<f64>,
+    t: f64,
+    nominal: Vec<f64>,
+    nominal_t0: f64,
+    noise_scale: f64,
+    guides: Vec<f64>,
+    cost: Cost,
+}
+
+/// `benches/data/shelf_open_phase.json` with the cost `OpenObject.cost(scene, "open")` compiles to
+/// (the same terms as `open_cost`, plus arm reach and base clearance, and the task's tilted grasp).
+fn open_phase(scene: &Scene) -> OpenPhase {
+    let data: serde_json::Value =
+        serde_json::from_str(include_str!("data/shelf_open_phase.json")).expect("benches/data/shelf_open_phase.json is valid JSON");
+    let offset = Matrix4::from_row_slice(&floats(&data["grasp_offset"]));
+    let offset: Isometry3<f64> = nalgebra::try_convert(offset).expect("grasp offset is a rigid transform");
+    let weights = floats(&data["pose_weights"]);
+    let mut terms = approach_cost(scene).terms;
+    terms[0] = Term::TargetPose {
+        link: scene.robot.link_id("grasp").expect("grasp frame"),
+        target: PoseTarget::ObjectLink {
+            link: scene.object.link_id("handle_frame").expect("handle frame"),
+            offset,
+            lead: data["lead"].as_f64().unwrap(),
+            lead_limit: data["lead_limit"].as_f64().unwrap(),
+        },
+        weights: weights.try_into().expect("six pose weights"),
+    };
+    terms[1] = Term::ObjectState { target: floats(&data["object_target"]), weights: vec![data["object_weight"].as_f64().unwrap()] };
+    let reach = scene.arm_reach.as_ref().expect("the robot declares its arm reach");
+    terms.push(Term::ArmReach { base_link: reach.base_link, frame_link: reach.frame_link, r_max: reach.max, weight: 1000.0, weight_slope: 100.0 });
+    // SafetyWeights' base clearance: the base footprint plus a 5 cm margin, object points 10 cm apart.
+    let base_link = scene.robot.link_id("base_link").expect("base link");
+    let (radius, bottom, top) = link_footprint(scene, base_link).expect("the base has collision geometry");
+    terms.push(Term::BaseClearance {
+        base_link,
+        radius: radius + 0.05,
+        bottom: bottom - 0.05,
+        top: top + 0.05,
+        points: moving_object_points(scene, 0.1),
+        weight: 100.0,
+        weight_slope: 10000.0,
+    });
+    OpenPhase {
+        x0: floats(&data["x0"]),
+        t: data["t"].as_f64().unwrap(),
+        nominal: floats(&data["nominal"]),
+        nominal_t0: data["nominal_t0"].as_f64().unwrap(),
+        noise_scale: data["noise_scale"].as_f64().unwrap(),
+        guides: floats(&data["guides"]),
+        cost: Cost::new(terms),
+    }
+}
+
 /// Iterations from the bench state before timing, so the plan is a converged one, not zeros.
 const WARM_ITERATIONS: usize = 20;
 
@@ -103,6 +168,28 @@ fn planning(c: &mut Criterion) {
                 })
             });
         }
+    }
+    let open = open_phase(&scene);
+    for threads in [1usize, 2] {
+        let mut config = MppiConfig::paper_defaults(scene.nu());
+        config.threads = Some(threads);
+        let seed = config.seed;
+        let mut mppi = Mppi::new(model.clone(), config).expect("sampler");
+        group.bench_with_input(BenchmarkId::new("open_phase", format!("{threads}_threads")), &threads, |b, _| {
+            b.iter_custom(|iterations| {
+                let mut total = Duration::ZERO;
+                for _ in 0..iterations {
+                    mppi.reset(seed, open.nominal_t0);
+                    mppi.set_nominal(&open.nominal, open.nominal_t0).expect("plan");
+                    mppi.set_noise_scale(open.noise_scale).expect("noise scale");
+                    mppi.set_guides(&open.guides).expect("guides");
+                    let start = Instant::now();
+                    mppi.iterate(&open.x0, open.t, &open.cost).expect("iteration");
+                    total += start.elapsed();
+                }
+                total
+            })
+        });
     }
     group.finish();
 }
