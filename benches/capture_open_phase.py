@@ -13,6 +13,7 @@ what the robot's planner does while it pulls the door, not a hand-picked contact
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -40,6 +41,7 @@ def main(argv: list[str] | None = None) -> int:
             return None
         guides = task.guides(scene, x, "open", config.horizon_steps, config.dt)
         offset = task.grasp_offset(scene, "open")
+        clearance = sabre.costs.BaseClearance(task.safety.base_link)  # the margin and spacing SafetyWeights uses
         captured.update(
             note=f"shelf, seed {args.seed}: the closed loop's re-plan at t = {t:.3f} s in the open phase "
             "(benches/capture_open_phase.py); the next iteration starts from x0 with this nominal",
@@ -56,6 +58,9 @@ def main(argv: list[str] | None = None) -> int:
             object_weight=task.object_weight,
             lead=task.lead(scene),
             lead_limit=task.target_opening(scene),
+            safety=dataclasses.asdict(task.safety),
+            base_clearance_margin=clearance.margin,
+            base_clearance_spacing=clearance.spacing,
         )
         return True
 

@@ -83,46 +83,58 @@ struct OpenPhase {
     cost: Cost,
 }
 
-/// `benches/data/shelf_open_phase.json` with the cost `OpenObject.cost(scene, "open")` compiles to
-/// (the same terms as `open_cost`, plus arm reach and base clearance, and the task's tilted grasp).
+/// `benches/data/shelf_open_phase.json` with the cost `OpenObject.cost(scene, "open")` compiles to,
+/// built from the task parameters recorded with it (the terms of `open_cost`, plus arm reach and
+/// base clearance, with the task's tilted grasp).
 fn open_phase(scene: &Scene) -> OpenPhase {
     let data: serde_json::Value =
         serde_json::from_str(include_str!("data/shelf_open_phase.json")).expect("benches/data/shelf_open_phase.json is valid JSON");
     let offset = Matrix4::from_row_slice(&floats(&data["grasp_offset"]));
     let offset: Isometry3<f64> = nalgebra::try_convert(offset).expect("grasp offset is a rigid transform");
-    let weights = floats(&data["pose_weights"]);
-    let mut terms = approach_cost(scene).terms;
-    terms[0] = Term::TargetPose {
-        link: scene.robot.link_id("grasp").expect("grasp frame"),
-        target: PoseTarget::ObjectLink {
-            link: scene.object.link_id("handle_frame").expect("handle frame"),
-            offset,
-            lead: data["lead"].as_f64().unwrap(),
-            lead_limit: data["lead_limit"].as_f64().unwrap(),
-        },
-        weights: weights.try_into().expect("six pose weights"),
-    };
-    terms[1] = Term::ObjectState { target: floats(&data["object_target"]), weights: vec![data["object_weight"].as_f64().unwrap()] };
-    let reach = scene.arm_reach.as_ref().expect("the robot declares its arm reach");
-    terms.push(Term::ArmReach { base_link: reach.base_link, frame_link: reach.frame_link, r_max: reach.max, weight: 1000.0, weight_slope: 100.0 });
-    // SafetyWeights' base clearance: the base footprint plus a 5 cm margin, object points 10 cm apart.
-    let base_link = scene.robot.link_id("base_link").expect("base link");
+    let safety = &data["safety"];
+    let value = |v: &serde_json::Value| v.as_f64().expect("a number");
+    let limits = scene.robot_limits();
+    let base_link = scene.robot.link_id(safety["base_link"].as_str().expect("base link name")).expect("base link");
     let (radius, bottom, top) = link_footprint(scene, base_link).expect("the base has collision geometry");
-    terms.push(Term::BaseClearance {
-        base_link,
-        radius: radius + 0.05,
-        bottom: bottom - 0.05,
-        top: top + 0.05,
-        points: moving_object_points(scene, 0.1),
-        weight: 100.0,
-        weight_slope: 10000.0,
-    });
+    let margin = value(&data["base_clearance_margin"]);
+    let reach = scene.arm_reach.as_ref().expect("the robot declares its arm reach");
+    let terms = vec![
+        Term::TargetPose {
+            link: scene.robot.link_id("grasp").expect("grasp frame"),
+            target: PoseTarget::ObjectLink {
+                link: scene.object.link_id("handle_frame").expect("handle frame"),
+                offset,
+                lead: value(&data["lead"]),
+                lead_limit: value(&data["lead_limit"]),
+            },
+            weights: floats(&data["pose_weights"]).try_into().expect("six pose weights"),
+        },
+        Term::ObjectState { target: floats(&data["object_target"]), weights: vec![value(&data["object_weight"])] },
+        Term::JointLimits {
+            weight: value(&safety["joint_limit"]),
+            weight_slope: value(&safety["joint_limit_slope"]),
+            lower: limits.iter().map(|l| l.lower).collect(),
+            upper: limits.iter().map(|l| l.upper).collect(),
+        },
+        Term::SelfCollision { pairs: scene.sphere_pairs.clone(), weight: value(&safety["self_collision"]), weight_slope: value(&safety["self_collision_slope"]) },
+        Term::Power { weight: value(&safety["power"]), p_max: value(&safety["p_max"]) },
+        Term::ArmReach { base_link: reach.base_link, frame_link: reach.frame_link, r_max: reach.max, weight: value(&safety["reach"]), weight_slope: value(&safety["reach_slope"]) },
+        Term::BaseClearance {
+            base_link,
+            radius: radius + margin,
+            bottom: bottom - margin,
+            top: top + margin,
+            points: moving_object_points(scene, value(&data["base_clearance_spacing"])),
+            weight: value(&safety["base_clearance"]),
+            weight_slope: value(&safety["base_clearance_slope"]),
+        },
+    ];
     OpenPhase {
         x0: floats(&data["x0"]),
-        t: data["t"].as_f64().unwrap(),
+        t: value(&data["t"]),
         nominal: floats(&data["nominal"]),
-        nominal_t0: data["nominal_t0"].as_f64().unwrap(),
-        noise_scale: data["noise_scale"].as_f64().unwrap(),
+        nominal_t0: value(&data["nominal_t0"]),
+        noise_scale: value(&data["noise_scale"]),
         guides: floats(&data["guides"]),
         cost: Cost::new(terms),
     }
