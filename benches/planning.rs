@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use nalgebra::{Isometry3, Matrix4};
-use sabre::cost::{link_footprint, moving_object_points, Cost, PoseTarget, Term};
+use sabre::cost::{base_clearance, Cost, PoseTarget, Term};
 use sabre::model::Scene;
 use sabre::mppi::{Mppi, MppiConfig};
 use sabre::sim::{RolloutConfig, RolloutModel};
@@ -62,7 +62,7 @@ fn open_cost(scene: &Scene) -> Cost {
 fn hooked_state() -> Vec<f64> {
     let data: serde_json::Value =
         serde_json::from_str(include_str!("data/shelf_hooked.json")).expect("benches/data/shelf_hooked.json is valid JSON");
-    data["x0"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect()
+    floats(&data["x0"])
 }
 
 fn floats(v: &serde_json::Value) -> Vec<f64> {
@@ -95,8 +95,6 @@ fn open_phase(scene: &Scene) -> OpenPhase {
     let value = |v: &serde_json::Value| v.as_f64().expect("a number");
     let limits = scene.robot_limits();
     let base_link = scene.robot.link_id(safety["base_link"].as_str().expect("base link name")).expect("base link");
-    let (radius, bottom, top) = link_footprint(scene, base_link).expect("the base has collision geometry");
-    let margin = value(&data["base_clearance_margin"]);
     let reach = scene.arm_reach.as_ref().expect("the robot declares its arm reach");
     let terms = vec![
         Term::TargetPose {
@@ -119,15 +117,16 @@ fn open_phase(scene: &Scene) -> OpenPhase {
         Term::SelfCollision { pairs: scene.sphere_pairs.clone(), weight: value(&safety["self_collision"]), weight_slope: value(&safety["self_collision_slope"]) },
         Term::Power { weight: value(&safety["power"]), p_max: value(&safety["p_max"]) },
         Term::ArmReach { base_link: reach.base_link, frame_link: reach.frame_link, r_max: reach.max, weight: value(&safety["reach"]), weight_slope: value(&safety["reach_slope"]) },
-        Term::BaseClearance {
+        base_clearance(
+            scene,
             base_link,
-            radius: radius + margin,
-            bottom: bottom - margin,
-            top: top + margin,
-            points: moving_object_points(scene, value(&data["base_clearance_spacing"])),
-            weight: value(&safety["base_clearance"]),
-            weight_slope: value(&safety["base_clearance_slope"]),
-        },
+            None,
+            value(&data["base_clearance_margin"]),
+            value(&data["base_clearance_spacing"]),
+            value(&safety["base_clearance"]),
+            value(&safety["base_clearance_slope"]),
+        )
+        .expect("base clearance"),
     ];
     OpenPhase {
         x0: floats(&data["x0"]),

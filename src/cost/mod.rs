@@ -125,6 +125,39 @@ pub fn link_footprint(scene: &Scene, link: usize) -> Option<(f64, f64, f64)> {
     bound
 }
 
+/// The [`Term::BaseClearance`] that keeps `base_link`'s footprint (radius, bottom, top; from its
+/// collision primitives when None) plus `margin` clear of the object's moving parts, sampled as
+/// points at most `spacing` apart.
+pub fn base_clearance(
+    scene: &Scene,
+    base_link: usize,
+    footprint: Option<(f64, f64, f64)>,
+    margin: f64,
+    spacing: f64,
+    weight: f64,
+    weight_slope: f64,
+) -> Result<Term> {
+    if !(spacing.is_finite() && spacing > 0.0) {
+        return Err(SabreError::invalid("base clearance spacing", format!("must be positive, got {spacing}")));
+    }
+    let (radius, bottom, top) = match footprint {
+        Some(f) => f,
+        None => link_footprint(scene, base_link).ok_or_else(|| {
+            let name = scene.robot.links.get(base_link).map_or("?", |l| l.name.as_str());
+            SabreError::invalid("base clearance", format!("link '{name}' has no collision geometry; give its footprint"))
+        })?,
+    };
+    Ok(Term::BaseClearance {
+        base_link,
+        radius: radius + margin,
+        bottom: bottom - margin,
+        top: top + margin,
+        points: moving_object_points(scene, spacing),
+        weight,
+        weight_slope,
+    })
+}
+
 /// What a term sees of one rollout step.
 pub struct StepView<'a> {
     /// State after the step, [q, q̇, o, ȯ].

@@ -1064,25 +1064,8 @@ fn term_from_spec(scene: &Scene, spec: &Bound<'_, PyAny>) -> crate::Result<Term>
         }
         "base_clearance" => {
             let base_link = scene.robot.require_link(&text(spec, "link")?)?;
-            let footprint = match spec.get_item("footprint").ok().and_then(|v| v.extract::<Option<[f64; 3]>>().ok()).flatten() {
-                Some(f) => (f[0], f[1], f[2]),
-                None => crate::cost::link_footprint(scene, base_link)
-                    .ok_or_else(|| spec_error(format!("base clearance: link '{}' has no collision geometry; give its footprint", text(spec, "link").unwrap_or_default())))?,
-            };
-            let margin = float(spec, "margin")?;
-            let spacing = float(spec, "spacing")?;
-            if spacing <= 0.0 {
-                return Err(spec_error(format!("base clearance spacing must be positive, got {spacing}")));
-            }
-            Term::BaseClearance {
-                base_link,
-                radius: footprint.0 + margin,
-                bottom: footprint.1 - margin,
-                top: footprint.2 + margin,
-                points: crate::cost::moving_object_points(scene, spacing),
-                weight: float(spec, "weight")?,
-                weight_slope: float(spec, "weight_slope")?,
-            }
+            let footprint = spec.get_item("footprint").ok().and_then(|v| v.extract::<Option<[f64; 3]>>().ok()).flatten().map(|f| (f[0], f[1], f[2]));
+            crate::cost::base_clearance(scene, base_link, footprint, float(spec, "margin")?, float(spec, "spacing")?, float(spec, "weight")?, float(spec, "weight_slope")?)?
         }
         other => return Err(spec_error(format!("unknown kind '{other}'"))),
     })
