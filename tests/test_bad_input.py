@@ -277,6 +277,7 @@ CONSTRUCTORS = {
     "LowLevelController dt=nan": lambda s: sabre.LowLevelController(s, dt=float("nan")),
     "LowLevelController bandwidth<0": lambda s: sabre.LowLevelController(s, bandwidth=-40.0),
     "LowLevelController integral gain=nan": lambda s: sabre.LowLevelController(s, integral_gain=float("nan")),
+    "LowLevelController inertia floor<0": lambda s: sabre.LowLevelController(s, gain_inertia_floor=-0.03),
 }
 
 
@@ -531,6 +532,8 @@ def test_core_constructors_and_loaders():
             _core.LowLevelController(scene, bad)
     with pytest.raises(InvalidValueError):
         _core.RolloutModel(scene, 0.015, 40.0, 400.0, 0.1, -0.2)
+    with pytest.raises(InvalidValueError):
+        _core.LowLevelController(scene, 0.001, 40.0, 400.0, 0.1, float("inf"))
     with pytest.raises(InvalidValueError):
         _core.Plant(scene, 0.001, float("nan"))
 

@@ -82,3 +82,54 @@ def test_realtime_cascade_plans_in_the_background_while_ticking(scene):
         assert cascade.running
     assert not cascade.running
     assert first == 1 and cascade.iterations > 1 and cascade.ticks == 400
+
+
+class _TwoPhaseReach(sabre.tasks.Reach):
+    """A Reach whose phase flips at t = 0.1 s and asks for a gain floor only in the second phase."""
+
+    phases = ("free", "stiff")
+
+    def next_phase(self, scene, x, t, phase):
+        return "stiff" if t >= 0.1 - 1e-9 else "free"
+
+    def gain_inertia_floor(self, phase):
+        return 0.2 if phase == "stiff" else None
+
+
+def test_run_episode_applies_the_task_gain_floor_per_phase_and_restores_the_controllers_own(scene):
+    """The floor the low-level controller ticks with after each re-plan is the task's for the planned
+    phase, the controller's own (0.01 here) where the task has none, and the controller's own again
+    after the episode."""
+    task = _TwoPhaseReach(target_pose=scene.fk(scene.default_state()[: scene.nq], "grasp"))
+    controller = sabre.Controller(scene, task, sabre.ControllerConfig(rollouts=8, seed=0))
+    plant = sabre.Plant(scene)
+    low = sabre.LowLevelController(scene, dt=plant.dt, gain_inertia_floor=0.01)
+    seen = []
+    sabre.run_episode(scene, controller, 0.2, x0=scene.default_state(), replan_rate=20.0, plant=plant, low_level=low,
+                      progress=False, on_replan=lambda t, x, p, c: seen.append((round(t, 6), low.gain_inertia_floor)))
+    # Each entry is read before the re-plan at t, so it is the floor of the plan made at t − 0.05.
+    assert seen == [(0.0, 0.01), (0.05, 0.01), (0.1, 0.01), (0.15, 0.2)]
+    assert low.gain_inertia_floor == 0.01
+    with pytest.raises(InvalidValueError):
+        low.gain_inertia_floor = -1.0
+    with pytest.raises(InvalidValueError):
+        low.gain_inertia_floor = float("nan")
+
+
+def test_open_object_stiffens_the_hand_only_while_opening():
+    task = sabre.tasks.OpenObject(open_gain_inertia_floor=0.03)
+    assert [task.gain_inertia_floor(p) for p in task.phases] == [None, None, None, 0.03, None]
+    assert sabre.tasks.OpenObject().gain_inertia_floor("open") is None
+    with pytest.raises(InvalidValueError):
+        sabre.tasks.OpenObject(open_gain_inertia_floor=-0.1)
+
+
+def test_realtime_cascade_ticks_with_the_task_gain_floor_of_the_planned_phase(scene):
+    task = _TwoPhaseReach(target_pose=scene.fk(scene.default_state()[: scene.nq], "grasp"))
+    x0 = scene.default_state()
+    for t0, expected in ((0.0, 0.01), (0.2, 0.2)):
+        controller = sabre.Controller(scene, task, sabre.ControllerConfig(rollouts=8, seed=0))
+        low = sabre.LowLevelController(scene, gain_inertia_floor=0.01)
+        with sabre.RealtimeCascade(controller, low_level=low).start(x0, t0=t0) as cascade:
+            cascade.tick(x0, np.zeros(scene.nq), t0)
+            assert low.gain_inertia_floor == expected

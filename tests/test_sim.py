@@ -163,6 +163,28 @@ def test_plant_and_rollout_model_agree_in_free_motion(scenes):
     assert err < 0.01
 
 
+@pytest.mark.parametrize("floor", [0.0, 0.03, 0.5])
+def test_low_level_gains_scale_with_the_joint_inertia_floored(scenes, floor):
+    """First call from rest: no feed-forward yet and the lag is e·dt, so (53) with gains (M + A) Λ gives
+    τ − g = M e_j a + A_jj e_j a for an error e_j on joint j alone, a = (Λ_D + Λ_I dt)·e_j, with
+    A = diag(max(0, floor − M_ii)), checked against the scene's own mass matrix and gravity for the
+    hand's joint (M_ii below every floor but 0), a wrist joint and a heavy shoulder joint."""
+    scene = scenes["shelf"]
+    x = np.array(scene.default_state())
+    x[NQ : 2 * NQ] = 0.0
+    M, g = scene.mass_matrix(x[:NQ])
+    assert M[NQ - 1, NQ - 1] < 0.03 < M[3, 3]
+    dt, error = 0.001, 0.2
+    for j in (3, NQ - 2, NQ - 1):
+        controller = sabre.LowLevelController(scene, dt=dt, gain_inertia_floor=floor)
+        u = np.zeros(NQ)
+        u[j] = error
+        a = (40.0 + 400.0 * dt) * error
+        expected = M[:, j] * a + g
+        expected[j] += max(0.0, floor - M[j, j]) * a
+        np.testing.assert_allclose(controller.torque(x, u), expected, rtol=1e-12, atol=1e-9)
+
+
 @pytest.mark.parametrize("name", OBJECTS)
 def test_plant_and_rollout_model_agree_while_pulling_the_object_open(scenes, motions, name):
     """The scripted hook and pull, 15 ms rollout model vs 1 kHz plant: while pulling, the object's

@@ -438,6 +438,7 @@ def run_episode(
     x0 = paper_start_state(scene) if x0 is None else as_float_array("x0", x0, (scene.nx,))
     plant.reset(x0)
     low_level.reset()
+    own_floor = low_level.gain_inertia_floor
     controller.reset(seed, 0.0)
     steps_per_plan = max(1, int(round(1.0 / (replan_rate * plant.dt))))
     n_plans = int(np.ceil(duration / (steps_per_plan * plant.dt)))
@@ -462,6 +463,8 @@ def run_episode(
             break
         stats = controller.update(x, t)
         planning_times.append(stats["iteration_time"])
+        floor = controller.task.gain_inertia_floor(controller.phase)
+        low_level.gain_inertia_floor = own_floor if floor is None else floor
         trace = plant.follow(low_level, controller.nominal, controller.nominal_t0, controller.config.dt, steps_per_plan, record_every,
                              safety=controller.inner_filter, tank=controller.tank)
         chunks.append(trace, cost=stats["nominal_cost"], phase=controller.task.phases.index(controller.phase))
@@ -473,6 +476,7 @@ def run_episode(
             break
     if bar is not None:
         bar.close()
+    low_level.gain_inertia_floor = own_floor
     wall = time.perf_counter() - wall
     data = chunks.arrays()
     return Episode(

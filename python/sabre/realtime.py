@@ -52,6 +52,9 @@ class RealtimeCascade:
         self._lock = threading.Lock()
         self._latest: tuple[np.ndarray, float] | None = None
         self._plan: tuple[np.ndarray, float, float] | None = None  # (nominal, t0, dt)
+        # the task's low-level gain inertia floor for the planned phase (None: the controller's own)
+        self._floor: float | None = None
+        self._own_floor = None if low_level is None else low_level.gain_inertia_floor
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._error: BaseException | None = None
@@ -80,8 +83,10 @@ class RealtimeCascade:
             x, t = self._latest
         self.controller.update(x, t)
         plan = (np.array(self.controller.nominal), float(self.controller.nominal_t0), float(self.controller.config.dt))
+        floor = self.controller.task.gain_inertia_floor(self.controller.phase)
         with self._lock:
             self._plan = plan
+            self._floor = floor
         self.iterations += 1
 
     def _run(self) -> None:
@@ -150,6 +155,13 @@ class RealtimeCascade:
             r = f.filter(x, u_ref, tau_ext, tank.energy)
             u, status = np.asarray(r.u), r.status
         energy = tank.step(tau_ext, u, self.inner_dt)
-        torque = None if self.low_level is None else self.low_level.torque(x, u)
+        torque = None
+        if self.low_level is not None:
+            with self._lock:
+                floor = self._floor
+            wanted = self._own_floor if floor is None else floor
+            if self.low_level.gain_inertia_floor != wanted:
+                self.low_level.gain_inertia_floor = wanted
+            torque = self.low_level.torque(x, u)
         self.ticks += 1
         return TickResult(reference=u_ref, command=np.asarray(u), torque=torque, tank_energy=float(energy), status=status)

@@ -120,8 +120,15 @@ class RolloutModel:
 class LowLevelController:
     """Dynamics-compensated PI joint-velocity controller (53) for the plant.
 
-    τ = M(q) (q̈* + Λ_D (q̇* − q̇) + Λ_I ∫(q̇* − q̇)) + g(q): (53) with K_D = M Λ_D and K_I = M Λ_I, so the
-    plant's free-motion velocity response matches the rollout model's servo of the same bandwidth.
+    τ = M(q) q̈* + (M(q) + A) (Λ_D (q̇* − q̇) + Λ_I ∫(q̇* − q̇)) + g(q): (53) with K_D = (M + A) Λ_D and
+    K_I = (M + A) Λ_I, so the plant's free-motion velocity response matches the rollout model's servo
+    of the same bandwidth. ∫(q̇* − q̇) is clipped to ±``integral_limit`` (rad) per joint.
+
+    A = diag(max(0, gain_inertia_floor − M_ii)) keeps the gains of light joints from vanishing: the
+    last wrist joint turns only the hand (M_ii ≈ 0.007 kg m²), and with K = M Λ alone it would give
+    0.27 N m per rad/s and 0.27 N m of integral torque, so a hook pulling on a held door twists the
+    hand until the finger slides off the bar. ``gain_inertia_floor=0`` (the default) is plain (53);
+    a task can ask for a floor per phase (:meth:`sabre.tasks.Task.gain_inertia_floor`).
     """
 
     def __init__(
@@ -132,6 +139,7 @@ class LowLevelController:
         bandwidth: float = 40.0,
         integral_gain: float = 400.0,
         integral_limit: float = 0.1,
+        gain_inertia_floor: float = 0.0,
     ) -> None:
         if not isinstance(scene, Scene):
             raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
@@ -142,7 +150,18 @@ class LowLevelController:
             as_positive("bandwidth", bandwidth),
             as_non_negative("integral_gain", integral_gain),
             as_non_negative("integral_limit", integral_limit),
+            as_non_negative("gain_inertia_floor", gain_inertia_floor),
         )
+
+    @property
+    def gain_inertia_floor(self) -> float:
+        """The floor (kg m²) on the joint inertia the PI gains scale with; settable between ticks
+        (the integral is kept), which is how :func:`run_episode` applies a task's per-phase value."""
+        return self._core.gain_inertia_floor
+
+    @gain_inertia_floor.setter
+    def gain_inertia_floor(self, floor: float) -> None:
+        self._core.gain_inertia_floor = as_non_negative("gain_inertia_floor", floor)
 
     def reset(self) -> None:
         """Clears the integrator and the reference history."""

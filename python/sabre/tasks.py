@@ -92,6 +92,12 @@ class Task:
     def on_step(self, scene: Scene, x: np.ndarray, t: float, controller) -> None:
         """Hook called once per planning iteration, after the phase update."""
 
+    def gain_inertia_floor(self, phase: str) -> float | None:
+        """The low-level controller's gain inertia floor (kg m², see
+        :class:`sabre.LowLevelController`) to use during `phase`, or None for the controller's own.
+        :func:`sabre.run_episode` applies it at every re-plan."""
+        return None
+
 
 @dataclass
 class Reach(Task):
@@ -221,6 +227,13 @@ class OpenObject(Task):
     #: opening rate (rad/s or m/s) that counts as opening by itself, within ``release_probe`` s
     release_rate: float = 0.05
     release_probe: float = 0.15
+    #: gain inertia floor (kg m²) of the low-level controller while opening (see
+    #: ``gain_inertia_floor`` and :class:`sabre.LowLevelController`), e.g. 0.03: pulling hard on a
+    #: held door, the hand's own joint (0.007 kg m²) then no longer lets the finger twist off the
+    #: bar, while hooking stays compliant so the finger yields around the bar. None (default): the
+    #: controller's own. Measured on the stuck door (README, Scenarios): it kept the bar in every
+    #: held seed but did not make more doors open after release over 20 seeds.
+    open_gain_inertia_floor: float | None = None
     extra: costs.Cost = field(default_factory=costs.Cost)
 
     phases = ("approach", "insert", "hook", "open", "release")
@@ -231,6 +244,8 @@ class OpenObject(Task):
                      "posture_weight", "noise_floor", "noise_open", "guide_speed", "guide_fine_speed",
                      "guide_gain", "runaway_speed", "release_speed", "release_distance", "release_rate"):
             setattr(self, name, as_non_negative(name, getattr(self, name)))
+        if self.open_gain_inertia_floor is not None:
+            self.open_gain_inertia_floor = as_non_negative("open_gain_inertia_floor", self.open_gain_inertia_floor)
         for name in ("horizon", "noise_distance", "release_probe"):
             setattr(self, name, as_positive(name, getattr(self, name)))
         for name in ("opening", "object_overshoot", "open_lead", "approach_pitch"):
@@ -482,6 +497,9 @@ class OpenObject(Task):
             targets = scene.object_fk_many(openings[:, None], "handle_frame") @ offset
             out.append(servo_guide(scene, q, targets, dt, gain=self.guide_gain, max_linear=2.0 * speed + 0.05, max_angular=2.0))
         return np.stack(out)
+
+    def gain_inertia_floor(self, phase: str) -> float | None:
+        return self.open_gain_inertia_floor if phase == "open" else None
 
     def pulling(self, scene: Scene, x: np.ndarray) -> bool:
         """Whether the finger already pulls the object open before the hook test passed: the

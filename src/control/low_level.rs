@@ -18,6 +18,12 @@ pub struct LowLevelConfig {
     pub integral_gain: f64,
     /// Bound on the accumulated position error per joint, against wind-up while in contact.
     pub integral_limit: f64,
+    /// Smallest joint inertia (kg m²) the PI gains are scaled with. The last wrist joint turns only
+    /// the hand (M_ii ≈ 0.007 kg m²), so with K = M Λ alone it resists a load by 0.27 N m per rad/s
+    /// and 0.27 N m of integral: a hook pulling on a held door twists it and the finger slides off
+    /// the bar. The floor gives such joints the stiffness of a joint of this inertia; heavier joints
+    /// keep K = M Λ.
+    pub gain_inertia_floor: f64,
 }
 
 impl Default for LowLevelConfig {
@@ -26,14 +32,17 @@ impl Default for LowLevelConfig {
             bandwidth: 40.0,
             integral_gain: 400.0,
             integral_limit: 0.1,
+            gain_inertia_floor: 0.0,
         }
     }
 }
 
-/// τ = M(q) (q̈* + Λ_D (q̇* − q̇) + Λ_I ∫(q̇* − q̇)) + g(q).
+/// τ = M(q) q̈* + (M(q) + A(q)) (Λ_D (q̇* − q̇) + Λ_I ∫(q̇* − q̇)) + g(q),
+/// A = diag(max(0, m_floor − M_ii)) (`gain_inertia_floor`).
 ///
-/// This is (53) with K_D = M Λ_D and K_I = M Λ_I, so the closed loop has the same first-order
-/// velocity response as the rollout model's servo. The Coriolis feed-forward C q̇* is neglected
+/// This is (53) with K_D = (M + A) Λ_D and K_I = (M + A) Λ_I, so the closed loop has the same
+/// first-order velocity response as the rollout model's servo on every joint whose inertia is
+/// above the floor. The Coriolis feed-forward C q̇* is neglected
 /// (robot velocities are small; it is bounded by the PI terms).
 pub struct LowLevelController {
     scene: Arc<Scene>,
@@ -45,6 +54,7 @@ pub struct LowLevelController {
     mass_matrix: DMatrix<f64>,
     gravity_torque: DVector<f64>,
     acceleration: DVector<f64>,
+    pi_acceleration: DVector<f64>,
 }
 
 impl LowLevelController {
@@ -52,7 +62,12 @@ impl LowLevelController {
         if !(dt.is_finite() && dt > 0.0) {
             return Err(SabreError::invalid("dt", "must be positive"));
         }
-        for (name, v) in [("bandwidth", config.bandwidth), ("integral_gain", config.integral_gain), ("integral_limit", config.integral_limit)] {
+        for (name, v) in [
+            ("bandwidth", config.bandwidth),
+            ("integral_gain", config.integral_gain),
+            ("integral_limit", config.integral_limit),
+            ("gain_inertia_floor", config.gain_inertia_floor),
+        ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(SabreError::invalid(name, format!("must be finite and non-negative, got {v}")));
             }
@@ -68,7 +83,22 @@ impl LowLevelController {
             mass_matrix: DMatrix::zeros(nq, nq),
             gravity_torque: DVector::zeros(nq),
             acceleration: DVector::zeros(nq),
+            pi_acceleration: DVector::zeros(nq),
         })
+    }
+
+    pub fn config(&self) -> &LowLevelConfig {
+        &self.config
+    }
+
+    /// Changes the gain inertia floor between ticks (gain scheduling, e.g. per task phase); the
+    /// integral state is kept.
+    pub fn set_gain_inertia_floor(&mut self, floor: f64) -> Result<()> {
+        if !(floor.is_finite() && floor >= 0.0) {
+            return Err(SabreError::invalid("gain_inertia_floor", format!("must be finite and non-negative, got {floor}")));
+        }
+        self.config.gain_inertia_floor = floor;
+        Ok(())
     }
 
     pub fn reset(&mut self) {
@@ -101,10 +131,18 @@ impl LowLevelController {
                 Some(prev) => (u_ref[i] - prev[i]) / self.dt,
                 None => 0.0,
             };
+            self.pi_acceleration[i] = c.bandwidth * error + c.integral_gain * self.integral[i];
+            // Summed left to right as before the floor existed, so that a zero floor is bit-identical.
             self.acceleration[i] = feedforward + c.bandwidth * error + c.integral_gain * self.integral[i];
         }
         self.previous_reference = Some(u_ref.to_vec());
-        let tau = &self.mass_matrix * &self.acceleration + &self.gravity_torque;
+        let mut tau = &self.mass_matrix * &self.acceleration + &self.gravity_torque;
+        for i in 0..nq {
+            let extra = c.gain_inertia_floor - self.mass_matrix[(i, i)];
+            if extra > 0.0 {
+                tau[i] += extra * self.pi_acceleration[i];
+            }
+        }
         Ok(tau.iter().copied().collect())
     }
 }

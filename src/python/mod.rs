@@ -614,18 +614,30 @@ pub struct PyLowLevelController {
 #[pymethods]
 impl PyLowLevelController {
     #[new]
-    #[pyo3(signature = (scene, dt=0.001, bandwidth=40.0, integral_gain=400.0, integral_limit=0.1))]
-    fn new(scene: &PyScene, dt: f64, bandwidth: f64, integral_gain: f64, integral_limit: f64) -> PyResult<Self> {
+    #[pyo3(signature = (scene, dt=0.001, bandwidth=40.0, integral_gain=400.0, integral_limit=0.1, gain_inertia_floor=0.0))]
+    fn new(scene: &PyScene, dt: f64, bandwidth: f64, integral_gain: f64, integral_limit: f64, gain_inertia_floor: f64) -> PyResult<Self> {
         let config = LowLevelConfig {
             bandwidth,
             integral_gain,
             integral_limit,
+            gain_inertia_floor,
         };
         run(|| LowLevelController::new(scene.inner.clone(), dt, config)).map(|c| Self { inner: Mutex::new(c) })
     }
 
     fn reset(&self) {
         self.inner.lock().unwrap_or_else(|e| e.into_inner()).reset();
+    }
+
+    #[getter]
+    fn gain_inertia_floor(&self) -> f64 {
+        self.inner.lock().unwrap_or_else(|e| e.into_inner()).config().gain_inertia_floor
+    }
+
+    #[setter]
+    fn set_gain_inertia_floor(&self, floor: f64) -> PyResult<()> {
+        let mut c = self.inner.lock().unwrap_or_else(|e| e.into_inner());
+        run(|| c.set_gain_inertia_floor(floor))
     }
 
     fn torque(&self, x: PyReadonlyArrayDyn<'_, f64>, u_ref: PyReadonlyArrayDyn<'_, f64>) -> PyResult<Vec<f64>> {
