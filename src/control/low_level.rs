@@ -37,6 +37,14 @@ impl Default for LowLevelConfig {
     }
 }
 
+fn check_gain(name: &str, v: f64) -> Result<()> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(SabreError::invalid(name, format!("must be finite and non-negative, got {v}")))
+    }
+}
+
 /// τ = M(q) q̈* + (M(q) + A(q)) (Λ_D (q̇* − q̇) + Λ_I ∫(q̇* − q̇)) + g(q),
 /// A = diag(max(0, m_floor − M_ii)) (`gain_inertia_floor`).
 ///
@@ -68,9 +76,7 @@ impl LowLevelController {
             ("integral_limit", config.integral_limit),
             ("gain_inertia_floor", config.gain_inertia_floor),
         ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(SabreError::invalid(name, format!("must be finite and non-negative, got {v}")));
-            }
+            check_gain(name, v)?;
         }
         let nq = scene.nq();
         Ok(Self {
@@ -94,9 +100,7 @@ impl LowLevelController {
     /// Changes the gain inertia floor between ticks (gain scheduling, e.g. per task phase); the
     /// integral state is kept.
     pub fn set_gain_inertia_floor(&mut self, floor: f64) -> Result<()> {
-        if !(floor.is_finite() && floor >= 0.0) {
-            return Err(SabreError::invalid("gain_inertia_floor", format!("must be finite and non-negative, got {floor}")));
-        }
+        check_gain("gain_inertia_floor", floor)?;
         self.config.gain_inertia_floor = floor;
         Ok(())
     }
