@@ -680,6 +680,8 @@ def test_absurd_thread_count_fails_fast():
         {"noise_distance": 0.0},
         {"success_fraction": 1.5},
         {"opening": float("inf")},
+        {"insert_depth_tolerance": -0.005},
+        {"insert_depth_tolerance": float("nan")},
     ],
 )
 def test_open_object_rejects_bad_parameters(kwargs):

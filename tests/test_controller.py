@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+import itertools
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 import sabre
 from sabre import costs
 from sabre.errors import InvalidValueError
+
+ASSETS = Path(__file__).resolve().parents[1] / "assets"
 
 
 @pytest.fixture(scope="module")
@@ -309,6 +315,53 @@ def test_open_object_walks_through_its_phases_and_recovers_from_a_slip(scene):
     # Far away, Σ is used as configured; the schedule shrinks it quadratically with the distance.
     assert task.noise_scale(scene, scene.default_state(), "approach") == pytest.approx(
         min(1.0, (task.approach_error(scene, scene.default_state(), "approach")[0] / task.noise_distance) ** 2))
+
+
+def _urdf_box_corners(urdf, link, collision, frame_joint):
+    """Corners (8, 4) of a link's collision box in the frame that `frame_joint` attaches to the
+    same parent as the link, read straight from the URDF (fixed joints, no rotations)."""
+    root = ET.parse(urdf).getroot()
+    joints = {j.find("child").get("link"): j for j in root.findall("joint")}
+    link_origin = np.array(joints[link].find("origin").get("xyz").split(), float)
+    frame_origin = np.array(root.find(f"joint[@name='{frame_joint}']/origin").get("xyz").split(), float)
+    box = root.find(f"link[@name='{link}']/collision[@name='{collision}']")
+    centre = np.array(box.find("origin").get("xyz").split(), float) + link_origin - frame_origin
+    half = 0.5 * np.array(box.find("geometry/box").get("size").split(), float)
+    signs = np.array(list(itertools.product((-1.0, 1.0), repeat=3)))
+    return np.hstack([centre + half * signs, np.ones((8, 1))])
+
+
+def test_inserting_ends_only_once_the_hook_tip_is_behind_the_bar(scene):
+    """The hook phase slides the finger sideways; its tip (a box on the hook finger) must already be
+    behind the bar (a 1 cm box at the handle frame's origin). Checked against the URDF's boxes: at
+    every depth the insert test accepts, the tip's nearest corner clears the bar's back face; a
+    finger 12 mm short, which the across-the-bar distance alone lets through, has its tip level with
+    the bar and keeps inserting."""
+    tip = _urdf_box_corners(ASSETS / "robots" / "royalpanda.urdf", "hook_finger", "tip", "grasp_joint")
+    bar_back = 0.005  # half the bar's 1 cm depth (assets/objects/shelf.urdf, collision "bar")
+    task = sabre.tasks.OpenObject()
+    x = scene.default_state()
+    x[0] = 0.939 - 0.75
+    handle = scene.object_fk(np.zeros(1), "handle_frame")
+    target = handle @ task.grasp_offset(scene, "insert")
+
+    def at_depth(dz):
+        shifted = target.copy()
+        shifted[:3, 3] += dz * handle[:3, 2]
+        placed = _place_grasp(scene, x, shifted)
+        corners = np.linalg.solve(handle, scene.fk(placed[: scene.nq], "grasp") @ tip.T).T
+        return placed, float(corners[:, 2].min())
+
+    for dz in (-0.9 * task.insert_depth_tolerance, 0.0, 0.9 * task.insert_depth_tolerance):
+        placed, nearest = at_depth(dz)
+        assert task.depth_error(scene, placed, "insert") == pytest.approx(dz, abs=1e-4)
+        assert task.next_phase(scene, placed, 0.0, "insert") == "hook"
+        assert nearest > bar_back + 0.003
+    short, nearest = at_depth(-0.012)
+    assert task.pocket_error(scene, short, "insert")[0] < task.switch_position
+    assert nearest < bar_back
+    assert task.next_phase(scene, short, 0.0, "insert") == "insert"
+    assert sabre.tasks.OpenObject(insert_depth_tolerance=None).next_phase(scene, short, 0.0, "insert") == "hook"
 
 
 def test_a_finger_that_already_drags_the_handle_open_switches_to_opening(scene):

@@ -152,7 +152,8 @@ class OpenObject(Task):
     Switches happen when the grasp frame is within ``switch_position`` (m) and ``switch_angle``
     (rad) of the current phase's target (twice that for the approach, ``hook_tolerance`` for the
     hook; for inserting and hooking only the distance across the bar counts, and along the bar
-    ``along_tolerance``). A handle the finger already drags open while inserting or hooking
+    ``along_tolerance``; inserting also ends only within ``insert_depth_tolerance`` of the
+    target's depth, so the tip is behind the bar before it slides sideways). A handle the finger already drags open while inserting or hooking
     (``pulling``) also switches to opening. If the bar leaves the pocket while opening (the grasp
     frame more than ``slip_distance`` from its target), the task starts over from the approach.
     Success: opening ≥ 90 % of the target.
@@ -187,6 +188,14 @@ class OpenObject(Task):
     switch_position: float = 0.015
     switch_angle: float = 0.15
     hook_tolerance: float = 0.006
+    #: how far (m) from the insert target's depth (handle frame z, toward the door) the grasp frame
+    #: may be when inserting ends. The hook phase slides the finger sideways, and its tip must pass
+    #: behind the bar to do so: at 5 mm short, the tip's nearest corner clears the bar's back face by
+    #: about 4.5 mm at the default pitch; at 14 mm short (which ``switch_position`` alone lets
+    #: through) it sits level with the bar, and sliding sideways drives the tip's corner into it.
+    #: Seen on the stuck door: hooking again under a held door, a finger that jammed this way pulled
+    #: the tank down to its floor and never hooked. None: no depth test (the earlier behaviour).
+    insert_depth_tolerance: float | None = 0.005
     #: how far (m) along the bar the grasp frame may be from its target when inserting and hooking
     along_tolerance: float = 0.03
     slip_distance: float = 0.05
@@ -244,8 +253,9 @@ class OpenObject(Task):
                      "posture_weight", "noise_floor", "noise_open", "guide_speed", "guide_fine_speed",
                      "guide_gain", "runaway_speed", "release_speed", "release_distance", "release_rate"):
             setattr(self, name, as_non_negative(name, getattr(self, name)))
-        if self.open_gain_inertia_floor is not None:
-            self.open_gain_inertia_floor = as_non_negative("open_gain_inertia_floor", self.open_gain_inertia_floor)
+        for name in ("open_gain_inertia_floor", "insert_depth_tolerance"):
+            if getattr(self, name) is not None:
+                setattr(self, name, as_non_negative(name, getattr(self, name)))
         for name in ("horizon", "noise_distance", "release_probe"):
             setattr(self, name, as_positive(name, getattr(self, name)))
         for name in ("opening", "object_overshoot", "open_lead", "approach_pitch"):
@@ -371,6 +381,14 @@ class OpenObject(Task):
         e = handle[:3, :3].T @ (scene.fk(x[:nq], "grasp")[:3, 3] - target[:3, 3])
         return float(np.hypot(e[1], e[2])), float(abs(e[0]))
 
+    def depth_error(self, scene: Scene, x: np.ndarray, phase: str) -> float:
+        """Signed distance (m) of the grasp frame from the target of `phase` along the handle
+        frame's z axis (into the door): negative while the finger is still short of it."""
+        nq, no = scene.nq, scene.no
+        handle = scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame")
+        target = handle @ self.grasp_offset(scene, phase)
+        return float(handle[:3, 2] @ (scene.fk(x[:nq], "grasp")[:3, 3] - target[:3, 3]))
+
     def lateral_error(self, scene: Scene, x: np.ndarray) -> float:
         """Sideways offset (m) of the grasp frame from its open-phase target, along the handle
         frame's y axis: how far the bar has moved toward leaving the finger's pocket."""
@@ -444,7 +462,8 @@ class OpenObject(Task):
         if phase == "insert":
             _, angle = self.approach_error(scene, x, "insert")
             across, along = self.pocket_error(scene, x, "insert")
-            if across < self.switch_position and along < self.along_tolerance and angle < self.switch_angle:
+            deep = self.insert_depth_tolerance is None or abs(self.depth_error(scene, x, "insert")) < self.insert_depth_tolerance
+            if across < self.switch_position and along < self.along_tolerance and angle < self.switch_angle and deep:
                 return "hook"
         if phase == "hook":
             _, angle = self.approach_error(scene, x, "hook")
