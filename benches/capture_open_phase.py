@@ -2,7 +2,8 @@
 
     python benches/capture_open_phase.py [--seed 0] [--at 12.8]
 
-Runs the shelf episode of `make demo` (paper start, Table I defaults, 20 Hz re-planning) and records,
+Runs the shelf episode of `make demo` (paper start, seed 0, Table I defaults) re-planned at 20 Hz
+(the demo itself re-plans at 50 Hz) and records,
 at the first re-plan in the open phase at or after `--at` seconds, what the controller's next
 iteration starts from: the measured state, the nominal sequence and its start time, the task's
 noise scale and guides, and the open-phase cost's parameters. The criterion bench
