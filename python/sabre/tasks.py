@@ -153,9 +153,10 @@ class OpenObject(Task):
     (rad) of the current phase's target (twice that for the approach, ``hook_tolerance`` for the
     hook; for inserting and hooking only the distance across the bar counts, and along the bar
     ``along_tolerance``; inserting also ends only within ``insert_depth_tolerance`` of the
-    target's depth, so the tip is behind the bar before it slides sideways). A handle the finger already drags open while inserting or hooking
-    (``pulling``) also switches to opening. If the bar leaves the pocket while opening (the grasp
-    frame more than ``slip_distance`` from its target), the task starts over from the approach.
+    target's depth, so the tip is behind the bar before it slides sideways). A handle the finger
+    already drags open while inserting or hooking (``pulling``) also switches to opening. If the
+    bar leaves the pocket while opening (the grasp frame more than ``slip_distance`` from its
+    target), the task starts over from the approach.
     Success: opening ≥ 90 % of the target.
     """
 
@@ -462,7 +463,8 @@ class OpenObject(Task):
         if phase == "insert":
             _, angle = self.approach_error(scene, x, "insert")
             across, along = self.pocket_error(scene, x, "insert")
-            deep = self.insert_depth_tolerance is None or abs(self.depth_error(scene, x, "insert")) < self.insert_depth_tolerance
+            depth = self.insert_depth_tolerance
+            deep = depth is None or abs(self.depth_error(scene, x, "insert")) < depth
             if across < self.switch_position and along < self.along_tolerance and angle < self.switch_angle and deep:
                 return "hook"
         if phase == "hook":
