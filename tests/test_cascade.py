@@ -110,6 +110,18 @@ def test_run_episode_applies_the_task_gain_floor_per_phase_and_restores_the_cont
     # Each entry is read before the re-plan at t, so it is the floor of the plan made at t − 0.05.
     assert seen == [(0.0, 0.01), (0.05, 0.01), (0.1, 0.01), (0.15, 0.2)]
     assert low.gain_inertia_floor == 0.01
+
+    # An episode that raises inside the task's phase with a floor still hands the controller back
+    # with its own floor.
+    def stop_late(t, x, p, c):
+        if t > 0.17:
+            raise RuntimeError("stopped by the test")
+
+    controller = sabre.Controller(scene, task, sabre.ControllerConfig(rollouts=8, seed=0))
+    with pytest.raises(RuntimeError, match="stopped by the test"):
+        sabre.run_episode(scene, controller, 0.3, x0=scene.default_state(), replan_rate=20.0, plant=plant, low_level=low,
+                          progress=False, on_replan=stop_late)
+    assert low.gain_inertia_floor == 0.01
     with pytest.raises(InvalidValueError):
         low.gain_inertia_floor = -1.0
     with pytest.raises(InvalidValueError):

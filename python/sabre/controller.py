@@ -456,27 +456,30 @@ def run_episode(
     planning_times = []
     success_time = None
     wall = time.perf_counter()
-    for _ in range(n_plans):
-        x = plant.state
-        t = plant.time
-        if on_replan is not None and on_replan(t, x, plant, controller) is True:
-            break
-        stats = controller.update(x, t)
-        planning_times.append(stats["iteration_time"])
-        floor = controller.task.gain_inertia_floor(controller.phase)
-        low_level.gain_inertia_floor = own_floor if floor is None else floor
-        trace = plant.follow(low_level, controller.nominal, controller.nominal_t0, controller.config.dt, steps_per_plan, record_every,
-                             safety=controller.inner_filter, tank=controller.tank)
-        chunks.append(trace, cost=stats["nominal_cost"], phase=controller.task.phases.index(controller.phase))
+    try:
+        for _ in range(n_plans):
+            x = plant.state
+            t = plant.time
+            if on_replan is not None and on_replan(t, x, plant, controller) is True:
+                break
+            stats = controller.update(x, t)
+            planning_times.append(stats["iteration_time"])
+            floor = controller.task.gain_inertia_floor(controller.phase)
+            low_level.gain_inertia_floor = own_floor if floor is None else floor
+            trace = plant.follow(low_level, controller.nominal, controller.nominal_t0, controller.config.dt, steps_per_plan, record_every,
+                                 safety=controller.inner_filter, tank=controller.tank)
+            chunks.append(trace, cost=stats["nominal_cost"], phase=controller.task.phases.index(controller.phase))
+            if bar is not None:
+                bar.update(round(steps_per_plan * plant.dt, 3))
+            if success_time is None and controller.task.success(scene, plant.state):
+                success_time = plant.time
+            if stop_on_success and success_time is not None and plant.time >= success_time + settle_time:
+                break
+    finally:
+        # a task's per-phase floor must not outlive the episode, even one that raised
+        low_level.gain_inertia_floor = own_floor
         if bar is not None:
-            bar.update(round(steps_per_plan * plant.dt, 3))
-        if success_time is None and controller.task.success(scene, plant.state):
-            success_time = plant.time
-        if stop_on_success and success_time is not None and plant.time >= success_time + settle_time:
-            break
-    if bar is not None:
-        bar.close()
-    low_level.gain_inertia_floor = own_floor
+            bar.close()
     wall = time.perf_counter() - wall
     data = chunks.arrays()
     return Episode(

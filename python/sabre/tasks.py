@@ -241,8 +241,9 @@ class OpenObject(Task):
     #: ``gain_inertia_floor`` and :class:`sabre.LowLevelController`), e.g. 0.03: pulling hard on a
     #: held door, the hand's own joint (0.007 kg m²) then no longer lets the finger twist off the
     #: bar, while hooking stays compliant so the finger yields around the bar. None (default): the
-    #: controller's own. Measured on the stuck door (README, Scenarios), 0.03 did not make more
-    #: doors open after release over 20 seeds (14 of 17 held, against 14 of 19 held without).
+    #: controller's own. Measured on the stuck door before ``insert_depth_tolerance`` existed
+    #: (README, Scenarios), 0.03 did not make more doors open after release over 20 seeds (14 of 17
+    #: held, against 14 of 19 held without); not re-measured since.
     open_gain_inertia_floor: float | None = None
     extra: costs.Cost = field(default_factory=costs.Cost)
 
