@@ -682,6 +682,8 @@ def test_absurd_thread_count_fails_fast():
         {"opening": float("inf")},
         {"insert_depth_tolerance": -0.005},
         {"insert_depth_tolerance": float("nan")},
+        {"hook_backout": -0.01},
+        {"hook_backout": float("nan")},
     ],
 )
 def test_open_object_rejects_bad_parameters(kwargs):

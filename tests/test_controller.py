@@ -364,6 +364,46 @@ def test_inserting_ends_only_once_the_hook_tip_is_behind_the_bar(scene):
     assert sabre.tasks.OpenObject(insert_depth_tolerance=None).next_phase(scene, short, 0.0, "insert") == "hook"
 
 
+def test_a_finger_that_backs_out_in_front_of_the_bar_while_hooking_starts_over(scene):
+    """While hooking, a hand that drifts back until the tip's nearest corner no longer clears the
+    bar's back face (checked against the URDF's boxes) without moving the handle starts over from
+    the approach; one a few millimetres short, whose tip is still behind the bar, keeps hooking,
+    and so does one that drags the handle open."""
+    tip = _urdf_box_corners(ASSETS / "robots" / "royalpanda.urdf", "hook_finger", "tip", "grasp_joint")
+    bar_back = 0.005  # half the bar's 1 cm depth (assets/objects/shelf.urdf, collision "bar")
+    task = sabre.tasks.OpenObject()
+    x = scene.default_state()
+    x[0] = 0.939 - 0.75
+    handle = scene.object_fk(np.zeros(1), "handle_frame")
+    # Where hooking starts: beside the bar (the insert target), then pulled back by dz.
+    start = handle @ task.grasp_offset(scene, "insert")
+
+    def backed_out(dz):
+        shifted = start.copy()
+        shifted[:3, 3] += dz * handle[:3, 2]
+        placed = _place_grasp(scene, x, shifted)
+        corners = np.linalg.solve(handle, scene.fk(placed[: scene.nq], "grasp") @ tip.T).T
+        return placed, float(corners[:, 2].min())
+
+    for dz in (-0.5 * task.hook_backout, -0.9 * task.hook_backout):
+        placed, nearest = backed_out(dz)
+        assert task.depth_error(scene, placed, "hook") == pytest.approx(dz, abs=1e-4)
+        assert nearest > bar_back - 0.001
+        assert task.next_phase(scene, placed, 0.0, "hook") == "hook"
+    for dz in (-1.2 * task.hook_backout, -0.03):
+        placed, nearest = backed_out(dz)
+        assert nearest < bar_back
+        assert task.next_phase(scene, placed, 0.0, "hook") == "approach"
+        assert sabre.tasks.OpenObject(hook_backout=None).next_phase(scene, placed, 0.0, "hook") == "hook"
+        # A tip that catches the bar and drags the handle open keeps hooking: on a free door the bar
+        # then slides into the pocket.
+        dragging = placed.copy()
+        dragging[2 * scene.nq + scene.no] = 2.0 * task.drag_speed / task.handle_travel(scene, 0.0)
+        assert task.next_phase(scene, dragging, 0.0, "hook") == "hook"
+        dragging[2 * scene.nq + scene.no] *= 0.4
+        assert task.next_phase(scene, dragging, 0.0, "hook") == "approach"
+
+
 def test_a_finger_that_already_drags_the_handle_open_switches_to_opening(scene):
     """While hooking, the bar may sit in the pocket 1 cm off the hook target (outside
     hook_tolerance) and still be pulled open: that is the open phase, whatever the hook test says.

@@ -153,7 +153,9 @@ class OpenObject(Task):
     (rad) of the current phase's target (twice that for the approach, ``hook_tolerance`` for the
     hook; for inserting and hooking only the distance across the bar counts, and along the bar
     ``along_tolerance``; inserting also ends only within ``insert_depth_tolerance`` of the
-    target's depth, so the tip is behind the bar before it slides sideways). A handle the finger
+    target's depth, so the tip is behind the bar before it slides sideways; a finger that backs out
+    more than ``hook_backout`` while hooking, and does not move the handle, starts over from the
+    approach). A handle the finger
     already drags open while inserting or hooking (``pulling``) also switches to opening. If the
     bar leaves the pocket while opening (the grasp frame more than ``slip_distance`` from its
     target), the task starts over from the approach.
@@ -197,6 +199,14 @@ class OpenObject(Task):
     #: Seen on the stuck door: hooking again under a held door, a finger that jammed this way pulled
     #: the tank down to its floor and never hooked. None: no depth test (the earlier behaviour).
     insert_depth_tolerance: float | None = 0.005
+    #: how far (m) short of the hook target's depth the grasp frame may back out while hooking
+    #: before the task starts over from the approach, unless the handle moves open (see
+    #: ``backed_out``). About 10 mm short the tip's nearest corner reaches the bar's back face: the
+    #: finger can no longer pass behind the bar, and the tip's edge catches on it instead. Seen on
+    #: the stuck door: hooking under a held door, the hand drifted back while it slid, and the
+    #: planner (whose model lets the door open) pulled on that catch until the tank was spent, then
+    #: the finger went round to the wrong side of the bar. None: never (the earlier behaviour).
+    hook_backout: float | None = 0.010
     #: how far (m) along the bar the grasp frame may be from its target when inserting and hooking
     along_tolerance: float = 0.03
     slip_distance: float = 0.05
@@ -255,7 +265,7 @@ class OpenObject(Task):
                      "posture_weight", "noise_floor", "noise_open", "guide_speed", "guide_fine_speed",
                      "guide_gain", "runaway_speed", "release_speed", "release_distance", "release_rate"):
             setattr(self, name, as_non_negative(name, getattr(self, name)))
-        for name in ("open_gain_inertia_floor", "insert_depth_tolerance"):
+        for name in ("open_gain_inertia_floor", "insert_depth_tolerance", "hook_backout"):
             if getattr(self, name) is not None:
                 setattr(self, name, as_non_negative(name, getattr(self, name)))
         for name in ("horizon", "noise_distance", "release_probe"):
@@ -475,6 +485,8 @@ class OpenObject(Task):
                 return "open"
         if phase in ("insert", "hook") and self.pulling(scene, x):
             return "open"
+        if phase == "hook" and self.backed_out(scene, x):
+            return "approach"
         if phase == "open" and not self.success(scene, x):
             dp, _ = self.approach_error(scene, x, "open")
             if dp > self.slip_distance or abs(self.lateral_error(scene, x)) > self.slip_lateral:
@@ -541,6 +553,17 @@ class OpenObject(Task):
             return False
         dp, _ = self.approach_error(scene, x, "open")
         return dp <= self.slip_distance and abs(self.lateral_error(scene, x)) <= self.slip_lateral
+
+    def backed_out(self, scene: Scene, x: np.ndarray) -> bool:
+        """Whether the hooking finger has backed out in front of the bar without moving it: the
+        grasp frame more than ``hook_backout`` (m) short of the hook target's depth while the handle
+        opens no faster than ``drag_speed`` (m/s). A finger that catches the bar with its tip often
+        drags a free door open that way until the bar slides into the pocket (``pulling``); one
+        that cannot move the door (held, or stuck) only spends the tank on the catch."""
+        if self.hook_backout is None or self.depth_error(scene, x, "hook") >= -self.hook_backout:
+            return False
+        nq, no = scene.nq, scene.no
+        return float(x[2 * nq + no]) * self.handle_travel(scene, float(x[2 * nq])) <= self.drag_speed
 
     def running_ahead(self, scene: Scene, x: np.ndarray) -> bool:
         """Whether the object opens by itself faster than ``runaway_speed`` (m/s at the handle), as
