@@ -76,6 +76,33 @@ def test_stuck_door_rejects_a_hold_position_outside_the_range_and_unknown_driver
         scenarios.stuck_door("IO", driver="teleop")
 
 
+def test_the_door_is_held_only_when_reached_in_time_and_every_release_runs_in_full():
+    """Stepping the stuck door's hold schedule at 50 Hz through made-up openings: a door that
+    reaches the hold position within the reach timeout is held for hold_seconds from that moment,
+    then runs free for release_seconds before the episode ends, all within the episode's duration;
+    one that reaches it later is never held."""
+    from sabre.scenarios import _DoorHold
+
+    def step_through(reached_at):
+        schedule = _DoorHold(hold_at=0.2, reach_timeout=30.0, hold_seconds=5.0, release_seconds=10.0)
+        held, end = [], None
+        for t in np.arange(0.0, schedule.duration + 1e-9, 0.02):
+            holding, done = schedule.update(float(t), 0.25 if t >= reached_at else 0.1)
+            held.append(holding)
+            if done:
+                end = float(t)
+                break
+        return schedule, np.array(held), end
+
+    for reached_at in (7.3, 30.0):
+        schedule, held, end = step_through(reached_at)
+        assert schedule.start == pytest.approx(reached_at)
+        assert held.sum() == 250  # 5 s at 50 Hz
+        assert end == pytest.approx(reached_at + 15.0) and end <= schedule.duration + 1e-9
+    schedule, held, end = step_through(33.1)
+    assert schedule.start is None and not held.any() and end is None
+
+
 def test_a_hold_that_never_starts_is_reported_as_such():
     """From the paper's start the door cannot reach 0.2 rad within 0.3 s: nothing is held, and the
     stuck-period numbers say so instead of describing the episode's last step."""

@@ -175,7 +175,7 @@ class StuckDoorResult:
 
 def stuck_door(variant: str = "IO", seed: int = 0, hold_seconds: float = 5.0, release_seconds: float = 10.0,
                obj: str = "shelf", alpha: float = 1.0, *, driver: str = "controller", replan_rate: float = 50.0,
-               tank_initial: float = 10.0, reach_timeout: float = 30.0, hold_at: float = 0.2) -> StuckDoorResult:
+               tank_initial: float = 10.0, reach_timeout: float = 40.0, hold_at: float = 0.2) -> StuckDoorResult:
     """The door is held for hold_seconds while the robot pulls on it, then released.
 
     driver "controller" (the paper's experiment): the sampling-based controller opens the object
@@ -194,26 +194,23 @@ def stuck_door(variant: str = "IO", seed: int = 0, hold_seconds: float = 5.0, re
         raise InvalidValueError(f"hold_at must lie inside the object's range, got {hold_at}")
     if driver == "scripted":
         ep = _scripted_episode(scene, variant, safety, hooked_state(scene), hold_seconds, release_seconds, tank_initial)
-        hold_start = 0.0
+        hold_start, was_held = 0.0, True
     elif driver == "controller":
         task = tasks.OpenObject()
         ctrl = Controller(scene, task, ControllerConfig(variant=variant, safety=safety, seed=seed, tank_initial=tank_initial))
-        held: dict[str, float | None] = {"from": None}
+        schedule = _DoorHold(hold_at, reach_timeout, hold_seconds, release_seconds)
 
         def hold(t, x, plant, controller):
-            if held["from"] is None and x[2 * scene.nq] - scene.o_lower[0] >= hold_at:
-                held["from"] = t
-            start = held["from"]
-            plant.hold_object(start is not None and t < start + hold_seconds - 1e-9)
+            holding, done = schedule.update(t, float(x[2 * scene.nq] - scene.o_lower[0]))
+            plant.hold_object(holding)
+            return done
 
-        # Run until the hold has started and then for hold + release (the door may never be reached).
-        ep = run_episode(scene, ctrl, reach_timeout + hold_seconds + release_seconds, seed=seed, replan_rate=replan_rate,
-                         record_every=1, stop_on_success=False, progress=False,
-                         on_replan=lambda t, x, plant, c: hold(t, x, plant, c) or _ended(held, hold_seconds + release_seconds, t))
-        hold_start = held["from"] if held["from"] is not None else float(ep.time[-1])
+        ep = run_episode(scene, ctrl, schedule.duration, seed=seed, replan_rate=replan_rate, record_every=1,
+                         stop_on_success=False, progress=False, on_replan=hold)
+        was_held = schedule.start is not None
+        hold_start = schedule.start if was_held else float(ep.time[-1])
     else:
         raise InvalidValueError(f"driver must be 'controller' or 'scripted', got {driver!r}")
-    was_held = driver == "scripted" or held["from"] is not None
     stuck = (ep.time >= hold_start - 1e-9) & (ep.time <= hold_start + hold_seconds + 1e-9) & was_held
     norms = np.linalg.norm(ep.wrench[:, :3], axis=1)
     i_rel = int(np.nonzero(stuck)[0][-1]) if stuck.any() else len(ep.time) - 1
@@ -228,8 +225,30 @@ def stuck_door(variant: str = "IO", seed: int = 0, hold_seconds: float = 5.0, re
     )
 
 
-def _ended(held: dict, span: float, t: float) -> bool:
-    return held["from"] is not None and t >= held["from"] + span - 1e-9
+@dataclass
+class _DoorHold:
+    """When the stuck door is held: from the first time the object is ``hold_at`` from closed, if
+    that comes within ``reach_timeout`` s, for ``hold_seconds``; the episode then runs
+    ``release_seconds`` more and ends. Holds that would start later never start, so every release
+    runs in full within ``duration``."""
+
+    hold_at: float
+    reach_timeout: float
+    hold_seconds: float
+    release_seconds: float
+    start: float | None = None
+
+    @property
+    def duration(self) -> float:
+        return self.reach_timeout + self.hold_seconds + self.release_seconds
+
+    def update(self, t: float, opening: float) -> tuple[bool, bool]:
+        """(whether the object is held now, whether the episode is over) at time t."""
+        if self.start is None and t <= self.reach_timeout + 1e-9 and opening >= self.hold_at:
+            self.start = t
+        if self.start is None:
+            return False, False
+        return t < self.start + self.hold_seconds - 1e-9, t >= self.start + self.hold_seconds + self.release_seconds - 1e-9
 
 
 @dataclass(frozen=True)
