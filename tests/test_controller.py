@@ -364,27 +364,30 @@ def test_inserting_ends_only_once_the_hook_tip_is_behind_the_bar(scene):
     assert sabre.tasks.OpenObject(insert_depth_tolerance=None).next_phase(scene, short, 0.0, "insert") == "hook"
 
 
-def test_a_finger_that_backs_out_in_front_of_the_bar_while_hooking_starts_over(scene):
-    """While hooking, a hand that drifts back until the tip's nearest corner no longer clears the
-    bar's back face (checked against the URDF's boxes) without moving the handle starts over from
-    the approach; one a few millimetres short, whose tip is still behind the bar, keeps hooking,
-    and so does one that drags the handle open."""
+def test_a_finger_that_backs_out_in_front_of_a_held_bar_while_hooking_starts_over(scene):
+    """Hooking a door already opened 0.2 rad that does not move, a hand that drifts back until the
+    tip's nearest corner no longer clears the bar's back face (checked against the URDF's boxes)
+    starts over from the approach; one a few millimetres short, whose tip is still behind the bar,
+    keeps hooking, and so does one that drags the handle open, or one at a closed door (where a
+    tip's catch is how the drag starts)."""
     tip = _urdf_box_corners(ASSETS / "robots" / "royalpanda.urdf", "hook_finger", "tip", "grasp_joint")
     bar_back = 0.005  # half the bar's 1 cm depth (assets/objects/shelf.urdf, collision "bar")
     task = sabre.tasks.OpenObject()
-    x = scene.default_state()
-    x[0] = 0.939 - 0.75
-    handle = scene.object_fk(np.zeros(1), "handle_frame")
-    # Where hooking starts: beside the bar (the insert target), then pulled back by dz.
-    start = handle @ task.grasp_offset(scene, "insert")
+    nq, no = scene.nq, scene.no
 
-    def backed_out(dz):
-        shifted = start.copy()
+    def backed_out(dz, opening=0.2):
+        x = scene.default_state()
+        x[0] = 0.939 - 0.75
+        x[2 * nq] = opening
+        handle = scene.object_fk(np.array([opening]), "handle_frame")
+        # Where hooking starts: beside the bar (the insert target), then pulled back by dz.
+        shifted = handle @ task.grasp_offset(scene, "insert")
         shifted[:3, 3] += dz * handle[:3, 2]
         placed = _place_grasp(scene, x, shifted)
-        corners = np.linalg.solve(handle, scene.fk(placed[: scene.nq], "grasp") @ tip.T).T
+        corners = np.linalg.solve(handle, scene.fk(placed[:nq], "grasp") @ tip.T).T
         return placed, float(corners[:, 2].min())
 
+    assert task.handle_from_closed(scene, backed_out(0.0)[0]) > task.drag_distance
     for dz in (-0.5 * task.hook_backout, -0.9 * task.hook_backout):
         placed, nearest = backed_out(dz)
         assert task.depth_error(scene, placed, "hook") == pytest.approx(dz, abs=1e-4)
@@ -398,10 +401,13 @@ def test_a_finger_that_backs_out_in_front_of_the_bar_while_hooking_starts_over(s
         # A tip that catches the bar and drags the handle open keeps hooking: on a free door the bar
         # then slides into the pocket.
         dragging = placed.copy()
-        dragging[2 * scene.nq + scene.no] = 2.0 * task.drag_speed / task.handle_travel(scene, 0.0)
+        dragging[2 * nq + no] = 2.0 * task.drag_speed / task.handle_travel(scene, 0.2)
         assert task.next_phase(scene, dragging, 0.0, "hook") == "hook"
-        dragging[2 * scene.nq + scene.no] *= 0.4
+        dragging[2 * nq + no] *= 0.4
         assert task.next_phase(scene, dragging, 0.0, "hook") == "approach"
+        closed, nearest = backed_out(dz, opening=0.0)
+        assert nearest < bar_back
+        assert task.next_phase(scene, closed, 0.0, "hook") == "hook"
 
 
 def test_a_finger_that_already_drags_the_handle_open_switches_to_opening(scene):

@@ -154,8 +154,8 @@ class OpenObject(Task):
     hook; for inserting and hooking only the distance across the bar counts, and along the bar
     ``along_tolerance``; inserting also ends only within ``insert_depth_tolerance`` of the
     target's depth, so the tip is behind the bar before it slides sideways; a finger that backs out
-    more than ``hook_backout`` while hooking, and does not move the handle, starts over from the
-    approach). A handle the finger
+    more than ``hook_backout`` while hooking an opened object, and does not move the handle,
+    starts over from the approach). A handle the finger
     already drags open while inserting or hooking (``pulling``) also switches to opening. If the
     bar leaves the pocket while opening (the grasp frame more than ``slip_distance`` from its
     target), the task starts over from the approach.
@@ -200,8 +200,8 @@ class OpenObject(Task):
     #: the tank down to its floor and never hooked. None: no depth test (the earlier behaviour).
     insert_depth_tolerance: float | None = 0.005
     #: how far (m) short of the hook target's depth the grasp frame may back out while hooking
-    #: before the task starts over from the approach, unless the handle moves open (see
-    #: ``backed_out``). About 10 mm short the tip's nearest corner reaches the bar's back face: the
+    #: before the task starts over from the approach, if the object was already opened and the handle
+    #: does not move (see ``backed_out``). About 10 mm short the tip's nearest corner reaches the bar's back face: the
     #: finger can no longer pass behind the bar, and the tip's edge catches on it instead. Seen on
     #: the stuck door: hooking under a held door, the hand drifted back while it slid, and the
     #: planner (whose model lets the door open) pulled on that catch until the tank was spent, then
@@ -543,27 +543,35 @@ class OpenObject(Task):
         itself is caught by ``self_opening`` first."""
         if self.drag_speed <= 0.0:
             return False
-        nq, no = scene.nq, scene.no
-        o = x[2 * nq : 2 * nq + no]
-        closed = scene.object_fk(np.asarray(scene.o_lower, dtype=np.float64), "handle_frame")[:3, 3]
-        if float(np.linalg.norm(scene.object_fk(o, "handle_frame")[:3, 3] - closed)) < self.drag_distance:
+        if self.handle_from_closed(scene, x) < self.drag_distance:
             return False
-        speed = float(x[2 * nq + no]) * self.handle_travel(scene, float(o[0]))
+        nq, no = scene.nq, scene.no
+        speed = float(x[2 * nq + no]) * self.handle_travel(scene, float(x[2 * nq]))
         if speed <= self.drag_speed:
             return False
         dp, _ = self.approach_error(scene, x, "open")
         return dp <= self.slip_distance and abs(self.lateral_error(scene, x)) <= self.slip_lateral
 
     def backed_out(self, scene: Scene, x: np.ndarray) -> bool:
-        """Whether the hooking finger has backed out in front of the bar without moving it: the
-        grasp frame more than ``hook_backout`` (m) short of the hook target's depth while the handle
-        opens no faster than ``drag_speed`` (m/s). A finger that catches the bar with its tip often
-        drags a free door open that way until the bar slides into the pocket (``pulling``); one
-        that cannot move the door (held, or stuck) only spends the tank on the catch."""
+        """Whether the finger, hooking an object already opened, has backed out in front of the bar
+        without moving it: the grasp frame more than ``hook_backout`` (m) short of the hook target's
+        depth, the handle at least ``drag_distance`` (m) from closed (as for ``pulling``) and opening
+        no faster than ``drag_speed`` (m/s). A finger that catches the bar with its tip often drags
+        a free door open that way until the bar slides into the pocket (``pulling``), and on a closed
+        door that is how the drag starts; a door that was opened and does not move now (held, or
+        stuck) only takes the tank's energy for the catch."""
         if self.hook_backout is None or self.depth_error(scene, x, "hook") >= -self.hook_backout:
+            return False
+        if self.handle_from_closed(scene, x) < self.drag_distance:
             return False
         nq, no = scene.nq, scene.no
         return float(x[2 * nq + no]) * self.handle_travel(scene, float(x[2 * nq])) <= self.drag_speed
+
+    def handle_from_closed(self, scene: Scene, x: np.ndarray) -> float:
+        """Distance (m) of the handle from where it is with the object closed."""
+        nq, no = scene.nq, scene.no
+        closed = scene.object_fk(np.asarray(scene.o_lower, dtype=np.float64), "handle_frame")[:3, 3]
+        return float(np.linalg.norm(scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame")[:3, 3] - closed))
 
     def running_ahead(self, scene: Scene, x: np.ndarray) -> bool:
         """Whether the object opens by itself faster than ``runaway_speed`` (m/s at the handle), as
