@@ -200,12 +200,13 @@ class OpenObject(Task):
     #: the tank down to its floor and never hooked. None: no depth test (the earlier behaviour).
     insert_depth_tolerance: float | None = 0.005
     #: how far (m) short of the hook target's depth the grasp frame may back out while hooking
-    #: before the task starts over from the approach, if the object was already opened and the handle
-    #: does not move (see ``backed_out``). About 10 mm short the tip's nearest corner reaches the bar's back face: the
-    #: finger can no longer pass behind the bar, and the tip's edge catches on it instead. Seen on
-    #: the stuck door: hooking under a held door, the hand drifted back while it slid, and the
-    #: planner (whose model lets the door open) pulled on that catch until the tank was spent, then
-    #: the finger went round to the wrong side of the bar. None: never (the earlier behaviour).
+    #: before the task starts over from the approach, if the object was already opened and the
+    #: handle does not move (see ``backed_out``). About 10 mm short the tip's nearest corner reaches
+    #: the bar's back face: the finger can no longer pass behind the bar, and the tip's edge catches
+    #: on it instead. Seen on the stuck door: hooking under a held door, the hand drifted back while
+    #: it slid, and the planner (whose model lets the door open) pulled on that catch until the tank
+    #: was spent, then the finger went round to the wrong side of the bar. None: never (the earlier
+    #: behaviour).
     hook_backout: float | None = 0.010
     #: how far (m) along the bar the grasp frame may be from its target when inserting and hooking
     along_tolerance: float = 0.03
