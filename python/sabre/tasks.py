@@ -155,10 +155,10 @@ class OpenObject(Task):
     ``along_tolerance``; inserting also ends only within ``insert_depth_tolerance`` of the
     target's depth, so the tip is behind the bar before it slides sideways; a finger that backs out
     more than ``hook_backout`` while hooking an opened object, and does not move the handle,
-    starts over from the approach). A handle the finger
-    already drags open while inserting or hooking (``pulling``) also switches to opening. If the
-    bar leaves the pocket while opening (the grasp frame more than ``slip_distance`` from its
-    target), the task starts over from the approach.
+    starts over from the approach). A handle the finger already drags open while inserting or
+    hooking (``pulling``) also switches to opening. If the bar leaves the pocket while opening (the
+    grasp frame more than ``slip_distance`` from its target), the task starts over from the
+    approach.
     Success: opening ≥ 90 % of the target.
     """
 
@@ -388,19 +388,23 @@ class OpenObject(Task):
         """(across, along) distance (m) of the grasp frame from the target of `phase`: across the
         bar (handle frame y and z) and along it (x). Sliding along the bar does not matter for
         hooking; only the position across it does."""
-        nq, no = scene.nq, scene.no
-        handle = scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame")
-        target = handle @ self.grasp_offset(scene, phase)
-        e = handle[:3, :3].T @ (scene.fk(x[:nq], "grasp")[:3, 3] - target[:3, 3])
+        handle, offset = self._grasp_from_target(scene, x, phase)
+        e = handle[:3, :3].T @ offset
         return float(np.hypot(e[1], e[2])), float(abs(e[0]))
 
     def depth_error(self, scene: Scene, x: np.ndarray, phase: str) -> float:
         """Signed distance (m) of the grasp frame from the target of `phase` along the handle
         frame's z axis (into the door): negative while the finger is still short of it."""
+        handle, offset = self._grasp_from_target(scene, x, phase)
+        return float(handle[:3, 2] @ offset)
+
+    def _grasp_from_target(self, scene: Scene, x: np.ndarray, phase: str) -> tuple[np.ndarray, np.ndarray]:
+        """The handle's pose (4, 4) and the grasp frame's offset (3,) from the target of `phase`,
+        in world axes."""
         nq, no = scene.nq, scene.no
         handle = scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame")
         target = handle @ self.grasp_offset(scene, phase)
-        return float(handle[:3, 2] @ (scene.fk(x[:nq], "grasp")[:3, 3] - target[:3, 3]))
+        return handle, scene.fk(x[:nq], "grasp")[:3, 3] - target[:3, 3]
 
     def lateral_error(self, scene: Scene, x: np.ndarray) -> float:
         """Sideways offset (m) of the grasp frame from its open-phase target, along the handle
@@ -546,9 +550,7 @@ class OpenObject(Task):
             return False
         if self.handle_from_closed(scene, x) < self.drag_distance:
             return False
-        nq, no = scene.nq, scene.no
-        speed = float(x[2 * nq + no]) * self.handle_travel(scene, float(x[2 * nq]))
-        if speed <= self.drag_speed:
+        if self.handle_speed(scene, x) <= self.drag_speed:
             return False
         dp, _ = self.approach_error(scene, x, "open")
         return dp <= self.slip_distance and abs(self.lateral_error(scene, x)) <= self.slip_lateral
@@ -565,8 +567,12 @@ class OpenObject(Task):
             return False
         if self.handle_from_closed(scene, x) < self.drag_distance:
             return False
+        return self.handle_speed(scene, x) <= self.drag_speed
+
+    def handle_speed(self, scene: Scene, x: np.ndarray) -> float:
+        """Speed (m/s) of the handle in the opening direction (negative while closing)."""
         nq, no = scene.nq, scene.no
-        return float(x[2 * nq + no]) * self.handle_travel(scene, float(x[2 * nq])) <= self.drag_speed
+        return float(x[2 * nq + no]) * self.handle_travel(scene, float(x[2 * nq]))
 
     def handle_from_closed(self, scene: Scene, x: np.ndarray) -> float:
         """Distance (m) of the handle from where it is with the object closed."""
@@ -578,9 +584,7 @@ class OpenObject(Task):
         """Whether the object opens by itself faster than ``runaway_speed`` (m/s at the handle), as
         a dishwasher door does past its balance point. The hand then rides along (its finger sits
         in the door's path) instead of starting over from the approach."""
-        nq, no = scene.nq, scene.no
-        rate = float(x[2 * nq + no])
-        return rate * self.handle_travel(scene, float(x[2 * nq])) > self.runaway_speed
+        return self.handle_speed(scene, x) > self.runaway_speed
 
     def noise_scale(self, scene: Scene, x: np.ndarray, phase: str) -> float:
         if phase in ("open", "release"):
