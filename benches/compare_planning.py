@@ -8,7 +8,8 @@ the task's cost evaluated at every step, and updates the policy (`Controller.upd
 what a MuJoCo-based sampler would pay for its rollouts alone: `mujoco.rollout` of the same N × K
 batch on the equivalent scene (benches/mujoco_scene.py), 2 threads, per-step states, cost not
 included. Both are timed alternately in one process, from the default state (free space) and from
-the state with the hook on the handle (contact); medians are printed with the ratio of the two.
+the state with the hook on the handle (contact); medians are printed with the ratio of the two, and
+with the time sabre's workers spent inside Rapier's pipeline step (`Controller.stats["engine_time"]`).
 Finally the closed loop opens the object from the paper's start (plant at 1 kHz, re-planning at
 `--replan-rate`, 20 Hz by default; `make demo` re-plans at 50 Hz); its real-time factor and the median planning iteration
 of each task phase are printed (the approach plans in free space, hook and open in contact).
@@ -61,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
 
     print(f"sabre {sabre.__version__} vs MuJoCo {mujoco.__version__}: planning iteration, N={n} x K={k}, "
           f"{THREADS} threads, median of {args.repeats} alternating rounds")
-    print(f"{'start':<10} {'sabre iteration (ms)':>22} {'mujoco.rollout (ms)':>21} {'ratio':>7}")
+    print(f"{'start':<10} {'sabre iteration (ms)':>22} {'mujoco.rollout (ms)':>21} {'ratio':>7} {'in Rapier (ms)':>15} {'share':>6}")
     for label, x in (("free", scene.default_state()), ("contact", hooked_state(scene))):
         controller = sabre.Controller(scene, sabre.tasks.OpenObject(), config)
         if label == "contact":
@@ -72,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
         controls = mujoco_controls(model, commands)
         out_state = np.empty((n, k, state.size))
         t_sim = 0.0
-        sabre_times, mujoco_times = [], []
+        sabre_times, mujoco_times, engine_ms, engine_share = [], [], [], []
         for round_ in range(args.repeats + 3):
             def run_sabre() -> float:
                 nonlocal t_sim
@@ -91,9 +92,15 @@ def main(argv: list[str] | None = None) -> int:
             if round_ >= 3:
                 sabre_times.append(results["run_sabre"])
                 mujoco_times.append(results["run_mujoco"])
+                stats = controller.stats
+                engine_ms.append(1e3 * stats["engine_time"] / THREADS)
+                engine_share.append(stats["engine_time"] / (THREADS * stats["rollout_time"]))
         s, m = statistics.median(sabre_times), statistics.median(mujoco_times)
-        print(f"{label:<10} {1e3 * s:>22.2f} {1e3 * m:>21.2f} {m / s:>6.2f}x")
-    print("(ratio = MuJoCo rollouts alone / sabre's whole iteration; > 1 means sabre's iteration is faster)")
+        e, share = statistics.median(engine_ms), statistics.median(engine_share)
+        print(f"{label:<10} {1e3 * s:>22.2f} {1e3 * m:>21.2f} {m / s:>6.2f}x {e:>15.2f} {100 * share:>5.0f}%")
+    print("(ratio = MuJoCo rollouts alone / sabre's whole iteration; > 1 means sabre's iteration is faster;")
+    print(" in Rapier = time inside Rapier's pipeline step per worker per iteration, share = its part of the")
+    print(" rollout workers' time: the floor under sabre's iteration that only a faster physics step lowers)")
 
     controller = sabre.Controller(scene, sabre.tasks.OpenObject(), config)
     episode = sabre.run_episode(scene, controller, args.episode_seconds, seed=0, replan_rate=args.replan_rate, progress=False)

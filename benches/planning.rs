@@ -5,7 +5,8 @@
 //! noise and the task's full cost recorded from the `make demo` episode by
 //! `benches/capture_open_phase.py`). Every timed iteration starts from the same planner state, so
 //! each does the same work: repeated iterations from one state otherwise let the plan drift into
-//! harder or softer contact, and the time with it.
+//! harder or softer contact, and the time with it. After each case a line gives, from the planner's
+//! statistics, how much of the rollout workers' time went into Rapier's pipeline step.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -14,7 +15,7 @@ use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use nalgebra::{Isometry3, Matrix4};
 use sabre::cost::{base_clearance, Cost, PoseTarget, Term};
 use sabre::model::Scene;
-use sabre::mppi::{Mppi, MppiConfig};
+use sabre::mppi::{IterationStats, Mppi, MppiConfig};
 use sabre::sim::{RolloutConfig, RolloutModel};
 
 fn approach_cost(scene: &Scene) -> Cost {
@@ -142,6 +143,46 @@ fn open_phase(scene: &Scene) -> OpenPhase {
 /// Iterations from the bench state before timing, so the plan is a converged one, not zeros.
 const WARM_ITERATIONS: usize = 20;
 
+/// What the timed iterations spent where, from the planner's own statistics: the physics engine's
+/// share is the floor below which sabre's work around it cannot take an iteration.
+#[derive(Default)]
+struct Breakdown {
+    iterations: u32,
+    iteration: f64,
+    rollout: f64,
+    engine: f64,
+    engine_steps: u64,
+}
+
+impl Breakdown {
+    fn add(&mut self, stats: &IterationStats) {
+        self.iterations += 1;
+        self.iteration += stats.iteration_time;
+        self.rollout += stats.rollout_time;
+        self.engine += stats.engine_time;
+        self.engine_steps += stats.engine_steps;
+    }
+
+    fn report(&self, case: &str, threads: usize) {
+        if self.iterations == 0 || self.engine_steps == 0 {
+            println!("{case}/{threads}_threads: no step went through Rapier's pipeline (all skipped as quiescent)");
+            return;
+        }
+        let n = f64::from(self.iterations);
+        let workers = threads as f64 * self.rollout;
+        println!(
+            "{case}/{threads}_threads: mean iteration {:.2} ms, rollouts {:.2} ms; Rapier's pipeline {:.1} % of the workers' time \
+             ({:.2} ms per worker per iteration, {:.1} µs per engine step, {:.0} engine steps per iteration)",
+            1e3 * self.iteration / n,
+            1e3 * self.rollout / n,
+            100.0 * self.engine / workers,
+            1e3 * self.engine / (n * threads as f64),
+            1e6 * self.engine / self.engine_steps as f64,
+            self.engine_steps as f64 / n,
+        );
+    }
+}
+
 fn planning(c: &mut Criterion) {
     let scene = Arc::new(Scene::load("royalpanda", "shelf", None).expect("built-in scene"));
     let model = Arc::new(RolloutModel::new(scene.clone(), RolloutConfig::default()).expect("model"));
@@ -164,6 +205,7 @@ fn planning(c: &mut Criterion) {
                 mppi.iterate(&x0, t, &cost).expect("warm-up iteration");
             }
             let (plan, plan_t0) = (mppi.nominal().to_vec(), mppi.nominal_t0());
+            let mut breakdown = Breakdown::default();
             group.bench_with_input(BenchmarkId::new(name, format!("{threads}_threads")), &threads, |b, _| {
                 b.iter_custom(|iterations| {
                     let mut total = Duration::ZERO;
@@ -172,12 +214,14 @@ fn planning(c: &mut Criterion) {
                         mppi.set_nominal(&plan, plan_t0).expect("plan");
                         mppi.set_noise_scale(noise).expect("noise scale");
                         let start = Instant::now();
-                        mppi.iterate(&x0, t + 0.01, &cost).expect("iteration");
+                        let stats = mppi.iterate(&x0, t + 0.01, &cost).expect("iteration");
                         total += start.elapsed();
+                        breakdown.add(stats);
                     }
                     total
                 })
             });
+            breakdown.report(name, threads);
         }
     }
     let open = open_phase(&scene);
@@ -186,6 +230,7 @@ fn planning(c: &mut Criterion) {
         config.threads = Some(threads);
         let seed = config.seed;
         let mut mppi = Mppi::new(model.clone(), config).expect("sampler");
+        let mut breakdown = Breakdown::default();
         group.bench_with_input(BenchmarkId::new("open_phase", format!("{threads}_threads")), &threads, |b, _| {
             b.iter_custom(|iterations| {
                 let mut total = Duration::ZERO;
@@ -195,12 +240,14 @@ fn planning(c: &mut Criterion) {
                     mppi.set_noise_scale(open.noise_scale).expect("noise scale");
                     mppi.set_guides(&open.guides).expect("guides");
                     let start = Instant::now();
-                    mppi.iterate(&open.x0, open.t, &open.cost).expect("iteration");
+                    let stats = mppi.iterate(&open.x0, open.t, &open.cost).expect("iteration");
                     total += start.elapsed();
+                    breakdown.add(stats);
                 }
                 total
             })
         });
+        breakdown.report("open_phase", threads);
     }
     group.finish();
 }

@@ -93,6 +93,9 @@ def test_controller_reaches_a_target_in_the_rollout_model(scene):
     stats = controller.stats
     assert stats["iteration"] == 300
     assert 1.0 < stats["effective_sample_size"] < 24.0 and stats["failed_rollouts"] == 0
+    assert 0 <= stats["engine_steps"] <= 24 * controller.config.horizon_steps
+    assert (stats["engine_time"] > 0.0) == (stats["engine_steps"] > 0)
+    assert 0.0 < stats["rollout_time"] <= stats["iteration_time"]
 
 
 def test_planning_is_deterministic_for_a_seed_whatever_the_thread_count(scene):
@@ -150,6 +153,8 @@ def test_python_term_is_added_to_the_rollout_costs(scene):
             controller.update(x, i * model.dt)
             x = model.rollout(x, controller.nominal[None, :1]).states[0, -1]
         results[label] = np.linalg.norm(x[:2] - x0[:2])
+        # With a Python term the rollouts run apart from the update; they are timed all the same.
+        assert 0.0 < controller.stats["rollout_time"] <= controller.stats["iteration_time"]
     assert calls and calls[0][0] == 24
     assert results["held"] < 0.5 * results["free"]
 
@@ -628,3 +633,18 @@ def test_a_door_that_falls_open_is_released_not_held():
     y[2 * shelf.nq] = 0.6
     assert not task.self_opening(shelf, y)
     assert task.next_phase(shelf, y, 0.0, "open") == "approach"
+
+
+def test_stats_count_the_steps_that_went_through_the_physics_engine(scene, hooked):
+    """From the hook on the handle the rollouts touch the door, so steps go through Rapier; the
+    engine time summed over the workers fits inside their wall time, and the count is the same
+    for any thread count (a count, not a timing)."""
+    counts = []
+    for threads in (1, 2):
+        config = sabre.ControllerConfig(seed=4, threads=threads)
+        controller = sabre.Controller(scene, sabre.tasks.OpenObject(), config)
+        stats = controller.update(hooked, 0.0)
+        assert 0 < stats["engine_steps"] <= config.rollouts * config.horizon_steps
+        assert 0.0 < stats["engine_time"] <= threads * stats["rollout_time"]
+        counts.append(stats["engine_steps"])
+    assert counts[0] == counts[1]

@@ -223,7 +223,7 @@ def test_results_do_not_depend_on_the_thread_count(scenes, motions):
     results = [model.rollout(hooked, U, threads=t) for t in (1, 2, 3, 8)]
     assert results[0].contact.any()
     for other in results[1:]:
-        for field in ("states", "tau_ext", "wrench", "contact", "failed"):
+        for field in ("states", "tau_ext", "wrench", "contact", "failed", "engine_steps"):
             assert np.array_equal(getattr(results[0], field), getattr(other, field)), field
     # The same call twice gives the same answer too (worlds are restored, not reused dirty).
     again = model.rollout(hooked, U, threads=2)
@@ -311,6 +311,8 @@ def test_rollout_shapes_and_dtypes(scenes):
     assert res.tau_ext.shape == (3, 7, NQ) and res.wrench.shape == (3, 7, 6)
     assert res.contact.shape == (3, 7) and res.contact.dtype == np.bool_
     assert res.failed.shape == (3,)
+    assert res.engine_steps.shape == (3,) and res.engine_steps.dtype == np.int64
+    assert res.engine_time.shape == (3,) and res.engine_time.dtype == np.float64
     np.testing.assert_array_equal(res.states[:, 0], np.broadcast_to(scene.default_state(), (3, scene.nx)))
     empty = sabre.RolloutModel(scene).rollout(scene.default_state(), np.zeros((0, 5, NQ)))
     assert empty.states.shape == (0, 6, scene.nx)
@@ -334,6 +336,13 @@ def test_skipping_quiescent_steps_changes_nothing(scenes, motions, name):
     np.testing.assert_allclose(a.states[:, :, O + 1], b.states[:, :, O + 1], atol=2e-3)
     np.testing.assert_array_equal(a.contact, b.contact)
     assert not a.contact[:, :200].any()
+    # The engine clock counts what went through Rapier: every step without skipping; with it, at
+    # least every step that carried contact, and none of the first steps far from the object
+    # unless the object still had to settle.
+    np.testing.assert_array_equal(b.engine_steps, [300, 300, 300])
+    assert (b.engine_time > 0).all()
+    assert (a.engine_steps >= a.contact.sum(axis=1)).all() and (a.engine_steps < 300).all()
+    assert ((a.engine_time > 0) == (a.engine_steps > 0)).all()
 
 
 def test_contact_report_sums_to_the_wrist_wrench():

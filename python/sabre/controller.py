@@ -283,8 +283,11 @@ class Controller:
     def stats(self) -> dict:
         """Last iteration: iteration_time, rollout_time (s), cost_min/mean/max, nominal_cost,
         effective_sample_size, failed_rollouts, phase, noise_scale, guide_time (s, the task's
-        guides, included in iteration_time); with the sequential filter
-        also sequential_time (s, included in iteration_time) and sequential_fallbacks."""
+        guides, included in iteration_time); engine_steps and engine_time (s): the rollout steps
+        that went through Rapier's pipeline and the time spent in them summed over the workers, so
+        ``engine_time / (rollout_time * threads)`` is the physics engine's share of the rollouts;
+        with the sequential filter also sequential_time (s, included in iteration_time) and
+        sequential_fallbacks."""
         return dict(self._stats)
 
 

@@ -38,6 +38,11 @@ class RolloutResult:
         wrench: (N, K, 6) force (N) and torque (N·m) on the hand and hook about the wrist flange, world frame.
         contact: (N, K) bool, robot–object contact carried force in that step.
         failed: (N,) bool, the physics diverged; that rollout is NaN from the failing step on.
+        engine_steps: (N,) int64, steps that went through Rapier's pipeline; the others were skipped
+            because nothing could move the object (``skip_quiescent_steps``).
+        engine_time: (N,) wall time (s) each rollout spent inside Rapier's pipeline, the physics
+            engine's own share of the work (the rest is the servo, contact measurement and cost).
+            A timing, so it varies from run to run; everything else is deterministic.
     """
 
     states: np.ndarray
@@ -45,6 +50,8 @@ class RolloutResult:
     wrench: np.ndarray
     contact: np.ndarray
     failed: np.ndarray
+    engine_steps: np.ndarray
+    engine_time: np.ndarray
 
 
 class RolloutModel:
@@ -111,6 +118,8 @@ class RolloutModel:
             wrench=readonly(r.wrench),
             contact=readonly(r.contact),
             failed=readonly(r.failed),
+            engine_steps=readonly(r.engine_steps.astype(np.int64)),
+            engine_time=readonly(r.engine_time),
         )
 
     def __repr__(self) -> str:

@@ -78,7 +78,12 @@ pub struct IterationStats {
     pub iteration: u64,
     /// Wall time of sampling, rollouts and update (s).
     pub iteration_time: f64,
+    /// Wall time of the rollouts with their cost (s).
     pub rollout_time: f64,
+    /// Steps of the batch that went through Rapier's pipeline, and the time spent in them summed
+    /// over the workers (s): the physics engine's own share of `rollout_time × threads`.
+    pub engine_steps: u64,
+    pub engine_time: f64,
     pub cost_min: f64,
     pub cost_mean: f64,
     pub cost_max: f64,
@@ -369,10 +374,15 @@ impl Mppi {
         &self.samples
     }
 
-    /// Rolls the current samples out from `x` under `cost`.
-    pub fn rollout(&self, x: &[f64], cost: &Cost) -> Result<RolloutBatch> {
-        self.model
-            .rollout_with_cost(x, &self.samples, self.config.rollouts, self.k, self.config.threads, Some(cost))
+    /// Rolls the current batch out from `x` with `cost`; records its timing in [`Self::stats`].
+    pub fn rollout(&mut self, x: &[f64], cost: &Cost) -> Result<RolloutBatch> {
+        let start = Instant::now();
+        let batch = self
+            .model
+            .rollout_with_cost(x, &self.samples, self.config.rollouts, self.k, self.config.threads, Some(cost))?;
+        self.stats.rollout_time = start.elapsed().as_secs_f64();
+        (self.stats.engine_steps, self.stats.engine_time) = batch.engine_totals();
+        Ok(batch)
     }
 
     /// Weights the samples by `costs` and moves the policy: μ_k += α clip(Σ_l w_l ε_k^l, ±g_max) (14, 54),
@@ -433,11 +443,8 @@ impl Mppi {
         }
         let start = Instant::now();
         self.sample(t);
-        let rollout_start = Instant::now();
         let batch = self.rollout(x, cost)?;
-        let rollout_time = rollout_start.elapsed().as_secs_f64();
         self.update(&batch.costs)?;
-        self.stats.rollout_time = rollout_time;
         self.stats.iteration_time = start.elapsed().as_secs_f64();
         Ok(&self.stats)
     }

@@ -320,6 +320,10 @@ pub struct PyRolloutResult {
     contact: Py<PyArrayDyn<bool>>,
     #[pyo3(get)]
     failed: Py<PyArrayDyn<bool>>,
+    #[pyo3(get)]
+    engine_steps: Py<PyArrayDyn<u64>>,
+    #[pyo3(get)]
+    engine_time: Py<PyArrayDyn<f64>>,
 }
 
 #[pyclass(name = "RolloutModel", module = "sabre._core", frozen)]
@@ -384,6 +388,8 @@ impl PyRolloutModel {
             wrench: array(py, batch.wrench, &[n, k, 6])?.unbind(),
             contact: batch.contact.into_pyarray(py).reshape(vec![n, k])?.unbind(),
             failed: batch.failed.into_pyarray(py).reshape(vec![n])?.unbind(),
+            engine_steps: batch.engine_steps.into_pyarray(py).reshape(vec![n])?.unbind(),
+            engine_time: array(py, batch.engine_time, &[n])?.unbind(),
         })
     }
 }
@@ -1118,6 +1124,8 @@ fn stats_dict<'py>(py: Python<'py>, s: &crate::mppi::IterationStats) -> PyResult
     d.set_item("iteration", s.iteration)?;
     d.set_item("iteration_time", s.iteration_time)?;
     d.set_item("rollout_time", s.rollout_time)?;
+    d.set_item("engine_steps", s.engine_steps)?;
+    d.set_item("engine_time", s.engine_time)?;
     d.set_item("cost_min", s.cost_min)?;
     d.set_item("cost_mean", s.cost_mean)?;
     d.set_item("cost_max", s.cost_max)?;

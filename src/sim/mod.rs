@@ -6,4 +6,4 @@ pub mod world;
 
 pub use plant::{Plant, PlantConfig, DEFAULT_TAU_EXT_CUTOFF};
 pub use rollout::{default_threads, RolloutBatch, RolloutConfig, RolloutModel};
-pub use world::{Interaction, SimWorld};
+pub use world::{EngineClock, Interaction, SimWorld};

@@ -68,6 +68,20 @@ pub struct RolloutBatch {
     pub failed: Vec<bool>,
     /// (N,) accumulated cost of each rollout (zero without a cost; +∞ for failed rollouts).
     pub costs: Vec<f64>,
+    /// (N,) steps of each rollout that went through Rapier's pipeline; the others were skipped
+    /// because nothing could move the object (see [`RolloutConfig::skip_quiescent_steps`]).
+    pub engine_steps: Vec<u64>,
+    /// (N,) wall time each rollout spent inside Rapier's pipeline (s); the rest of its time is the
+    /// servo, the contact measurement and the cost.
+    pub engine_time: Vec<f64>,
+}
+
+impl RolloutBatch {
+    /// Steps through Rapier's pipeline and the time spent in them, summed over the batch. The time
+    /// adds up every worker's: divide by the thread count for its share of the wall time.
+    pub fn engine_totals(&self) -> (u64, f64) {
+        (self.engine_steps.iter().sum(), self.engine_time.iter().sum())
+    }
 }
 
 /// Batch rollouts of the reduced-order model from one initial state.
@@ -286,6 +300,8 @@ impl RolloutModel {
             contact: vec![false; n * k],
             failed: vec![false; n],
             costs: zeros(n)?,
+            engine_steps: vec![0; n],
+            engine_time: vec![0.0; n],
         };
         if n == 0 || k == 0 {
             for i in 0..n {
@@ -296,8 +312,15 @@ impl RolloutModel {
         if let Some(cost) = cost {
             cost.validate(&self.scene)?;
         }
-        let work = |i: usize, states: &mut [f64], tau: &mut [f64], wrench: &mut [f64], contact: &mut [bool], (failed, total): (&mut bool, &mut f64)| {
+        let work = |i: usize,
+                    states: &mut [f64],
+                    tau: &mut [f64],
+                    wrench: &mut [f64],
+                    contact: &mut [bool],
+                    (failed, total): (&mut bool, &mut f64),
+                    (engine_steps, engine_time): (&mut u64, &mut f64)| {
             let mut world = self.checkout();
+            let clock = world.engine_clock();
             let u_i = &u[i * k * nq..(i + 1) * k * nq];
             let slices = RolloutSlices {
                 states: &mut *states,
@@ -310,6 +333,9 @@ impl RolloutModel {
             // marked failed from its first step and its world, possibly inconsistent, is dropped.
             let failed_at = match catch_unwind(AssertUnwindSafe(|| self.rollout_one(&mut world, x0, u_i, cost, slices))) {
                 Ok(result) => {
+                    let after = world.engine_clock();
+                    *engine_steps = after.steps - clock.steps;
+                    *engine_time = after.seconds - clock.seconds;
                     self.checkin(world);
                     result
                 }
@@ -332,8 +358,9 @@ impl RolloutModel {
                 .zip(batch.wrench.par_chunks_mut(k * 6))
                 .zip(batch.contact.par_chunks_mut(k))
                 .zip(batch.failed.par_iter_mut().zip(batch.costs.par_iter_mut()))
+                .zip(batch.engine_steps.par_iter_mut().zip(batch.engine_time.par_iter_mut()))
                 .enumerate()
-                .for_each(|(i, ((((s, t), w), c), f))| work(i, s, t, w, c, f));
+                .for_each(|(i, (((((s, t), w), c), f), e))| work(i, s, t, w, c, f, e));
         };
         pool(threads)?.install(run);
         Ok(batch)

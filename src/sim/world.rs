@@ -2,6 +2,7 @@
 //! the state x = [q, q̇, o, ȯ], and turns solver contact impulses into τ_ext, the wrist wrench and a contact flag.
 
 use std::sync::Arc;
+use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, UnitQuaternion, Vector3};
 use rapier3d_f64::prelude::*;
@@ -232,6 +233,17 @@ pub struct SimWorld {
     object_frames: Frames,
     mass_matrix: DMatrix<f64>,
     gravity_torque: DVector<f64>,
+    engine: EngineClock,
+}
+
+/// Work done inside Rapier's `PhysicsPipeline::step` by one world since it was built: what the
+/// physics engine itself costs, apart from sabre's servo, interaction and cost work around it.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct EngineClock {
+    /// Steps that went through the pipeline (steps skipped as quiescent are not counted).
+    pub steps: u64,
+    /// Wall time spent inside those steps (s).
+    pub seconds: f64,
 }
 
 impl Clone for SimWorld {
@@ -250,6 +262,7 @@ impl Clone for SimWorld {
             object_frames: self.object_frames.clone(),
             mass_matrix: self.mass_matrix.clone(),
             gravity_torque: self.gravity_torque.clone(),
+            engine: self.engine,
         }
     }
 }
@@ -679,6 +692,7 @@ impl SimWorld {
             object_frames: Default::default(),
             mass_matrix,
             gravity_torque,
+            engine: EngineClock::default(),
             scene,
         };
         world.set_state(&x0);
@@ -979,6 +993,7 @@ impl SimWorld {
             }
         }
         let s = &mut self.state;
+        let started = Instant::now();
         self.pipeline.step(
             self.gravity,
             &self.params,
@@ -994,7 +1009,15 @@ impl SimWorld {
             &(),
             &(),
         );
+        self.engine.steps += 1;
+        self.engine.seconds += started.elapsed().as_secs_f64();
         self.measure_interaction();
+    }
+
+    /// Steps taken and time spent inside Rapier's pipeline by this world so far (the clock is
+    /// not part of the simulated state: [`Self::restore_from`] and [`Self::set_state`] keep it).
+    pub fn engine_clock(&self) -> EngineClock {
+        self.engine
     }
 
     /// One step under the velocity command `u` (projected onto the velocity limits); writes the
