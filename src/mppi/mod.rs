@@ -80,9 +80,10 @@ pub struct IterationStats {
     pub iteration_time: f64,
     /// Wall time of the rollouts with their cost (s).
     pub rollout_time: f64,
-    /// Steps of the batch that went through Rapier's pipeline, and the time spent in them summed
-    /// over the workers (s): the physics engine's own share of `rollout_time × threads`.
+    /// Steps of the batch that went through Rapier's pipeline (the rest were skipped as quiescent).
     pub engine_steps: u64,
+    /// Time spent inside those steps, summed over the workers (s): the physics engine's own share
+    /// of `rollout_time × threads`.
     pub engine_time: f64,
     pub cost_min: f64,
     pub cost_mean: f64,
