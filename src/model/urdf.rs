@@ -58,6 +58,41 @@ fn finite_or_err(source: &str, what: &str, values: &[f64]) -> Result<()> {
     }
 }
 
+/// A physical inertia tensor: symmetric positive definite, and its principal moments obey the
+/// triangle inequality (no rigid body has one moment larger than the other two together).
+fn check_inertia(source: &str, link: &str, inertia: &Matrix3<f64>) -> Result<()> {
+    let moments = inertia.symmetric_eigenvalues();
+    let scale = moments.abs().max().max(f64::MIN_POSITIVE);
+    let tolerance = 1e-9 * scale;
+    let positive = moments.iter().all(|&m| m > 0.0);
+    let (a, b, c) = (moments[0], moments[1], moments[2]);
+    let triangle = a <= b + c + tolerance && b <= a + c + tolerance && c <= a + b + tolerance;
+    if positive && triangle {
+        Ok(())
+    } else {
+        Err(SabreError::urdf(
+            source,
+            format!("link '{link}' has a non-physical inertia (principal moments {a:.6e}, {b:.6e}, {c:.6e}): it must be positive definite and each moment at most the sum of the other two"),
+        ))
+    }
+}
+
+/// Deepest element nesting accepted; URDF itself needs about six levels.
+pub const MAX_XML_DEPTH: usize = 64;
+
+/// Refuses documents nested deeper than [`MAX_XML_DEPTH`] before any recursive parser sees them.
+fn check_depth(source: &str, doc: &roxmltree::Document) -> Result<()> {
+    let mut depth = vec![0usize; doc.descendants().count() + 1];
+    for node in doc.descendants() {
+        let d = node.parent().map_or(0, |p| depth[p.id().get_usize()] + 1);
+        depth[node.id().get_usize()] = d;
+        if d > MAX_XML_DEPTH {
+            return Err(SabreError::urdf(source, format!("XML nested deeper than {MAX_XML_DEPTH} elements")));
+        }
+    }
+    Ok(())
+}
+
 fn convert_shape(source: &str, link: &str, geometry: &urdf_rs::Geometry) -> Result<Shape> {
     let positive = |what: &str, v: f64| -> Result<f64> {
         if v.is_finite() && v > 0.0 {
@@ -99,8 +134,11 @@ fn convert_link(source: &str, link: &urdf_rs::Link) -> Result<Link> {
         let i = &link.inertial.inertia;
         let values = [link.inertial.mass.value, i.ixx, i.ixy, i.ixz, i.iyy, i.iyz, i.izz];
         finite_or_err(source, &format!("inertial of link '{}'", link.name), &values)?;
+        let o = &link.inertial.origin;
+        finite_or_err(source, &format!("inertial origin of link '{}'", link.name), &[o.xyz[0], o.xyz[1], o.xyz[2], o.rpy[0], o.rpy[1], o.rpy[2]])?;
         let origin = origin_pose(&link.inertial.origin);
         let local = Matrix3::new(i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz);
+        check_inertia(source, &link.name, &local)?;
         let r = origin.rotation.to_rotation_matrix();
         Some(Inertial {
             mass: link.inertial.mass.value,
@@ -172,11 +210,25 @@ fn convert_joint(source: &str, joint: &urdf_rs::Joint, link_id: &dyn Fn(&str) ->
     if (kind != JointKind::Fixed && !(lower < upper)) || lower.is_nan() || upper.is_nan() {
         return Err(SabreError::urdf(source, format!("joint '{}' has lower limit {lower} not below upper {upper}", joint.name)));
     }
-    let velocity = if l.velocity > 0.0 { l.velocity } else { f64::INFINITY };
-    let effort = if l.effort > 0.0 { l.effort } else { f64::INFINITY };
+    // URDF leaves velocity and effort at 0 when a <limit> omits them: no bound. A negative or
+    // non-finite bound is a mistake, not "unlimited".
+    let bound = |what: &str, v: f64| -> Result<f64> {
+        if !v.is_finite() || v < 0.0 {
+            Err(SabreError::urdf(source, format!("joint '{}' has {what} limit {v}; it must be finite and non-negative (0 or omitted: no limit)", joint.name)))
+        } else if v == 0.0 {
+            Ok(f64::INFINITY)
+        } else {
+            Ok(v)
+        }
+    };
+    let velocity = bound("velocity", l.velocity)?;
+    let effort = bound("effort", l.effort)?;
     let (damping, friction) = joint.dynamics.as_ref().map_or((0.0, 0.0), |d| (d.damping, d.friction));
-    if !(damping >= 0.0 && friction >= 0.0) {
-        return Err(SabreError::urdf(source, format!("joint '{}' has negative or non-finite dynamics", joint.name)));
+    if !(damping.is_finite() && friction.is_finite() && damping >= 0.0 && friction >= 0.0) {
+        return Err(SabreError::urdf(
+            source,
+            format!("joint '{}' has damping {damping} and friction {friction}; both must be finite and non-negative", joint.name),
+        ));
     }
     Ok(Joint {
         name: joint.name.clone(),
@@ -221,6 +273,7 @@ fn parse_xyz(source: &str, node: &roxmltree::Node) -> Result<Vector3<f64>> {
 
 fn parse_extension(source: &str, text: &str) -> Result<SabreExtension> {
     let doc = roxmltree::Document::parse(text).map_err(|e| SabreError::urdf(source, format!("malformed XML: {e}")))?;
+    check_depth(source, &doc)?;
     let mut ext = SabreExtension::default();
     let Some(block) = doc.root_element().children().find(|n| n.has_tag_name("sabre")) else {
         return Ok(ext);
@@ -307,4 +360,84 @@ pub fn load_urdf_file(path: &std::path::Path) -> Result<ParsedUrdf> {
     let source = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|e| SabreError::urdf(&source, format!("cannot read file: {e}")))?;
     parse_urdf(&source, &text)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const ROBOT: &str = include_str!("../../assets/robots/royalpanda.urdf");
+    const SHELF: &str = include_str!("../../assets/objects/shelf.urdf");
+
+    fn shelf_with(from: &str, to: &str) -> String {
+        assert!(SHELF.contains(from), "fixture text '{from}' not in shelf.urdf");
+        SHELF.replacen(from, to, 1)
+    }
+
+    fn urdf_error(text: &str) -> String {
+        match parse_urdf("object", text) {
+            Err(SabreError::Urdf { detail, .. }) => detail,
+            other => panic!("expected a URDF error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn the_shipped_assets_pass_every_value_check() {
+        parse_urdf("robot", ROBOT).unwrap();
+        for (name, text) in crate::model::scene::BUILTIN_OBJECTS {
+            parse_urdf(name, text).unwrap();
+        }
+    }
+
+    #[test]
+    fn deep_nesting_is_refused_before_the_recursive_parser_sees_it() {
+        let deep = format!("<robot name=\"r\">{}{}</robot>", "<a>".repeat(20_000), "</a>".repeat(20_000));
+        assert!(urdf_error(&deep).contains("nested deeper"));
+        // The root element sits at depth 1 under the document node.
+        let nested = |levels: usize| format!("<robot>{}{}</robot>", "<a>".repeat(levels), "</a>".repeat(levels));
+        let at_limit = nested(MAX_XML_DEPTH - 1);
+        assert!(check_depth("t", &roxmltree::Document::parse(&at_limit).unwrap()).is_ok());
+        let beyond = nested(MAX_XML_DEPTH);
+        assert!(check_depth("t", &roxmltree::Document::parse(&beyond).unwrap()).is_err());
+    }
+
+    #[test]
+    fn non_finite_inertial_origins_are_refused() {
+        let text = shelf_with("<origin xyz=\"0.231338 0 0.382559\"", "<origin xyz=\"0.231338 nan 0.382559\"");
+        assert!(urdf_error(&text).contains("inertial origin"));
+    }
+
+    #[test]
+    fn negative_or_non_physical_inertia_is_refused() {
+        for (ixx, iyy, izz) in [(-0.1, 0.1, 0.1), (0.0, 0.1, 0.1), (1.0, 0.1, 0.1)] {
+            let doc = format!(
+                "<robot name=\"o\"><link name=\"base\"/><link name=\"door\"><inertial><mass value=\"1\"/><inertia ixx=\"{ixx}\" ixy=\"0\" ixz=\"0\" iyy=\"{iyy}\" iyz=\"0\" izz=\"{izz}\"/></inertial></link>\
+                 <joint name=\"j\" type=\"revolute\"><parent link=\"base\"/><child link=\"door\"/><axis xyz=\"0 0 1\"/><limit lower=\"0\" upper=\"1\" effort=\"1\" velocity=\"1\"/></joint></robot>"
+            );
+            assert!(urdf_error(&doc).contains("non-physical inertia"), "{ixx} {iyy} {izz}");
+        }
+    }
+
+    #[test]
+    fn negative_limits_and_infinite_dynamics_are_refused() {
+        let joint = |limit: &str, dynamics: &str| {
+            format!(
+                "<robot name=\"o\"><link name=\"base\"/><link name=\"door\"/>\
+                 <joint name=\"j\" type=\"revolute\"><parent link=\"base\"/><child link=\"door\"/><axis xyz=\"0 0 1\"/>{limit}{dynamics}</joint></robot>"
+            )
+        };
+        let ok = joint("<limit lower=\"0\" upper=\"1\" effort=\"0\" velocity=\"0\"/>", "<dynamics damping=\"1\" friction=\"0.5\"/>");
+        let tree = parse_urdf("object", &ok).unwrap().tree;
+        let limits = tree.active_limits()[0];
+        assert!(limits.effort.is_infinite() && limits.velocity.is_infinite(), "0 means no bound");
+        for (limit, dynamics, says) in [
+            ("<limit lower=\"0\" upper=\"1\" effort=\"-5\" velocity=\"1\"/>", "", "effort limit -5"),
+            ("<limit lower=\"0\" upper=\"1\" effort=\"5\" velocity=\"-1\"/>", "", "velocity limit -1"),
+            ("<limit lower=\"0\" upper=\"1\" effort=\"inf\" velocity=\"1\"/>", "", "effort limit inf"),
+            ("<limit lower=\"0\" upper=\"1\" effort=\"1\" velocity=\"1\"/>", "<dynamics damping=\"inf\"/>", "damping inf"),
+            ("<limit lower=\"0\" upper=\"1\" effort=\"1\" velocity=\"1\"/>", "<dynamics damping=\"1\" friction=\"-1\"/>", "friction -1"),
+        ] {
+            assert!(urdf_error(&joint(limit, dynamics)).contains(says), "{limit} {dynamics}");
+        }
+    }
 }
