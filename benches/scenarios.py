@@ -1,4 +1,4 @@
-"""Runs the SPEC §10 scenarios for the controller variants and prints a markdown table.
+"""Runs the paper's Sec. VI-A scenarios for the controller variants and prints a markdown table.
 
     .venv/bin/python benches/scenarios.py --seeds 1 --duration 5
 """
