@@ -1,6 +1,6 @@
 """Runs the paper's Sec. VI-A scenarios for the controller variants and prints a markdown table.
 
-    .venv/bin/python benches/scenarios.py --seeds 1 --duration 5
+    .venv/bin/python experiments/scenarios.py --seeds 1 --duration 5
 """
 
 from __future__ import annotations

@@ -3,10 +3,10 @@
 Runs the controller (Table I defaults, variant N unless --variant) on the 1 kHz plant for up to
 --duration s of simulated time per episode, re-planning at --replan-rate Hz, and prints a
 markdown table: successes, time to open, final opening, mean wrench, real-time factor and median
-planning time. Episodes stop 0.5 s after success. Results go to benches/results/acceptance.json.
+planning time. Episodes stop 0.5 s after success. Results go to experiments/results/acceptance.json.
 
-    .venv/bin/python benches/acceptance.py --seeds 10
-    .venv/bin/python benches/acceptance.py --objects shelf drawer --seeds 3 --variant IO
+    .venv/bin/python experiments/acceptance.py --seeds 10
+    .venv/bin/python experiments/acceptance.py --objects shelf drawer --seeds 3 --variant IO
 """
 
 from __future__ import annotations
