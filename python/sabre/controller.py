@@ -25,8 +25,8 @@ from .tasks import Task
 
 __all__ = ["ControllerConfig", "Controller", "Episode", "run_episode", "paper_start_state", "likelihood_weights", "VARIANTS"]
 
-#: Controller variants (paper Sec. IV, Fig. 2): N no filter, I inner FILTER-QP with the tank, O sequential
-#: FILTER-QP in the outer loop, IO both.
+#: Controller variants (paper Sec. IV, Fig. 2): N no filter, I inner FILTER-QP with the tank,
+#: O sequential FILTER-QP in the outer loop, IO both.
 VARIANTS = ("N", "I", "O", "IO")
 
 
