@@ -5,14 +5,15 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.deps-stamp
 export VIRTUAL_ENV := $(CURDIR)/$(VENV)
 
-.PHONY: all venv build demo test test-rust test-python bench bench-rust bench-python clean
+.PHONY: all venv build demo test test-rust test-python lint lint-rust lint-python bench bench-rust bench-python clean
 
 all: build
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet "maturin>=1.5,<2" "numpy>=1.24" "pytest>=7" "matplotlib>=3.7" "tqdm>=4.60" "mujoco>=3.1" "osqp>=0.6"
+	$(PY) -m pip install --quiet "maturin>=1.5,<2" "numpy>=1.24" "pytest>=7" "matplotlib>=3.7" "tqdm>=4.60" "mujoco>=3.1" "osqp>=0.6" \
+		"ruff>=0.5" "mypy>=1.10"
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -31,6 +32,20 @@ test-python: build
 	$(PY) -m pytest -q tests
 
 test: test-rust test-python
+
+# `make -k lint` reports every tool's findings instead of stopping at the first.
+lint-rust:
+	cargo fmt --check
+	cargo clippy --all-targets -- -D warnings
+	cargo clippy --all-targets --features python -- -D warnings
+
+# The stub check compares python/sabre/_core.pyi with the built extension.
+lint-python: build
+	$(VENV)/bin/ruff check .
+	$(PY) -m mypy python/sabre
+	$(PY) -m mypy.stubtest sabre._core
+
+lint: lint-rust lint-python
 
 bench-rust:
 	cargo bench --bench rollout

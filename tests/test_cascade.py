@@ -1,4 +1,4 @@
-"""The cascade: controller variants (SPEC §8) in simulated time and the real-time mode."""
+"""The cascade: controller variants (paper Sec. IV) in simulated time and the real-time mode."""
 
 from __future__ import annotations
 

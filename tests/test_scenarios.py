@@ -1,4 +1,4 @@
-"""Scenario checks (SPEC §10): the stuck door loads the held door and the tank keeps its floor."""
+"""Scenario checks (paper Sec. VI-A): the stuck door loads the held door and the tank keeps its floor."""
 
 from __future__ import annotations
 

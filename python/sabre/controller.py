@@ -25,8 +25,8 @@ from .tasks import Task
 
 __all__ = ["ControllerConfig", "Controller", "Episode", "run_episode", "paper_start_state", "likelihood_weights", "VARIANTS"]
 
-#: Controller variants (SPEC §8): N no filter, I inner FILTER-QP with the tank, O sequential
-#: FILTER-QP in the outer loop, IO both.
+#: Controller variants (paper Sec. IV, Fig. 2): N no filter, I inner FILTER-QP with the tank,
+#: O sequential FILTER-QP in the outer loop, IO both.
 VARIANTS = ("N", "I", "O", "IO")
 
 
@@ -350,7 +350,7 @@ class Episode:
 
     def violations(self, config: SafetyConfig | None = None) -> dict[str, float]:
         """Cumulative constraint violation per ZBF class, Δ_tot = Σ_k max(0, −h(x_k)) over the
-        recorded states (SPEC §9), with the rows of a filter built from ``config`` (default
+        recorded states (paper Sec. VI), with the rows of a filter built from ``config`` (default
         settings: the paper's base box)."""
         f = SafetyFilter(self.scene, config)
         names = f.row_names

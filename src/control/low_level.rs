@@ -136,7 +136,8 @@ impl LowLevelController {
                 None => 0.0,
             };
             self.pi_acceleration[i] = c.bandwidth * error + c.integral_gain * self.integral[i];
-            // Summed left to right as before the floor existed, so that a zero floor is bit-identical.
+            // Summed as (53) is written, the floor's term added separately below,
+            // so that a zero floor gives exactly the torque of plain (53).
             self.acceleration[i] = feedforward + c.bandwidth * error + c.integral_gain * self.integral[i];
         }
         self.previous_reference = Some(u_ref.to_vec());

@@ -11,7 +11,7 @@
 
 use super::constraints::Rows;
 
-/// Largest active set tried (rows); beyond it the interior-point solver is as quick.
+/// Largest active set (rows) solved directly; beyond it the interior-point solver is as quick.
 const MAX_ROWS: usize = 16;
 
 pub(crate) struct ActiveSet {

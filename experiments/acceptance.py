@@ -3,15 +3,16 @@
 Runs the controller (Table I defaults, variant N unless --variant) on the 1 kHz plant for up to
 --duration s of simulated time per episode, re-planning at --replan-rate Hz, and prints a
 markdown table: successes, time to open, final opening, mean wrench, real-time factor and median
-planning time. Episodes stop 0.5 s after success. Results go to benches/results/acceptance.json.
+planning time. Episodes stop 0.5 s after success. Results go to experiments/results/acceptance.json.
 
-    .venv/bin/python benches/acceptance.py --seeds 10
-    .venv/bin/python benches/acceptance.py --objects shelf drawer --seeds 3 --variant IO
+    .venv/bin/python experiments/acceptance.py --seeds 10
+    .venv/bin/python experiments/acceptance.py --objects shelf drawer --seeds 3 --variant IO
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import pathlib
 import time
@@ -30,8 +31,8 @@ def run(obj: str, seed: int, args) -> dict:
     ep = sabre.run_episode(scene, controller, args.duration, seed=seed, replan_rate=args.replan_rate, progress=False)
     wall = time.perf_counter() - start
     phases = [ep.phases[i] for i in ep.phase]
-    slips = sum(1 for a, b in zip(phases, phases[1:]) if a == "open" and b in ("approach", "release"))
-    releases = sum(1 for a, b in zip(phases, phases[1:]) if a != "release" and b == "release")
+    slips = sum(1 for a, b in itertools.pairwise(phases) if a == "open" and b in ("approach", "release"))
+    releases = sum(1 for a, b in itertools.pairwise(phases) if a != "release" and b == "release")
     return {
         "object": obj,
         "seed": seed,
@@ -67,15 +68,18 @@ def main() -> None:
             r = run(obj, seed, args)
             rows.append(r)
             when = "-" if r["time_to_success"] is None else f"{r['time_to_success']:.1f} s"
-            print(f"{obj:10s} seed {seed:2d}: success={r['success']!s:5s} at {when:>7s}  opening {r['final_opening']:.3f}"
-                  f"  wrench {r['mean_wrench']:.1f} N  slips {r['slips']}  releases {r['releases']}  rtf {r['real_time_factor']:.2f}"
+            print(f"{obj:10s} seed {seed:2d}: success={r['success']!s:5s} at {when:>7s}"
+                  f"  opening {r['final_opening']:.3f}  wrench {r['mean_wrench']:.1f} N"
+                  f"  slips {r['slips']}  releases {r['releases']}  rtf {r['real_time_factor']:.2f}"
                   f"  plan {r['plan_ms_median']:.1f} ms", flush=True)
     out = pathlib.Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(rows, indent=1))
     print()
-    print(f"variant {args.variant}, {args.duration:.0f} s limit, re-planning at {args.replan_rate:.0f} Hz, {args.threads} threads")
-    print("| object | success | time to open (median, max) | final opening (needed) | mean wrench | real-time factor | planning (median) |")
+    print(f"variant {args.variant}, {args.duration:.0f} s limit,"
+          f" re-planning at {args.replan_rate:.0f} Hz, {args.threads} threads")
+    print("| object | success | time to open (median, max) | final opening (needed) | mean wrench"
+          " | real-time factor | planning (median) |")
     print("|---|---|---|---|---|---|---|")
     for obj in args.objects:
         rs = [r for r in rows if r["object"] == obj]

@@ -1,6 +1,6 @@
-"""Runs the SPEC §10 scenarios for the controller variants and prints a markdown table.
+"""Runs the paper's Sec. VI-A scenarios for the controller variants and prints a markdown table.
 
-    .venv/bin/python benches/scenarios.py --seeds 1 --duration 5
+    .venv/bin/python experiments/scenarios.py --seeds 1 --duration 5
 """
 
 from __future__ import annotations
@@ -34,8 +34,10 @@ def main() -> None:
                   f"{np.mean([r.tank_min for r in rs]):.2f} / {np.mean([r.opening_after_release for r in rs]):.3f} |")
         for a in (1.0, 1000.0):
             rs = [S.tank_chattering(a, s, args.hold, 0.1, driver=driver) for s in seeds]
-            print(f"| chattering | {driver}/IO α={a:g} | within 0.5 J of the floor: s / peak dissipation (W) / power variation (W/s) / tank min (J) | "
-                  f"{np.mean([r.floor_power.seconds for r in rs]):.2f} / {np.mean([r.floor_power.peak_dissipation for r in rs]):.2f} / "
+            print(f"| chattering | {driver}/IO α={a:g} | within 0.5 J of the floor: "
+                  "s / peak dissipation (W) / power variation (W/s) / tank min (J) | "
+                  f"{np.mean([r.floor_power.seconds for r in rs]):.2f} / "
+                  f"{np.mean([r.floor_power.peak_dissipation for r in rs]):.2f} / "
                   f"{np.mean([r.floor_power.variation_per_s for r in rs]):.2f} / {np.mean([r.tank_min for r in rs]):.4f} |")
     for v in ("N", "IO"):
         rs = [S.obstacle_corridor(v, s, args.duration) for s in seeds]
