@@ -302,7 +302,7 @@ impl Scene {
 /// `tree.nq()` entries, named `name` in errors).
 fn poses_many(tree: &KinematicTree, root: &Isometry3<f64>, name: &str, values: &[f64], frame: &str) -> Result<Vec<Isometry3<f64>>> {
     let n = tree.nq();
-    if n == 0 || values.len() % n != 0 {
+    if n == 0 || !values.len().is_multiple_of(n) {
         return Err(SabreError::shape(name, format!("(·, {n})"), format!("{} elements", values.len())));
     }
     ensure_finite(name, values)?;

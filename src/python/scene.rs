@@ -11,6 +11,11 @@ use super::error::run;
 use super::mppi::PyServoGuideConfig;
 use crate::model::scene::Scene;
 
+/// A self-collision sphere: (name, link, centre xyz in the link frame, radius).
+type SphereRow = (String, String, [f64; 3], f64);
+/// A float64 array handed to Python.
+type Array<'py> = Bound<'py, PyArrayDyn<f64>>;
+
 #[pyclass(name = "Scene", module = "sabre._core", frozen)]
 pub struct PyScene {
     pub(crate) inner: Arc<Scene>,
@@ -124,7 +129,7 @@ impl PyScene {
         self.inner.rollout_contact_links.iter().map(|&l| self.inner.robot.links[l].name.clone()).collect()
     }
     /// Self-collision spheres as (name, link, centre xyz, radius) and the checked pairs (by name).
-    fn self_collision(&self) -> (Vec<(String, String, [f64; 3], f64)>, Vec<(String, String)>) {
+    fn self_collision(&self) -> (Vec<SphereRow>, Vec<(String, String)>) {
         let s = &self.inner;
         (
             s.spheres
@@ -205,7 +210,7 @@ impl PyScene {
         &self,
         py: Python<'py>,
         q: PyReadonlyArrayDyn<'py, f64>,
-    ) -> PyResult<(Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>)> {
+    ) -> PyResult<(Array<'py>, Array<'py>)> {
         let nq = self.inner.nq();
         let (m, g) = run(|| self.inner.mass_matrix_and_gravity(view("q", &q, &[nq as isize])?))?;
         Ok((array(py, m.transpose().as_slice().to_vec(), &[nq, nq])?, array(py, g.as_slice().to_vec(), &[nq])?))

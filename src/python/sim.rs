@@ -176,6 +176,9 @@ impl PyRolloutModel {
     }
 }
 
+/// A contact point: (robot link, object link, point (3,), force on the robot (3,)).
+type ContactRow = (String, String, [f64; 3], [f64; 3]);
+
 #[pyclass(name = "Plant", module = "sabre._core")]
 pub struct PyPlant {
     inner: Mutex<Plant>,
@@ -342,7 +345,7 @@ impl PyPlant {
         self.with(|p| Ok(p.interaction().contact))
     }
     /// Contact points of the last step: (robot link, object link, point (3,), force on the robot (3,)).
-    fn contacts(&self) -> PyResult<Vec<(String, String, [f64; 3], [f64; 3])>> {
+    fn contacts(&self) -> PyResult<Vec<ContactRow>> {
         self.with(|p| {
             let scene = p.scene();
             Ok(p
