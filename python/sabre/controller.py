@@ -41,8 +41,9 @@ class ControllerConfig:
     """Every Table I parameter of the sampler, with the paper's defaults, plus seed and threads.
 
     The defaults are the core's (Table I). sigma: diagonal of Σ (variances), one entry per input;
-    None gives Table I's Σ for the scene's inputs (:meth:`sigma_for`). h: sharpness of the likelihood mapping (55). step_size: ρ = α (14).
-    gradient_clip: g_max (54). keep_fraction: share of the best previous samples reused ("caching").
+    None gives Table I's Σ for the scene's inputs (:meth:`sigma_for`). h: sharpness of the
+    likelihood mapping (55). step_size: ρ = α (14). gradient_clip: g_max (54). keep_fraction:
+    share of the best previous samples reused ("caching").
     """
 
     rollouts: int = _MPPI.rollouts
