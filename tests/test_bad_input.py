@@ -429,7 +429,7 @@ CORE_CALLS = {
     "Scene.jacobian": (lambda c, a: c.scene.jacobian(a, "grasp"), "nq"),
     "Scene.object_fk": (lambda c, a: c.scene.object_fk(a, "handle_frame"), "no"),
     "Scene.mass_matrix_and_gravity": (lambda c, a: c.scene.mass_matrix_and_gravity(a), "nq"),
-    "Scene.servo_guide q0": (lambda c, a: c.scene.servo_guide(a, np.stack([np.eye(4)] * 3), 0.015, "grasp", 2.0, 0.3, 0.6, None, 1e-3, 0.05), "nq"),
+    "Scene.servo_guide q0": (lambda c, a: c.scene.servo_guide(a, np.stack([np.eye(4)] * 3), 0.015, "grasp", _core.ServoGuideConfig()), "nq"),
     "RolloutModel.rollout x0": (lambda c, a: c.model.rollout(a, np.zeros((1, 1, c.nq)), None), "nx"),
     "Plant.reset": (lambda c, a: c.plant.reset(a), "nx"),
     "Plant.step": (lambda c, a: c.plant.step(a), "nq"),
@@ -523,19 +523,26 @@ def test_core_constructors_and_loaders():
     with pytest.raises(UrdfError):
         _core.Scene.from_urdf_strings("<robot", SHELF, None)
     scene = _core.Scene.load("royalpanda", "shelf", None)
+
+    def config(cls, **fields):
+        c = cls()
+        for name, value in fields.items():
+            setattr(c, name, value)
+        return c
+
     for bad in (0.0, -1.0, float("nan"), float("inf")):
         with pytest.raises(InvalidValueError):
-            _core.RolloutModel(scene, bad)
+            _core.RolloutModel(scene, config(_core.RolloutConfig, dt=bad))
         with pytest.raises(InvalidValueError):
-            _core.Plant(scene, bad)
+            _core.Plant(scene, config(_core.PlantConfig, dt=bad))
         with pytest.raises(InvalidValueError):
-            _core.LowLevelController(scene, bad)
+            _core.LowLevelController(scene, bad, _core.LowLevelConfig())
     with pytest.raises(InvalidValueError):
-        _core.RolloutModel(scene, 0.015, 40.0, 400.0, 0.1, -0.2)
+        _core.RolloutModel(scene, config(_core.RolloutConfig, contact_friction=-0.2))
     with pytest.raises(InvalidValueError):
-        _core.LowLevelController(scene, 0.001, 40.0, 400.0, 0.1, float("inf"))
+        _core.LowLevelController(scene, 0.001, config(_core.LowLevelConfig, gain_inertia_floor=float("inf")))
     with pytest.raises(InvalidValueError):
-        _core.Plant(scene, 0.001, float("nan"))
+        _core.Plant(scene, config(_core.PlantConfig, contact_friction=float("nan")))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -689,3 +696,20 @@ def test_absurd_thread_count_fails_fast():
 def test_open_object_rejects_bad_parameters(kwargs):
     with pytest.raises(InvalidValueError):
         sabre.tasks.OpenObject(**kwargs)
+
+
+@pytest.mark.parametrize(
+    "spec, field",
+    [
+        ({"kind": "contact"}, "weight"),
+        ({"kind": "contact", "weight": float("inf")}, "weight"),
+        ({"kind": "power", "weight": "heavy", "p_max": 0.0}, "weight"),
+        ({"kind": "pose", "frame": "grasp", "target": np.eye(4).ravel().tolist(), "object_frame": None, "weights": [1.0] * 5}, "weights"),
+        ({"kind": "base_box", "lower": [0.0, 0.0], "upper": [1.0], "weight": 1.0, "weight_slope": 1.0}, "upper"),
+        ({"weight": 1.0}, "kind"),
+    ],
+)
+def test_core_bad_cost_spec_is_an_invalid_value_naming_the_field(spec, field):
+    scene = _core.Scene.load("royalpanda", "shelf", None)
+    with pytest.raises(InvalidValueError, match=field):
+        _core.Cost(scene, [spec])

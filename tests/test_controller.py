@@ -217,8 +217,12 @@ def test_paper_start_state(scene):
 def _planner(scene, cost, rollouts=40, horizon=1.0, keep=0.0, sigma=None, **kw):
     model = sabre.RolloutModel(scene)
     sigma = [0.5] * 3 + [1.0] * 7 if sigma is None else sigma
-    return sabre._core.Planner(model._core, cost.compile(scene).core, rollouts, horizon, sigma,
-                               10.0, 1.0, 0.2, keep, 0, 3, 0, 1, 1, **kw)
+    config = sabre._core.MppiConfig()
+    settings = dict(rollouts=rollouts, horizon=horizon, sigma=sigma, h=10.0, step_size=1.0, gradient_clip=0.2,
+                    keep_fraction=keep, smoothing_window=0, smoothing_order=3, seed=0, threads=1, noise_interval=1, **kw)
+    for name, value in settings.items():
+        setattr(config, name, value)
+    return sabre._core.Planner(model._core, cost.compile(scene).core, config)
 
 
 def test_input_limit_bounds_every_sample(scene):

@@ -1,4 +1,8 @@
-"""Type stubs of the private compiled module ``sabre._core`` (use the public ``sabre`` API instead)."""
+"""Type stubs of the private compiled module ``sabre._core`` (use the public ``sabre`` API instead).
+
+Config classes (``RolloutConfig()``, ``MppiConfig()``, ...) are constructed without arguments and
+hold the core's defaults; their attributes are read and written directly.
+"""
 
 from __future__ import annotations
 
@@ -43,6 +47,7 @@ class Scene:
     def object_limits(self) -> tuple[list[float], list[float]]: ...
     def object_dynamics(self) -> tuple[list[float], list[float]]: ...
     def object_joint_is_revolute(self) -> bool: ...
+    @property
     def object_pose(self) -> npt.NDArray[np.float64]: ...
     def default_state(self) -> list[float]: ...
     def home_configuration(self) -> list[float]: ...
@@ -55,17 +60,7 @@ class Scene:
     def object_fk(self, o: npt.NDArray[np.float64], frame: str) -> npt.NDArray[np.float64]: ...
     def object_fk_many(self, o: npt.NDArray[np.float64], frame: str) -> npt.NDArray[np.float64]: ...
     def servo_guide(
-        self,
-        q0: npt.NDArray[np.float64],
-        targets: npt.NDArray[np.float64],
-        dt: float,
-        frame: str,
-        gain: float,
-        max_linear: float,
-        max_angular: float,
-        velocity_limit: npt.NDArray[np.float64] | None,
-        damping: float,
-        joint_margin: float,
+        self, q0: npt.NDArray[np.float64], targets: npt.NDArray[np.float64], dt: float, frame: str, config: ServoGuideConfig
     ) -> npt.NDArray[np.float64]: ...
     def mass_matrix_and_gravity(self, q: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
 
@@ -85,25 +80,89 @@ class RolloutResult:
     @property
     def engine_time(self) -> npt.NDArray[np.float64]: ...
 
+class RolloutConfig:
+    dt: float
+    servo_bandwidth: float
+    servo_integral_gain: float
+    servo_integral_limit: float
+    contact_friction: float
+    solver_iterations: int
+    multibody_robot: bool
+    skip_quiescent_steps: bool
+    def __init__(self) -> None: ...
+
+class PlantConfig:
+    dt: float
+    contact_friction: float
+    solver_iterations: int
+    tau_ext_cutoff: float | None
+    def __init__(self) -> None: ...
+
+class LowLevelConfig:
+    bandwidth: float
+    integral_gain: float
+    integral_limit: float
+    gain_inertia_floor: float
+    def __init__(self) -> None: ...
+
+class MppiConfig:
+    rollouts: int
+    horizon: float
+    sigma: list[float] | None
+    h: float
+    step_size: float
+    gradient_clip: float
+    keep_fraction: float
+    smoothing_window: int
+    smoothing_order: int
+    noise_interval: int
+    seed: int
+    threads: int | None
+    input_limit: list[float] | None
+    def __init__(self) -> None: ...
+    @staticmethod
+    def paper_sigma(nu: int) -> list[float]: ...
+
+class ServoGuideConfig:
+    gain: float
+    max_linear: float
+    max_angular: float
+    velocity_limit: list[float] | None
+    damping: float
+    joint_margin: float
+    def __init__(self) -> None: ...
+
+class SafetyConfig:
+    gamma: list[float]
+    penalty: list[float]
+    margin: list[float]
+    enabled: list[bool]
+    base_box: list[float]
+    tank_floor: float
+    max_obstacles: int
+    max_iterations: int
+    tolerance: float
+    active_tolerance: float
+    screening: bool
+    def __init__(self) -> None: ...
+    @staticmethod
+    def classes() -> list[str]: ...
+
+class EnergyTankConfig:
+    initial: float
+    floor: float
+    ceiling: float | None
+    record_history: bool
+    def __init__(self) -> None: ...
+
 class RolloutModel:
-    def __init__(
-        self,
-        scene: Scene,
-        dt: float = 0.015,
-        servo_bandwidth: float = 40.0,
-        servo_integral_gain: float = 400.0,
-        servo_integral_limit: float = 0.1,
-        contact_friction: float = 0.2,
-        solver_iterations: int = 1,
-        multibody_robot: bool = False,
-        skip_quiescent_steps: bool = True,
-    ) -> None: ...
+    def __init__(self, scene: Scene, config: RolloutConfig) -> None: ...
     @property
     def dt(self) -> float: ...
     def rollout(self, x0: npt.NDArray[np.float64], u: npt.NDArray[np.float64], threads: int | None = None) -> RolloutResult: ...
 
 class LowLevelController:
-    def __init__(self, scene: Scene, dt: float = 0.001, bandwidth: float = 40.0, integral_gain: float = 400.0, integral_limit: float = 0.1, gain_inertia_floor: float = 0.0) -> None: ...
+    def __init__(self, scene: Scene, dt: float, config: LowLevelConfig) -> None: ...
     @property
     def gain_inertia_floor(self) -> float: ...
     @gain_inertia_floor.setter
@@ -112,9 +171,7 @@ class LowLevelController:
     def torque(self, x: npt.NDArray[np.float64], u_ref: npt.NDArray[np.float64]) -> list[float]: ...
 
 class Plant:
-    def __init__(
-        self, scene: Scene, dt: float = 0.001, contact_friction: float = 0.2, solver_iterations: int = 4, tau_ext_cutoff: float | None = ...
-    ) -> None: ...
+    def __init__(self, scene: Scene, config: PlantConfig) -> None: ...
     def reset(self, x0: npt.NDArray[np.float64]) -> None: ...
     def step(self, tau: npt.NDArray[np.float64]) -> None: ...
     def follow(
@@ -175,24 +232,7 @@ class Cost:
     def num_terms(self) -> int: ...
 
 class Planner:
-    def __init__(
-        self,
-        model: RolloutModel,
-        cost: Cost,
-        rollouts: int,
-        horizon: float,
-        sigma: list[float],
-        h: float,
-        step_size: float,
-        gradient_clip: float,
-        keep_fraction: float,
-        smoothing_window: int,
-        smoothing_order: int,
-        seed: int,
-        threads: int | None = None,
-        noise_interval: int = 1,
-        input_limit: list[float] | None = None,
-    ) -> None: ...
+    def __init__(self, model: RolloutModel, cost: Cost, config: MppiConfig) -> None: ...
     @property
     def noise_scale(self) -> float: ...
     @noise_scale.setter
@@ -250,20 +290,7 @@ class FilterResult:
     def method(self) -> str: ...
 
 class SafetyFilter:
-    def __init__(
-        self,
-        scene: Scene,
-        gamma: list[float],
-        penalty: list[float],
-        margin: list[float],
-        enabled: list[bool],
-        base_box: list[float],
-        tank_floor: float,
-        max_obstacles: int,
-        max_iterations: int,
-        tolerance: float,
-        screening: bool,
-    ) -> None: ...
+    def __init__(self, scene: Scene, config: SafetyConfig) -> None: ...
     def filter(
         self,
         x: npt.NDArray[np.float64],
@@ -299,7 +326,7 @@ class SafetyFilter:
     ) -> dict: ...
 
 class EnergyTank:
-    def __init__(self, initial: float = 10.0, floor: float = 2.0, ceiling: float | None = None, record_history: bool = True) -> None: ...
+    def __init__(self, config: EnergyTankConfig) -> None: ...
     def step(self, tau_ext: npt.NDArray[np.float64], u: npt.NDArray[np.float64], dt: float) -> float: ...
     def reset(self) -> None: ...
     @property

@@ -68,3 +68,11 @@ def as_count(name: str, value: Any, minimum: int = 1, maximum: int | None = None
 def readonly(array: np.ndarray) -> np.ndarray:
     array.setflags(write=False)
     return array
+
+
+def core_config(config_class: type, **fields: Any) -> Any:
+    """A config object of the compiled core (its defaults from Rust) with `fields` set."""
+    config = config_class()
+    for name, value in fields.items():
+        setattr(config, name, value)
+    return config

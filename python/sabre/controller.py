@@ -15,7 +15,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from . import _core
-from ._validate import as_count, as_float_array, as_positive
+from ._validate import as_count, as_float_array, as_positive, core_config
 from .costs import Batch, CompiledCost
 from .errors import InvalidValueError, ShapeError
 from .safety import CLASSES, EnergyTank, SafetyConfig, SafetyFilter
@@ -29,43 +29,50 @@ __all__ = ["ControllerConfig", "Controller", "Episode", "run_episode", "paper_st
 #: O sequential FILTER-QP in the outer loop, IO both.
 VARIANTS = ("N", "I", "O", "IO")
 
+# The core's defaults, the one source of every default below.
+_MPPI = _core.MppiConfig()
+_ROLLOUT = _core.RolloutConfig()
+_SAFETY = _core.SafetyConfig()
+_TANK = _core.EnergyTankConfig()
+
 
 @dataclass(frozen=True)
 class ControllerConfig:
     """Every Table I parameter of the sampler, with the paper's defaults, plus seed and threads.
 
-    sigma: diagonal of Σ (variances), one entry per input; None gives 0.5 for the base and 1.0 for
-    the arm joints (Table I). h: sharpness of the likelihood mapping (55). step_size: ρ = α (14).
-    gradient_clip: g_max (54). keep_fraction: share of the best previous samples reused ("caching").
+    The defaults are the core's (Table I). sigma: diagonal of Σ (variances), one entry per input;
+    None gives Table I's Σ for the scene's inputs (:meth:`sigma_for`). h: sharpness of the
+    likelihood mapping (55). step_size: ρ = α (14). gradient_clip: g_max (54). keep_fraction:
+    share of the best previous samples reused ("caching").
     """
 
-    rollouts: int = 40
-    horizon: float = 1.0
-    dt: float = 0.015
+    rollouts: int = _MPPI.rollouts
+    horizon: float = _MPPI.horizon
+    dt: float = _ROLLOUT.dt
     sigma: tuple[float, ...] | None = None
-    h: float = 10.0
-    step_size: float = 1.0
-    gradient_clip: float = 0.2
-    keep_fraction: float = 0.3
-    smoothing_window: int = 30
-    smoothing_order: int = 3
+    h: float = _MPPI.h
+    step_size: float = _MPPI.step_size
+    gradient_clip: float = _MPPI.gradient_clip
+    keep_fraction: float = _MPPI.keep_fraction
+    smoothing_window: int = _MPPI.smoothing_window
+    smoothing_order: int = _MPPI.smoothing_order
     #: noise drawn every `noise_interval` rollout steps and interpolated (1 = white, as in the paper).
-    noise_interval: int = 1
-    seed: int = 0
-    threads: int | None = None
+    noise_interval: int = _MPPI.noise_interval
+    seed: int = _MPPI.seed
+    threads: int | None = _MPPI.threads
     #: Symmetric bound |u_i| ≤ input_limit_i on the commanded velocities (one entry per input, or
     #: None for the joint velocity limits). Samples are projected onto it.
     input_limit: tuple[float, ...] | None = None
     #: Rollout-model settings (the closed loop the sampler predicts with).
-    servo_bandwidth: float = 40.0
-    contact_friction: float = 0.2
+    servo_bandwidth: float = _ROLLOUT.servo_bandwidth
+    contact_friction: float = _ROLLOUT.contact_friction
     #: "N" (no filter), "I" (1 kHz FILTER-QP with the energy tank), "O" (Sequential FILTER-QP on
     #: the optimised sequence, which warm-starts the next round) or "IO" (both).
     variant: str = "N"
     #: constraints, slack penalties and passivity settings of both filters (None: the defaults).
     safety: SafetyConfig | None = None
     #: energy tank: S(0) (J); its floor ε is ``safety.tank_floor``.
-    tank_initial: float = 10.0
+    tank_initial: float = _TANK.initial
 
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
@@ -114,8 +121,9 @@ class ControllerConfig:
         return int(round(self.horizon / self.dt))
 
     def sigma_for(self, nu: int) -> list[float]:
+        """The covariance diagonal the sampler uses for ``nu`` inputs."""
         if self.sigma is None:
-            return [0.5 if i < 3 else 1.0 for i in range(nu)]
+            return list(_core.MppiConfig.paper_sigma(nu))
         if len(self.sigma) != nu:
             raise InvalidValueError(f"sigma has {len(self.sigma)} entries, the scene has nu = {nu} inputs")
         return [float(s) for s in self.sigma]
@@ -142,23 +150,23 @@ class Controller:
         self.phase = task.initial_phase()
         self._compiled: dict[str, CompiledCost] = {}
         self._cost = self._compile(self.phase)
-        self._planner = _core.Planner(
-            self.model._core,
-            self._cost.core,
-            c.rollouts,
-            c.horizon,
-            c.sigma_for(scene.nu),
-            c.h,
-            c.step_size,
-            c.gradient_clip,
-            c.keep_fraction,
-            c.smoothing_window,
-            c.smoothing_order,
-            c.seed,
-            c.threads,
-            c.noise_interval,
-            None if c.input_limit is None else [float(v) for v in c.input_limit],
+        planner_config = core_config(
+            _core.MppiConfig,
+            rollouts=c.rollouts,
+            horizon=c.horizon,
+            sigma=c.sigma_for(scene.nu),
+            h=c.h,
+            step_size=c.step_size,
+            gradient_clip=c.gradient_clip,
+            keep_fraction=c.keep_fraction,
+            smoothing_window=c.smoothing_window,
+            smoothing_order=c.smoothing_order,
+            seed=c.seed,
+            threads=c.threads,
+            noise_interval=c.noise_interval,
+            input_limit=None if c.input_limit is None else [float(v) for v in c.input_limit],
         )
+        self._planner = _core.Planner(self.model._core, self._cost.core, planner_config)
         self._stats: dict = {}
         self.phase_history: list[tuple[float, str]] = [(0.0, self.phase)]
         safety = c.safety_config
@@ -322,7 +330,7 @@ class Episode:
     tank_energy: np.ndarray | None = None
     variant: str = "N"
     filter_fallbacks: int = 0
-    tank_floor: float = 2.0
+    tank_floor: float = _SAFETY.tank_floor
     tau_ext_measured: np.ndarray | None = None
 
     @property

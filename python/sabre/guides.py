@@ -11,11 +11,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._validate import as_float_array
+from . import _core
+from ._validate import as_float_array, core_config
 from .errors import InvalidValueError
 from .scene import Scene
 
 __all__ = ["servo_guide", "rotation_log"]
+
+# The core's defaults, the one source of the servo guide's defaults.
+_GUIDE = _core.ServoGuideConfig()
 
 
 def rotation_log(r: np.ndarray) -> np.ndarray:
@@ -41,12 +45,12 @@ def servo_guide(
     targets: np.ndarray,
     dt: float,
     frame: str = "grasp",
-    gain: float = 2.0,
-    max_linear: float = 0.3,
-    max_angular: float = 0.6,
+    gain: float = _GUIDE.gain,
+    max_linear: float = _GUIDE.max_linear,
+    max_angular: float = _GUIDE.max_angular,
     velocity_limit: np.ndarray | None = None,
-    damping: float = 1e-3,
-    joint_margin: float = 0.05,
+    damping: float = _GUIDE.damping,
+    joint_margin: float = _GUIDE.joint_margin,
 ) -> np.ndarray:
     """(K, nu) joint velocities that servo ``frame`` along ``targets`` (K+1, 4, 4) from q0 (nq,).
 
@@ -64,6 +68,13 @@ def servo_guide(
         raise InvalidValueError(f"targets: expected shape (K+1, 4, 4) with K >= 1, got {targets.shape}")
     if velocity_limit is not None:
         velocity_limit = as_float_array("velocity_limit", velocity_limit, (scene.nq,))
-    return scene._core.servo_guide(
-        q0, targets, float(dt), frame, float(gain), float(max_linear), float(max_angular), velocity_limit, float(damping), float(joint_margin)
+    config = core_config(
+        _core.ServoGuideConfig,
+        gain=float(gain),
+        max_linear=float(max_linear),
+        max_angular=float(max_angular),
+        velocity_limit=None if velocity_limit is None else velocity_limit.tolist(),
+        damping=float(damping),
+        joint_margin=float(joint_margin),
     )
+    return scene._core.servo_guide(q0, targets, float(dt), frame, config)

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Mapping, Sequence
 import numpy as np
 
 from . import _core
-from ._validate import as_count, as_float_array, as_non_negative, as_positive, readonly
+from ._validate import as_count, as_float_array, as_non_negative, as_positive, core_config, readonly
 from .errors import InvalidValueError
 from .scene import Scene
 
@@ -24,17 +24,19 @@ if TYPE_CHECKING:
 
 __all__ = ["CLASSES", "SafetyConfig", "SafetyFilter", "FilterResult", "SequenceResult", "EnergyTank", "Obstacle"]
 
+# The core's defaults, the one source of every default below.
+_SAFETY = _core.SafetyConfig()
+_TANK = _core.EnergyTankConfig()
+
 #: Constraint classes, in the order the core uses.
-CLASSES: tuple[str, ...] = ("joint_limits", "self_collision", "arm_reach", "base_box", "obstacles", "passivity")
+CLASSES: tuple[str, ...] = tuple(_core.SafetyConfig.classes())
 
 #: ZBF rate γ (1/s) of the kinematic classes; passivity's rate is ``passivity_alpha``.
-DEFAULT_GAMMA = MappingProxyType({"joint_limits": 10.0, "self_collision": 10.0, "arm_reach": 10.0, "base_box": 10.0, "obstacles": 10.0})
+DEFAULT_GAMMA = MappingProxyType(dict(zip(CLASSES[:-1], _SAFETY.gamma[:-1])))
 #: Slack penalties Γ (paper Table I: joint limits 10, self-collision 100, Cartesian 100, passivity 100).
-DEFAULT_PENALTY = MappingProxyType(
-    {"joint_limits": 10.0, "self_collision": 100.0, "arm_reach": 100.0, "base_box": 100.0, "obstacles": 100.0, "passivity": 100.0}
-)
+DEFAULT_PENALTY = MappingProxyType(dict(zip(CLASSES, _SAFETY.penalty)))
 #: Margins Δ (Remark 1) in the units of each class's h: rad, m², m², m, m².
-DEFAULT_MARGIN = MappingProxyType({"joint_limits": 0.03, "self_collision": 0.01, "arm_reach": 0.01, "base_box": 0.01, "obstacles": 0.01})
+DEFAULT_MARGIN = MappingProxyType(dict(zip(CLASSES[:-1], _SAFETY.margin[:-1])))
 
 
 def _vector(name: str, value, n: int) -> np.ndarray:
@@ -59,9 +61,9 @@ class SafetyConfig:
     """Settings of :class:`SafetyFilter`, validated on construction.
 
     The mappings take overrides by class name (see :data:`CLASSES`); missing classes keep their
-    defaults. ``gamma``: ZBF rate γ (1/s), default 10 for every kinematic class — a joint
-    approaches its limit no faster than 10 × its distance. ``penalty``: slack penalty Γ (Table I).
-    ``margin``: Δ of Remark 1 in the units of that class's h (rad for joint limits, m for the base
+    defaults (:data:`DEFAULT_GAMMA`, :data:`DEFAULT_PENALTY`, :data:`DEFAULT_MARGIN`, from the
+    core). ``gamma``: ZBF rate γ (1/s) — a joint approaches its limit no faster than γ × its
+    distance. ``penalty``: slack penalty Γ (Table I). ``margin``: Δ of Remark 1 in the units of that class's h (rad for joint limits, m for the base
     box, m² for self-collision, arm reach and obstacles); the defaults keep the slack that the
     penalties allow inside the true limits. ``enabled``: classes without rows. ``base_box``:
     (x_min, x_max, y_min, y_max) in m, or None for no box. ``passivity_alpha``: α of (56)
@@ -75,13 +77,13 @@ class SafetyConfig:
     penalty: Mapping[str, float] = field(default_factory=dict)
     margin: Mapping[str, float] = field(default_factory=dict)
     enabled: Mapping[str, bool] = field(default_factory=dict)
-    base_box: tuple[float, float, float, float] | None = (-2.0, 2.0, -2.0, 2.0)
-    passivity_alpha: float = 1.0
-    tank_floor: float = 2.0
-    max_obstacles: int = 8
-    max_iterations: int = 50
-    tolerance: float = 1e-8
-    screening: bool = True
+    base_box: tuple[float, float, float, float] | None = tuple(_SAFETY.base_box)
+    passivity_alpha: float = _SAFETY.gamma[-1]
+    tank_floor: float = _SAFETY.tank_floor
+    max_obstacles: int = _SAFETY.max_obstacles
+    max_iterations: int = _SAFETY.max_iterations
+    tolerance: float = _SAFETY.tolerance
+    screening: bool = _SAFETY.screening
 
     def __post_init__(self) -> None:
         kinematic = CLASSES[:-1]
@@ -92,7 +94,7 @@ class SafetyConfig:
         gamma = _merged("gamma", self.gamma, DEFAULT_GAMMA, kinematic)
         penalty = _merged("penalty", self.penalty, DEFAULT_PENALTY, CLASSES)
         margin = _merged("margin", self.margin, DEFAULT_MARGIN, kinematic)
-        enabled = _merged("enabled", self.enabled, {c: True for c in CLASSES}, CLASSES)
+        enabled = _merged("enabled", self.enabled, dict(zip(CLASSES, _SAFETY.enabled)), CLASSES)
         for c in kinematic:
             gamma[c] = as_positive(f"gamma[{c}]", gamma[c])
             margin[c] = as_non_negative(f"margin[{c}]", margin[c])
@@ -123,22 +125,23 @@ class SafetyConfig:
         if not isinstance(self.screening, (bool, np.bool_)):
             raise InvalidValueError(f"screening: expected a bool, got {self.screening!r}")
 
-    def _core_args(self) -> tuple:
-        gamma = [self.gamma[c] for c in CLASSES[:-1]] + [self.passivity_alpha]
-        margin = [self.margin[c] for c in CLASSES[:-1]] + [0.0]
-        box = self.base_box if self.base_box is not None else (-2.0, 2.0, -2.0, 2.0)
-        return (
-            gamma,
-            [self.penalty[c] for c in CLASSES],
-            margin,
-            [self.enabled[c] for c in CLASSES],
-            list(box),
-            self.tank_floor,
-            self.max_obstacles,
-            self.max_iterations,
-            self.tolerance,
-            bool(self.screening),
-        )
+    def _core_config(self) -> _core.SafetyConfig:
+        """The settings as the core's config object; without a base box its class is disabled
+        and the box keeps the core's default."""
+        fields = {
+            "gamma": [self.gamma[c] for c in CLASSES[:-1]] + [self.passivity_alpha],
+            "penalty": [self.penalty[c] for c in CLASSES],
+            "margin": [self.margin[c] for c in CLASSES[:-1]] + [_SAFETY.margin[-1]],
+            "enabled": [self.enabled[c] for c in CLASSES],
+            "tank_floor": self.tank_floor,
+            "max_obstacles": self.max_obstacles,
+            "max_iterations": self.max_iterations,
+            "tolerance": self.tolerance,
+            "screening": bool(self.screening),
+        }
+        if self.base_box is not None:
+            fields["base_box"] = list(self.base_box)
+        return core_config(_core.SafetyConfig, **fields)
 
 
 @dataclass(frozen=True)
@@ -223,7 +226,7 @@ class SafetyFilter:
             raise TypeError(f"config must be a sabre.SafetyConfig, got {type(config).__name__}")
         self.scene = scene
         self.config = config
-        self._core = _core.SafetyFilter(scene._core, *config._core_args())
+        self._core = _core.SafetyFilter(scene._core, config._core_config())
 
     def _passivity(self, tau_ext, tank_energy) -> tuple[np.ndarray | None, float | None]:
         if (tau_ext is None) != (tank_energy is None):
@@ -338,7 +341,7 @@ class SafetyFilter:
 
 
 class EnergyTank:
-    """The virtual energy tank (paper Sec. III-C, IV-C): S(0) = ``initial`` (10 J), floor ε (2 J).
+    """The virtual energy tank (paper Sec. III-C, IV-C): S(0) = ``initial``, floor ε = ``floor``.
 
     ``step(tau_ext, u, dt)`` integrates Ṡ = τ_extᵀu (49) with explicit Euler: τ_ext is the external
     torque on the robot, so the power the robot pushes into the environment, −τ_extᵀu, drains the
@@ -347,10 +350,22 @@ class EnergyTank:
     every step's energy when ``record_history``.
     """
 
-    def __init__(self, initial: float = 10.0, floor: float = 2.0, *, ceiling: float | None = None, record_history: bool = True) -> None:
-        self._core = _core.EnergyTank(
-            float(initial), float(floor), None if ceiling is None else float(ceiling), bool(record_history)
+    def __init__(
+        self,
+        initial: float = _TANK.initial,
+        floor: float = _TANK.floor,
+        *,
+        ceiling: float | None = _TANK.ceiling,
+        record_history: bool = _TANK.record_history,
+    ) -> None:
+        config = core_config(
+            _core.EnergyTankConfig,
+            initial=float(initial),
+            floor=float(floor),
+            ceiling=None if ceiling is None else float(ceiling),
+            record_history=bool(record_history),
         )
+        self._core = _core.EnergyTank(config)
 
     def step(self, tau_ext: Sequence[float] | np.ndarray, u: Sequence[float] | np.ndarray, dt: float) -> float:
         tau = as_float_array("tau_ext", tau_ext, (None,))

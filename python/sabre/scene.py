@@ -162,7 +162,7 @@ class Scene:
     @property
     def object_pose(self) -> np.ndarray:
         """(4, 4) pose of the object's root (cabinet) in the world."""
-        return readonly(self._core.object_pose())
+        return readonly(self._core.object_pose)
 
     @property
     def rollout_contact_links(self) -> tuple[str, ...]:

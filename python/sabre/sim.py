@@ -8,13 +8,18 @@ from typing import Sequence
 import numpy as np
 
 from . import _core
-from ._validate import as_count, as_float_array, as_non_negative, as_positive, readonly
+from ._validate import as_count, as_float_array, as_non_negative, as_positive, core_config, readonly
 from .errors import InvalidValueError
 from .safety import EnergyTank, SafetyFilter
 from .scene import Scene
 
 #: Default bandwidth (Hz) of :attr:`Plant.measured_tau_ext`.
 DEFAULT_TAU_EXT_CUTOFF: float = _core.DEFAULT_TAU_EXT_CUTOFF
+
+# The core's defaults, the one source of every default below.
+_ROLLOUT = _core.RolloutConfig()
+_PLANT = _core.PlantConfig()
+_LOW_LEVEL = _core.LowLevelConfig()
 
 __all__ = ["RolloutModel", "RolloutResult", "Plant", "Trace", "LowLevelController", "default_threads", "MAX_THREADS"]
 
@@ -76,31 +81,32 @@ class RolloutModel:
     def __init__(
         self,
         scene: Scene,
-        dt: float = 0.015,
+        dt: float = _ROLLOUT.dt,
         *,
-        servo_bandwidth: float = 40.0,
-        servo_integral_gain: float = 400.0,
-        servo_integral_limit: float = 0.1,
-        contact_friction: float = 0.2,
-        solver_iterations: int = 1,
-        multibody_robot: bool = False,
-        skip_quiescent_steps: bool = True,
+        servo_bandwidth: float = _ROLLOUT.servo_bandwidth,
+        servo_integral_gain: float = _ROLLOUT.servo_integral_gain,
+        servo_integral_limit: float = _ROLLOUT.servo_integral_limit,
+        contact_friction: float = _ROLLOUT.contact_friction,
+        solver_iterations: int = _ROLLOUT.solver_iterations,
+        multibody_robot: bool = _ROLLOUT.multibody_robot,
+        skip_quiescent_steps: bool = _ROLLOUT.skip_quiescent_steps,
     ) -> None:
         if not isinstance(scene, Scene):
             raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
         self.scene = scene
         self.dt = as_positive("dt", dt)
-        self._core = _core.RolloutModel(
-            scene._core,
-            self.dt,
-            as_positive("servo_bandwidth", servo_bandwidth),
-            as_non_negative("servo_integral_gain", servo_integral_gain),
-            as_non_negative("servo_integral_limit", servo_integral_limit),
-            as_non_negative("contact_friction", contact_friction),
-            as_count("solver_iterations", solver_iterations),
-            bool(multibody_robot),
-            bool(skip_quiescent_steps),
+        config = core_config(
+            _core.RolloutConfig,
+            dt=self.dt,
+            servo_bandwidth=as_positive("servo_bandwidth", servo_bandwidth),
+            servo_integral_gain=as_non_negative("servo_integral_gain", servo_integral_gain),
+            servo_integral_limit=as_non_negative("servo_integral_limit", servo_integral_limit),
+            contact_friction=as_non_negative("contact_friction", contact_friction),
+            solver_iterations=as_count("solver_iterations", solver_iterations),
+            multibody_robot=bool(multibody_robot),
+            skip_quiescent_steps=bool(skip_quiescent_steps),
         )
+        self._core = _core.RolloutModel(scene._core, config)
 
     def rollout(self, x0: Sequence[float] | np.ndarray, U: np.ndarray, threads: int | None = None) -> RolloutResult:
         """Simulates N input sequences U (N, K, nu) from the state x0 (nx,).
@@ -143,24 +149,25 @@ class LowLevelController:
     def __init__(
         self,
         scene: Scene,
-        dt: float = 0.001,
+        dt: float = _PLANT.dt,
         *,
-        bandwidth: float = 40.0,
-        integral_gain: float = 400.0,
-        integral_limit: float = 0.1,
-        gain_inertia_floor: float = 0.0,
+        bandwidth: float = _LOW_LEVEL.bandwidth,
+        integral_gain: float = _LOW_LEVEL.integral_gain,
+        integral_limit: float = _LOW_LEVEL.integral_limit,
+        gain_inertia_floor: float = _LOW_LEVEL.gain_inertia_floor,
     ) -> None:
         if not isinstance(scene, Scene):
             raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
         self.scene = scene
-        self._core = _core.LowLevelController(
-            scene._core,
-            as_positive("dt", dt),
-            as_positive("bandwidth", bandwidth),
-            as_non_negative("integral_gain", integral_gain),
-            as_non_negative("integral_limit", integral_limit),
-            as_non_negative("gain_inertia_floor", gain_inertia_floor),
+        dt = as_positive("dt", dt)
+        config = core_config(
+            _core.LowLevelConfig,
+            bandwidth=as_positive("bandwidth", bandwidth),
+            integral_gain=as_non_negative("integral_gain", integral_gain),
+            integral_limit=as_non_negative("integral_limit", integral_limit),
+            gain_inertia_floor=as_non_negative("gain_inertia_floor", gain_inertia_floor),
         )
+        self._core = _core.LowLevelController(scene._core, dt, config)
 
     @property
     def gain_inertia_floor(self) -> float:
@@ -244,18 +251,26 @@ class Plant:
     that raw signal lets the full command through between impacts and chatters.
     """
 
-    def __init__(self, scene: Scene, dt: float = 0.001, *, contact_friction: float = 0.2, solver_iterations: int = 4,
-                 tau_ext_cutoff: float | None = DEFAULT_TAU_EXT_CUTOFF) -> None:
+    def __init__(
+        self,
+        scene: Scene,
+        dt: float = _PLANT.dt,
+        *,
+        contact_friction: float = _PLANT.contact_friction,
+        solver_iterations: int = _PLANT.solver_iterations,
+        tau_ext_cutoff: float | None = _PLANT.tau_ext_cutoff,
+    ) -> None:
         if not isinstance(scene, Scene):
             raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
         self.scene = scene
-        self._core = _core.Plant(
-            scene._core,
-            as_positive("dt", dt),
-            as_non_negative("contact_friction", contact_friction),
-            as_count("solver_iterations", solver_iterations),
-            None if tau_ext_cutoff is None else as_positive("tau_ext_cutoff", tau_ext_cutoff),
+        config = core_config(
+            _core.PlantConfig,
+            dt=as_positive("dt", dt),
+            contact_friction=as_non_negative("contact_friction", contact_friction),
+            solver_iterations=as_count("solver_iterations", solver_iterations),
+            tau_ext_cutoff=None if tau_ext_cutoff is None else as_positive("tau_ext_cutoff", tau_ext_cutoff),
         )
+        self._core = _core.Plant(scene._core, config)
 
     @property
     def dt(self) -> float:

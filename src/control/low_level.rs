@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
+use nalgebra::{DMatrix, DVector, Isometry3};
 
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
 use crate::model::dynamics::{joint_space_terms, DynamicsWorkspace};
@@ -122,7 +122,7 @@ impl LowLevelController {
             &self.scene.robot,
             &Isometry3::identity(),
             q,
-            &Vector3::new(0.0, 0.0, -9.81),
+            &crate::model::GRAVITY,
             &mut self.workspace,
             &mut self.mass_matrix,
             &mut self.gravity_torque,

@@ -7,3 +7,7 @@ pub mod urdf;
 
 pub use kinematics::{JointKind, JointLimits, KinematicTree};
 pub use scene::Scene;
+
+/// Gravitational acceleration of the world frame (m/s²), z up: the one value every model of the
+/// robot and object (plant, rollouts, low-level controller, dynamics queries) is built with.
+pub const GRAVITY: nalgebra::Vector3<f64> = nalgebra::Vector3::new(0.0, 0.0, -9.81);

@@ -1,8 +1,9 @@
 //! The scene: one robot, one articulated object placed in the world, the state layout and built-in assets.
 
-use nalgebra::{DMatrix, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
-use super::kinematics::{JointKind, JointLimits, KinematicTree};
+use super::dynamics::{joint_space_terms, DynamicsWorkspace};
+use super::kinematics::{Frames, JointKind, JointLimits, KinematicTree};
 use super::urdf::{parse_urdf, ParsedUrdf};
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
 
@@ -258,6 +259,28 @@ impl Scene {
         Ok(self.object.link_poses(&self.object_pose, o)[link])
     }
 
+    /// World poses of a robot frame for M configurations `q` (M × nq, row-major).
+    pub fn fk_many(&self, q: &[f64], frame: &str) -> Result<Vec<Isometry3<f64>>> {
+        poses_many(&self.robot, &Isometry3::identity(), "q", q, frame)
+    }
+
+    /// World poses of an object frame for M object configurations `o` (M × no, row-major).
+    pub fn object_fk_many(&self, o: &[f64], frame: &str) -> Result<Vec<Isometry3<f64>>> {
+        poses_many(&self.object, &self.object_pose, "o", o, frame)
+    }
+
+    /// Joint-space mass matrix M(q) (nq × nq) and gravity torque g(q) (nq) of the robot under
+    /// [`super::GRAVITY`], the terms of the low-level controller (53).
+    pub fn mass_matrix_and_gravity(&self, q: &[f64]) -> Result<(DMatrix<f64>, DVector<f64>)> {
+        self.check_q(q)?;
+        let nq = self.nq();
+        let mut workspace = DynamicsWorkspace::default();
+        let mut mass_matrix = DMatrix::zeros(nq, nq);
+        let mut gravity_torque = DVector::zeros(nq);
+        joint_space_terms(&self.robot, &Isometry3::identity(), q, &super::GRAVITY, &mut workspace, &mut mass_matrix, &mut gravity_torque);
+        Ok((mass_matrix, gravity_torque))
+    }
+
     /// World centre of each self-collision sphere.
     pub fn sphere_centers(&self, poses: &[Isometry3<f64>]) -> Vec<Point3<f64>> {
         self.spheres.iter().map(|s| poses[s.link] * Point3::from(s.center)).collect()
@@ -272,5 +295,81 @@ impl Scene {
     /// True if the object's single movable joint is a hinge.
     pub fn object_is_revolute(&self) -> bool {
         self.object.active_joints.iter().all(|&j| self.object.joints[j].kind == JointKind::Revolute)
+    }
+}
+
+/// World poses of one frame of `tree` (rooted at `root`) for every row of `values` (rows of
+/// `tree.nq()` entries, named `name` in errors).
+fn poses_many(tree: &KinematicTree, root: &Isometry3<f64>, name: &str, values: &[f64], frame: &str) -> Result<Vec<Isometry3<f64>>> {
+    let n = tree.nq();
+    if n == 0 || !values.len().is_multiple_of(n) {
+        return Err(SabreError::shape(name, format!("(·, {n})"), format!("{} elements", values.len())));
+    }
+    ensure_finite(name, values)?;
+    let link = tree.require_link(frame)?;
+    let mut frames = Frames::default();
+    Ok(values
+        .chunks_exact(n)
+        .map(|row| {
+            tree.update_frames(root, row, &mut frames);
+            frames.poses[link]
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::dynamics::potential_energy;
+
+    fn scene() -> Scene {
+        Scene::load("royalpanda", "shelf", None).expect("built-in scene loads")
+    }
+
+    #[test]
+    fn fk_many_equals_fk_of_each_row() {
+        let s = scene();
+        let home = s.home_configuration();
+        let rows: Vec<f64> = (0..3).flat_map(|k| home.iter().enumerate().map(move |(i, v)| v + 0.1 * k as f64 * (i as f64).sin())).collect();
+        let poses = s.fk_many(&rows, "grasp").unwrap();
+        assert_eq!(poses.len(), 3);
+        for (row, pose) in rows.chunks(s.nq()).zip(&poses) {
+            assert_eq!(*pose, s.fk(row, "grasp").unwrap());
+        }
+        let o = [0.1, 0.4];
+        let object_poses = s.object_fk_many(&o, "handle_frame").unwrap();
+        for (value, pose) in o.iter().zip(&object_poses) {
+            assert_eq!(*pose, s.object_fk(&[*value], "handle_frame").unwrap());
+        }
+    }
+
+    #[test]
+    fn fk_many_rejects_ragged_non_finite_and_unknown_input() {
+        let s = scene();
+        let mut rows = s.home_configuration();
+        rows.push(0.0);
+        assert!(matches!(s.fk_many(&rows, "grasp"), Err(SabreError::Shape { .. })));
+        rows.pop();
+        rows[2] = f64::NAN;
+        assert!(matches!(s.fk_many(&rows, "grasp"), Err(SabreError::InvalidValue { .. })));
+        assert!(matches!(s.fk_many(&s.home_configuration(), "gripper"), Err(SabreError::UnknownFrame { .. })));
+    }
+
+    #[test]
+    fn gravity_torque_is_the_gradient_of_the_potential_energy() {
+        let s = scene();
+        let q: Vec<f64> = s.home_configuration().iter().enumerate().map(|(i, v)| v + 0.05 * i as f64).collect();
+        let (m, g) = s.mass_matrix_and_gravity(&q).unwrap();
+        assert_eq!((m.nrows(), m.ncols(), g.len()), (s.nq(), s.nq(), s.nq()));
+        assert!((&m - m.transpose()).norm() < 1e-12, "M(q) is symmetric");
+        let root = Isometry3::identity();
+        let h = 1e-6;
+        for i in 0..s.nq() {
+            let (mut up, mut down) = (q.clone(), q.clone());
+            up[i] += h;
+            down[i] -= h;
+            let gradient = (potential_energy(&s.robot, &root, &up, &crate::model::GRAVITY) - potential_energy(&s.robot, &root, &down, &crate::model::GRAVITY)) / (2.0 * h);
+            assert!((g[i] - gradient).abs() < 1e-5 * (1.0 + gradient.abs()), "joint {i}: g = {}, dV/dq = {gradient}", g[i]);
+        }
     }
 }

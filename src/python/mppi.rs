@@ -1,0 +1,319 @@
+//! `_core.Planner` and its `MppiConfig`, the likelihood mappings, and the servo guide's settings.
+
+use std::sync::{Arc, Mutex};
+
+use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use super::convert::{array, lock, view};
+use super::cost::PyCost;
+use super::error::{run, run_detached};
+use super::sim::PyRolloutModel;
+use crate::cost::Cost;
+use crate::error::SabreError;
+use crate::mppi::{IterationStats, LikelihoodMapping, Mppi, MppiConfig, ServoGuideConfig};
+
+/// Sampler settings (Table I); `MppiConfig()` holds the core's defaults. `sigma=None` is the
+/// Table I covariance for the scene's inputs ([`MppiConfig::paper_defaults`]).
+#[pyclass(name = "MppiConfig", module = "sabre._core", get_all, set_all)]
+#[derive(Clone)]
+pub struct PyMppiConfig {
+    /// Rollouts N per iteration.
+    rollouts: usize,
+    /// Horizon T (s).
+    horizon: f64,
+    /// Diagonal of Σ (variances), one per input; None: Table I for the scene.
+    sigma: Option<Vec<f64>>,
+    /// Sharpness h of the likelihood mapping (55).
+    h: f64,
+    /// Step size α of the update (14).
+    step_size: f64,
+    /// Element-wise gradient clip g_max (54).
+    gradient_clip: f64,
+    /// Share of the previous batch kept and shifted in time.
+    keep_fraction: f64,
+    /// Savitzky–Golay window (samples) and order; a window of 0 or 1 turns smoothing off.
+    smoothing_window: usize,
+    smoothing_order: usize,
+    /// Noise drawn every `noise_interval` steps and interpolated in between (1: white noise).
+    noise_interval: usize,
+    seed: u64,
+    /// Rollout worker threads (None: all cores).
+    threads: Option<usize>,
+    /// Symmetric bound on each commanded input; None: the joint velocity limits.
+    input_limit: Option<Vec<f64>>,
+}
+
+impl PyMppiConfig {
+    fn to_core(&self, nu: usize) -> MppiConfig {
+        MppiConfig {
+            rollouts: self.rollouts,
+            horizon: self.horizon,
+            sigma: self.sigma.clone().unwrap_or_else(|| MppiConfig::paper_defaults(nu).sigma),
+            h: self.h,
+            step_size: self.step_size,
+            gradient_clip: self.gradient_clip,
+            keep_fraction: self.keep_fraction,
+            smoothing_window: self.smoothing_window,
+            smoothing_order: self.smoothing_order,
+            noise_interval: self.noise_interval,
+            seed: self.seed,
+            threads: self.threads,
+            input_limit: self.input_limit.clone(),
+        }
+    }
+}
+
+#[pymethods]
+impl PyMppiConfig {
+    #[new]
+    fn new() -> Self {
+        let c = MppiConfig::paper_defaults(0);
+        Self {
+            rollouts: c.rollouts,
+            horizon: c.horizon,
+            sigma: None,
+            h: c.h,
+            step_size: c.step_size,
+            gradient_clip: c.gradient_clip,
+            keep_fraction: c.keep_fraction,
+            smoothing_window: c.smoothing_window,
+            smoothing_order: c.smoothing_order,
+            noise_interval: c.noise_interval,
+            seed: c.seed,
+            threads: c.threads,
+            input_limit: c.input_limit,
+        }
+    }
+
+    /// The Table I covariance diagonal for `nu` inputs (what `sigma=None` stands for).
+    #[staticmethod]
+    fn paper_sigma(nu: usize) -> Vec<f64> {
+        MppiConfig::paper_defaults(nu).sigma
+    }
+}
+
+/// Settings of the resolved-rate servo guide; `ServoGuideConfig()` holds the core's defaults.
+#[pyclass(name = "ServoGuideConfig", module = "sabre._core", get_all, set_all)]
+#[derive(Clone)]
+pub struct PyServoGuideConfig {
+    /// Proportional gain on the pose error (1/s).
+    gain: f64,
+    /// Caps on the commanded Cartesian rate: linear (m/s) and angular (rad/s).
+    max_linear: f64,
+    max_angular: f64,
+    /// Per-joint speed limit (nq), tightened to the URDF limits; None: the URDF limits.
+    velocity_limit: Option<Vec<f64>>,
+    /// Damping λ of the least-squares inverse.
+    damping: f64,
+    /// Distance (rad or m) inside each joint limit at which a joint is held.
+    joint_margin: f64,
+}
+
+impl PyServoGuideConfig {
+    pub(crate) fn to_core(&self, nq: usize) -> crate::Result<ServoGuideConfig> {
+        if let Some(limit) = &self.velocity_limit {
+            if limit.len() != nq {
+                return Err(SabreError::shape("velocity_limit", format!("({nq})"), format!("({})", limit.len())));
+            }
+        }
+        Ok(ServoGuideConfig {
+            gain: self.gain,
+            max_linear: self.max_linear,
+            max_angular: self.max_angular,
+            velocity_limit: self.velocity_limit.clone(),
+            damping: self.damping,
+            joint_margin: self.joint_margin,
+        })
+    }
+}
+
+#[pymethods]
+impl PyServoGuideConfig {
+    #[new]
+    fn new() -> Self {
+        let c = ServoGuideConfig::default();
+        Self {
+            gain: c.gain,
+            max_linear: c.max_linear,
+            max_angular: c.max_angular,
+            velocity_limit: c.velocity_limit,
+            damping: c.damping,
+            joint_margin: c.joint_margin,
+        }
+    }
+}
+
+#[pyclass(name = "Planner", module = "sabre._core")]
+pub struct PyPlanner {
+    inner: Mutex<Mppi>,
+    cost: Mutex<Arc<Cost>>,
+}
+
+fn stats_dict<'py>(py: Python<'py>, s: &IterationStats) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("iteration", s.iteration)?;
+    d.set_item("iteration_time", s.iteration_time)?;
+    d.set_item("rollout_time", s.rollout_time)?;
+    d.set_item("engine_steps", s.engine_steps)?;
+    d.set_item("engine_time", s.engine_time)?;
+    d.set_item("cost_min", s.cost_min)?;
+    d.set_item("cost_mean", s.cost_mean)?;
+    d.set_item("cost_max", s.cost_max)?;
+    d.set_item("nominal_cost", s.nominal_cost)?;
+    d.set_item("effective_sample_size", s.effective_sample_size)?;
+    d.set_item("failed_rollouts", s.failed_rollouts)?;
+    Ok(d)
+}
+
+#[pymethods]
+impl PyPlanner {
+    /// The sampler of the paper (Sec. V) for `model` and `cost`, set up by `config`.
+    #[new]
+    fn new(model: &PyRolloutModel, cost: &PyCost, config: &PyMppiConfig) -> PyResult<Self> {
+        let config = config.to_core(model.inner.scene().nu());
+        let planner = run(|| {
+            cost.inner.validate(model.inner.scene())?;
+            Mppi::new(model.inner.clone(), config)
+        })?;
+        Ok(Self { inner: Mutex::new(planner), cost: Mutex::new(cost.inner.clone()) })
+    }
+
+    #[getter]
+    fn noise_scale(&self) -> f64 {
+        lock(&self.inner).noise_scale()
+    }
+
+    #[setter]
+    fn set_noise_scale(&self, scale: f64) -> PyResult<()> {
+        let mut planner = lock(&self.inner);
+        run(|| planner.set_noise_scale(scale))
+    }
+
+    fn set_cost(&self, cost: &PyCost) -> PyResult<()> {
+        let planner = lock(&self.inner);
+        run(|| cost.inner.validate(planner.model().scene()))?;
+        *lock(&self.cost) = cost.inner.clone();
+        Ok(())
+    }
+
+    fn reset(&self, seed: u64, t0: f64) {
+        lock(&self.inner).reset(seed, t0);
+    }
+
+    /// One planning iteration (sample, roll out, update) without the GIL; returns its statistics.
+    fn iterate<'py>(&self, py: Python<'py>, x: PyReadonlyArrayDyn<'py, f64>, t: f64) -> PyResult<Bound<'py, PyDict>> {
+        let cost = lock(&self.cost).clone();
+        let inner = &self.inner;
+        let x = run(|| view("x", &x, &[-1]))?;
+        let stats = run_detached(py, || lock(inner).iterate(x, t, &cost).cloned())?;
+        stats_dict(py, &stats)
+    }
+
+    /// Builds the batch for time t and returns it, (N, K, nu).
+    fn sample<'py>(&self, py: Python<'py>, t: f64) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let mut planner = lock(&self.inner);
+        let (n, k, nu) = (planner.config().rollouts, planner.horizon_steps(), planner.model().scene().nu());
+        let samples = planner.sample(t).to_vec();
+        array(py, samples, &[n, k, nu])
+    }
+
+    /// Rolls the current batch out from x; returns (costs, states, tau_ext, wrench, contact).
+    #[allow(clippy::type_complexity)]
+    fn evaluate<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArrayDyn<'py, f64>,
+    ) -> PyResult<(Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<bool>>)> {
+        let cost = lock(&self.cost).clone();
+        let inner = &self.inner;
+        let x = run(|| view("x", &x, &[-1]))?;
+        let batch = run_detached(py, || lock(inner).rollout(x, &cost))?;
+        let (n, k, nx, nq) = (batch.n, batch.k, batch.nx, batch.nq);
+        Ok((
+            array(py, batch.costs, &[n])?,
+            array(py, batch.states, &[n, k + 1, nx])?,
+            array(py, batch.tau_ext, &[n, k, nq])?,
+            array(py, batch.wrench, &[n, k, 6])?,
+            batch.contact.into_pyarray(py).reshape(vec![n, k])?,
+        ))
+    }
+
+    /// Weights the current batch by `costs` (N,) and updates the policy.
+    fn update<'py>(&self, py: Python<'py>, costs: PyReadonlyArrayDyn<'py, f64>) -> PyResult<Bound<'py, PyDict>> {
+        let mut planner = lock(&self.inner);
+        let n = planner.config().rollouts as isize;
+        let costs = run(|| view("costs", &costs, &[n]))?;
+        let stats = run(|| planner.update(costs).map(|_| planner.stats().clone()))?;
+        stats_dict(py, &stats)
+    }
+
+    /// The commanded input (nu,) at time t, interpolated along the nominal.
+    fn reference(&self, t: f64) -> PyResult<Vec<f64>> {
+        if !t.is_finite() {
+            return Err(SabreError::invalid("t", "must be finite").into());
+        }
+        let planner = lock(&self.inner);
+        let mut out = vec![0.0; planner.model().scene().nu()];
+        planner.reference(t, &mut out);
+        Ok(out)
+    }
+
+    #[getter]
+    fn nominal<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let planner = lock(&self.inner);
+        let (k, nu) = (planner.horizon_steps(), planner.model().scene().nu());
+        array(py, planner.nominal().to_vec(), &[k, nu])
+    }
+
+    #[getter]
+    fn nominal_t0(&self) -> f64 {
+        lock(&self.inner).nominal_t0()
+    }
+
+    /// Sequences (M, K, nu) placed in the next batch after the nominal and the zero sequence.
+    fn set_guides(&self, guides: PyReadonlyArrayDyn<'_, f64>) -> PyResult<()> {
+        let mut planner = lock(&self.inner);
+        let (k, nu) = (planner.horizon_steps() as isize, planner.model().scene().nu() as isize);
+        let guides = run(|| view("guides", &guides, &[-1, k, nu]))?;
+        run(|| planner.set_guides(guides))
+    }
+
+    fn set_nominal(&self, nominal: PyReadonlyArrayDyn<'_, f64>, t0: f64) -> PyResult<()> {
+        let mut planner = lock(&self.inner);
+        let (k, nu) = (planner.horizon_steps() as isize, planner.model().scene().nu() as isize);
+        let nominal = run(|| view("nominal", &nominal, &[k, nu]))?;
+        run(|| planner.set_nominal(nominal, t0))
+    }
+
+    #[getter]
+    fn weights(&self) -> Vec<f64> {
+        lock(&self.inner).weights().to_vec()
+    }
+
+    #[getter]
+    fn horizon_steps(&self) -> usize {
+        lock(&self.inner).horizon_steps()
+    }
+
+    #[getter]
+    fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        stats_dict(py, lock(&self.inner).stats())
+    }
+}
+
+/// Normalised weights of a cost vector under one likelihood mapping ("naive", "baseline",
+/// "invariant" (55)).
+#[pyfunction]
+pub fn likelihood_weights(costs: Vec<f64>, mapping: &str, parameter: f64) -> PyResult<Vec<f64>> {
+    let mapping = match mapping {
+        "naive" => LikelihoodMapping::Naive { lambda: parameter },
+        "baseline" => LikelihoodMapping::Baseline { lambda: parameter },
+        "invariant" => LikelihoodMapping::Invariant { h: parameter },
+        other => return Err(SabreError::invalid("mapping", format!("unknown mapping '{other}' (naive, baseline, invariant)")).into()),
+    };
+    let mut out = Vec::new();
+    crate::mppi::weights(&costs, mapping, &mut out);
+    Ok(out)
+}

@@ -1,0 +1,218 @@
+//! `_core.Scene`: the robot, the object and its pose; kinematics and dynamics queries on them.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use numpy::{PyArrayDyn, PyReadonlyArrayDyn};
+use pyo3::prelude::*;
+
+use super::convert::{array, isometry, pose_array, poses_array, view};
+use super::error::run;
+use super::mppi::PyServoGuideConfig;
+use crate::model::scene::Scene;
+
+/// A self-collision sphere: (name, link, centre xyz in the link frame, radius).
+type SphereRow = (String, String, [f64; 3], f64);
+/// A float64 array handed to Python.
+type Array<'py> = Bound<'py, PyArrayDyn<f64>>;
+
+#[pyclass(name = "Scene", module = "sabre._core", frozen)]
+pub struct PyScene {
+    pub(crate) inner: Arc<Scene>,
+}
+
+impl PyScene {
+    fn wrap(scene: Scene) -> Self {
+        Self { inner: Arc::new(scene) }
+    }
+}
+
+#[pymethods]
+impl PyScene {
+    /// A built-in robot and object by name; `obj_pose` (x, y, z, roll, pitch, yaw) places the object.
+    #[staticmethod]
+    #[pyo3(signature = (robot, obj, obj_pose=None))]
+    fn load(robot: &str, obj: &str, obj_pose: Option<Vec<f64>>) -> PyResult<Self> {
+        run(|| Scene::load(robot, obj, obj_pose.as_deref())).map(Self::wrap)
+    }
+
+    #[staticmethod]
+    #[pyo3(signature = (robot_path, obj_path, obj_pose=None))]
+    fn from_urdf(robot_path: PathBuf, obj_path: PathBuf, obj_pose: Option<Vec<f64>>) -> PyResult<Self> {
+        run(|| Scene::from_urdf_files(&robot_path, &obj_path, obj_pose.as_deref())).map(Self::wrap)
+    }
+
+    #[staticmethod]
+    #[pyo3(signature = (robot_urdf, obj_urdf, obj_pose=None))]
+    fn from_urdf_strings(robot_urdf: &str, obj_urdf: &str, obj_pose: Option<Vec<f64>>) -> PyResult<Self> {
+        run(|| Scene::from_urdf_strings(robot_urdf, obj_urdf, obj_pose.as_deref())).map(Self::wrap)
+    }
+
+    #[getter]
+    fn nq(&self) -> usize {
+        self.inner.nq()
+    }
+    #[getter]
+    fn no(&self) -> usize {
+        self.inner.no()
+    }
+    #[getter]
+    fn nx(&self) -> usize {
+        self.inner.nx()
+    }
+    #[getter]
+    fn nu(&self) -> usize {
+        self.inner.nu()
+    }
+    #[getter]
+    fn robot_name(&self) -> String {
+        self.inner.robot.name.clone()
+    }
+    #[getter]
+    fn object_name(&self) -> String {
+        self.inner.object.name.clone()
+    }
+    #[getter]
+    fn joint_names(&self) -> Vec<String> {
+        self.inner.robot.active_joint_names()
+    }
+    #[getter]
+    fn frame_names(&self) -> Vec<String> {
+        self.inner.robot.link_names()
+    }
+    #[getter]
+    fn object_joint_names(&self) -> Vec<String> {
+        self.inner.object.active_joint_names()
+    }
+    #[getter]
+    fn object_frame_names(&self) -> Vec<String> {
+        self.inner.object.link_names()
+    }
+    /// Robot joint limits as (lower, upper, velocity, effort) arrays of length nq.
+    fn robot_limits(&self) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
+        let l = self.inner.robot_limits();
+        (
+            l.iter().map(|v| v.lower).collect(),
+            l.iter().map(|v| v.upper).collect(),
+            l.iter().map(|v| v.velocity).collect(),
+            l.iter().map(|v| v.effort).collect(),
+        )
+    }
+    /// Object joint limits as (lower, upper) arrays of length no.
+    fn object_limits(&self) -> (Vec<f64>, Vec<f64>) {
+        let l = self.inner.object_limits();
+        (l.iter().map(|v| v.lower).collect(), l.iter().map(|v| v.upper).collect())
+    }
+    /// Object damping and dry friction per object joint.
+    fn object_dynamics(&self) -> (Vec<f64>, Vec<f64>) {
+        let o = &self.inner.object;
+        (
+            o.active_joints.iter().map(|&j| o.joints[j].damping).collect(),
+            o.active_joints.iter().map(|&j| o.joints[j].friction).collect(),
+        )
+    }
+    fn object_joint_is_revolute(&self) -> bool {
+        self.inner.object_is_revolute()
+    }
+    /// Object pose in the world as a 4 × 4 matrix.
+    #[getter]
+    fn object_pose<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        pose_array(py, &self.inner.object_pose)
+    }
+    fn default_state(&self) -> Vec<f64> {
+        self.inner.default_state()
+    }
+    fn home_configuration(&self) -> Vec<f64> {
+        self.inner.home_configuration()
+    }
+    fn rollout_contact_links(&self) -> Vec<String> {
+        self.inner.rollout_contact_links.iter().map(|&l| self.inner.robot.links[l].name.clone()).collect()
+    }
+    /// Self-collision spheres as (name, link, centre xyz, radius) and the checked pairs (by name).
+    fn self_collision(&self) -> (Vec<SphereRow>, Vec<(String, String)>) {
+        let s = &self.inner;
+        (
+            s.spheres
+                .iter()
+                .map(|sp| (sp.name.clone(), s.robot.links[sp.link].name.clone(), [sp.center.x, sp.center.y, sp.center.z], sp.radius))
+                .collect(),
+            s.sphere_pairs.iter().map(|&(a, b)| (s.spheres[a].name.clone(), s.spheres[b].name.clone())).collect(),
+        )
+    }
+    /// (base link, frame, max) of the planar arm-reach limit (40), if declared.
+    fn arm_reach(&self) -> Option<(String, String, f64)> {
+        let s = &self.inner;
+        s.arm_reach
+            .as_ref()
+            .map(|a| (s.robot.links[a.base_link].name.clone(), s.robot.links[a.frame_link].name.clone(), a.max))
+    }
+
+    /// World pose (4, 4) of a robot frame at q (nq,).
+    fn fk<'py>(&self, py: Python<'py>, q: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let nq = self.inner.nq() as isize;
+        let pose = run(|| self.inner.fk(view("q", &q, &[nq])?, frame))?;
+        pose_array(py, &pose)
+    }
+
+    /// World poses (M, 4, 4) of a robot frame for M configurations (M, nq).
+    fn fk_many<'py>(&self, py: Python<'py>, q: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let nq = self.inner.nq() as isize;
+        let poses = run(|| self.inner.fk_many(view("q", &q, &[-1, nq])?, frame))?;
+        poses_array(py, &poses)
+    }
+
+    /// Geometric Jacobian (6, nq) of a robot frame's origin, world frame, linear rows first.
+    fn jacobian<'py>(&self, py: Python<'py>, q: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let nq = self.inner.nq() as isize;
+        let j = run(|| self.inner.jacobian(view("q", &q, &[nq])?, frame))?;
+        array(py, j.transpose().as_slice().to_vec(), &[6, self.inner.nq()])
+    }
+
+    /// World pose (4, 4) of an object frame at object configuration o (no,).
+    fn object_fk<'py>(&self, py: Python<'py>, o: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let no = self.inner.no() as isize;
+        let pose = run(|| self.inner.object_fk(view("o", &o, &[no])?, frame))?;
+        pose_array(py, &pose)
+    }
+
+    /// World poses (M, 4, 4) of an object frame for M object configurations (M, no).
+    fn object_fk_many<'py>(&self, py: Python<'py>, o: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let no = self.inner.no() as isize;
+        let poses = run(|| self.inner.object_fk_many(view("o", &o, &[-1, no])?, frame))?;
+        poses_array(py, &poses)
+    }
+
+    /// Joint velocities (K, nu) servoing `frame` along target poses (K+1, 4, 4) from q0 (nq,):
+    /// the resolved-rate guide of `sabre.guides.servo_guide` with the gains of `config`.
+    fn servo_guide<'py>(
+        &self,
+        py: Python<'py>,
+        q0: PyReadonlyArrayDyn<'py, f64>,
+        targets: PyReadonlyArrayDyn<'py, f64>,
+        dt: f64,
+        frame: &str,
+        config: &PyServoGuideConfig,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let nq = self.inner.nq();
+        let (out, steps) = run(|| {
+            let q0 = view("q0", &q0, &[nq as isize])?;
+            let targets = view("targets", &targets, &[-1, 4, 4])?;
+            let poses = targets.chunks(16).map(|m| isometry("targets", m)).collect::<crate::Result<Vec<_>>>()?;
+            let config = config.to_core(nq)?;
+            let out = crate::mppi::servo_guide(&self.inner, q0, &poses, dt, frame, &config)?;
+            Ok((out, poses.len().saturating_sub(1)))
+        })?;
+        array(py, out, &[steps, nq])
+    }
+
+    /// Joint-space mass matrix (nq, nq) and gravity torque (nq,) of the robot at q (nq,).
+    fn mass_matrix_and_gravity<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArrayDyn<'py, f64>,
+    ) -> PyResult<(Array<'py>, Array<'py>)> {
+        let nq = self.inner.nq();
+        let (m, g) = run(|| self.inner.mass_matrix_and_gravity(view("q", &q, &[nq as isize])?))?;
+        Ok((array(py, m.transpose().as_slice().to_vec(), &[nq, nq])?, array(py, g.as_slice().to_vec(), &[nq])?))
+    }
+}

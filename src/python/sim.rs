@@ -1,0 +1,383 @@
+//! `_core.RolloutModel` (batched rollouts of the reduced-order model (57)) and `_core.Plant` (the
+//! full-dynamics stand-in for the robot), with their config objects.
+
+use std::sync::{Arc, Mutex};
+
+use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use super::control::PyLowLevelController;
+use super::convert::{array, lock, view};
+use super::error::{run, run_detached};
+use super::safety::{PyEnergyTank, PySafetyFilter};
+use super::scene::PyScene;
+use crate::control::{follow_reference, follow_reference_safe, InnerSafety, TrackTrace};
+use crate::sim::{Plant, PlantConfig, RolloutConfig, RolloutModel};
+
+/// Settings of the rollout model; `RolloutConfig()` holds the core's defaults.
+#[pyclass(name = "RolloutConfig", module = "sabre._core", get_all, set_all)]
+#[derive(Clone)]
+pub struct PyRolloutConfig {
+    /// Step of the rollout model (s).
+    dt: f64,
+    /// Closed-loop bandwidth Λ (1/s) of the joint velocity servo (57).
+    servo_bandwidth: f64,
+    /// Integral gain Λ_I (1/s²) of the servo and the bound on its accumulated error.
+    servo_integral_gain: f64,
+    servo_integral_limit: f64,
+    /// Coulomb friction coefficient of robot–object contacts.
+    contact_friction: f64,
+    /// Rapier solver iterations per step.
+    solver_iterations: usize,
+    /// Simulate the servo with Rapier's multibody solver instead of the joint-space servo.
+    multibody_robot: bool,
+    /// Skip the physics step while the object is statically held and out of reach.
+    skip_quiescent_steps: bool,
+}
+
+impl From<RolloutConfig> for PyRolloutConfig {
+    fn from(c: RolloutConfig) -> Self {
+        Self {
+            dt: c.dt,
+            servo_bandwidth: c.servo_bandwidth,
+            servo_integral_gain: c.servo_integral_gain,
+            servo_integral_limit: c.servo_integral_limit,
+            contact_friction: c.contact_friction,
+            solver_iterations: c.solver_iterations,
+            multibody_robot: c.multibody_robot,
+            skip_quiescent_steps: c.skip_quiescent_steps,
+        }
+    }
+}
+
+impl From<&PyRolloutConfig> for RolloutConfig {
+    fn from(c: &PyRolloutConfig) -> Self {
+        Self {
+            dt: c.dt,
+            servo_bandwidth: c.servo_bandwidth,
+            servo_integral_gain: c.servo_integral_gain,
+            servo_integral_limit: c.servo_integral_limit,
+            contact_friction: c.contact_friction,
+            solver_iterations: c.solver_iterations,
+            multibody_robot: c.multibody_robot,
+            skip_quiescent_steps: c.skip_quiescent_steps,
+        }
+    }
+}
+
+#[pymethods]
+impl PyRolloutConfig {
+    #[new]
+    fn new() -> Self {
+        RolloutConfig::default().into()
+    }
+}
+
+/// Settings of the plant; `PlantConfig()` holds the core's defaults.
+#[pyclass(name = "PlantConfig", module = "sabre._core", get_all, set_all)]
+#[derive(Clone)]
+pub struct PyPlantConfig {
+    /// Plant step (s).
+    dt: f64,
+    /// Coulomb friction coefficient of robot–object contacts.
+    contact_friction: f64,
+    /// Rapier solver iterations per step.
+    solver_iterations: usize,
+    /// Bandwidth (Hz) of the external-torque measurement; None: the raw per-step torques.
+    tau_ext_cutoff: Option<f64>,
+}
+
+impl From<PlantConfig> for PyPlantConfig {
+    fn from(c: PlantConfig) -> Self {
+        Self { dt: c.dt, contact_friction: c.contact_friction, solver_iterations: c.solver_iterations, tau_ext_cutoff: c.tau_ext_cutoff }
+    }
+}
+
+impl From<&PyPlantConfig> for PlantConfig {
+    fn from(c: &PyPlantConfig) -> Self {
+        Self { dt: c.dt, contact_friction: c.contact_friction, solver_iterations: c.solver_iterations, tau_ext_cutoff: c.tau_ext_cutoff }
+    }
+}
+
+#[pymethods]
+impl PyPlantConfig {
+    #[new]
+    fn new() -> Self {
+        PlantConfig::default().into()
+    }
+}
+
+/// N rollouts of K steps: states (N, K+1, nx), tau_ext (N, K, nq), wrench (N, K, 6), contact
+/// (N, K), failed (N,), engine_steps (N,), engine_time (N,).
+#[pyclass(name = "RolloutResult", module = "sabre._core", frozen)]
+pub struct PyRolloutResult {
+    #[pyo3(get)]
+    states: Py<PyArrayDyn<f64>>,
+    #[pyo3(get)]
+    tau_ext: Py<PyArrayDyn<f64>>,
+    #[pyo3(get)]
+    wrench: Py<PyArrayDyn<f64>>,
+    #[pyo3(get)]
+    contact: Py<PyArrayDyn<bool>>,
+    #[pyo3(get)]
+    failed: Py<PyArrayDyn<bool>>,
+    #[pyo3(get)]
+    engine_steps: Py<PyArrayDyn<u64>>,
+    #[pyo3(get)]
+    engine_time: Py<PyArrayDyn<f64>>,
+}
+
+#[pyclass(name = "RolloutModel", module = "sabre._core", frozen)]
+pub struct PyRolloutModel {
+    pub(crate) inner: Arc<RolloutModel>,
+}
+
+#[pymethods]
+impl PyRolloutModel {
+    #[new]
+    fn new(scene: &PyScene, config: &PyRolloutConfig) -> PyResult<Self> {
+        let config = RolloutConfig::from(config);
+        run(|| RolloutModel::new(scene.inner.clone(), config)).map(|m| Self { inner: Arc::new(m) })
+    }
+
+    #[getter]
+    fn dt(&self) -> f64 {
+        self.inner.dt()
+    }
+
+    /// Rolls N input sequences U (N, K, nu) out from x0 (nx,) without the GIL.
+    #[pyo3(signature = (x0, u, threads=None))]
+    fn rollout<'py>(
+        &self,
+        py: Python<'py>,
+        x0: PyReadonlyArrayDyn<'py, f64>,
+        u: PyReadonlyArrayDyn<'py, f64>,
+        threads: Option<usize>,
+    ) -> PyResult<PyRolloutResult> {
+        let scene = self.inner.scene();
+        let (nx, nq) = (scene.nx() as isize, scene.nq() as isize);
+        let x0 = run(|| view("x0", &x0, &[nx]))?;
+        let u_shape = u.shape().to_vec();
+        let u = run(|| view("U", &u, &[-1, -1, nq]))?;
+        let (n, k) = (u_shape[0], u_shape[1]);
+        let model = self.inner.clone();
+        let batch = run_detached(py, move || model.rollout(x0, u, n, k, threads))?;
+        let (nx, nq) = (batch.nx, batch.nq);
+        Ok(PyRolloutResult {
+            states: array(py, batch.states, &[n, k + 1, nx])?.unbind(),
+            tau_ext: array(py, batch.tau_ext, &[n, k, nq])?.unbind(),
+            wrench: array(py, batch.wrench, &[n, k, 6])?.unbind(),
+            contact: batch.contact.into_pyarray(py).reshape(vec![n, k])?.unbind(),
+            failed: batch.failed.into_pyarray(py).reshape(vec![n])?.unbind(),
+            engine_steps: batch.engine_steps.into_pyarray(py).reshape(vec![n])?.unbind(),
+            engine_time: array(py, batch.engine_time, &[n])?.unbind(),
+        })
+    }
+}
+
+/// A contact point: (robot link, object link, point (3,), force on the robot (3,)).
+type ContactRow = (String, String, [f64; 3], [f64; 3]);
+
+#[pyclass(name = "Plant", module = "sabre._core")]
+pub struct PyPlant {
+    inner: Mutex<Plant>,
+}
+
+impl PyPlant {
+    fn with<T>(&self, f: impl FnOnce(&mut Plant) -> crate::Result<T>) -> PyResult<T> {
+        let mut plant = lock(&self.inner);
+        run(|| f(&mut plant))
+    }
+}
+
+#[pymethods]
+impl PyPlant {
+    #[new]
+    fn new(scene: &PyScene, config: &PyPlantConfig) -> PyResult<Self> {
+        let config = PlantConfig::from(config);
+        run(|| Plant::new(scene.inner.clone(), config)).map(|p| Self { inner: Mutex::new(p) })
+    }
+
+    fn reset(&self, x0: PyReadonlyArrayDyn<'_, f64>) -> PyResult<()> {
+        self.with(|p| {
+            let nx = p.scene().nx() as isize;
+            p.reset(view("x0", &x0, &[nx])?)
+        })
+    }
+
+    fn step(&self, py: Python<'_>, tau: PyReadonlyArrayDyn<'_, f64>) -> PyResult<()> {
+        let tau = self.with(|p| Ok(view("tau", &tau, &[p.scene().nq() as isize])?.to_vec()))?;
+        let plant = &self.inner;
+        run_detached(py, || lock(plant).step(&tau))
+    }
+
+    /// Runs `steps` plant steps, each with torques from the low-level controller tracking `u_ref`.
+    fn track(&self, py: Python<'_>, controller: &PyLowLevelController, u_ref: PyReadonlyArrayDyn<'_, f64>, steps: usize) -> PyResult<()> {
+        let u_ref = self.with(|p| Ok(view("u_ref", &u_ref, &[p.scene().nq() as isize])?.to_vec()))?;
+        let plant = &self.inner;
+        let controller = &controller.inner;
+        run_detached(py, || {
+            let mut plant = lock(plant);
+            let mut controller = lock(controller);
+            for _ in 0..steps {
+                let tau = controller.torque(plant.state(), &u_ref)?;
+                plant.step(&tau)?;
+            }
+            Ok(())
+        })
+    }
+
+    /// Follows a reference sequence (K, nq) starting at t0 with steps dt for `steps` plant steps under
+    /// the low-level controller; returns the trace of every `record_every`-th step as
+    /// (time, state, reference, wrench, tau_ext, contact).
+    #[pyo3(signature = (controller, reference, t0, dt, steps, record_every=1))]
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    fn follow<'py>(
+        &self,
+        py: Python<'py>,
+        controller: &PyLowLevelController,
+        reference: PyReadonlyArrayDyn<'py, f64>,
+        t0: f64,
+        dt: f64,
+        steps: usize,
+        record_every: usize,
+    ) -> PyResult<(
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyArrayDyn<bool>>,
+    )> {
+        let (nx, nq) = self.with(|p| Ok((p.scene().nx(), p.scene().nq())))?;
+        let reference = run(|| view("reference", &reference, &[-1, nq as isize]))?;
+        let plant = &self.inner;
+        let controller = &controller.inner;
+        let trace = run_detached(py, || {
+            let (mut plant, mut controller) = (lock(plant), lock(controller));
+            let mut trace = TrackTrace::default();
+            follow_reference(&mut plant, &mut controller, reference, t0, dt, steps, record_every, &mut trace)?;
+            Ok(trace)
+        })?;
+        let m = trace.time.len();
+        Ok((
+            array(py, trace.time, &[m])?,
+            array(py, trace.state, &[m, nx])?,
+            array(py, trace.reference, &[m, nq])?,
+            array(py, trace.wrench, &[m, 6])?,
+            array(py, trace.tau_ext, &[m, nq])?,
+            trace.contact.into_pyarray(py).reshape(vec![m])?,
+        ))
+    }
+
+    /// [`Self::follow`] with the optional inner safety stage (FILTER-QP (41) with the passivity
+    /// row (56), the tank (49), or both); returns the trace as a dict: time, state, reference,
+    /// wrench, tau_ext, tau_ext_measured, contact, and with a filter filtered (M, nq) and
+    /// filter_status (list of str), with a tank tank_energy (M,).
+    #[pyo3(signature = (controller, reference, t0, dt, steps, record_every=1, safety=None, tank=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn follow_safe<'py>(
+        &self,
+        py: Python<'py>,
+        controller: &PyLowLevelController,
+        reference: PyReadonlyArrayDyn<'py, f64>,
+        t0: f64,
+        dt: f64,
+        steps: usize,
+        record_every: usize,
+        safety: Option<&PySafetyFilter>,
+        tank: Option<&PyEnergyTank>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let (nx, nq) = self.with(|p| Ok((p.scene().nx(), p.scene().nq())))?;
+        let reference = run(|| view("reference", &reference, &[-1, nq as isize]))?;
+        let plant = &self.inner;
+        let controller = &controller.inner;
+        let (has_filter, has_tank) = (safety.is_some(), tank.is_some());
+        let trace = run_detached(py, || {
+            // Always plant, controller, filter, tank: one lock order for every call.
+            let mut plant = lock(plant);
+            let mut controller = lock(controller);
+            let mut filter = safety.map(|f| lock(&f.inner));
+            let mut tank = tank.map(|t| lock(&t.inner));
+            let stage = InnerSafety { filter: filter.as_deref_mut(), tank: tank.as_deref_mut() };
+            let mut trace = TrackTrace::default();
+            follow_reference_safe(&mut plant, &mut controller, reference, t0, dt, steps, record_every, &mut trace, Some(stage))?;
+            Ok(trace)
+        })?;
+        let m = trace.time.len();
+        let d = PyDict::new(py);
+        d.set_item("time", array(py, trace.time, &[m])?)?;
+        d.set_item("state", array(py, trace.state, &[m, nx])?)?;
+        d.set_item("reference", array(py, trace.reference, &[m, nq])?)?;
+        d.set_item("wrench", array(py, trace.wrench, &[m, 6])?)?;
+        d.set_item("tau_ext", array(py, trace.tau_ext, &[m, nq])?)?;
+        d.set_item("tau_ext_measured", array(py, trace.tau_ext_measured, &[m, nq])?)?;
+        d.set_item("contact", trace.contact.into_pyarray(py).reshape(vec![m])?)?;
+        if has_filter {
+            d.set_item("filtered", array(py, trace.filtered, &[m, nq])?)?;
+            d.set_item("filter_status", trace.filter_status.iter().map(|s| s.name()).collect::<Vec<_>>())?;
+        }
+        if has_tank {
+            d.set_item("tank_energy", array(py, trace.tank_energy, &[m])?)?;
+        }
+        Ok(d)
+    }
+
+    #[getter]
+    fn state(&self) -> PyResult<Vec<f64>> {
+        self.with(|p| Ok(p.state().to_vec()))
+    }
+    #[getter]
+    fn wrench(&self) -> PyResult<Vec<f64>> {
+        self.with(|p| Ok(p.interaction().wrench.to_vec()))
+    }
+    #[getter]
+    fn tau_ext(&self) -> PyResult<Vec<f64>> {
+        self.with(|p| Ok(p.interaction().tau_ext.clone()))
+    }
+    #[getter]
+    fn measured_tau_ext(&self) -> PyResult<Vec<f64>> {
+        self.with(|p| Ok(p.measured_tau_ext().to_vec()))
+    }
+    #[getter]
+    fn contact(&self) -> PyResult<bool> {
+        self.with(|p| Ok(p.interaction().contact))
+    }
+    /// Contact points of the last step: (robot link, object link, point (3,), force on the robot (3,)).
+    fn contacts(&self) -> PyResult<Vec<ContactRow>> {
+        self.with(|p| {
+            let scene = p.scene();
+            Ok(p
+                .contacts()
+                .into_iter()
+                .map(|c| (scene.robot.links[c.robot_link].name.clone(), scene.object.links[c.object_link].name.clone(), c.point, c.force))
+                .collect())
+        })
+    }
+    #[getter]
+    fn applied_torque(&self) -> PyResult<Vec<f64>> {
+        self.with(|p| Ok(p.applied_torque().to_vec()))
+    }
+    #[getter]
+    fn time(&self) -> PyResult<f64> {
+        self.with(|p| Ok(p.time()))
+    }
+    #[getter]
+    fn dt(&self) -> PyResult<f64> {
+        self.with(|p| Ok(p.dt()))
+    }
+    #[getter]
+    fn object_held(&self) -> PyResult<bool> {
+        self.with(|p| Ok(p.object_held()))
+    }
+    fn hold_object(&self, flag: bool) -> PyResult<()> {
+        self.with(|p| {
+            p.hold_object(flag);
+            Ok(())
+        })
+    }
+    fn object_energy(&self) -> PyResult<f64> {
+        self.with(|p| Ok(p.object_energy()))
+    }
+}
