@@ -79,7 +79,7 @@ def cases(scene: sabre.Scene, rng: np.random.Generator) -> dict[str, list[tuple]
     reference[:, j4] = 1.2
     reference[:, 3] = 0.3
     tank = sabre.EnergyTank()
-    trace = plant.follow(controller, reference, 0.0, 0.015, 500, safety=make_filter(scene, True), tank=tank)
+    trace = controller.follow(plant, reference, 0.0, 0.015, 500, safety=make_filter(scene, True), tank=tank)
     energies = np.concatenate([[10.0], trace.tank_energy[:-1]])
     states = np.vstack([x0, trace.state[:-1]])
     taus = np.vstack([np.zeros(nq), trace.tau_ext_measured[:-1]])  # what the filter read before each step

@@ -72,7 +72,7 @@ TARGETS = {
     ),
     "Plant.reset(x0)": (lambda o, v: o.plant.reset(v), lambda o: o.scene.nx, lambda o: o.scene.default_state(), True),
     "Plant.step(tau)": (lambda o, v: o.plant.step(v), lambda o: o.scene.nq, lambda o: np.zeros(o.scene.nq), False),
-    "Plant.track(u_ref)": (lambda o, v: o.plant.track(o.controller, v, 1), lambda o: o.scene.nq, lambda o: np.zeros(o.scene.nq), False),
+    "LowLevelController.track(u_ref)": (lambda o, v: o.controller.track(o.plant, v, 1), lambda o: o.scene.nq, lambda o: np.zeros(o.scene.nq), False),
     "LowLevelController.torque(x)": (
         lambda o, v: o.controller.torque(v, np.zeros(o.scene.nq)),
         lambda o: o.scene.nx,
@@ -433,7 +433,7 @@ CORE_CALLS = {
     "RolloutModel.rollout x0": (lambda c, a: c.model.rollout(a, np.zeros((1, 1, c.nq)), None), "nx"),
     "Plant.reset": (lambda c, a: c.plant.reset(a), "nx"),
     "Plant.step": (lambda c, a: c.plant.step(a), "nq"),
-    "Plant.track": (lambda c, a: c.plant.track(c.controller, a, 1), "nq"),
+    "LowLevelController.track": (lambda c, a: c.controller.track(c.plant, a, 1), "nq"),
     "LowLevelController.torque x": (lambda c, a: c.controller.torque(a, np.zeros(c.nq)), "nx"),
     "LowLevelController.torque u_ref": (lambda c, a: c.controller.torque(c.x0, a), "nq"),
 }
@@ -591,7 +591,7 @@ for value in (np.zeros(nx) + 1e308, np.full(nx, -1e308), np.r_[np.zeros(nq), np.
     for _ in range(3):
         attempt(lambda: plant.step(np.full(nq, 1e308)))
         attempt(lambda: controller.torque(value, np.full(nq, 1e308)))
-    attempt(lambda: plant.track(controller, np.full(nq, -1e308), 5))
+    attempt(lambda: controller.track(plant, np.full(nq, -1e308), 5))
 plant.reset()
 attempt(lambda: plant.step(np.zeros(nq)))
 

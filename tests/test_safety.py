@@ -216,7 +216,7 @@ def test_plant_follow_with_filter_and_tank(scene):
     plant.reset(x0)
     reference = np.zeros((10, scene.nq))
     reference[:, j4] = 1.0
-    trace = plant.follow(controller, reference, 0.0, 0.015, 300, record_every=2, safety=f, tank=tank)
+    trace = controller.follow(plant, reference, 0.0, 0.015, 300, record_every=2, safety=f, tank=tank)
     assert trace.filtered.shape == (150, scene.nq) and trace.tank_energy.shape == (150,)
     assert len(trace.filter_status) == 150 and not trace.fallback.any()
     assert trace.filtered[-1, j4] < 0.2 < trace.reference[-1, j4]
@@ -226,9 +226,9 @@ def test_plant_follow_with_filter_and_tank(scene):
     # Consecutive 1 kHz calls mostly re-solve the previous active set instead of running Clarabel.
     assert f.stats["interior_point_calls"] < 30
     plant.reset(x0)
-    plain = plant.follow(controller, reference, 0.0, 0.015, 10)
+    plain = controller.follow(plant, reference, 0.0, 0.015, 10)
     assert plain.filtered is None and plain.tank_energy is None and plain.fallback is None
-    books = plant.follow(controller, reference, 0.0, 0.015, 10, tank=sabre.EnergyTank())
+    books = controller.follow(plant, reference, 0.0, 0.015, 10, tank=sabre.EnergyTank())
     assert books.filtered is None and books.tank_energy.shape == (10,)
 
 

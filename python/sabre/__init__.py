@@ -22,7 +22,8 @@ from .realtime import RealtimeCascade, TickResult
 from .scene import OBJECTS, ROBOTS, Scene
 from .safety import EnergyTank, FilterResult, Obstacle, SafetyConfig, SafetyFilter, SequenceResult
 from .scripted import ScriptedMotion, hook_and_pull
-from .sim import Contact, LowLevelController, Plant, RolloutModel, RolloutResult, Trace, default_threads
+from .control import LowLevelController, Trace
+from .sim import ContactPoint, Plant, RolloutModel, RolloutResult, default_threads
 
 __all__ = [
     "VARIANTS",
@@ -36,7 +37,7 @@ __all__ = [
     "RolloutResult",
     "Plant",
     "Trace",
-    "Contact",
+    "ContactPoint",
     "LowLevelController",
     "SafetyFilter",
     "SafetyConfig",

@@ -67,7 +67,7 @@ def scripted_demo(obj: str, threads: int | None) -> int:
     per_step = int(round(motion.dt / plant.dt))
     t0 = time.perf_counter()
     for u in motion.U:
-        plant.track(controller, u, steps=per_step)
+        controller.track(plant, u, steps=per_step)
     wall = time.perf_counter() - t0
     print(f"  plant (1 kHz, full dynamics, PI velocity control): final opening {plant.state[no]:.3f}, "
           f"real-time factor {len(motion.U) * motion.dt / wall:.1f}x")

@@ -20,7 +20,8 @@ from .costs import Batch, CompiledCost
 from .errors import InvalidValueError, ShapeError
 from .safety import CLASSES, EnergyTank, SafetyConfig, SafetyFilter
 from .scene import Scene
-from .sim import MAX_THREADS, LowLevelController, Plant, RolloutModel
+from .control import LowLevelController
+from .sim import MAX_THREADS, Plant, RolloutModel
 from .tasks import Task
 
 __all__ = ["ControllerConfig", "Controller", "Episode", "run_episode", "paper_start_state", "likelihood_weights", "VARIANTS"]
@@ -367,7 +368,7 @@ class Episode:
 
 
 class TraceChunks:
-    """The plant traces of consecutive inner-loop runs (:meth:`Plant.follow`), gathered into the
+    """The plant traces of consecutive inner-loop runs (:meth:`LowLevelController.follow`), gathered into the
     arrays of one :class:`Episode`. ``append(trace, **per_run)`` adds a run; each keyword is a value
     that holds for every recorded step of that run (e.g. the plan's cost)."""
 
@@ -469,7 +470,7 @@ def run_episode(
             planning_times.append(stats["iteration_time"])
             floor = controller.task.gain_inertia_floor(controller.phase)
             low_level.gain_inertia_floor = own_floor if floor is None else floor
-            trace = plant.follow(low_level, controller.nominal, controller.nominal_t0, controller.config.dt, steps_per_plan, record_every,
+            trace = low_level.follow(plant, controller.nominal, controller.nominal_t0, controller.config.dt, steps_per_plan, record_every,
                                  safety=controller.inner_filter, tank=controller.tank)
             chunks.append(trace, cost=stats["nominal_cost"], phase=controller.task.phases.index(controller.phase))
             if bar is not None:

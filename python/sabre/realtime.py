@@ -21,7 +21,7 @@ import numpy as np
 from ._validate import as_float_array, as_positive
 from .controller import Controller
 from .errors import InvalidValueError
-from .sim import LowLevelController
+from .control import LowLevelController
 
 __all__ = ["RealtimeCascade", "TickResult"]
 

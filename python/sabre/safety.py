@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -18,9 +18,7 @@ from . import _core
 from ._validate import as_count, as_float_array, as_non_negative, as_positive, readonly
 from .errors import InvalidValueError
 from .scene import Scene
-
-if TYPE_CHECKING:
-    from .sim import RolloutModel
+from .sim import RolloutModel
 
 __all__ = ["CLASSES", "SafetyConfig", "SafetyFilter", "FilterResult", "SequenceResult", "EnergyTank", "Obstacle"]
 
@@ -266,8 +264,6 @@ class SafetyFilter:
     def filter_sequence(self, x0: Sequence[float] | np.ndarray, U: np.ndarray, model: RolloutModel) -> SequenceResult:
         """Sequential FILTER-QP (Algorithm 1): filters U (K, nq) step by step while rolling it out
         from x0 in ``model`` (no passivity row: the paper enforces passivity in the inner loop)."""
-        from .sim import RolloutModel
-
         if not isinstance(model, RolloutModel):
             raise TypeError(f"model must be a sabre.RolloutModel, got {type(model).__name__}")
         x0 = as_float_array("x0", x0, (self.scene.nx,))

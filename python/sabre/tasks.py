@@ -17,6 +17,7 @@ from ._validate import as_float_array, as_non_negative, as_positive
 from .errors import InvalidValueError
 from .guides import servo_guide
 from .scene import Scene
+from .sim import RolloutModel
 
 __all__ = ["Task", "Reach", "OpenObject", "SafetyWeights"]
 
@@ -458,9 +459,7 @@ class OpenObject(Task):
         way = back + radial / norm
         return way / float(np.linalg.norm(way))
 
-    def _probe_model(self, scene: Scene):
-        from .sim import RolloutModel
-
+    def _probe_model(self, scene: Scene) -> RolloutModel:
         cache = self.__dict__.setdefault("_probe_models", {})
         if id(scene) not in cache:
             cache.clear()
