@@ -17,10 +17,29 @@ from .errors import (
     UrdfError,
 )
 from . import costs, guides, scenarios, tasks
-from .controller import VARIANTS, Controller, ControllerConfig, Episode, likelihood_weights, paper_start_state, run_episode
+from .controller import (
+    VARIANTS,
+    Controller,
+    ControllerConfig,
+    Episode,
+    IterationStats,
+    likelihood_weights,
+    paper_start_state,
+    run_episode,
+)
 from .realtime import RealtimeCascade, TickResult
 from .scene import OBJECTS, ROBOTS, Scene
-from .safety import EnergyTank, FilterResult, Obstacle, SafetyConfig, SafetyFilter, SequenceResult
+from .safety import (
+    ConstraintRows,
+    EnergyTank,
+    FilterResult,
+    FilterStats,
+    Obstacle,
+    QPMatrices,
+    SafetyConfig,
+    SafetyFilter,
+    SequenceResult,
+)
 from .scripted import ScriptedMotion, hook_and_pull
 from .control import LowLevelController, Trace
 from .sim import ContactPoint, Plant, RolloutModel, RolloutResult, default_threads
@@ -43,6 +62,9 @@ __all__ = [
     "SafetyConfig",
     "FilterResult",
     "SequenceResult",
+    "FilterStats",
+    "ConstraintRows",
+    "QPMatrices",
     "Obstacle",
     "EnergyTank",
     "default_threads",
@@ -52,6 +74,7 @@ __all__ = [
     "Controller",
     "ControllerConfig",
     "Episode",
+    "IterationStats",
     "run_episode",
     "paper_start_state",
     "likelihood_weights",

@@ -24,7 +24,7 @@ from .control import LowLevelController
 from .sim import MAX_THREADS, Plant, RolloutModel
 from .tasks import Task
 
-__all__ = ["ControllerConfig", "Controller", "Episode", "run_episode", "paper_start_state", "likelihood_weights", "VARIANTS"]
+__all__ = ["ControllerConfig", "Controller", "IterationStats", "Episode", "run_episode", "paper_start_state", "likelihood_weights", "VARIANTS"]
 
 #: Controller variants (SPEC §8): N no filter, I inner FILTER-QP with the tank, O sequential
 #: FILTER-QP in the outer loop, IO both.
@@ -122,6 +122,53 @@ class ControllerConfig:
         return [float(s) for s in self.sigma]
 
 
+@dataclass(frozen=True)
+class IterationStats:
+    """Statistics of one planning iteration (:meth:`Controller.update`).
+
+    Attributes:
+        iteration: iterations since the last reset, this one included.
+        iteration_time: wall time of the whole iteration (s): sampling, rollouts, cost, update, the
+            task's guides and, with the outer filter, the sequential FILTER-QP.
+        rollout_time: wall time of the parallel rollouts and their cost (s).
+        engine_steps: rollout steps, summed over the rollouts, that went through Rapier's pipeline
+            (the others were skipped as quiescent, see :class:`sabre.RolloutModel`).
+        engine_time: time spent inside Rapier's pipeline (s), summed over the workers, so
+            ``engine_time / (rollout_time * threads)`` is the physics engine's share of the rollouts.
+        cost_min, cost_mean, cost_max: smallest, mean and largest finite rollout cost of the batch
+            (dimensionless, the task's cost).
+        nominal_cost: cost of the nominal (the sequence the reference follows) after the update.
+        effective_sample_size: 1 / Σ w_i² of the normalised sample weights (55), between 1 and N.
+        failed_rollouts: rollouts whose physics diverged (weighted zero).
+        phase: the task phase the iteration planned for.
+        noise_scale: factor on Σ the task asked for (:meth:`sabre.tasks.Task.noise_scale`).
+        guide_time: wall time of the task's guides (s), included in ``iteration_time``.
+        sequential_time: wall time of the sequential FILTER-QP (s, Algorithm 1), included in
+            ``iteration_time``; None without the outer filter (variants N, I).
+        sequential_fallbacks: steps of the sequential filter that fell back to the safe stop; None
+            without the outer filter.
+
+    Timings vary from run to run; every other field is deterministic for a seed.
+    """
+
+    iteration: int
+    iteration_time: float
+    rollout_time: float
+    engine_steps: int
+    engine_time: float
+    cost_min: float
+    cost_mean: float
+    cost_max: float
+    nominal_cost: float
+    effective_sample_size: float
+    failed_rollouts: int
+    phase: str
+    noise_scale: float
+    guide_time: float
+    sequential_time: float | None = None
+    sequential_fallbacks: int | None = None
+
+
 class Controller:
     """Sampling-based controller for `scene` pursuing `task`.
 
@@ -160,7 +207,7 @@ class Controller:
             c.noise_interval,
             None if c.input_limit is None else [float(v) for v in c.input_limit],
         )
-        self._stats: dict = {}
+        self._stats: IterationStats | None = None
         self.phase_history: list[tuple[float, str]] = [(0.0, self.phase)]
         safety = c.safety_config
         #: Sequential FILTER-QP of the outer loop (variants O, IO), else None.
@@ -217,8 +264,16 @@ class Controller:
             self._planner.set_cost(self._cost.core)
             self.phase_history.append((float(t), phase))
 
-    def update(self, x: Sequence[float] | np.ndarray, t: float) -> dict:
-        """One planning iteration from state x (nx,) at time t (s); returns its statistics."""
+    def update(self, x: Sequence[float] | np.ndarray, t: float) -> IterationStats:
+        """One planning iteration from the measured state x (nx,) at time t (s); returns its statistics.
+
+        Runs the task's phase switch and ``on_step``, samples around the nominal, rolls out, weighs
+        and updates the nominal (and, with the outer filter, filters it along its rollout).
+
+        Raises:
+            ShapeError: x is not (nx,), or the task's guides are not (M, K, nu).
+            InvalidValueError: non-finite x or t, an unknown phase or a bad noise scale from the task.
+        """
         x = as_float_array("x", x, (self.scene.nx,))
         t = float(t)
         if not np.isfinite(t):
@@ -264,8 +319,8 @@ class Controller:
         stats["iteration_time"] += guide_time if not self._cost.python_terms else 0.0
         stats["phase"] = self.phase
         stats["noise_scale"] = scale
-        self._stats = stats
-        return stats
+        self._stats = IterationStats(**stats)
+        return self._stats
 
     def reference(self, t: float) -> np.ndarray:
         """(nu,) commanded joint velocity at time t."""
@@ -281,15 +336,9 @@ class Controller:
         return self._planner.nominal_t0
 
     @property
-    def stats(self) -> dict:
-        """Last iteration: iteration_time, rollout_time (s), cost_min/mean/max, nominal_cost,
-        effective_sample_size, failed_rollouts, phase, noise_scale, guide_time (s, the task's
-        guides, included in iteration_time); engine_steps and engine_time (s): the rollout steps
-        that went through Rapier's pipeline and the time spent in them summed over the workers, so
-        ``engine_time / (rollout_time * threads)`` is the physics engine's share of the rollouts;
-        with the sequential filter also sequential_time (s, included in iteration_time) and
-        sequential_fallbacks."""
-        return dict(self._stats)
+    def stats(self) -> IterationStats | None:
+        """Statistics of the last planning iteration; None before the first :meth:`update`."""
+        return self._stats
 
 
 @dataclass
@@ -360,7 +409,7 @@ class Episode:
                "base_box": "base_box", "obstacle": "obstacles", "passivity": "passivity"}
         total = {c: 0.0 for c in CLASSES if c != "passivity"}
         for x in self.state:
-            h = f.constraint_rows(x)[2]
+            h = f.constraint_rows(x).h
             for c, v in zip(classes, h):
                 if np.isfinite(v) and v < 0.0 and key.get(c) in total:
                     total[key[c]] += -float(v)
@@ -467,12 +516,12 @@ def run_episode(
             if on_replan is not None and on_replan(t, x, plant, controller) is True:
                 break
             stats = controller.update(x, t)
-            planning_times.append(stats["iteration_time"])
+            planning_times.append(stats.iteration_time)
             floor = controller.task.gain_inertia_floor(controller.phase)
             low_level.gain_inertia_floor = own_floor if floor is None else floor
             trace = low_level.follow(plant, controller.nominal, controller.nominal_t0, controller.config.dt, steps_per_plan, record_every,
                                  safety=controller.inner_filter, tank=controller.tank)
-            chunks.append(trace, cost=stats["nominal_cost"], phase=controller.task.phases.index(controller.phase))
+            chunks.append(trace, cost=stats.nominal_cost, phase=controller.task.phases.index(controller.phase))
             if bar is not None:
                 bar.update(round(steps_per_plan * plant.dt, 3))
             if success_time is None and controller.task.success(scene, plant.state):
@@ -505,7 +554,7 @@ def run_episode(
         command=data["command"],
         tank_energy=data["tank"],
         variant=controller.config.variant,
-        filter_fallbacks=0 if controller.inner_filter is None else int(controller.inner_filter.stats["fallbacks"]),
+        filter_fallbacks=0 if controller.inner_filter is None else int(controller.inner_filter.stats.fallbacks),
         tank_floor=controller.tank.floor,
     )
 

@@ -20,7 +20,10 @@ from .errors import InvalidValueError
 from .scene import Scene
 from .sim import RolloutModel
 
-__all__ = ["CLASSES", "SafetyConfig", "SafetyFilter", "FilterResult", "SequenceResult", "EnergyTank", "Obstacle"]
+__all__ = [
+    "CLASSES", "SafetyConfig", "SafetyFilter", "FilterResult", "SequenceResult", "FilterStats", "ConstraintRows",
+    "QPMatrices", "EnergyTank", "Obstacle",
+]
 
 #: Constraint classes, in the order the core uses.
 CLASSES: tuple[str, ...] = ("joint_limits", "self_collision", "arm_reach", "base_box", "obstacles", "passivity")
@@ -192,7 +195,64 @@ class SequenceResult:
 
 
 @dataclass(frozen=True)
+class FilterStats:
+    """Counters of a :class:`SafetyFilter` since it was built or :meth:`SafetyFilter.reset_stats`.
+
+    Attributes:
+        calls: FILTER-QP calls (each step of :meth:`SafetyFilter.filter_sequence` counts).
+        fallbacks: calls whose solver failed and returned the safe stop u = 0.
+        mean_solve_time: mean wall time per call in the core (s; 0 without calls).
+        max_solve_time: longest call (s).
+        total_iterations: interior-point iterations summed over the calls.
+        interior_point_calls: calls that ran Clarabel (the others took an exact shortcut).
+    """
+
+    calls: int
+    fallbacks: int
+    mean_solve_time: float
+    max_solve_time: float
+    total_iterations: int
+    interior_point_calls: int
+
+
+@dataclass(frozen=True)
+class ConstraintRows:
+    """The affine rows of FILTER-QP at one state: row i requires ``a[i] @ u + δ_i ≥ b[i]``.
+
+    Attributes:
+        a: (R, nq) gradient ∂h/∂q of each row's barrier (for passivity: τ_extᵀ).
+        b: (R,) right-hand side −γ (h − Δ) (19), in the units of ``a @ u``.
+        h: (R,) barrier value of each row without the margin; NaN for rows off at this call.
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    h: np.ndarray
+
+
+@dataclass(frozen=True)
+class QPMatrices:
+    """The whole FILTER-QP (41) as dense arrays: minimise ½ zᵀPz + qᵀz subject to A z ≤ b, over
+    z = [u (nu); δ (R)], the command and one slack per row; the input bounds are rows of A too.
+
+    Attributes:
+        P: (nu + R, nu + R) quadratic cost (identity on u, the class penalty Γ on each slack).
+        q: (nu + R,) linear cost (−u_ref on u).
+        A: (m, nu + R) inequality rows. b: (m,) their bounds.
+        nu: the number of command entries at the front of z.
+    """
+
+    P: np.ndarray
+    q: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+    nu: int
+
+
+@dataclass(frozen=True)
 class Obstacle:
+    """A sphere obstacle of a :class:`SafetyFilter`: its id, world centre (m) and radius (m)."""
+
     id: int
     center: tuple[float, float, float]
     radius: float
@@ -301,10 +361,9 @@ class SafetyFilter:
         return np.asarray(self._core.input_limits, dtype=np.float64)
 
     @property
-    def stats(self) -> dict:
-        """calls, fallbacks, mean_solve_time and max_solve_time (s), total_iterations,
-        interior_point_calls (calls that ran Clarabel)."""
-        return dict(self._core.stats)
+    def stats(self) -> FilterStats:
+        """Call, fallback and solver counters since construction or :meth:`reset_stats`."""
+        return FilterStats(**dict(self._core.stats))
 
     def reset_stats(self) -> None:
         self._core.reset_stats()
@@ -314,20 +373,43 @@ class SafetyFilter:
         remembered active set is used only after it passes every optimality check)."""
         self._core.forget_active_set()
 
-    def constraint_rows(self, x, tau_ext=None, tank_energy=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(a (R, nq), b (R,), h (R,)) at state x: each row's condition is a·u + δ ≥ b, b = −γ (h − Δ)."""
+    def constraint_rows(
+        self,
+        x: Sequence[float] | np.ndarray,
+        tau_ext: Sequence[float] | np.ndarray | None = None,
+        tank_energy: float | None = None,
+    ) -> ConstraintRows:
+        """The R rows of FILTER-QP at state x (nx,); with τ_ext (nq,, N·m) and the tank energy
+        (J) the passivity row is on.
+
+        Raises:
+            ShapeError: x or tau_ext of the wrong length.
+            InvalidValueError: non-finite input, or only one of tau_ext and tank_energy given.
+        """
         x = as_float_array("x", x, (self.scene.nx,))
         tau, energy = self._passivity(tau_ext, tank_energy)
         a, b, h = self._core.constraint_rows(x, tau, energy)
-        return readonly(a), readonly(b), readonly(h)
+        return ConstraintRows(a=readonly(a), b=readonly(b), h=readonly(h))
 
-    def qp_matrices(self, x, u_ref, tau_ext=None, tank_energy=None) -> dict:
-        """The full QP as dense arrays, for cross-checks with other solvers: minimise
-        ½ zᵀPz + qᵀz subject to A z ≤ b over z = [u (nu); δ (R)] (keys P, q, A, b, nu)."""
+    def qp_matrices(
+        self,
+        x: Sequence[float] | np.ndarray,
+        u_ref: Sequence[float] | np.ndarray,
+        tau_ext: Sequence[float] | np.ndarray | None = None,
+        tank_energy: float | None = None,
+    ) -> QPMatrices:
+        """The full QP at state x (nx,) for the command u_ref (nq,), as dense arrays, for
+        cross-checks with other solvers (arguments as for :meth:`filter`).
+
+        Raises:
+            ShapeError: an argument of the wrong length.
+            InvalidValueError: non-finite input, or only one of tau_ext and tank_energy given.
+        """
         x = as_float_array("x", x, (self.scene.nx,))
         u_ref = as_float_array("u_ref", u_ref, (self.scene.nq,))
         tau, energy = self._passivity(tau_ext, tank_energy)
-        return dict(self._core.qp_matrices(x, u_ref, tau, energy))
+        d = dict(self._core.qp_matrices(x, u_ref, tau, energy))
+        return QPMatrices(P=readonly(d["P"]), q=readonly(d["q"]), A=readonly(d["A"]), b=readonly(d["b"]), nu=int(d["nu"]))
 
     def __repr__(self) -> str:
         return f"SafetyFilter({self.scene!r}, rows={len(self.row_names)})"

@@ -148,7 +148,7 @@ def _scripted_episode(scene, variant, safety, x0, hold_seconds, release_seconds,
                    tau_ext=d["tau_ext"], tau_ext_measured=d["tau_ext_measured"], contact=d["contact"].astype(bool), cost=np.zeros(len(d["time"])),
                    phase=np.zeros(len(d["time"]), dtype=int), phases=("pull",), success=False, time_to_success=None,
                    command=d["command"], tank_energy=d["tank"], variant=variant,
-                   filter_fallbacks=0 if inner is None else int(inner.stats["fallbacks"]), tank_floor=tank.floor)
+                   filter_fallbacks=0 if inner is None else int(inner.stats.fallbacks), tank_floor=tank.floor)
 
 
 # -- stuck door --------------------------------------------------------------------------------
@@ -337,7 +337,7 @@ def obstacle_corridor(variant: str = "IO", seed: int = 0, duration: float = 6.0,
     violation = 0.0
     if t_app is not None:
         for x in ep.state[ep.time >= t_app]:
-            h = np.asarray(check.constraint_rows(x)[2])[rows]
+            h = np.asarray(check.constraint_rows(x).h)[rows]
             h = h[np.isfinite(h)]
             violation += float(np.sum(np.maximum(0.0, -h)))
     reached = bool(any(task.success(scene, x) for x in ep.state))
