@@ -433,7 +433,7 @@ CORE_CALLS = {
     "RolloutModel.rollout x0": (lambda c, a: c.model.rollout(a, np.zeros((1, 1, c.nq)), None), "nx"),
     "Plant.reset": (lambda c, a: c.plant.reset(a), "nx"),
     "Plant.step": (lambda c, a: c.plant.step(a), "nq"),
-    "LowLevelController.track": (lambda c, a: c.controller.track(c.plant, a, 1), "nq"),
+    "Plant.track": (lambda c, a: c.plant.track(c.controller, a, 1), "nq"),
     "LowLevelController.torque x": (lambda c, a: c.controller.torque(a, np.zeros(c.nq)), "nx"),
     "LowLevelController.torque u_ref": (lambda c, a: c.controller.torque(c.x0, a), "nq"),
 }
@@ -672,20 +672,29 @@ def test_absurd_thread_count_fails_fast():
 
 
 @pytest.mark.parametrize(
-    "kwargs",
+    "make",
     [
-        {"slip_distance": -0.01},
-        {"drag_speed": float("nan")},
-        {"hook_tolerance": "tight"},
-        {"noise_distance": 0.0},
-        {"success_fraction": 1.5},
-        {"opening": float("inf")},
-        {"insert_depth_tolerance": -0.005},
-        {"insert_depth_tolerance": float("nan")},
-        {"hook_backout": -0.01},
-        {"hook_backout": float("nan")},
+        lambda t: t.OpenConfig(slip_distance=-0.01),
+        lambda t: t.HookConfig(drag_speed=float("nan")),
+        lambda t: t.HookConfig(tolerance="tight"),
+        lambda t: t.NoiseConfig(distance=0.0),
+        lambda t: t.OpenConfig(success_fraction=1.5),
+        lambda t: t.OpenObject(opening=float("inf")),
+        lambda t: t.HookConfig(insert_depth_tolerance=-0.005),
+        lambda t: t.HookConfig(insert_depth_tolerance=float("nan")),
+        lambda t: t.HookConfig(backout=-0.01),
+        lambda t: t.HookConfig(backout=float("nan")),
+        lambda t: t.ApproachConfig(pregrasp_offset=(0.0, float("nan"), 0.0)),
+        lambda t: t.OpenConfig(pose_weights=(1.0, 1.0, 1.0, 1.0, 1.0, -1.0)),
+        lambda t: t.ReleaseConfig(probe=0.0),
+        lambda t: t.GuideConfig(gain=-1.0),
     ],
 )
-def test_open_object_rejects_bad_parameters(kwargs):
+def test_open_object_settings_reject_bad_values(make):
     with pytest.raises(InvalidValueError):
-        sabre.tasks.OpenObject(**kwargs)
+        make(sabre.tasks)
+
+
+def test_open_object_rejects_a_settings_group_of_the_wrong_type():
+    with pytest.raises(TypeError):
+        sabre.tasks.OpenObject(hook=sabre.tasks.OpenConfig())

@@ -129,11 +129,11 @@ def test_run_episode_applies_the_task_gain_floor_per_phase_and_restores_the_cont
 
 
 def test_open_object_stiffens_the_hand_only_while_opening():
-    task = sabre.tasks.OpenObject(open_gain_inertia_floor=0.03)
+    task = sabre.tasks.OpenObject(open=sabre.tasks.OpenConfig(gain_inertia_floor=0.03))
     assert [task.gain_inertia_floor(p) for p in task.phases] == [None, None, None, 0.03, None]
     assert sabre.tasks.OpenObject().gain_inertia_floor("open") is None
     with pytest.raises(InvalidValueError):
-        sabre.tasks.OpenObject(open_gain_inertia_floor=-0.1)
+        sabre.tasks.OpenConfig(gain_inertia_floor=-0.1)
 
 
 def test_realtime_cascade_ticks_with_the_task_gain_floor_of_the_planned_phase(scene):
