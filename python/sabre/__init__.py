@@ -27,6 +27,7 @@ from .controller import (
     paper_start_state,
     run_episode,
 )
+from .plots import plot_episode
 from .realtime import RealtimeCascade, TickResult
 from .scene import OBJECTS, ROBOTS, Scene
 from .safety import (
@@ -76,6 +77,7 @@ __all__ = [
     "Episode",
     "IterationStats",
     "run_episode",
+    "plot_episode",
     "paper_start_state",
     "likelihood_weights",
     "ScriptedMotion",

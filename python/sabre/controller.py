@@ -22,11 +22,11 @@ from .safety import CLASSES, EnergyTank, SafetyConfig, SafetyFilter
 from .scene import Scene
 from .control import LowLevelController
 from .sim import MAX_THREADS, Plant, RolloutModel
-from .tasks import Task
+from .tasks import OpenObject, Task
 
 __all__ = ["ControllerConfig", "Controller", "IterationStats", "Episode", "run_episode", "paper_start_state", "likelihood_weights", "VARIANTS"]
 
-#: Controller variants (SPEC §8): N no filter, I inner FILTER-QP with the tank, O sequential
+#: Controller variants Π_N, Π_I, Π_O, Π_IO (paper Sec. VI): N no filter, I inner FILTER-QP with the tank, O sequential
 #: FILTER-QP in the outer loop, IO both.
 VARIANTS = ("N", "I", "O", "IO")
 
@@ -100,21 +100,26 @@ class ControllerConfig:
 
     @property
     def safety_config(self) -> SafetyConfig:
+        """The filters' settings: ``safety``, or the defaults when None."""
         return SafetyConfig() if self.safety is None else self.safety
 
     @property
     def inner_filter(self) -> bool:
+        """Whether the variant runs the 1 kHz FILTER-QP with the tank (I, IO)."""
         return "I" in self.variant
 
     @property
     def outer_filter(self) -> bool:
+        """Whether the variant runs the sequential FILTER-QP on each plan (O, IO)."""
         return "O" in self.variant
 
     @property
     def horizon_steps(self) -> int:
+        """K, the number of rollout steps in the horizon."""
         return int(round(self.horizon / self.dt))
 
     def sigma_for(self, nu: int) -> list[float]:
+        """The diagonal of Σ for ``nu`` inputs. Raises InvalidValueError if ``sigma`` has another length."""
         if self.sigma is None:
             return [0.5 if i < 3 else 1.0 for i in range(nu)]
         if len(self.sigma) != nu:
@@ -236,6 +241,7 @@ class Controller:
 
     @property
     def filters(self) -> tuple[SafetyFilter, ...]:
+        """The safety filters of the variant (outer first), empty for N."""
         return tuple(f for f in (self.outer_filter, self.inner_filter) if f is not None)
 
     def add_obstacle(self, center: Sequence[float] | np.ndarray, radius: float) -> int | None:
@@ -247,10 +253,12 @@ class Controller:
         return ids.pop() if ids else None
 
     def move_obstacle(self, obstacle_id: int, center: Sequence[float] | np.ndarray) -> None:
+        """Moves an obstacle (world centre (3,), m) in every filter of the variant."""
         for f in self.filters:
             f.move_obstacle(obstacle_id, center)
 
     def remove_obstacle(self, obstacle_id: int) -> None:
+        """Removes an obstacle from every filter of the variant."""
         for f in self.filters:
             f.remove_obstacle(obstacle_id)
 
@@ -333,6 +341,7 @@ class Controller:
 
     @property
     def nominal_t0(self) -> float:
+        """Time (s) at which row 0 of :attr:`nominal` applies."""
         return self._planner.nominal_t0
 
     @property
@@ -352,6 +361,9 @@ class Episode:
     tau_ext_measured (M, nq) the plant's τ_ext measurement after each step (what the tank and the
     passivity row read; ``tau_ext`` is the contact torque of the step itself),
     filter_fallbacks: inner-loop steps where the FILTER-QP fell back to the safe stop.
+    tank_floor: the tank's floor ε (J). target_opening, success_opening: the task's target opening
+    and the opening that counts as success (rad or m), None for a task that is not an
+    :class:`~sabre.tasks.OpenObject`.
     """
 
     scene: Scene
@@ -374,20 +386,26 @@ class Episode:
     filter_fallbacks: int = 0
     tank_floor: float = 2.0
     tau_ext_measured: np.ndarray | None = None
+    target_opening: float | None = None
+    success_opening: float | None = None
 
     @property
     def opening(self) -> np.ndarray:
+        """(M,) the object's opening (rad or m)."""
         return self.state[:, 2 * self.scene.nq]
 
     @property
     def duration(self) -> float:
+        """Simulated time of the last recorded step (s)."""
         return float(self.time[-1]) if len(self.time) else 0.0
 
     @property
     def real_time_factor(self) -> float:
+        """Simulated over wall time (above 1: faster than real time)."""
         return self.duration / self.wall_time if self.wall_time > 0 else float("inf")
 
     def mean_wrench(self, only_contact: bool = True) -> float:
+        """Mean wrist force |f| (N), over the steps in contact (all steps if none, or with ``only_contact=False``)."""
         norms = np.linalg.norm(self.wrench[:, :3], axis=1)
         mask = self.contact if only_contact and self.contact.any() else np.ones_like(self.contact)
         return float(norms[mask].mean()) if mask.any() else 0.0
@@ -400,7 +418,7 @@ class Episode:
 
     def violations(self, config: SafetyConfig | None = None) -> dict[str, float]:
         """Cumulative constraint violation per ZBF class, Δ_tot = Σ_k max(0, −h(x_k)) over the
-        recorded states (SPEC §9), with the rows of a filter built from ``config`` (default
+        recorded states (the metric of the paper's Fig. 8), with the rows of a filter built from ``config`` (default
         settings: the paper's base box)."""
         f = SafetyFilter(self.scene, config)
         names = f.row_names
@@ -556,7 +574,15 @@ def run_episode(
         variant=controller.config.variant,
         filter_fallbacks=0 if controller.inner_filter is None else int(controller.inner_filter.stats.fallbacks),
         tank_floor=controller.tank.floor,
+        **_opening_targets(scene, controller.task),
     )
+
+
+def _opening_targets(scene: Scene, task: Task) -> dict[str, float | None]:
+    if not isinstance(task, OpenObject):
+        return {"target_opening": None, "success_opening": None}
+    target = task.target_opening(scene)
+    return {"target_opening": target, "success_opening": task.open.success_fraction * target}
 
 
 def likelihood_weights(costs: Sequence[float] | np.ndarray, mapping: str = "invariant", parameter: float = 10.0) -> np.ndarray:

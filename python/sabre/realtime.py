@@ -1,7 +1,7 @@
 """Real-time mode of the cascade: the outer loop re-plans on its own thread, the inner loop is
 driven by incoming state (e.g. a ROS 2 joint-state callback at 1 kHz).
 
-``RealtimeCascade.tick(x, tau_ext, t)`` is the inner loop of SPEC §8: it interpolates the latest
+``RealtimeCascade.tick(x, tau_ext, t)`` is the inner loop of the cascade (paper Fig. 2): it interpolates the latest
 reference at time t, runs the controller's inner FILTER-QP with the energy tank (variants I, IO),
 integrates the tank, and returns the command (and, with a low-level controller, the torque). The
 planner runs ``Controller.update`` in a background thread on the most recent state it was given;
@@ -101,6 +101,7 @@ class RealtimeCascade:
             self._error = exc
 
     def stop(self) -> None:
+        """Stops the planning thread and waits for it to finish."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join()
@@ -114,6 +115,7 @@ class RealtimeCascade:
 
     @property
     def running(self) -> bool:
+        """Whether the planning thread runs."""
         return self._thread is not None and self._thread.is_alive()
 
     # Inner loop -----------------------------------------------------------------------------

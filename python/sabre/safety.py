@@ -180,6 +180,7 @@ class FilterResult:
 
     @property
     def fallback(self) -> bool:
+        """Whether the solver failed and u is the safe stop 0."""
         return self.status == "fallback"
 
 
@@ -340,13 +341,16 @@ class SafetyFilter:
         return self._core.add_obstacle(center.tolist(), as_positive("radius", radius))
 
     def move_obstacle(self, obstacle_id: int, center: Sequence[float] | np.ndarray) -> None:
+        """Moves obstacle ``obstacle_id`` to the world centre (3,) in m. Raises InvalidValueError for an unknown id."""
         self._core.move_obstacle(as_count("obstacle_id", obstacle_id, 0), as_float_array("center", center, (3,)).tolist())
 
     def remove_obstacle(self, obstacle_id: int) -> None:
+        """Removes obstacle ``obstacle_id``; its slot turns off. Raises InvalidValueError for an unknown id."""
         self._core.remove_obstacle(as_count("obstacle_id", obstacle_id, 0))
 
     @property
     def obstacles(self) -> list[Obstacle]:
+        """The sphere obstacles in place, in id order."""
         return [Obstacle(int(i), tuple(c), float(r)) for i, c, r in self._core.obstacles]
 
     # -- inspection -------------------------------------------------------------------------
@@ -366,6 +370,7 @@ class SafetyFilter:
         return FilterStats(**dict(self._core.stats))
 
     def reset_stats(self) -> None:
+        """Sets every counter of :attr:`stats` to zero."""
         self._core.reset_stats()
 
     def forget_active_set(self) -> None:
@@ -431,27 +436,33 @@ class EnergyTank:
         )
 
     def step(self, tau_ext: Sequence[float] | np.ndarray, u: Sequence[float] | np.ndarray, dt: float) -> float:
+        """Integrates Ṡ = τ_extᵀu (49) over dt (s) with τ_ext (nq,) in N·m and u (nq,) the command; returns S (J)."""
         tau = as_float_array("tau_ext", tau_ext, (None,))
         u = as_float_array("u", u, (tau.shape[0],))
         return self._core.step(tau, u, as_positive("dt", dt))
 
     def reset(self) -> None:
+        """Puts the energy back to :attr:`initial` and clears the history."""
         self._core.reset()
 
     @property
     def energy(self) -> float:
+        """Current energy S (J)."""
         return self._core.energy
 
     @property
     def initial(self) -> float:
+        """S(0) (J)."""
         return self._core.initial
 
     @property
     def floor(self) -> float:
+        """The floor ε (J) the passivity row keeps S above."""
         return self._core.floor
 
     @property
     def ceiling(self) -> float | None:
+        """Upper bound of S (J), or None."""
         return self._core.ceiling
 
     @property
@@ -461,6 +472,7 @@ class EnergyTank:
 
     @property
     def history(self) -> np.ndarray:
+        """(steps + 1,) S(0) and the energy after every step (J); empty without ``record_history``."""
         return readonly(self._core.history)
 
     def __repr__(self) -> str:

@@ -1,4 +1,4 @@
-"""The paper's evaluation scenarios (SPEC §10) as functions returning small frozen results.
+"""The paper's evaluation scenarios (Sec. VI) as functions returning small frozen results.
 
 - :func:`stuck_door`: hooked on the shelf handle, the door is held fixed while the robot pulls,
   then released (Fig. 11, 13).

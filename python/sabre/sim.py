@@ -165,6 +165,7 @@ class Plant:
 
     @property
     def dt(self) -> float:
+        """Plant step (s)."""
         return self._core.dt
 
     def reset(self, x0: Sequence[float] | np.ndarray | None = None) -> None:
@@ -218,10 +219,12 @@ class Plant:
 
     @property
     def time(self) -> float:
+        """Simulated time since the last :meth:`reset` (s)."""
         return self._core.time
 
     @property
     def object_held(self) -> bool:
+        """Whether the object is held in place by :meth:`hold_object` (fault injection)."""
         return self._core.object_held
 
     def hold_object(self, flag: bool) -> None:

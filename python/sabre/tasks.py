@@ -44,6 +44,7 @@ class SafetyWeights:
     base_link: str = "base_link"
 
     def terms(self, scene: Scene) -> costs.Cost:
+        """The safety cost terms for the scene (arm reach and base clearance where the scene has them)."""
         out = costs.Cost([
             costs.JointLimits(self.joint_limit, self.joint_limit_slope),
             costs.SelfCollision(self.self_collision, self.self_collision_slope),
@@ -62,6 +63,7 @@ class Task:
     phases: tuple[str, ...] = ("main",)
 
     def initial_phase(self) -> str:
+        """The phase a reset starts in (default: the first)."""
         return self.phases[0]
 
     def cost(self, scene: Scene, phase: str) -> costs.Cost:
@@ -73,6 +75,7 @@ class Task:
         return phase
 
     def success(self, scene: Scene, x: np.ndarray) -> bool:
+        """Whether the task is done at state x (nx,)."""
         return False
 
     def noise_scale(self, scene: Scene, x: np.ndarray, phase: str) -> float:
@@ -409,6 +412,7 @@ class OpenObject(Task):
             self.opening = _finite("opening", self.opening)
 
     def posture_term(self, scene: Scene) -> costs.Cost:
+        """The posture cost of the approach (empty when ``approach.posture_weight`` is 0)."""
         names = scene.joint_names
         if self.approach.posture_weight <= 0.0:
             return costs.Cost()
@@ -426,9 +430,11 @@ class OpenObject(Task):
         return costs.Cost([costs.Posture(target, weights)])
 
     def lead(self, scene: Scene) -> float:
+        """How far ahead (rad or m) of the opening the open-phase pose target sits."""
         return float(self.open.lead)
 
     def target_opening(self, scene: Scene) -> float:
+        """The opening to reach (rad or m): ``opening``, or 75 % of the range."""
         if self.opening is not None:
             return float(self.opening)
         return float(scene.o_lower[0] + 0.75 * (scene.o_upper[0] - scene.o_lower[0]))
@@ -721,6 +727,7 @@ class OpenObject(Task):
         return float(np.clip((d / self.noise.distance) ** 2, self.noise.floor, 1.0))
 
     def opening_of(self, scene: Scene, x: np.ndarray) -> float:
+        """The object's opening (rad or m) at state x."""
         return float(x[2 * scene.nq])
 
     def success(self, scene: Scene, x: np.ndarray) -> bool:
