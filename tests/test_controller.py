@@ -319,7 +319,7 @@ def test_open_object_walks_through_its_phases_and_recovers_from_a_slip(scene):
     assert task.next_phase(scene, slipped, 0.0, "open") == "approach"
     # Far away, Σ is used as configured; the schedule shrinks it quadratically with the distance.
     assert task.noise_scale(scene, scene.default_state(), "approach") == pytest.approx(
-        min(1.0, (task.approach_error(scene, scene.default_state(), "approach")[0] / task.noise.distance) ** 2))
+        min(1.0, (task.approach_error(scene, scene.default_state(), "approach").distance / task.noise.distance) ** 2))
 
 
 def _urdf_box_corners(urdf, link, collision, frame_joint):
@@ -363,7 +363,7 @@ def test_inserting_ends_only_once_the_hook_tip_is_behind_the_bar(scene):
         assert task.next_phase(scene, placed, 0.0, "insert") == "hook"
         assert nearest > bar_back + 0.003
     short, nearest = at_depth(-0.012)
-    assert task.pocket_error(scene, short, "insert")[0] < task.approach.switch_position
+    assert task.pocket_error(scene, short, "insert").across < task.approach.switch_position
     assert nearest < bar_back
     assert task.next_phase(scene, short, 0.0, "insert") == "insert"
     assert sabre.tasks.OpenObject(hook=sabre.tasks.HookConfig(insert_depth_tolerance=None)).next_phase(scene, short, 0.0, "insert") == "hook"
@@ -427,7 +427,7 @@ def test_a_finger_that_already_drags_the_handle_open_switches_to_opening(scene):
     x[2 * nq] = 0.2
     handle = scene.object_fk(np.array([0.2]), "handle_frame")
     off_target = _place_grasp(scene, x, handle @ task.grasp_offset(scene, "hook") @ _translation(0.0, 0.0, -0.01))
-    across, _ = task.pocket_error(scene, off_target, "hook")
+    across = task.pocket_error(scene, off_target, "hook").across
     assert task.hook.tolerance < across < task.open.slip_distance
     rate = 2.0 * task.hook.drag_speed / task.handle_travel(scene, 0.2)  # handle at twice drag_speed
     moving = off_target.copy()
@@ -536,10 +536,12 @@ def test_open_object_guides_follow_the_handle(scene, hooked):
     np.testing.assert_allclose(opened[:2], expected, rtol=0.35)
     assert abs(opened[2]) < 0.02
     (approach,) = task.guides(scene, scene.default_state(), "approach", k, dt)
-    distance, angle = task.approach_error(scene, scene.default_state(), "approach")
+    start = task.approach_error(scene, scene.default_state(), "approach")
+    distance, angle = start.distance, start.angle
     x_end = scene.default_state()
     x_end[: scene.nq] += dt * approach.sum(axis=0)
-    distance_end, angle_end = task.approach_error(scene, x_end, "approach")
+    end = task.approach_error(scene, x_end, "approach")
+    distance_end, angle_end = end.distance, end.angle
     assert distance_end < distance - 0.05 and angle_end < 0.5 * angle
     assert sabre.tasks.OpenObject(guide=sabre.tasks.GuideConfig(speed=0.0)).guides(scene, scene.default_state(), "approach", k, dt) is None
 

@@ -21,7 +21,7 @@ from .sim import RolloutModel
 
 __all__ = [
     "Task", "Reach", "OpenObject", "SafetyWeights", "ApproachConfig", "HookConfig", "OpenConfig", "ReleaseConfig",
-    "NoiseConfig", "GuideConfig",
+    "NoiseConfig", "GuideConfig", "GraspError", "PocketError",
 ]
 
 
@@ -152,6 +152,23 @@ def _finite(name: str, value: float) -> float:
     if not np.isfinite(value):
         raise InvalidValueError(f"{name} must be finite, got {value}")
     return value
+
+
+@dataclass(frozen=True)
+class GraspError:
+    """How far the grasp frame is from a phase's target: ``distance`` (m) and ``angle`` (rad)."""
+
+    distance: float
+    angle: float
+
+
+@dataclass(frozen=True)
+class PocketError:
+    """Position of the grasp frame relative to a phase's target in the handle frame (m):
+    ``across`` the bar (y and z) and ``along`` it (x)."""
+
+    across: float
+    along: float
 
 
 @dataclass(frozen=True)
@@ -511,22 +528,22 @@ class OpenObject(Task):
             + self.extra
         )
 
-    def approach_error(self, scene: Scene, x: np.ndarray, phase: str = "insert") -> tuple[float, float]:
-        """Distance (m) and angle (rad) of the grasp frame from the target of `phase`."""
+    def approach_error(self, scene: Scene, x: np.ndarray, phase: str = "insert") -> GraspError:
+        """Distance (m) and angle (rad) of the grasp frame from the target of `phase` at state x (nx,)."""
         nq, no = scene.nq, scene.no
         target = scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame") @ self.grasp_offset(scene, phase)
         pose = scene.fk(x[:nq], "grasp")
         dp = float(np.linalg.norm(pose[:3, 3] - target[:3, 3]))
         cos = (np.trace(target[:3, :3].T @ pose[:3, :3]) - 1.0) / 2.0
-        return dp, float(np.arccos(np.clip(cos, -1.0, 1.0)))
+        return GraspError(distance=dp, angle=float(np.arccos(np.clip(cos, -1.0, 1.0))))
 
-    def pocket_error(self, scene: Scene, x: np.ndarray, phase: str) -> tuple[float, float]:
+    def pocket_error(self, scene: Scene, x: np.ndarray, phase: str) -> PocketError:
         """(across, along) distance (m) of the grasp frame from the target of `phase`: across the
         bar (handle frame y and z) and along it (x). Sliding along the bar does not matter for
         hooking; only the position across it does."""
         handle, offset = self._grasp_from_target(scene, x, phase)
         e = handle[:3, :3].T @ offset
-        return float(np.hypot(e[1], e[2])), float(abs(e[0]))
+        return PocketError(across=float(np.hypot(e[1], e[2])), along=float(abs(e[0])))
 
     def depth_error(self, scene: Scene, x: np.ndarray, phase: str) -> float:
         """Signed distance (m) of the grasp frame from the target of `phase` along the handle
@@ -607,19 +624,21 @@ class OpenObject(Task):
         if phase in ("approach", "insert", "hook") and float(x[2 * scene.nq]) > 0.0 and self.self_opening(scene, x):
             return "release"
         if phase == "approach":
-            dp, angle = self.approach_error(scene, x, "approach")
-            if dp < 2.0 * self.approach.switch_position and angle < self.approach.switch_angle:
+            error = self.approach_error(scene, x, "approach")
+            if error.distance < 2.0 * self.approach.switch_position and error.angle < self.approach.switch_angle:
                 return "insert"
         if phase == "insert":
-            _, angle = self.approach_error(scene, x, "insert")
-            across, along = self.pocket_error(scene, x, "insert")
+            angle = self.approach_error(scene, x, "insert").angle
+            pocket = self.pocket_error(scene, x, "insert")
+            across, along = pocket.across, pocket.along
             depth = self.hook.insert_depth_tolerance
             deep = depth is None or abs(self.depth_error(scene, x, "insert")) < depth
             if across < self.approach.switch_position and along < self.hook.along_tolerance and angle < self.approach.switch_angle and deep:
                 return "hook"
         if phase == "hook":
-            _, angle = self.approach_error(scene, x, "hook")
-            across, along = self.pocket_error(scene, x, "hook")
+            angle = self.approach_error(scene, x, "hook").angle
+            pocket = self.pocket_error(scene, x, "hook")
+            across, along = pocket.across, pocket.along
             if across < self.hook.tolerance and along < self.hook.along_tolerance and angle < self.approach.switch_angle:
                 return "open"
         if phase in ("insert", "hook") and self.pulling(scene, x):
@@ -627,7 +646,7 @@ class OpenObject(Task):
         if phase == "hook" and self.backed_out(scene, x):
             return "approach"
         if phase == "open" and not self.success(scene, x):
-            dp, _ = self.approach_error(scene, x, "open")
+            dp = self.approach_error(scene, x, "open").distance
             if dp > self.open.slip_distance or abs(self.lateral_error(scene, x)) > self.open.slip_lateral:
                 if self.self_opening(scene, x):
                     return "release"
@@ -686,7 +705,7 @@ class OpenObject(Task):
             return False
         if self.handle_speed(scene, x) <= self.hook.drag_speed:
             return False
-        dp, _ = self.approach_error(scene, x, "open")
+        dp = self.approach_error(scene, x, "open").distance
         return dp <= self.open.slip_distance and abs(self.lateral_error(scene, x)) <= self.open.slip_lateral
 
     def backed_out(self, scene: Scene, x: np.ndarray) -> bool:
@@ -723,7 +742,7 @@ class OpenObject(Task):
     def noise_scale(self, scene: Scene, x: np.ndarray, phase: str) -> float:
         if phase in ("open", "release"):
             return self.noise.open
-        d, _ = self.approach_error(scene, x, phase)
+        d = self.approach_error(scene, x, phase).distance
         return float(np.clip((d / self.noise.distance) ** 2, self.noise.floor, 1.0))
 
     def opening_of(self, scene: Scene, x: np.ndarray) -> float:
