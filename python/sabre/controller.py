@@ -35,9 +35,16 @@ VARIANTS = ("N", "I", "O", "IO")
 class ControllerConfig:
     """Every Table I parameter of the sampler, with the paper's defaults, plus seed and threads.
 
-    sigma: diagonal of Σ (variances), one entry per input; None gives 0.5 for the base and 1.0 for
-    the arm joints (Table I). h: sharpness of the likelihood mapping (55). step_size: ρ = α (14).
-    gradient_clip: g_max (54). keep_fraction: share of the best previous samples reused ("caching").
+    rollouts: N samples per iteration (≥ 3). horizon: T (s). dt: rollout step (s); K = T / dt
+    steps. sigma: diagonal of Σ (variances, (rad/s)² or (m/s)²), one entry per input; None gives
+    0.5 for the base and 1.0 for the arm joints (Table I). h: sharpness of the likelihood mapping
+    (55). step_size: ρ = α (14). gradient_clip: g_max (54). keep_fraction: share of the best
+    previous samples reused ("caching"), in [0, 1]. smoothing_window, smoothing_order: the
+    Savitzky–Golay filter of the nominal (window in steps; 0 or 1: off). seed: the random stream. threads: rollout
+    workers (None: every core; results are identical for any count). tank_initial: S(0) (J).
+
+    Raises:
+        InvalidValueError: any value outside its range (checked on construction).
     """
 
     rollouts: int = 40
@@ -175,11 +182,18 @@ class IterationStats:
 
 
 class Controller:
-    """Sampling-based controller for `scene` pursuing `task`.
+    """Sampling-based controller (paper Sec. IV-A) for ``scene`` pursuing ``task``.
 
     update(x, t): one planning iteration from the measured state. reference(t): the commanded joint
     velocity at time t (linear interpolation of the nominal). nominal: the current input sequence
-    (K, nu) starting at ``nominal_t0``. stats: statistics of the last iteration.
+    (K, nu) starting at ``nominal_t0``. stats: statistics of the last iteration
+    (:class:`IterationStats`). The variant's filters (:attr:`outer_filter`, :attr:`inner_filter`)
+    and energy tank (:attr:`tank`) are built from ``config`` (default: :class:`ControllerConfig`).
+
+    Raises:
+        TypeError: scene or task of the wrong type.
+        InvalidValueError: ``config.sigma`` of another length than nu.
+        ShapeError: ``config.input_limit`` of another length than nu.
     """
 
     def __init__(self, scene: Scene, task: Task, config: ControllerConfig | None = None) -> None:
@@ -492,14 +506,26 @@ def run_episode(
     low_level: LowLevelController | None = None,
     on_replan: Callable[[float, np.ndarray, Plant, Controller], None] | None = None,
 ) -> Episode:
-    """Runs the controller on the 1 kHz plant for `duration` seconds of simulated time.
+    """Runs the controller on the plant for ``duration`` seconds of simulated time; returns the traces.
 
-    The controller re-plans every 1/replan_rate s of simulated time from the plant's state; in
-    between, the inner loop interpolates its reference and tracks it with the low-level controller.
-    ``on_replan(t, x, plant, controller)`` runs before each re-plan (for disturbances); returning
-    True ends the episode there. Stops
-    ``settle_time`` after the task succeeds if ``stop_on_success``. A progress bar (tqdm) shows for
-    runs longer than 10 s of simulated time unless ``progress=False``.
+    The controller re-plans every 1/``replan_rate`` s (Hz, default 20) of simulated time from the
+    plant's state; in between, the inner loop (:meth:`LowLevelController.follow`) interpolates its
+    reference, filters it (variants I, IO) and tracks it with the low-level controller (53).
+
+    Args:
+        seed: the sampler's seed for this episode (default: the controller's configured seed).
+        x0: start state (nx,) (default: :func:`paper_start_state`).
+        record_every: record every n-th plant step (default 10, i.e. 100 Hz on the 1 kHz plant).
+        stop_on_success, settle_time: end ``settle_time`` s (default 0.5) after the task succeeds.
+        progress: a tqdm bar; None (default) shows it for runs longer than 10 s of simulated time.
+        plant, low_level: the plant (default: a new 1 kHz :class:`Plant`) and its controller
+            (default: a :class:`LowLevelController` at the plant's step).
+        on_replan: ``on_replan(t, x, plant, controller)`` runs before each re-plan (for
+            disturbances); returning True ends the episode there.
+
+    Raises:
+        InvalidValueError: non-positive duration or replan_rate, record_every < 1, non-finite x0.
+        ShapeError: x0 is not (nx,).
     """
     duration = as_positive("duration", duration)
     replan_rate = as_positive("replan_rate", replan_rate)
