@@ -102,9 +102,15 @@ class RolloutModel:
         )
 
     def rollout(self, x0: Sequence[float] | np.ndarray, U: np.ndarray, threads: int | None = None) -> RolloutResult:
-        """Simulates N input sequences U (N, K, nu) from the state x0 (nx,).
+        """Simulates N input sequences U (N, K, nu) of joint velocities (rad/s, m/s for the base
+        translation) from the state x0 (nx,), each step ``dt`` s long, on ``threads`` workers
+        (default: :func:`default_threads`).
 
         Inputs are projected onto the joint velocity limits before they are applied.
+
+        Raises:
+            ShapeError: x0 or U of the wrong shape.
+            InvalidValueError: non-finite x0 or U, threads outside [1, MAX_THREADS].
         """
         x0 = as_float_array("x0", x0, (self.scene.nx,))
         U = as_float_array("U", U, (None, None, self.scene.nu))
@@ -169,12 +175,21 @@ class Plant:
         return self._core.dt
 
     def reset(self, x0: Sequence[float] | np.ndarray | None = None) -> None:
-        """Puts the plant at x0 (default: the scene's default state), time 0, object released."""
+        """Puts the plant at x0 (nx,) (default: the scene's default state), time 0, object released.
+
+        Raises:
+            ShapeError: x0 is not (nx,). InvalidValueError: non-finite x0.
+        """
         x0 = self.scene.default_state() if x0 is None else as_float_array("x0", x0, (self.scene.nx,))
         self._core.reset(x0)
 
     def step(self, tau: Sequence[float] | np.ndarray) -> None:
-        """Advances one step of dt under joint torques tau (nq,)."""
+        """Advances one step of dt under joint torques tau (nq,) in N·m (N for the base
+        translation), clamped to the effort limits.
+
+        Raises:
+            ShapeError: tau is not (nq,). InvalidValueError: non-finite tau.
+        """
         self._core.step(as_float_array("tau", tau, (self.scene.nq,)))
     @property
     def state(self) -> np.ndarray:
