@@ -79,7 +79,7 @@ def cases(scene: sabre.Scene, rng: np.random.Generator) -> dict[str, list[tuple]
     reference[:, j4] = 1.2
     reference[:, 3] = 0.3
     tank = sabre.EnergyTank()
-    trace = plant.follow(controller, reference, 0.0, 0.015, 500, safety=make_filter(scene, True), tank=tank)
+    trace = controller.follow(plant, reference, 0.0, 0.015, 500, safety=make_filter(scene, True), tank=tank)
     energies = np.concatenate([[10.0], trace.tank_energy[:-1]])
     states = np.vstack([x0, trace.state[:-1]])
     taus = np.vstack([np.zeros(nq), trace.tau_ext_measured[:-1]])  # what the filter read before each step
@@ -103,25 +103,25 @@ def cases(scene: sabre.Scene, rng: np.random.Generator) -> dict[str, list[tuple]
 class OsqpFilter:
     """OSQP on the exported QP, set up once with a fixed pattern, then updated and warm-started."""
 
-    def __init__(self, qps: list[dict]) -> None:
-        pattern = np.zeros_like(qps[0]["A"], dtype=bool)
+    def __init__(self, qps: list[sabre.QPMatrices]) -> None:
+        pattern = np.zeros_like(qps[0].A, dtype=bool)
         for qp in qps:
-            pattern |= qp["A"] != 0.0
+            pattern |= qp.A != 0.0
         # Entries by column, then row: CSC order, so values can be handed to OSQP as they come.
         self.cols, self.rows = np.nonzero(pattern.T)
         first = qps[0]
-        self.P = sp.csc_matrix(np.triu(first["P"]))
-        A = sp.csc_matrix((first["A"][self.rows, self.cols], (self.rows, self.cols)), shape=first["A"].shape)
+        self.P = sp.csc_matrix(np.triu(first.P))
+        A = sp.csc_matrix((first.A[self.rows, self.cols], (self.rows, self.cols)), shape=first.A.shape)
         assert A.nnz == len(self.rows) and np.array_equal(A.indices, self.rows), "explicit zeros must stay in the pattern"
         self.solver = osqp.OSQP()
         self.solver.setup(
-            self.P, first["q"], A, np.full(len(first["b"]), -np.inf), first["b"],
+            self.P, first.q, A, np.full(len(first.b), -np.inf), first.b,
             eps_abs=1e-7, eps_rel=1e-7, polishing=True, warm_starting=True, verbose=False, max_iter=20000,
         )
-        self.nu = first["nu"]
+        self.nu = first.nu
 
-    def solve(self, qp: dict) -> tuple[np.ndarray, float, str]:
-        self.solver.update(q=qp["q"], u=qp["b"], Ax=qp["A"][self.rows, self.cols])
+    def solve(self, qp: sabre.QPMatrices) -> tuple[np.ndarray, float, str]:
+        self.solver.update(q=qp.q, u=qp.b, Ax=qp.A[self.rows, self.cols])
         r = self.solver.solve()
         return r.x[: self.nu], r.info.run_time, r.info.status
 

@@ -9,7 +9,7 @@ what a MuJoCo-based sampler would pay for its rollouts alone: `mujoco.rollout` o
 batch on the equivalent scene (benches/mujoco_scene.py), 2 threads, per-step states, cost not
 included. Both are timed alternately in one process, from the default state (free space) and from
 the state with the hook on the handle (contact); medians are printed with the ratio of the two, and
-with the time sabre's workers spent inside Rapier's pipeline step (`Controller.stats["engine_time"]`).
+with the time sabre's workers spent inside Rapier's pipeline step (`Controller.stats.engine_time`).
 Finally the closed loop opens the object from the paper's start (plant at 1 kHz, re-planning at
 `--replan-rate`, 20 Hz by default; `make demo` re-plans at 50 Hz); its real-time factor and the median planning iteration
 of each task phase are printed (the approach plans in free space, hook and open in contact).
@@ -93,8 +93,8 @@ def main(argv: list[str] | None = None) -> int:
                 sabre_times.append(results["run_sabre"])
                 mujoco_times.append(results["run_mujoco"])
                 stats = controller.stats
-                engine_ms.append(1e3 * stats["engine_time"] / THREADS)
-                engine_share.append(stats["engine_time"] / (THREADS * stats["rollout_time"]))
+                engine_ms.append(1e3 * stats.engine_time / THREADS)
+                engine_share.append(stats.engine_time / (THREADS * stats.rollout_time))
         s, m = statistics.median(sabre_times), statistics.median(mujoco_times)
         e, share = statistics.median(engine_ms), statistics.median(engine_share)
         print(f"{label:<10} {1e3 * s:>22.2f} {1e3 * m:>21.2f} {m / s:>6.2f}x {e:>15.2f} {100 * share:>5.0f}%")

@@ -72,7 +72,7 @@ TARGETS = {
     ),
     "Plant.reset(x0)": (lambda o, v: o.plant.reset(v), lambda o: o.scene.nx, lambda o: o.scene.default_state(), True),
     "Plant.step(tau)": (lambda o, v: o.plant.step(v), lambda o: o.scene.nq, lambda o: np.zeros(o.scene.nq), False),
-    "Plant.track(u_ref)": (lambda o, v: o.plant.track(o.controller, v, 1), lambda o: o.scene.nq, lambda o: np.zeros(o.scene.nq), False),
+    "LowLevelController.track(u_ref)": (lambda o, v: o.controller.track(o.plant, v, 1), lambda o: o.scene.nq, lambda o: np.zeros(o.scene.nq), False),
     "LowLevelController.torque(x)": (
         lambda o, v: o.controller.torque(v, np.zeros(o.scene.nq)),
         lambda o: o.scene.nx,
@@ -598,7 +598,7 @@ for value in (np.zeros(nx) + 1e308, np.full(nx, -1e308), np.r_[np.zeros(nq), np.
     for _ in range(3):
         attempt(lambda: plant.step(np.full(nq, 1e308)))
         attempt(lambda: controller.torque(value, np.full(nq, 1e308)))
-    attempt(lambda: plant.track(controller, np.full(nq, -1e308), 5))
+    attempt(lambda: controller.track(plant, np.full(nq, -1e308), 5))
 plant.reset()
 attempt(lambda: plant.step(np.zeros(nq)))
 
@@ -679,23 +679,33 @@ def test_absurd_thread_count_fails_fast():
 
 
 @pytest.mark.parametrize(
-    "kwargs",
+    "make",
     [
-        {"slip_distance": -0.01},
-        {"drag_speed": float("nan")},
-        {"hook_tolerance": "tight"},
-        {"noise_distance": 0.0},
-        {"success_fraction": 1.5},
-        {"opening": float("inf")},
-        {"insert_depth_tolerance": -0.005},
-        {"insert_depth_tolerance": float("nan")},
-        {"hook_backout": -0.01},
-        {"hook_backout": float("nan")},
+        lambda t: t.OpenConfig(slip_distance=-0.01),
+        lambda t: t.HookConfig(drag_speed=float("nan")),
+        lambda t: t.HookConfig(tolerance="tight"),
+        lambda t: t.NoiseConfig(distance=0.0),
+        lambda t: t.OpenConfig(success_fraction=1.5),
+        lambda t: t.OpenObject(opening=float("inf")),
+        lambda t: t.HookConfig(insert_depth_tolerance=-0.005),
+        lambda t: t.HookConfig(insert_depth_tolerance=float("nan")),
+        lambda t: t.HookConfig(backout=-0.01),
+        lambda t: t.HookConfig(backout=float("nan")),
+        lambda t: t.ApproachConfig(pregrasp_offset=(0.0, float("nan"), 0.0)),
+        lambda t: t.OpenConfig(pose_weights=(1.0, 1.0, 1.0, 1.0, 1.0, -1.0)),
+        lambda t: t.ReleaseConfig(probe=0.0),
+        lambda t: t.GuideConfig(gain=-1.0),
     ],
 )
-def test_open_object_rejects_bad_parameters(kwargs):
+def test_open_object_settings_reject_bad_values(make):
     with pytest.raises(InvalidValueError):
-        sabre.tasks.OpenObject(**kwargs)
+        make(sabre.tasks)
+
+
+def test_open_object_rejects_a_settings_group_of_the_wrong_type():
+    with pytest.raises(TypeError):
+        sabre.tasks.OpenObject(hook=sabre.tasks.OpenConfig())
+
 
 
 @pytest.mark.parametrize(

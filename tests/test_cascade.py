@@ -129,11 +129,11 @@ def test_run_episode_applies_the_task_gain_floor_per_phase_and_restores_the_cont
 
 
 def test_open_object_stiffens_the_hand_only_while_opening():
-    task = sabre.tasks.OpenObject(open_gain_inertia_floor=0.03)
+    task = sabre.tasks.OpenObject(open=sabre.tasks.OpenConfig(gain_inertia_floor=0.03))
     assert [task.gain_inertia_floor(p) for p in task.phases] == [None, None, None, 0.03, None]
     assert sabre.tasks.OpenObject().gain_inertia_floor("open") is None
     with pytest.raises(InvalidValueError):
-        sabre.tasks.OpenObject(open_gain_inertia_floor=-0.1)
+        sabre.tasks.OpenConfig(gain_inertia_floor=-0.1)
 
 
 def test_realtime_cascade_ticks_with_the_task_gain_floor_of_the_planned_phase(scene):
@@ -145,3 +145,34 @@ def test_realtime_cascade_ticks_with_the_task_gain_floor_of_the_planned_phase(sc
         with sabre.RealtimeCascade(controller, low_level=low).start(x0, t0=t0) as cascade:
             cascade.tick(x0, np.zeros(scene.nq), t0)
             assert low.gain_inertia_floor == expected
+
+
+def test_iteration_stats_report_the_sequential_filter_only_with_the_outer_loop(scene):
+    """IterationStats.sequential_time/fallbacks are None without the outer filter; with it they
+    are set, and the sequential time is part of the iteration time."""
+    x = scene.default_state()
+    for variant, outer in (("N", False), ("O", True)):
+        controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(variant=variant, rollouts=8, seed=1))
+        assert controller.stats is None
+        stats = controller.update(x, 0.0)
+        assert isinstance(stats, sabre.IterationStats) and controller.stats is stats
+        assert stats.phase == controller.phase and stats.iteration == 1
+        if outer:
+            assert stats.sequential_fallbacks == 0
+            assert 0.0 < stats.sequential_time <= stats.iteration_time
+        else:
+            assert stats.sequential_time is None and stats.sequential_fallbacks is None
+
+
+def test_episode_knows_the_opening_target_and_plots_it(scene, tmp_path):
+    """run_episode with OpenObject records the target and success openings of the task, and
+    plot_episode writes a PNG of the episode."""
+    pytest.importorskip("matplotlib")
+    task = sabre.tasks.OpenObject()
+    controller = sabre.Controller(scene, task, sabre.ControllerConfig(rollouts=8, seed=1))
+    episode = sabre.run_episode(scene, controller, 0.2, replan_rate=50.0, record_every=10, progress=False)
+    assert episode.target_opening == pytest.approx(task.target_opening(scene))
+    assert episode.success_opening == pytest.approx(task.open.success_fraction * task.target_opening(scene))
+    path = tmp_path / "episode.png"
+    sabre.plot_episode(episode, path)
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

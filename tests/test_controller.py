@@ -91,11 +91,11 @@ def test_controller_reaches_a_target_in_the_rollout_model(scene):
     end = np.linalg.norm(scene.fk(x[: scene.nq], "grasp")[:3, 3] - target[:3, 3])
     assert end < 0.3 * start
     stats = controller.stats
-    assert stats["iteration"] == 300
-    assert 1.0 < stats["effective_sample_size"] < 24.0 and stats["failed_rollouts"] == 0
-    assert 0 <= stats["engine_steps"] <= controller.config.rollouts * controller.config.horizon_steps
-    assert (stats["engine_time"] > 0.0) == (stats["engine_steps"] > 0)
-    assert 0.0 < stats["rollout_time"] <= stats["iteration_time"]
+    assert stats.iteration == 300
+    assert 1.0 < stats.effective_sample_size < 24.0 and stats.failed_rollouts == 0
+    assert 0 <= stats.engine_steps <= controller.config.rollouts * controller.config.horizon_steps
+    assert (stats.engine_time > 0.0) == (stats.engine_steps > 0)
+    assert 0.0 < stats.rollout_time <= stats.iteration_time
 
 
 def test_planning_is_deterministic_for_a_seed_whatever_the_thread_count(scene):
@@ -154,7 +154,7 @@ def test_python_term_is_added_to_the_rollout_costs(scene):
             x = model.rollout(x, controller.nominal[None, :1]).states[0, -1]
         results[label] = np.linalg.norm(x[:2] - x0[:2])
         # With a Python term the rollouts run apart from the update; they are timed all the same.
-        assert 0.0 < controller.stats["rollout_time"] <= controller.stats["iteration_time"]
+        assert 0.0 < controller.stats.rollout_time <= controller.stats.iteration_time
     assert calls and calls[0][0] == 24
     assert results["held"] < 0.5 * results["free"]
 
@@ -314,16 +314,16 @@ def test_open_object_walks_through_its_phases_and_recovers_from_a_slip(scene):
     for phase, following in expected.items():
         at = _place_grasp(scene, x, handle @ task.grasp_offset(scene, phase))
         assert task.next_phase(scene, at, 0.0, phase) == following
-        assert task.noise_scale(scene, at, phase) == pytest.approx(task.noise_floor)
+        assert task.noise_scale(scene, at, phase) == pytest.approx(task.noise.floor)
     hooked = _place_grasp(scene, x, handle @ task.grasp_offset(scene, "open"))
     assert task.next_phase(scene, hooked, 0.0, "open") == "open"
-    assert task.noise_scale(scene, hooked, "open") == task.noise_open
+    assert task.noise_scale(scene, hooked, "open") == task.noise.open
     slipped = _place_grasp(scene, x, handle @ task.grasp_offset(scene, "open") @ _translation(0.0, -0.015, 0.0))
     assert task.lateral_error(scene, slipped) == pytest.approx(-0.015, abs=1e-4)
     assert task.next_phase(scene, slipped, 0.0, "open") == "approach"
     # Far away, Σ is used as configured; the schedule shrinks it quadratically with the distance.
     assert task.noise_scale(scene, scene.default_state(), "approach") == pytest.approx(
-        min(1.0, (task.approach_error(scene, scene.default_state(), "approach")[0] / task.noise_distance) ** 2))
+        min(1.0, (task.approach_error(scene, scene.default_state(), "approach").distance / task.noise.distance) ** 2))
 
 
 def _urdf_box_corners(urdf, link, collision, frame_joint):
@@ -361,16 +361,16 @@ def test_inserting_ends_only_once_the_hook_tip_is_behind_the_bar(scene):
         corners = np.linalg.solve(handle, scene.fk(placed[: scene.nq], "grasp") @ tip.T).T
         return placed, float(corners[:, 2].min())
 
-    for dz in (-0.9 * task.insert_depth_tolerance, 0.0, 0.9 * task.insert_depth_tolerance):
+    for dz in (-0.9 * task.hook.insert_depth_tolerance, 0.0, 0.9 * task.hook.insert_depth_tolerance):
         placed, nearest = at_depth(dz)
         assert task.depth_error(scene, placed, "insert") == pytest.approx(dz, abs=1e-4)
         assert task.next_phase(scene, placed, 0.0, "insert") == "hook"
         assert nearest > bar_back + 0.003
     short, nearest = at_depth(-0.012)
-    assert task.pocket_error(scene, short, "insert")[0] < task.switch_position
+    assert task.pocket_error(scene, short, "insert").across < task.approach.switch_position
     assert nearest < bar_back
     assert task.next_phase(scene, short, 0.0, "insert") == "insert"
-    assert sabre.tasks.OpenObject(insert_depth_tolerance=None).next_phase(scene, short, 0.0, "insert") == "hook"
+    assert sabre.tasks.OpenObject(hook=sabre.tasks.HookConfig(insert_depth_tolerance=None)).next_phase(scene, short, 0.0, "insert") == "hook"
 
 
 def test_a_finger_that_backs_out_in_front_of_a_held_bar_while_hooking_starts_over(scene):
@@ -396,21 +396,21 @@ def test_a_finger_that_backs_out_in_front_of_a_held_bar_while_hooking_starts_ove
         corners = np.linalg.solve(handle, scene.fk(placed[:nq], "grasp") @ tip.T).T
         return placed, float(corners[:, 2].min())
 
-    assert task.handle_from_closed(scene, backed_out(0.0)[0]) > task.drag_distance
-    for dz in (-0.5 * task.hook_backout, -0.9 * task.hook_backout):
+    assert task.handle_from_closed(scene, backed_out(0.0)[0]) > task.hook.drag_distance
+    for dz in (-0.5 * task.hook.backout, -0.9 * task.hook.backout):
         placed, nearest = backed_out(dz)
         assert task.depth_error(scene, placed, "hook") == pytest.approx(dz, abs=1e-4)
         assert nearest > bar_back - 0.001
         assert task.next_phase(scene, placed, 0.0, "hook") == "hook"
-    for dz in (-1.2 * task.hook_backout, -0.03):
+    for dz in (-1.2 * task.hook.backout, -0.03):
         placed, nearest = backed_out(dz)
         assert nearest < bar_back
         assert task.next_phase(scene, placed, 0.0, "hook") == "approach"
-        assert sabre.tasks.OpenObject(hook_backout=None).next_phase(scene, placed, 0.0, "hook") == "hook"
+        assert sabre.tasks.OpenObject(hook=sabre.tasks.HookConfig(backout=None)).next_phase(scene, placed, 0.0, "hook") == "hook"
         # A tip that catches the bar and drags the handle open keeps hooking: on a free door the bar
         # then slides into the pocket.
         dragging = placed.copy()
-        dragging[2 * nq + no] = 2.0 * task.drag_speed / task.handle_travel(scene, 0.2)
+        dragging[2 * nq + no] = 2.0 * task.hook.drag_speed / task.handle_travel(scene, 0.2)
         assert task.next_phase(scene, dragging, 0.0, "hook") == "hook"
         dragging[2 * nq + no] *= 0.4
         assert task.next_phase(scene, dragging, 0.0, "hook") == "approach"
@@ -431,9 +431,9 @@ def test_a_finger_that_already_drags_the_handle_open_switches_to_opening(scene):
     x[2 * nq] = 0.2
     handle = scene.object_fk(np.array([0.2]), "handle_frame")
     off_target = _place_grasp(scene, x, handle @ task.grasp_offset(scene, "hook") @ _translation(0.0, 0.0, -0.01))
-    across, _ = task.pocket_error(scene, off_target, "hook")
-    assert task.hook_tolerance < across < task.slip_distance
-    rate = 2.0 * task.drag_speed / task.handle_travel(scene, 0.2)  # handle at twice drag_speed
+    across = task.pocket_error(scene, off_target, "hook").across
+    assert task.hook.tolerance < across < task.open.slip_distance
+    rate = 2.0 * task.hook.drag_speed / task.handle_travel(scene, 0.2)  # handle at twice drag_speed
     moving = off_target.copy()
     moving[2 * nq + no] = rate
     assert task.next_phase(scene, off_target, 0.0, "hook") == "hook"
@@ -443,12 +443,12 @@ def test_a_finger_that_already_drags_the_handle_open_switches_to_opening(scene):
     closing[2 * nq + no] = -rate
     assert task.next_phase(scene, closing, 0.0, "hook") == "hook"
     slow = off_target.copy()
-    slow[2 * nq + no] = 0.5 * task.drag_speed / task.handle_travel(scene, 0.2)
+    slow[2 * nq + no] = 0.5 * task.hook.drag_speed / task.handle_travel(scene, 0.2)
     assert task.next_phase(scene, slow, 0.0, "hook") == "hook"
     far = _place_grasp(scene, x, handle @ task.grasp_offset(scene, "hook") @ _translation(0.0, 0.0, -0.08))
     far[2 * nq + no] = rate
     assert task.next_phase(scene, far, 0.0, "hook") == "hook"
-    assert sabre.tasks.OpenObject(drag_speed=0.0).next_phase(scene, moving, 0.0, "hook") == "hook"
+    assert sabre.tasks.OpenObject(hook=sabre.tasks.HookConfig(drag_speed=0.0)).next_phase(scene, moving, 0.0, "hook") == "hook"
     # the same pull 2 cm from closed (shelf handle about 0.27 m from the hinge): not yet
     near = 0.02 / task.handle_travel(scene, 0.0)
     handle = scene.object_fk(np.array([near]), "handle_frame")
@@ -530,22 +530,24 @@ def test_open_object_guides_follow_the_handle(scene, hooked):
     """From a hooked state, the opening guides, rolled out with the rollout model, open the door
     about as far as their handle speeds say (standing still does not); the approach guide moves
     the grasp frame toward its target."""
-    task = sabre.tasks.OpenObject(approach_pitch=0.0)
+    task = sabre.tasks.OpenObject(approach=sabre.tasks.ApproachConfig(pitch=0.0))
     k, dt = 66, 0.015
     guides = task.guides(scene, hooked, "open", k, dt)
-    assert guides.shape == (len(task.open_speeds), k, scene.nu)
+    assert guides.shape == (len(task.open.speeds), k, scene.nu)
     result = sabre.RolloutModel(scene).rollout(hooked, np.concatenate([guides, np.zeros((1, k, scene.nu))]))
     opened = result.states[:, -1, 2 * scene.nq] - hooked[2 * scene.nq]
-    expected = np.asarray(task.open_speeds) * k * dt / task.handle_travel(scene, 0.0)
+    expected = np.asarray(task.open.speeds) * k * dt / task.handle_travel(scene, 0.0)
     np.testing.assert_allclose(opened[:2], expected, rtol=0.35)
     assert abs(opened[2]) < 0.02
     (approach,) = task.guides(scene, scene.default_state(), "approach", k, dt)
-    distance, angle = task.approach_error(scene, scene.default_state(), "approach")
+    start = task.approach_error(scene, scene.default_state(), "approach")
+    distance, angle = start.distance, start.angle
     x_end = scene.default_state()
     x_end[: scene.nq] += dt * approach.sum(axis=0)
-    distance_end, angle_end = task.approach_error(scene, x_end, "approach")
+    end = task.approach_error(scene, x_end, "approach")
+    distance_end, angle_end = end.distance, end.angle
     assert distance_end < distance - 0.05 and angle_end < 0.5 * angle
-    assert sabre.tasks.OpenObject(guide_speed=0.0).guides(scene, scene.default_state(), "approach", k, dt) is None
+    assert sabre.tasks.OpenObject(guide=sabre.tasks.GuideConfig(speed=0.0)).guides(scene, scene.default_state(), "approach", k, dt) is None
 
 
 def test_object_setpoint_clears_the_power_balance(scene):
@@ -555,10 +557,10 @@ def test_object_setpoint_clears_the_power_balance(scene):
     travel = task.handle_travel(scene, 0.0)
     # Handle radius about the hinge from the URDF: bar 0.061 m out and 0.265 m across.
     assert travel == pytest.approx(np.hypot(0.061, 0.265), rel=1e-3)
-    resisting = 4.0 + 2.0 * task.open_speeds[0] / travel  # shelf friction 4 N·m, damping 2
+    resisting = 4.0 + 2.0 * task.open.speeds[0] / travel  # shelf friction 4 N·m, damping 2
     gap = 10.0 * resisting / (100.0 * 1.0)
     assert task.object_setpoint(scene) == pytest.approx(task.target_opening(scene) + 2 * gap, rel=1e-3)
-    assert sabre.tasks.OpenObject(object_overshoot=0.1).object_setpoint(scene) == pytest.approx(task.target_opening(scene) + 0.1)
+    assert sabre.tasks.OpenObject(open=sabre.tasks.OpenConfig(object_overshoot=0.1)).object_setpoint(scene) == pytest.approx(task.target_opening(scene) + 0.1)
 
 
 def test_base_clearance_keeps_the_base_out_of_a_falling_door():
@@ -628,7 +630,7 @@ def test_a_door_that_falls_open_is_released_not_held():
     radial = start[:3, 3] - np.array([1.2, start[1, 3], 0.07])
     way = -start[:3, 2] + radial / np.linalg.norm(radial)
     way /= np.linalg.norm(way)
-    expected = min(task.release_speed * 66 * 0.015, task.release_distance)
+    expected = min(task.release.speed * 66 * 0.015, task.release.distance)
     np.testing.assert_allclose(end[:3, 3] - start[:3, 3], expected * way, atol=0.01)
     x[2 * nq] = 0.0
     assert task.next_phase(scene, x, 0.0, "release") == "approach"
@@ -648,7 +650,7 @@ def test_stats_count_the_steps_that_went_through_the_physics_engine(scene, hooke
         config = sabre.ControllerConfig(seed=4, threads=threads)
         controller = sabre.Controller(scene, sabre.tasks.OpenObject(), config)
         stats = controller.update(hooked, 0.0)
-        assert 0 < stats["engine_steps"] <= config.rollouts * config.horizon_steps
-        assert 0.0 < stats["engine_time"] <= threads * stats["rollout_time"]
-        counts.append(stats["engine_steps"])
+        assert 0 < stats.engine_steps <= config.rollouts * config.horizon_steps
+        assert 0.0 < stats.engine_time <= threads * stats.rollout_time
+        counts.append(stats.engine_steps)
     assert counts[0] == counts[1]

@@ -78,10 +78,11 @@ def test_random_states_meet_input_limits_exactly_and_rows_up_to_slack(scene, rng
         r = f.filter(x, u_ref, tau_ext=tau, tank_energy=energy)
         assert r.status != "fallback"
         assert np.all(np.abs(r.u) <= v + 1e-9)
-        a, b, _ = f.constraint_rows(x, tau_ext=tau, tank_energy=energy)
+        rows = f.constraint_rows(x, tau_ext=tau, tank_energy=energy)
+        a, b = rows.a, rows.b
         assert np.all(a @ r.u + r.slack >= b - 1e-6), f.row_names[int(np.argmin(a @ r.u + r.slack - b))]
         assert np.all(r.slack >= 0)
-    assert f.stats["calls"] == 200 and f.stats["fallbacks"] == 0
+    assert f.stats.calls == 200 and f.stats.fallbacks == 0
 
 
 def test_safe_command_far_from_limits_is_unchanged(scene):
@@ -106,7 +107,7 @@ def test_exported_qp_optimality_conditions_hold_at_the_filtered_command(scene, r
         tau, energy = rng.uniform(-5, 5, nu), rng.uniform(1.5, 10.0)
         r = f.filter(x, u_ref, tau_ext=tau, tank_energy=energy)
         qp = f.qp_matrices(x, u_ref, tau_ext=tau, tank_energy=energy)
-        P, q, A, b = qp["P"], qp["q"], qp["A"], qp["b"]
+        P, q, A, b = qp.P, qp.q, qp.A, qp.b
         R = len(r.slack)
         z = np.concatenate([r.u, r.slack])
         gap = b - A @ z
@@ -128,9 +129,10 @@ def test_row_gradients_match_finite_differences(scene, rng, safety_filter):
         x = random_state(scene, rng)
         d = np.zeros_like(x)
         d[: scene.nq] = rng.uniform(-1, 1, scene.nq)
-        a, _, h = f.constraint_rows(x)
-        _, _, hp = f.constraint_rows(x + eps * d)
-        _, _, hm = f.constraint_rows(x - eps * d)
+        rows = f.constraint_rows(x)
+        a, h = rows.a, rows.h
+        hp = f.constraint_rows(x + eps * d).h
+        hm = f.constraint_rows(x - eps * d).h
         live = np.isfinite(h)
         assert live.sum() == len(h) - 1  # all but passivity (no tank given)
         numeric = (hp - hm)[live] / (2 * eps)
@@ -184,7 +186,7 @@ def test_fallback_is_the_safe_stop_and_is_counted(scene):
     r = f.filter(x, u)
     assert r.status == "fallback" and r.fallback
     np.testing.assert_array_equal(r.u, 0.0)
-    assert f.stats["fallbacks"] == 1
+    assert f.stats.fallbacks == 1
 
 
 def test_sequential_filter_keeps_the_rollout_within_limits(scene):
@@ -216,19 +218,19 @@ def test_plant_follow_with_filter_and_tank(scene):
     plant.reset(x0)
     reference = np.zeros((10, scene.nq))
     reference[:, j4] = 1.0
-    trace = plant.follow(controller, reference, 0.0, 0.015, 300, record_every=2, safety=f, tank=tank)
+    trace = controller.follow(plant, reference, 0.0, 0.015, 300, record_every=2, safety=f, tank=tank)
     assert trace.filtered.shape == (150, scene.nq) and trace.tank_energy.shape == (150,)
     assert len(trace.filter_status) == 150 and not trace.fallback.any()
     assert trace.filtered[-1, j4] < 0.2 < trace.reference[-1, j4]
     assert np.all(trace.state[:, j4] < scene.q_upper[j4])
     np.testing.assert_allclose(trace.tank_energy, 10.0, atol=1e-9)  # no contact
-    assert f.stats["calls"] == 300
+    assert f.stats.calls == 300
     # Consecutive 1 kHz calls mostly re-solve the previous active set instead of running Clarabel.
-    assert f.stats["interior_point_calls"] < 30
+    assert f.stats.interior_point_calls < 30
     plant.reset(x0)
-    plain = plant.follow(controller, reference, 0.0, 0.015, 10)
+    plain = controller.follow(plant, reference, 0.0, 0.015, 10)
     assert plain.filtered is None and plain.tank_energy is None and plain.fallback is None
-    books = plant.follow(controller, reference, 0.0, 0.015, 10, tank=sabre.EnergyTank())
+    books = controller.follow(plant, reference, 0.0, 0.015, 10, tank=sabre.EnergyTank())
     assert books.filtered is None and books.tank_energy.shape == (10,)
 
 

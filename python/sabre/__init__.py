@@ -17,12 +17,33 @@ from .errors import (
     UrdfError,
 )
 from . import costs, guides, scenarios, tasks
-from .controller import VARIANTS, Controller, ControllerConfig, Episode, likelihood_weights, paper_start_state, run_episode
+from .controller import (
+    VARIANTS,
+    Controller,
+    ControllerConfig,
+    Episode,
+    IterationStats,
+    likelihood_weights,
+    paper_start_state,
+    run_episode,
+)
+from .plots import plot_episode
 from .realtime import RealtimeCascade, TickResult
 from .scene import OBJECTS, ROBOTS, Scene
-from .safety import EnergyTank, FilterResult, Obstacle, SafetyConfig, SafetyFilter, SequenceResult
+from .safety import (
+    ConstraintRows,
+    EnergyTank,
+    FilterResult,
+    FilterStats,
+    Obstacle,
+    QPMatrices,
+    SafetyConfig,
+    SafetyFilter,
+    SequenceResult,
+)
 from .scripted import ScriptedMotion, hook_and_pull
-from .sim import Contact, LowLevelController, Plant, RolloutModel, RolloutResult, Trace, default_threads
+from .control import LowLevelController, Trace
+from .sim import ContactPoint, Plant, RolloutModel, RolloutResult, default_threads
 
 __all__ = [
     "VARIANTS",
@@ -36,12 +57,15 @@ __all__ = [
     "RolloutResult",
     "Plant",
     "Trace",
-    "Contact",
+    "ContactPoint",
     "LowLevelController",
     "SafetyFilter",
     "SafetyConfig",
     "FilterResult",
     "SequenceResult",
+    "FilterStats",
+    "ConstraintRows",
+    "QPMatrices",
     "Obstacle",
     "EnergyTank",
     "default_threads",
@@ -51,7 +75,9 @@ __all__ = [
     "Controller",
     "ControllerConfig",
     "Episode",
+    "IterationStats",
     "run_episode",
+    "plot_episode",
     "paper_start_state",
     "likelihood_weights",
     "ScriptedMotion",

@@ -20,13 +20,14 @@ from .costs import Batch, CompiledCost
 from .errors import InvalidValueError, ShapeError
 from .safety import CLASSES, EnergyTank, SafetyConfig, SafetyFilter
 from .scene import Scene
-from .sim import MAX_THREADS, LowLevelController, Plant, RolloutModel
-from .tasks import Task
+from .control import LowLevelController
+from .sim import MAX_THREADS, Plant, RolloutModel
+from .tasks import OpenObject, Task
 
-__all__ = ["ControllerConfig", "Controller", "Episode", "run_episode", "paper_start_state", "likelihood_weights", "VARIANTS"]
+__all__ = ["ControllerConfig", "Controller", "IterationStats", "Episode", "run_episode", "paper_start_state", "likelihood_weights", "VARIANTS"]
 
-#: Controller variants (paper Sec. IV, Fig. 2): N no filter, I inner FILTER-QP with the tank,
-#: O sequential FILTER-QP in the outer loop, IO both.
+#: Controller variants Π_N, Π_I, Π_O, Π_IO (paper Sec. VI): N no filter, I inner FILTER-QP with the tank, O sequential
+#: FILTER-QP in the outer loop, IO both.
 VARIANTS = ("N", "I", "O", "IO")
 
 # The core's defaults, the one source of every default below.
@@ -40,10 +41,17 @@ _TANK = _core.EnergyTankConfig()
 class ControllerConfig:
     """Every Table I parameter of the sampler, with the paper's defaults, plus seed and threads.
 
-    The defaults are the core's (Table I). sigma: diagonal of Σ (variances), one entry per input;
-    None gives Table I's Σ for the scene's inputs (:meth:`sigma_for`). h: sharpness of the
-    likelihood mapping (55). step_size: ρ = α (14). gradient_clip: g_max (54). keep_fraction:
-    share of the best previous samples reused ("caching").
+    The defaults are the core's (Table I).
+    rollouts: N samples per iteration (≥ 3). horizon: T (s). dt: rollout step (s); K = T / dt
+    steps. sigma: diagonal of Σ (variances, (rad/s)² or (m/s)²), one entry per input; None gives
+    Table I's Σ for the scene's inputs (:meth:`sigma_for`). h: sharpness of the likelihood mapping
+    (55). step_size: ρ = α (14). gradient_clip: g_max (54). keep_fraction: share of the best
+    previous samples reused ("caching"), in [0, 1]. smoothing_window, smoothing_order: the
+    Savitzky–Golay filter of the nominal (window in steps; 0 or 1: off). seed: the random stream. threads: rollout
+    workers (None: every core; results are identical for any count). tank_initial: S(0) (J).
+
+    Raises:
+        InvalidValueError: any value outside its range (checked on construction).
     """
 
     rollouts: int = _MPPI.rollouts
@@ -106,22 +114,26 @@ class ControllerConfig:
 
     @property
     def safety_config(self) -> SafetyConfig:
+        """The filters' settings: ``safety``, or the defaults when None."""
         return SafetyConfig() if self.safety is None else self.safety
 
     @property
     def inner_filter(self) -> bool:
+        """Whether the variant runs the 1 kHz FILTER-QP with the tank (I, IO)."""
         return "I" in self.variant
 
     @property
     def outer_filter(self) -> bool:
+        """Whether the variant runs the sequential FILTER-QP on each plan (O, IO)."""
         return "O" in self.variant
 
     @property
     def horizon_steps(self) -> int:
+        """K, the number of rollout steps in the horizon."""
         return int(round(self.horizon / self.dt))
 
     def sigma_for(self, nu: int) -> list[float]:
-        """The covariance diagonal the sampler uses for ``nu`` inputs."""
+        """The diagonal of Σ for ``nu`` inputs. Raises InvalidValueError if ``sigma`` has another length."""
         if self.sigma is None:
             return list(_core.MppiConfig.paper_sigma(nu))
         if len(self.sigma) != nu:
@@ -129,12 +141,66 @@ class ControllerConfig:
         return [float(s) for s in self.sigma]
 
 
+@dataclass(frozen=True)
+class IterationStats:
+    """Statistics of one planning iteration (:meth:`Controller.update`).
+
+    Attributes:
+        iteration: iterations since the last reset, this one included.
+        iteration_time: wall time of the whole iteration (s): sampling, rollouts, cost, update, the
+            task's guides and, with the outer filter, the sequential FILTER-QP.
+        rollout_time: wall time of the parallel rollouts and their cost (s).
+        engine_steps: rollout steps, summed over the rollouts, that went through Rapier's pipeline
+            (the others were skipped as quiescent, see :class:`sabre.RolloutModel`).
+        engine_time: time spent inside Rapier's pipeline (s), summed over the workers, so
+            ``engine_time / (rollout_time * threads)`` is the physics engine's share of the rollouts.
+        cost_min, cost_mean, cost_max: smallest, mean and largest finite rollout cost of the batch
+            (dimensionless, the task's cost).
+        nominal_cost: cost of the nominal (the sequence the reference follows) after the update.
+        effective_sample_size: 1 / Σ w_i² of the normalised sample weights (55), between 1 and N.
+        failed_rollouts: rollouts whose physics diverged (weighted zero).
+        phase: the task phase the iteration planned for.
+        noise_scale: factor on Σ the task asked for (:meth:`sabre.tasks.Task.noise_scale`).
+        guide_time: wall time of the task's guides (s), included in ``iteration_time``.
+        sequential_time: wall time of the sequential FILTER-QP (s, Algorithm 1), included in
+            ``iteration_time``; None without the outer filter (variants N, I).
+        sequential_fallbacks: steps of the sequential filter that fell back to the safe stop; None
+            without the outer filter.
+
+    Timings vary from run to run; every other field is deterministic for a seed.
+    """
+
+    iteration: int
+    iteration_time: float
+    rollout_time: float
+    engine_steps: int
+    engine_time: float
+    cost_min: float
+    cost_mean: float
+    cost_max: float
+    nominal_cost: float
+    effective_sample_size: float
+    failed_rollouts: int
+    phase: str
+    noise_scale: float
+    guide_time: float
+    sequential_time: float | None = None
+    sequential_fallbacks: int | None = None
+
+
 class Controller:
-    """Sampling-based controller for `scene` pursuing `task`.
+    """Sampling-based controller (paper Sec. IV-A) for ``scene`` pursuing ``task``.
 
     update(x, t): one planning iteration from the measured state. reference(t): the commanded joint
     velocity at time t (linear interpolation of the nominal). nominal: the current input sequence
-    (K, nu) starting at ``nominal_t0``. stats: statistics of the last iteration.
+    (K, nu) starting at ``nominal_t0``. stats: statistics of the last iteration
+    (:class:`IterationStats`). The variant's filters (:attr:`outer_filter`, :attr:`inner_filter`)
+    and energy tank (:attr:`tank`) are built from ``config`` (default: :class:`ControllerConfig`).
+
+    Raises:
+        TypeError: scene or task of the wrong type.
+        InvalidValueError: ``config.sigma`` of another length than nu.
+        ShapeError: ``config.input_limit`` of another length than nu.
     """
 
     def __init__(self, scene: Scene, task: Task, config: ControllerConfig | None = None) -> None:
@@ -167,7 +233,7 @@ class Controller:
             input_limit=None if c.input_limit is None else [float(v) for v in c.input_limit],
         )
         self._planner = _core.Planner(self.model._core, self._cost.core, planner_config)
-        self._stats: dict = {}
+        self._stats: IterationStats | None = None
         self.phase_history: list[tuple[float, str]] = [(0.0, self.phase)]
         safety = c.safety_config
         #: Sequential FILTER-QP of the outer loop (variants O, IO), else None.
@@ -196,6 +262,7 @@ class Controller:
 
     @property
     def filters(self) -> tuple[SafetyFilter, ...]:
+        """The safety filters of the variant (outer first), empty for N."""
         return tuple(f for f in (self.outer_filter, self.inner_filter) if f is not None)
 
     def add_obstacle(self, center: Sequence[float] | np.ndarray, radius: float) -> int | None:
@@ -207,10 +274,12 @@ class Controller:
         return ids.pop() if ids else None
 
     def move_obstacle(self, obstacle_id: int, center: Sequence[float] | np.ndarray) -> None:
+        """Moves an obstacle (world centre (3,), m) in every filter of the variant."""
         for f in self.filters:
             f.move_obstacle(obstacle_id, center)
 
     def remove_obstacle(self, obstacle_id: int) -> None:
+        """Removes an obstacle from every filter of the variant."""
         for f in self.filters:
             f.remove_obstacle(obstacle_id)
 
@@ -224,8 +293,16 @@ class Controller:
             self._planner.set_cost(self._cost.core)
             self.phase_history.append((float(t), phase))
 
-    def update(self, x: Sequence[float] | np.ndarray, t: float) -> dict:
-        """One planning iteration from state x (nx,) at time t (s); returns its statistics."""
+    def update(self, x: Sequence[float] | np.ndarray, t: float) -> IterationStats:
+        """One planning iteration from the measured state x (nx,) at time t (s); returns its statistics.
+
+        Runs the task's phase switch and ``on_step``, samples around the nominal, rolls out, weighs
+        and updates the nominal (and, with the outer filter, filters it along its rollout).
+
+        Raises:
+            ShapeError: x is not (nx,), or the task's guides are not (M, K, nu).
+            InvalidValueError: non-finite x or t, an unknown phase or a bad noise scale from the task.
+        """
         x = as_float_array("x", x, (self.scene.nx,))
         t = float(t)
         if not np.isfinite(t):
@@ -271,8 +348,8 @@ class Controller:
         stats["iteration_time"] += guide_time if not self._cost.python_terms else 0.0
         stats["phase"] = self.phase
         stats["noise_scale"] = scale
-        self._stats = stats
-        return stats
+        self._stats = IterationStats(**stats)
+        return self._stats
 
     def reference(self, t: float) -> np.ndarray:
         """(nu,) commanded joint velocity at time t."""
@@ -285,18 +362,13 @@ class Controller:
 
     @property
     def nominal_t0(self) -> float:
+        """Time (s) at which row 0 of :attr:`nominal` applies."""
         return self._planner.nominal_t0
 
     @property
-    def stats(self) -> dict:
-        """Last iteration: iteration_time, rollout_time (s), cost_min/mean/max, nominal_cost,
-        effective_sample_size, failed_rollouts, phase, noise_scale, guide_time (s, the task's
-        guides, included in iteration_time); engine_steps and engine_time (s): the rollout steps
-        that went through Rapier's pipeline and the time spent in them summed over the workers, so
-        ``engine_time / (rollout_time * threads)`` is the physics engine's share of the rollouts;
-        with the sequential filter also sequential_time (s, included in iteration_time) and
-        sequential_fallbacks."""
-        return dict(self._stats)
+    def stats(self) -> IterationStats | None:
+        """Statistics of the last planning iteration; None before the first :meth:`update`."""
+        return self._stats
 
 
 @dataclass
@@ -310,6 +382,9 @@ class Episode:
     tau_ext_measured (M, nq) the plant's τ_ext measurement after each step (what the tank and the
     passivity row read; ``tau_ext`` is the contact torque of the step itself),
     filter_fallbacks: inner-loop steps where the FILTER-QP fell back to the safe stop.
+    tank_floor: the tank's floor ε (J). target_opening, success_opening: the task's target opening
+    and the opening that counts as success (rad or m), None for a task that is not an
+    :class:`~sabre.tasks.OpenObject`.
     """
 
     scene: Scene
@@ -332,20 +407,26 @@ class Episode:
     filter_fallbacks: int = 0
     tank_floor: float = _SAFETY.tank_floor
     tau_ext_measured: np.ndarray | None = None
+    target_opening: float | None = None
+    success_opening: float | None = None
 
     @property
     def opening(self) -> np.ndarray:
+        """(M,) the object's opening (rad or m)."""
         return self.state[:, 2 * self.scene.nq]
 
     @property
     def duration(self) -> float:
+        """Simulated time of the last recorded step (s)."""
         return float(self.time[-1]) if len(self.time) else 0.0
 
     @property
     def real_time_factor(self) -> float:
+        """Simulated over wall time (above 1: faster than real time)."""
         return self.duration / self.wall_time if self.wall_time > 0 else float("inf")
 
     def mean_wrench(self, only_contact: bool = True) -> float:
+        """Mean wrist force |f| (N), over the steps in contact (all steps if none, or with ``only_contact=False``)."""
         norms = np.linalg.norm(self.wrench[:, :3], axis=1)
         mask = self.contact if only_contact and self.contact.any() else np.ones_like(self.contact)
         return float(norms[mask].mean()) if mask.any() else 0.0
@@ -358,7 +439,7 @@ class Episode:
 
     def violations(self, config: SafetyConfig | None = None) -> dict[str, float]:
         """Cumulative constraint violation per ZBF class, Δ_tot = Σ_k max(0, −h(x_k)) over the
-        recorded states (paper Sec. VI), with the rows of a filter built from ``config`` (default
+        recorded states (the metric of the paper's Fig. 8), with the rows of a filter built from ``config`` (default
         settings: the paper's base box)."""
         f = SafetyFilter(self.scene, config)
         names = f.row_names
@@ -367,7 +448,7 @@ class Episode:
                "base_box": "base_box", "obstacle": "obstacles", "passivity": "passivity"}
         total = {c: 0.0 for c in CLASSES if c != "passivity"}
         for x in self.state:
-            h = f.constraint_rows(x)[2]
+            h = f.constraint_rows(x).h
             for c, v in zip(classes, h):
                 if np.isfinite(v) and v < 0.0 and key.get(c) in total:
                     total[key[c]] += -float(v)
@@ -375,7 +456,7 @@ class Episode:
 
 
 class TraceChunks:
-    """The plant traces of consecutive inner-loop runs (:meth:`Plant.follow`), gathered into the
+    """The plant traces of consecutive inner-loop runs (:meth:`LowLevelController.follow`), gathered into the
     arrays of one :class:`Episode`. ``append(trace, **per_run)`` adds a run; each keyword is a value
     that holds for every recorded step of that run (e.g. the plan's cost)."""
 
@@ -432,14 +513,26 @@ def run_episode(
     low_level: LowLevelController | None = None,
     on_replan: Callable[[float, np.ndarray, Plant, Controller], None] | None = None,
 ) -> Episode:
-    """Runs the controller on the 1 kHz plant for `duration` seconds of simulated time.
+    """Runs the controller on the plant for ``duration`` seconds of simulated time; returns the traces.
 
-    The controller re-plans every 1/replan_rate s of simulated time from the plant's state; in
-    between, the inner loop interpolates its reference and tracks it with the low-level controller.
-    ``on_replan(t, x, plant, controller)`` runs before each re-plan (for disturbances); returning
-    True ends the episode there. Stops
-    ``settle_time`` after the task succeeds if ``stop_on_success``. A progress bar (tqdm) shows for
-    runs longer than 10 s of simulated time unless ``progress=False``.
+    The controller re-plans every 1/``replan_rate`` s (Hz, default 20) of simulated time from the
+    plant's state; in between, the inner loop (:meth:`LowLevelController.follow`) interpolates its
+    reference, filters it (variants I, IO) and tracks it with the low-level controller (53).
+
+    Args:
+        seed: the sampler's seed for this episode (default: the controller's configured seed).
+        x0: start state (nx,) (default: :func:`paper_start_state`).
+        record_every: record every n-th plant step (default 10, i.e. 100 Hz on the 1 kHz plant).
+        stop_on_success, settle_time: end ``settle_time`` s (default 0.5) after the task succeeds.
+        progress: a tqdm bar; None (default) shows it for runs longer than 10 s of simulated time.
+        plant, low_level: the plant (default: a new 1 kHz :class:`Plant`) and its controller
+            (default: a :class:`LowLevelController` at the plant's step).
+        on_replan: ``on_replan(t, x, plant, controller)`` runs before each re-plan (for
+            disturbances); returning True ends the episode there.
+
+    Raises:
+        InvalidValueError: non-positive duration or replan_rate, record_every < 1, non-finite x0.
+        ShapeError: x0 is not (nx,).
     """
     duration = as_positive("duration", duration)
     replan_rate = as_positive("replan_rate", replan_rate)
@@ -474,12 +567,12 @@ def run_episode(
             if on_replan is not None and on_replan(t, x, plant, controller) is True:
                 break
             stats = controller.update(x, t)
-            planning_times.append(stats["iteration_time"])
+            planning_times.append(stats.iteration_time)
             floor = controller.task.gain_inertia_floor(controller.phase)
             low_level.gain_inertia_floor = own_floor if floor is None else floor
-            trace = plant.follow(low_level, controller.nominal, controller.nominal_t0, controller.config.dt, steps_per_plan, record_every,
+            trace = low_level.follow(plant, controller.nominal, controller.nominal_t0, controller.config.dt, steps_per_plan, record_every,
                                  safety=controller.inner_filter, tank=controller.tank)
-            chunks.append(trace, cost=stats["nominal_cost"], phase=controller.task.phases.index(controller.phase))
+            chunks.append(trace, cost=stats.nominal_cost, phase=controller.task.phases.index(controller.phase))
             if bar is not None:
                 bar.update(round(steps_per_plan * plant.dt, 3))
             if success_time is None and controller.task.success(scene, plant.state):
@@ -512,9 +605,17 @@ def run_episode(
         command=data["command"],
         tank_energy=data["tank"],
         variant=controller.config.variant,
-        filter_fallbacks=0 if controller.inner_filter is None else int(controller.inner_filter.stats["fallbacks"]),
+        filter_fallbacks=0 if controller.inner_filter is None else int(controller.inner_filter.stats.fallbacks),
         tank_floor=controller.tank.floor,
+        **_opening_targets(scene, controller.task),
     )
+
+
+def _opening_targets(scene: Scene, task: Task) -> dict[str, float | None]:
+    if not isinstance(task, OpenObject):
+        return {"target_opening": None, "success_opening": None}
+    target = task.target_opening(scene)
+    return {"target_opening": target, "success_opening": task.open.success_fraction * target}
 
 
 def likelihood_weights(costs: Sequence[float] | np.ndarray, mapping: str = "invariant", parameter: float = 10.0) -> np.ndarray:

@@ -21,7 +21,7 @@ import numpy as np
 from ._validate import as_float_array, as_positive
 from .controller import Controller
 from .errors import InvalidValueError
-from .sim import LowLevelController
+from .control import LowLevelController
 
 __all__ = ["RealtimeCascade", "TickResult"]
 
@@ -101,6 +101,7 @@ class RealtimeCascade:
             self._error = exc
 
     def stop(self) -> None:
+        """Stops the planning thread and waits for it to finish."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join()
@@ -114,6 +115,7 @@ class RealtimeCascade:
 
     @property
     def running(self) -> bool:
+        """Whether the planning thread runs."""
         return self._thread is not None and self._thread.is_alive()
 
     # Inner loop -----------------------------------------------------------------------------

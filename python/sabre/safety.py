@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -18,11 +18,12 @@ from . import _core
 from ._validate import as_count, as_float_array, as_non_negative, as_positive, core_config, readonly
 from .errors import InvalidValueError
 from .scene import Scene
+from .sim import RolloutModel
 
-if TYPE_CHECKING:
-    from .sim import RolloutModel
-
-__all__ = ["CLASSES", "SafetyConfig", "SafetyFilter", "FilterResult", "SequenceResult", "EnergyTank", "Obstacle"]
+__all__ = [
+    "CLASSES", "SafetyConfig", "SafetyFilter", "FilterResult", "SequenceResult", "FilterStats", "ConstraintRows",
+    "QPMatrices", "EnergyTank", "Obstacle",
+]
 
 # The core's defaults, the one source of every default below.
 _SAFETY = _core.SafetyConfig()
@@ -182,6 +183,7 @@ class FilterResult:
 
     @property
     def fallback(self) -> bool:
+        """Whether the solver failed and u is the safe stop 0."""
         return self.status == "fallback"
 
 
@@ -197,7 +199,64 @@ class SequenceResult:
 
 
 @dataclass(frozen=True)
+class FilterStats:
+    """Counters of a :class:`SafetyFilter` since it was built or :meth:`SafetyFilter.reset_stats`.
+
+    Attributes:
+        calls: FILTER-QP calls (each step of :meth:`SafetyFilter.filter_sequence` counts).
+        fallbacks: calls whose solver failed and returned the safe stop u = 0.
+        mean_solve_time: mean wall time per call in the core (s; 0 without calls).
+        max_solve_time: longest call (s).
+        total_iterations: interior-point iterations summed over the calls.
+        interior_point_calls: calls that ran Clarabel (the others took an exact shortcut).
+    """
+
+    calls: int
+    fallbacks: int
+    mean_solve_time: float
+    max_solve_time: float
+    total_iterations: int
+    interior_point_calls: int
+
+
+@dataclass(frozen=True)
+class ConstraintRows:
+    """The affine rows of FILTER-QP at one state: row i requires ``a[i] @ u + δ_i ≥ b[i]``.
+
+    Attributes:
+        a: (R, nq) gradient ∂h/∂q of each row's barrier (for passivity: τ_extᵀ).
+        b: (R,) right-hand side −γ (h − Δ) (19), in the units of ``a @ u``.
+        h: (R,) barrier value of each row without the margin; NaN for rows off at this call.
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    h: np.ndarray
+
+
+@dataclass(frozen=True)
+class QPMatrices:
+    """The whole FILTER-QP (41) as dense arrays: minimise ½ zᵀPz + qᵀz subject to A z ≤ b, over
+    z = [u (nu); δ (R)], the command and one slack per row; the input bounds are rows of A too.
+
+    Attributes:
+        P: (nu + R, nu + R) quadratic cost (identity on u, the class penalty Γ on each slack).
+        q: (nu + R,) linear cost (−u_ref on u).
+        A: (m, nu + R) inequality rows. b: (m,) their bounds.
+        nu: the number of command entries at the front of z.
+    """
+
+    P: np.ndarray
+    q: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+    nu: int
+
+
+@dataclass(frozen=True)
 class Obstacle:
+    """A sphere obstacle of a :class:`SafetyFilter`: its id, world centre (m) and radius (m)."""
+
     id: int
     center: tuple[float, float, float]
     radius: float
@@ -269,8 +328,6 @@ class SafetyFilter:
     def filter_sequence(self, x0: Sequence[float] | np.ndarray, U: np.ndarray, model: RolloutModel) -> SequenceResult:
         """Sequential FILTER-QP (Algorithm 1): filters U (K, nq) step by step while rolling it out
         from x0 in ``model`` (no passivity row: the paper enforces passivity in the inner loop)."""
-        from .sim import RolloutModel
-
         if not isinstance(model, RolloutModel):
             raise TypeError(f"model must be a sabre.RolloutModel, got {type(model).__name__}")
         x0 = as_float_array("x0", x0, (self.scene.nx,))
@@ -287,13 +344,16 @@ class SafetyFilter:
         return self._core.add_obstacle(center.tolist(), as_positive("radius", radius))
 
     def move_obstacle(self, obstacle_id: int, center: Sequence[float] | np.ndarray) -> None:
+        """Moves obstacle ``obstacle_id`` to the world centre (3,) in m. Raises InvalidValueError for an unknown id."""
         self._core.move_obstacle(as_count("obstacle_id", obstacle_id, 0), as_float_array("center", center, (3,)).tolist())
 
     def remove_obstacle(self, obstacle_id: int) -> None:
+        """Removes obstacle ``obstacle_id``; its slot turns off. Raises InvalidValueError for an unknown id."""
         self._core.remove_obstacle(as_count("obstacle_id", obstacle_id, 0))
 
     @property
     def obstacles(self) -> list[Obstacle]:
+        """The sphere obstacles in place, in id order."""
         return [Obstacle(int(i), tuple(c), float(r)) for i, c, r in self._core.obstacles]
 
     # -- inspection -------------------------------------------------------------------------
@@ -308,12 +368,12 @@ class SafetyFilter:
         return np.asarray(self._core.input_limits, dtype=np.float64)
 
     @property
-    def stats(self) -> dict:
-        """calls, fallbacks, mean_solve_time and max_solve_time (s), total_iterations,
-        interior_point_calls (calls that ran Clarabel)."""
-        return dict(self._core.stats)
+    def stats(self) -> FilterStats:
+        """Call, fallback and solver counters since construction or :meth:`reset_stats`."""
+        return FilterStats(**dict(self._core.stats))
 
     def reset_stats(self) -> None:
+        """Sets every counter of :attr:`stats` to zero."""
         self._core.reset_stats()
 
     def forget_active_set(self) -> None:
@@ -321,20 +381,43 @@ class SafetyFilter:
         remembered active set is used only after it passes every optimality check)."""
         self._core.forget_active_set()
 
-    def constraint_rows(self, x, tau_ext=None, tank_energy=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(a (R, nq), b (R,), h (R,)) at state x: each row's condition is a·u + δ ≥ b, b = −γ (h − Δ)."""
+    def constraint_rows(
+        self,
+        x: Sequence[float] | np.ndarray,
+        tau_ext: Sequence[float] | np.ndarray | None = None,
+        tank_energy: float | None = None,
+    ) -> ConstraintRows:
+        """The R rows of FILTER-QP at state x (nx,); with τ_ext (nq,, N·m) and the tank energy
+        (J) the passivity row is on.
+
+        Raises:
+            ShapeError: x or tau_ext of the wrong length.
+            InvalidValueError: non-finite input, or only one of tau_ext and tank_energy given.
+        """
         x = as_float_array("x", x, (self.scene.nx,))
         tau, energy = self._passivity(tau_ext, tank_energy)
         a, b, h = self._core.constraint_rows(x, tau, energy)
-        return readonly(a), readonly(b), readonly(h)
+        return ConstraintRows(a=readonly(a), b=readonly(b), h=readonly(h))
 
-    def qp_matrices(self, x, u_ref, tau_ext=None, tank_energy=None) -> dict:
-        """The full QP as dense arrays, for cross-checks with other solvers: minimise
-        ½ zᵀPz + qᵀz subject to A z ≤ b over z = [u (nu); δ (R)] (keys P, q, A, b, nu)."""
+    def qp_matrices(
+        self,
+        x: Sequence[float] | np.ndarray,
+        u_ref: Sequence[float] | np.ndarray,
+        tau_ext: Sequence[float] | np.ndarray | None = None,
+        tank_energy: float | None = None,
+    ) -> QPMatrices:
+        """The full QP at state x (nx,) for the command u_ref (nq,), as dense arrays, for
+        cross-checks with other solvers (arguments as for :meth:`filter`).
+
+        Raises:
+            ShapeError: an argument of the wrong length.
+            InvalidValueError: non-finite input, or only one of tau_ext and tank_energy given.
+        """
         x = as_float_array("x", x, (self.scene.nx,))
         u_ref = as_float_array("u_ref", u_ref, (self.scene.nq,))
         tau, energy = self._passivity(tau_ext, tank_energy)
-        return dict(self._core.qp_matrices(x, u_ref, tau, energy))
+        d = dict(self._core.qp_matrices(x, u_ref, tau, energy))
+        return QPMatrices(P=readonly(d["P"]), q=readonly(d["q"]), A=readonly(d["A"]), b=readonly(d["b"]), nu=int(d["nu"]))
 
     def __repr__(self) -> str:
         return f"SafetyFilter({self.scene!r}, rows={len(self.row_names)})"
@@ -368,27 +451,33 @@ class EnergyTank:
         self._core = _core.EnergyTank(config)
 
     def step(self, tau_ext: Sequence[float] | np.ndarray, u: Sequence[float] | np.ndarray, dt: float) -> float:
+        """Integrates Ṡ = τ_extᵀu (49) over dt (s) with τ_ext (nq,) in N·m and u (nq,) the command; returns S (J)."""
         tau = as_float_array("tau_ext", tau_ext, (None,))
         u = as_float_array("u", u, (tau.shape[0],))
         return self._core.step(tau, u, as_positive("dt", dt))
 
     def reset(self) -> None:
+        """Puts the energy back to :attr:`initial` and clears the history."""
         self._core.reset()
 
     @property
     def energy(self) -> float:
+        """Current energy S (J)."""
         return self._core.energy
 
     @property
     def initial(self) -> float:
+        """S(0) (J)."""
         return self._core.initial
 
     @property
     def floor(self) -> float:
+        """The floor ε (J) the passivity row keeps S above."""
         return self._core.floor
 
     @property
     def ceiling(self) -> float | None:
+        """Upper bound of S (J), or None."""
         return self._core.ceiling
 
     @property
@@ -398,6 +487,7 @@ class EnergyTank:
 
     @property
     def history(self) -> np.ndarray:
+        """(steps + 1,) S(0) and the energy after every step (J); empty without ``record_history``."""
         return readonly(self._core.history)
 
     def __repr__(self) -> str:

@@ -22,7 +22,8 @@ from .errors import InvalidValueError
 from .safety import EnergyTank, SafetyConfig, SafetyFilter
 from .scene import Scene
 from .scripted import hook_and_pull
-from .sim import LowLevelController, Plant
+from .control import LowLevelController
+from .sim import Plant
 
 __all__ = [
     "StuckDoorResult",
@@ -53,7 +54,7 @@ def hooked_state(scene: Scene, engage: float = 0.6) -> np.ndarray:
     per = int(round(motion.dt / plant.dt))
     n = int(np.argmax(motion.phases == 3)) + int(round(engage / motion.dt))
     for u in motion.U[:n]:
-        plant.track(low, u, steps=per)
+        low.track(plant, u, steps=per)
     x = plant.state
     x[scene.nq : 2 * scene.nq] = 0.0
     return x
@@ -140,14 +141,14 @@ def _scripted_episode(scene, variant, safety, x0, hold_seconds, release_seconds,
     chunk = 0.05
     while t < total - 1e-9:
         plant.hold_object(t < hold_seconds - 1e-9)
-        chunks.append(plant.follow(low, U, 0.0, motion.dt, int(round(chunk / plant.dt)), 1, safety=inner, tank=tank))
+        chunks.append(low.follow(plant, U, 0.0, motion.dt, int(round(chunk / plant.dt)), 1, safety=inner, tank=tank))
         t = plant.time
     d = chunks.arrays()
     return Episode(scene=scene, time=d["time"], state=d["state"], reference=d["reference"], wrench=d["wrench"],
                    tau_ext=d["tau_ext"], tau_ext_measured=d["tau_ext_measured"], contact=d["contact"].astype(bool), cost=np.zeros(len(d["time"])),
                    phase=np.zeros(len(d["time"]), dtype=int), phases=("pull",), success=False, time_to_success=None,
                    command=d["command"], tank_energy=d["tank"], variant=variant,
-                   filter_fallbacks=0 if inner is None else int(inner.stats["fallbacks"]), tank_floor=tank.floor)
+                   filter_fallbacks=0 if inner is None else int(inner.stats.fallbacks), tank_floor=tank.floor)
 
 
 # -- stuck door --------------------------------------------------------------------------------
@@ -336,7 +337,7 @@ def obstacle_corridor(variant: str = "IO", seed: int = 0, duration: float = 6.0,
     violation = 0.0
     if t_app is not None:
         for x in ep.state[ep.time >= t_app]:
-            h = np.asarray(check.constraint_rows(x)[2])[rows]
+            h = np.asarray(check.constraint_rows(x).h)[rows]
             h = h[np.isfinite(h)]
             violation += float(np.sum(np.maximum(0.0, -h)))
     reached = bool(any(task.success(scene, x) for x in ep.state))

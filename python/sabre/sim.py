@@ -1,4 +1,4 @@
-"""Simulation: the reduced-order rollout model (batched, parallel), the 1 kHz plant and its low-level controller."""
+"""Simulation: the reduced-order rollout model (batched, parallel) and the 1 kHz plant with its contact reports."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ import numpy as np
 from . import _core
 from ._validate import as_count, as_float_array, as_non_negative, as_positive, core_config, readonly
 from .errors import InvalidValueError
-from .safety import EnergyTank, SafetyFilter
 from .scene import Scene
 
 #: Default bandwidth (Hz) of :attr:`Plant.measured_tau_ext`.
@@ -19,9 +18,8 @@ DEFAULT_TAU_EXT_CUTOFF: float = _core.DEFAULT_TAU_EXT_CUTOFF
 # The core's defaults, the one source of every default below.
 _ROLLOUT = _core.RolloutConfig()
 _PLANT = _core.PlantConfig()
-_LOW_LEVEL = _core.LowLevelConfig()
 
-__all__ = ["RolloutModel", "RolloutResult", "Plant", "Trace", "LowLevelController", "default_threads", "MAX_THREADS"]
+__all__ = ["RolloutModel", "RolloutResult", "Plant", "ContactPoint", "default_threads", "MAX_THREADS", "DEFAULT_TAU_EXT_CUTOFF"]
 
 #: Largest worker-thread count accepted (pools are cached per size).
 MAX_THREADS = 256
@@ -109,9 +107,15 @@ class RolloutModel:
         self._core = _core.RolloutModel(scene._core, config)
 
     def rollout(self, x0: Sequence[float] | np.ndarray, U: np.ndarray, threads: int | None = None) -> RolloutResult:
-        """Simulates N input sequences U (N, K, nu) from the state x0 (nx,).
+        """Simulates N input sequences U (N, K, nu) of joint velocities (rad/s, m/s for the base
+        translation) from the state x0 (nx,), each step ``dt`` s long, on ``threads`` workers
+        (default: :func:`default_threads`).
 
         Inputs are projected onto the joint velocity limits before they are applied.
+
+        Raises:
+            ShapeError: x0 or U of the wrong shape.
+            InvalidValueError: non-finite x0 or U, threads outside [1, MAX_THREADS].
         """
         x0 = as_float_array("x0", x0, (self.scene.nx,))
         U = as_float_array("U", U, (None, None, self.scene.nu))
@@ -132,101 +136,8 @@ class RolloutModel:
         return f"RolloutModel({self.scene!r}, dt={self.dt})"
 
 
-class LowLevelController:
-    """Dynamics-compensated PI joint-velocity controller (53) for the plant.
-
-    τ = M(q) q̈* + (M(q) + A) (Λ_D (q̇* − q̇) + Λ_I ∫(q̇* − q̇)) + g(q): (53) with K_D = (M + A) Λ_D and
-    K_I = (M + A) Λ_I, so the plant's free-motion velocity response matches the rollout model's servo
-    of the same bandwidth. ∫(q̇* − q̇) is clipped to ±``integral_limit`` (rad) per joint.
-
-    A = diag(max(0, gain_inertia_floor − M_ii)) keeps the gains of light joints from vanishing: the
-    last wrist joint turns only the hand (M_ii ≈ 0.007 kg m²), and with K = M Λ alone it would give
-    0.27 N m per rad/s and 0.27 N m of integral torque, so a hook pulling on a held door twists the
-    hand until the finger slides off the bar. ``gain_inertia_floor=0`` (the default) is plain (53);
-    a task can ask for a floor per phase (:meth:`sabre.tasks.Task.gain_inertia_floor`).
-    """
-
-    def __init__(
-        self,
-        scene: Scene,
-        dt: float = _PLANT.dt,
-        *,
-        bandwidth: float = _LOW_LEVEL.bandwidth,
-        integral_gain: float = _LOW_LEVEL.integral_gain,
-        integral_limit: float = _LOW_LEVEL.integral_limit,
-        gain_inertia_floor: float = _LOW_LEVEL.gain_inertia_floor,
-    ) -> None:
-        if not isinstance(scene, Scene):
-            raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
-        self.scene = scene
-        dt = as_positive("dt", dt)
-        config = core_config(
-            _core.LowLevelConfig,
-            bandwidth=as_positive("bandwidth", bandwidth),
-            integral_gain=as_non_negative("integral_gain", integral_gain),
-            integral_limit=as_non_negative("integral_limit", integral_limit),
-            gain_inertia_floor=as_non_negative("gain_inertia_floor", gain_inertia_floor),
-        )
-        self._core = _core.LowLevelController(scene._core, dt, config)
-
-    @property
-    def gain_inertia_floor(self) -> float:
-        """The floor (kg m²) on the joint inertia the PI gains scale with; settable between ticks
-        (the integral is kept), which is how :func:`run_episode` applies a task's per-phase value."""
-        return self._core.gain_inertia_floor
-
-    @gain_inertia_floor.setter
-    def gain_inertia_floor(self, floor: float) -> None:
-        self._core.gain_inertia_floor = as_non_negative("gain_inertia_floor", floor)
-
-    def reset(self) -> None:
-        """Clears the integrator and the reference history."""
-        self._core.reset()
-
-    def torque(self, x: Sequence[float] | np.ndarray, u_ref: Sequence[float] | np.ndarray) -> np.ndarray:
-        """(nq,) joint torques that make the robot at state x (nx,) track the velocities u_ref (nq,)."""
-        x = as_float_array("x", x, (self.scene.nx,))
-        u_ref = as_float_array("u_ref", u_ref, (self.scene.nq,))
-        return np.asarray(self._core.torque(x, u_ref), dtype=np.float64)
-
-
 @dataclass(frozen=True)
-class Trace:
-    """What :meth:`Plant.follow` recorded, one row per recorded plant step (M rows).
-
-    Attributes:
-        time: (M,) plant time after the step (s).
-        state: (M, nx) state after the step.
-        reference: (M, nq) interpolated reference command of the step.
-        filtered: (M, nq) command after the safety filter (what the low-level controller tracked),
-            or None without a filter.
-        filter_status: (M,) the filter's status per step (``"solved"``, ``"almost_solved"``,
-            ``"fallback"``), or None without a filter.
-        tank_energy: (M,) tank energy after the step (J), or None without a tank.
-        wrench: (M, 6) wrist wrench; tau_ext: (M, nq) external joint torques from the contact
-            forces of the step; tau_ext_measured: (M, nq) the plant's τ_ext measurement after the
-            step (:attr:`Plant.measured_tau_ext`); contact: (M,) bool.
-    """
-
-    time: np.ndarray
-    state: np.ndarray
-    reference: np.ndarray
-    filtered: np.ndarray | None
-    filter_status: tuple[str, ...] | None
-    tank_energy: np.ndarray | None
-    wrench: np.ndarray
-    tau_ext: np.ndarray
-    tau_ext_measured: np.ndarray
-    contact: np.ndarray
-
-    @property
-    def fallback(self) -> np.ndarray | None:
-        """(M,) bool: the filter fell back to the safe stop in that step (None without a filter)."""
-        return None if self.filter_status is None else np.array([s == "fallback" for s in self.filter_status])
-
-
-@dataclass(frozen=True)
-class Contact:
+class ContactPoint:
     """One robot–object contact point of a plant step (world frame)."""
 
     robot_link: str
@@ -235,7 +146,6 @@ class Contact:
     """(3,) contact point (m)."""
     force: np.ndarray
     """(3,) force acting on the robot at the point (N)."""
-
 
 class Plant:
     """The stand-in for the real robot: full rigid-body dynamics of robot and object in Rapier.
@@ -274,79 +184,26 @@ class Plant:
 
     @property
     def dt(self) -> float:
+        """Plant step (s)."""
         return self._core.dt
 
     def reset(self, x0: Sequence[float] | np.ndarray | None = None) -> None:
-        """Puts the plant at x0 (default: the scene's default state), time 0, object released."""
+        """Puts the plant at x0 (nx,) (default: the scene's default state), time 0, object released.
+
+        Raises:
+            ShapeError: x0 is not (nx,). InvalidValueError: non-finite x0.
+        """
         x0 = self.scene.default_state() if x0 is None else as_float_array("x0", x0, (self.scene.nx,))
         self._core.reset(x0)
 
     def step(self, tau: Sequence[float] | np.ndarray) -> None:
-        """Advances one step of dt under joint torques tau (nq,)."""
-        self._core.step(as_float_array("tau", tau, (self.scene.nq,)))
+        """Advances one step of dt under joint torques tau (nq,) in N·m (N for the base
+        translation), clamped to the effort limits.
 
-    def track(self, controller: LowLevelController, u_ref: Sequence[float] | np.ndarray, steps: int = 1) -> None:
-        """Runs ``steps`` steps with the controller tracking the constant velocity reference u_ref (nq,)."""
-        self._core.track(controller._core, as_float_array("u_ref", u_ref, (self.scene.nq,)), as_count("steps", steps, 0))
-
-    def follow(
-        self,
-        controller: LowLevelController,
-        reference: np.ndarray,
-        t0: float,
-        dt: float,
-        steps: int,
-        record_every: int = 1,
-        *,
-        safety: SafetyFilter | None = None,
-        tank: EnergyTank | None = None,
-    ) -> Trace:
-        """The inner loop for ``steps`` plant steps: the reference sequence (K, nq), sampled every
-        ``dt`` from time ``t0``, is interpolated at the plant's time and tracked by ``controller``.
-
-        With ``safety`` each step's command goes through the FILTER-QP first; with ``tank`` too,
-        its passivity row uses the plant's last measured τ_ext and the tank's energy, and the tank
-        integrates the filtered command against the newly measured τ_ext after the step. A tank
-        without a filter only keeps the books. Records every ``record_every``-th step.
+        Raises:
+            ShapeError: tau is not (nq,). InvalidValueError: non-finite tau.
         """
-        if not isinstance(controller, LowLevelController):
-            raise TypeError(f"controller must be a sabre.LowLevelController, got {type(controller).__name__}")
-        if safety is not None and not isinstance(safety, SafetyFilter):
-            raise TypeError(f"safety must be a sabre.SafetyFilter, got {type(safety).__name__}")
-        if tank is not None and not isinstance(tank, EnergyTank):
-            raise TypeError(f"tank must be a sabre.EnergyTank, got {type(tank).__name__}")
-        if safety is not None and (safety.scene.nq != self.scene.nq or safety.scene.nx != self.scene.nx):
-            raise InvalidValueError("safety: the filter was built for a different scene than the plant's")
-        reference = as_float_array("reference", reference, (None, self.scene.nq))
-        if reference.shape[0] == 0:
-            raise InvalidValueError("reference: needs at least one step")
-        t0 = float(t0)
-        if not np.isfinite(t0):
-            raise InvalidValueError(f"t0: must be finite, got {t0}")
-        d = self._core.follow_safe(
-            controller._core,
-            reference,
-            t0,
-            as_positive("dt", dt),
-            as_count("steps", steps, 0),
-            as_count("record_every", record_every, 1),
-            None if safety is None else safety._core,
-            None if tank is None else tank._core,
-        )
-        status = d.get("filter_status")
-        return Trace(
-            time=readonly(d["time"]),
-            state=readonly(d["state"]),
-            reference=readonly(d["reference"]),
-            filtered=readonly(d["filtered"]) if "filtered" in d else None,
-            filter_status=None if status is None else tuple(status),
-            tank_energy=readonly(d["tank_energy"]) if "tank_energy" in d else None,
-            wrench=readonly(d["wrench"]),
-            tau_ext=readonly(d["tau_ext"]),
-            tau_ext_measured=readonly(d["tau_ext_measured"]),
-            contact=readonly(d["contact"]),
-        )
-
+        self._core.step(as_float_array("tau", tau, (self.scene.nq,)))
     @property
     def state(self) -> np.ndarray:
         """(nx,) current state [q, q̇, o, ȯ]."""
@@ -373,13 +230,13 @@ class Plant:
         """Whether any robot–object contact carried force in the last step."""
         return self._core.contact
 
-    def contacts(self) -> list[Contact]:
+    def contacts(self) -> list[ContactPoint]:
         """Every robot–object contact point of the last step, with the force it put on the robot.
 
         For diagnosing what the robot touches (which link against which object part); it
         allocates, so call it between steps, not inside a tight loop."""
         return [
-            Contact(robot_link=r, object_link=o, point=np.array(p, dtype=np.float64), force=np.array(f, dtype=np.float64))
+            ContactPoint(robot_link=r, object_link=o, point=np.array(p, dtype=np.float64), force=np.array(f, dtype=np.float64))
             for r, o, p, f in self._core.contacts()
         ]
 
@@ -390,10 +247,12 @@ class Plant:
 
     @property
     def time(self) -> float:
+        """Simulated time since the last :meth:`reset` (s)."""
         return self._core.time
 
     @property
     def object_held(self) -> bool:
+        """Whether the object is held in place by :meth:`hold_object` (fault injection)."""
         return self._core.object_held
 
     def hold_object(self, flag: bool) -> None:

@@ -17,8 +17,12 @@ from ._validate import as_float_array, as_non_negative, as_positive
 from .errors import InvalidValueError
 from .guides import servo_guide
 from .scene import Scene
+from .sim import RolloutModel
 
-__all__ = ["Task", "Reach", "OpenObject", "SafetyWeights"]
+__all__ = [
+    "Task", "Reach", "OpenObject", "SafetyWeights", "ApproachConfig", "HookConfig", "OpenConfig", "ReleaseConfig",
+    "NoiseConfig", "GuideConfig", "GraspError", "PocketError",
+]
 
 
 @dataclass(frozen=True)
@@ -40,6 +44,7 @@ class SafetyWeights:
     base_link: str = "base_link"
 
     def terms(self, scene: Scene) -> costs.Cost:
+        """The safety cost terms for the scene (arm reach and base clearance where the scene has them)."""
         out = costs.Cost([
             costs.JointLimits(self.joint_limit, self.joint_limit_slope),
             costs.SelfCollision(self.self_collision, self.self_collision_slope),
@@ -58,6 +63,7 @@ class Task:
     phases: tuple[str, ...] = ("main",)
 
     def initial_phase(self) -> str:
+        """The phase a reset starts in (default: the first)."""
         return self.phases[0]
 
     def cost(self, scene: Scene, phase: str) -> costs.Cost:
@@ -69,6 +75,7 @@ class Task:
         return phase
 
     def success(self, scene: Scene, x: np.ndarray) -> bool:
+        """Whether the task is done at state x (nx,)."""
         return False
 
     def noise_scale(self, scene: Scene, x: np.ndarray, phase: str) -> float:
@@ -132,173 +139,319 @@ def _offset(xyz: tuple[float, float, float]) -> np.ndarray:
     return t
 
 
+def _xyz(name: str, value: Sequence[float]) -> tuple[float, float, float]:
+    return tuple(as_float_array(name, value, (3,)).tolist())
+
+
+def _optional_non_negative(name: str, value: float | None) -> float | None:
+    return None if value is None else as_non_negative(name, value)
+
+
+def _finite(name: str, value: float) -> float:
+    value = float(value)
+    if not np.isfinite(value):
+        raise InvalidValueError(f"{name} must be finite, got {value}")
+    return value
+
+
+@dataclass(frozen=True)
+class GraspError:
+    """How far the grasp frame is from a phase's target: ``distance`` (m) and ``angle`` (rad)."""
+
+    distance: float
+    angle: float
+
+
+@dataclass(frozen=True)
+class PocketError:
+    """Position of the grasp frame relative to a phase's target in the handle frame (m):
+    ``across`` the bar (y and z) and ``along`` it (x)."""
+
+    across: float
+    along: float
+
+
+@dataclass(frozen=True)
+class ApproachConfig:
+    """Reaching the handle (phases approach and insert) of :class:`OpenObject`.
+
+    Offsets are grasp-frame positions (m) in the handle frame: x along the bar, y sideways (toward
+    the finger), z into the door. The rationale of every default is in docs/design.md.
+
+    Attributes:
+        pregrasp_offset: target while approaching, in front of the bar and beside it (m).
+        insert_offset: target while inserting, beside the bar with the finger's tip past it (m).
+        pitch: the hand points this far (rad) below the handle's normal.
+        weight: pose weight of the reaching targets (the paper's approach weight).
+        switch_position: distance (m) to the target that ends inserting (twice it ends the approach).
+        switch_angle: angle (rad) to the target that ends approaching, inserting and hooking.
+        posture: preferred arm posture while approaching (nq joint targets), or None for a Panda
+            posture that holds a hand level with a handle.
+        posture_weight: its weight per rad² (0: off).
+
+    Raises:
+        InvalidValueError: a negative weight or tolerance, a non-finite offset or pitch.
+    """
+
+    pregrasp_offset: tuple[float, float, float] = (0.0, -0.022, -0.07)
+    insert_offset: tuple[float, float, float] = (0.0, -0.022, 0.0)
+    pitch: float = 0.3
+    weight: float = 100.0
+    switch_position: float = 0.015
+    switch_angle: float = 0.15
+    posture: tuple[float, ...] | None = None
+    posture_weight: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "pregrasp_offset", _xyz("approach.pregrasp_offset", self.pregrasp_offset))
+        object.__setattr__(self, "insert_offset", _xyz("approach.insert_offset", self.insert_offset))
+        object.__setattr__(self, "pitch", _finite("approach.pitch", self.pitch))
+        for name in ("weight", "switch_position", "switch_angle", "posture_weight"):
+            object.__setattr__(self, name, as_non_negative(f"approach.{name}", getattr(self, name)))
+        if self.posture is not None:
+            object.__setattr__(self, "posture", tuple(as_float_array("approach.posture", self.posture, (None,)).tolist()))
+
+
+@dataclass(frozen=True)
+class HookConfig:
+    """Sliding the bar into the finger's pocket (phase hook, and the end of inserting).
+
+    Attributes:
+        offset: grasp-frame target while hooking, in the handle frame (m): the bar in the pocket.
+        tolerance: distance (m) across the bar to the target that ends hooking.
+        insert_depth_tolerance: distance (m) from the insert target's depth within which inserting
+            may end; None: no depth test.
+        backout: how far (m) short of the hook target's depth the grasp frame may back out while
+            hooking an opened, unmoving object before the task starts over; None: never.
+        along_tolerance: distance (m) along the bar from the target allowed when inserting and hooking.
+        drag_speed: handle speed (m/s) that counts as the finger already pulling while inserting or
+            hooking (see :meth:`OpenObject.pulling`); 0: off.
+        drag_distance: distance (m) of the handle from closed below which pulling never counts.
+
+    Raises:
+        InvalidValueError: a negative or non-finite tolerance, speed or distance.
+    """
+
+    offset: tuple[float, float, float] = (0.0, 0.003, 0.0)
+    tolerance: float = 0.006
+    insert_depth_tolerance: float | None = 0.005
+    backout: float | None = 0.010
+    along_tolerance: float = 0.03
+    drag_speed: float = 0.02
+    drag_distance: float = 0.03
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "offset", _xyz("hook.offset", self.offset))
+        for name in ("tolerance", "along_tolerance", "drag_speed", "drag_distance"):
+            object.__setattr__(self, name, as_non_negative(f"hook.{name}", getattr(self, name)))
+        for name in ("insert_depth_tolerance", "backout"):
+            object.__setattr__(self, name, _optional_non_negative(f"hook.{name}", getattr(self, name)))
+
+
+@dataclass(frozen=True)
+class OpenConfig:
+    """Pulling the object open (phase open) and the success test.
+
+    Attributes:
+        offset: grasp-frame target while opening, in the handle frame (m): in the pocket, pulled
+            out from the bar.
+        pose_weights: pose weights (x along the bar, y sideways, z into the door, then rotation
+            about x, y, z).
+        lead: the pose target sits this far (rad or m of opening) ahead of the object's opening.
+        object_weight: weight W_o of the object cost (34).
+        object_overshoot: o* lies this far (rad or m) beyond the target opening; None: from the
+            power balance (:meth:`OpenObject.object_setpoint`).
+        speeds: handle speeds (m/s) of the guides that follow the handle along its path; empty: none.
+        slip_distance: distance (m) of the grasp frame from its target beyond which the bar has
+            left the pocket.
+        slip_lateral: sideways offset (m) from the target beyond which the bar has left the pocket.
+        success_fraction: success once the opening reaches this share of the target, in (0, 1].
+        gain_inertia_floor: the low-level controller's gain inertia floor (kg m²) while opening
+            (see :class:`sabre.LowLevelController`); None: the controller's own.
+
+    Raises:
+        InvalidValueError: a negative weight, speed or bound, a non-finite lead or overshoot, a
+            success fraction outside (0, 1].
+    """
+
+    offset: tuple[float, float, float] = (0.0, 0.003, -0.016)
+    pose_weights: tuple[float, float, float, float, float, float] = (100.0, 10000.0, 1000.0, 1000.0, 1000.0, 1000.0)
+    lead: float = 0.0
+    object_weight: float = 100.0
+    object_overshoot: float | None = None
+    speeds: tuple[float, ...] = (0.1, 0.05)
+    slip_distance: float = 0.05
+    slip_lateral: float = 0.01
+    success_fraction: float = 0.9
+    gain_inertia_floor: float | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "offset", _xyz("open.offset", self.offset))
+        weights = as_float_array("open.pose_weights", self.pose_weights, (6,))
+        if np.any(weights < 0.0):
+            raise InvalidValueError(f"open.pose_weights must be non-negative, got {self.pose_weights}")
+        object.__setattr__(self, "pose_weights", tuple(weights.tolist()))
+        object.__setattr__(self, "lead", _finite("open.lead", self.lead))
+        if self.object_overshoot is not None:
+            object.__setattr__(self, "object_overshoot", _finite("open.object_overshoot", self.object_overshoot))
+        speeds = tuple(as_non_negative("open.speeds", s) for s in self.speeds)
+        object.__setattr__(self, "speeds", speeds)
+        for name in ("object_weight", "slip_distance", "slip_lateral"):
+            object.__setattr__(self, name, as_non_negative(f"open.{name}", getattr(self, name)))
+        object.__setattr__(self, "gain_inertia_floor", _optional_non_negative("open.gain_inertia_floor", self.gain_inertia_floor))
+        if not 0.0 < self.success_fraction <= 1.0:
+            raise InvalidValueError(f"open.success_fraction must be in (0, 1], got {self.success_fraction}")
+
+
+@dataclass(frozen=True)
+class ReleaseConfig:
+    """Letting go of an object that opens by itself (phase release).
+
+    Attributes:
+        speed: speed (m/s) at which the hand backs off; 0: no release guide.
+        distance: how far (m) it backs off.
+        rate: opening rate (rad/s or m/s) that counts as opening by itself ...
+        probe: ... within this many seconds of the object left alone (s, > 0).
+        runaway_speed: handle speed (m/s) above which the object is taken to open by itself while
+            the bar is out of the pocket (:meth:`OpenObject.running_ahead`).
+
+    Raises:
+        InvalidValueError: a negative speed, distance or rate, a non-positive probe.
+    """
+
+    speed: float = 0.4
+    distance: float = 0.3
+    rate: float = 0.05
+    probe: float = 0.15
+    runaway_speed: float = 0.15
+
+    def __post_init__(self) -> None:
+        for name in ("speed", "distance", "rate", "runaway_speed"):
+            object.__setattr__(self, name, as_non_negative(f"release.{name}", getattr(self, name)))
+        object.__setattr__(self, "probe", as_positive("release.probe", self.probe))
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    """The sampling-noise schedule (:meth:`OpenObject.noise_scale`): while reaching, Σ is scaled
+    by (d / distance)², clipped to [floor, 1], with d the grasp frame's distance (m) to the phase's
+    target; opening and releasing use ``open``.
+
+    Raises:
+        InvalidValueError: a non-positive distance, a negative floor or open scale.
+    """
+
+    distance: float = 0.5
+    floor: float = 1e-3
+    open: float = 0.01
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "distance", as_positive("noise.distance", self.distance))
+        for name in ("floor", "open"):
+            object.__setattr__(self, name, as_non_negative(f"noise.{name}", getattr(self, name)))
+
+
+@dataclass(frozen=True)
+class GuideConfig:
+    """Reaching guides (:meth:`OpenObject.guides`): a pose servo toward the phase's target.
+
+    Attributes:
+        speed: linear speed cap (m/s) while approaching; 0 turns the reaching guides off.
+        fine_speed: linear speed cap (m/s) while inserting and hooking.
+        gain: servo gain (1/s) of every guide.
+
+    Raises:
+        InvalidValueError: a negative speed or gain.
+    """
+
+    speed: float = 0.3
+    fine_speed: float = 0.05
+    gain: float = 2.0
+
+    def __post_init__(self) -> None:
+        for name in ("speed", "fine_speed", "gain"):
+            object.__setattr__(self, name, as_non_negative(f"guide.{name}", getattr(self, name)))
+
+
 @dataclass
 class OpenObject(Task):
-    """Open the scene's object to ``opening`` (rad or m; default 75 % of its range).
+    """Open the scene's object to ``opening`` (rad or m; None: 75 % of its range).
 
     The two phases of the paper (reach the handle, then open) with the reaching split into the
-    moves a hook finger needs:
+    moves a hook finger needs, each set up by its own config (the rationale of every default is
+    in docs/design.md, "OpenObject: phases and their settings"):
 
-    - approach: drive the ``grasp`` frame to a pre-grasp pose 7 cm in front of the handle
-      (``handle_frame``) and beside the bar, touching nothing (contact cost on);
-    - insert: move in until the finger is beside the bar with its tip past it (touching is no
-      longer penalised: with the sampling noise, every move that close to the handle brushes it);
-    - hook: slide sideways so the bar sits in the finger's pocket, behind the tip;
-    - open: the pose target sits in the pocket, 1.6 cm out from the bar (the pull), and follows the
-      handle as the object moves; the object cost pulls toward the target opening. The pose weight
-      is low along the bar and toward the door (the hand may slide along the handle and take up
-      slack) and high sideways (the bar must stay in the pocket).
+    - approach (:class:`ApproachConfig`): drive the ``grasp`` frame to a pre-grasp pose in front
+      of the handle (``handle_frame``) and beside the bar, touching nothing (contact cost on);
+    - insert (:class:`ApproachConfig`, :class:`HookConfig`): move in until the finger is beside
+      the bar with its tip past it;
+    - hook (:class:`HookConfig`): slide sideways so the bar sits in the finger's pocket;
+    - open (:class:`OpenConfig`): the pose target sits in the pocket, pulled out from the bar,
+      and follows the handle as the object moves; the object cost (34) pulls toward the target;
+    - release (:class:`ReleaseConfig`): an object that opens by itself once free is let go.
 
-    Switches happen when the grasp frame is within ``switch_position`` (m) and ``switch_angle``
-    (rad) of the current phase's target (twice that for the approach, ``hook_tolerance`` for the
-    hook; for inserting and hooking only the distance across the bar counts, and along the bar
-    ``along_tolerance``; inserting also ends only within ``insert_depth_tolerance`` of the
-    target's depth, so the tip is behind the bar before it slides sideways; a finger that backs out
-    more than ``hook_backout`` while hooking an opened object, and does not move the handle,
-    starts over from the approach). A handle the finger already drags open while inserting or
-    hooking (``pulling``) also switches to opening. If the bar leaves the pocket while opening (the
-    grasp frame more than ``slip_distance`` from its target), the task starts over from the
-    approach.
-    Success: opening ≥ 90 % of the target.
+    ``noise`` (:class:`NoiseConfig`) shapes the sampling covariance per phase and ``guide``
+    (:class:`GuideConfig`) the reaching guides. ``horizon`` (s) is the controller's horizon T,
+    used by the power balance of :meth:`object_setpoint`; ``contact_weight`` weighs the contact
+    cost (30) while approaching and releasing; ``safety`` the terms every phase carries; ``extra``
+    is added to every phase's cost. Success: opening ≥ ``open.success_fraction`` of the target.
+
+    Example: ``OpenObject(hook=HookConfig(backout=None))`` never restarts a backed-out hook.
+
+    Raises:
+        InvalidValueError: a non-finite opening, a non-positive horizon, a negative contact weight.
+        TypeError: a group of the wrong type.
     """
 
     opening: float | None = None
-    approach_weight: float = 100.0
-    #: open-phase pose weights (x along the bar, y sideways, z into the door, then rotation).
-    open_pose_weights: tuple[float, float, float, float, float, float] = (100.0, 10000.0, 1000.0, 1000.0, 1000.0, 1000.0)
-    #: while opening, the pose target sits on the handle this far (rad or m) ahead of the object's
-    #: current opening, so the hand is led along the opening path (0: the handle as it is).
-    open_lead: float = 0.0
-    object_weight: float = 100.0
-    #: o* of the object cost lies this far (rad or m) beyond ``opening``; None: from the power
-    #: balance (see :meth:`object_setpoint`), with ``horizon`` the controller's horizon T (s).
-    object_overshoot: float | None = None
     horizon: float = 1.0
     contact_weight: float = 100.0
+    approach: ApproachConfig = field(default_factory=ApproachConfig)
+    hook: HookConfig = field(default_factory=HookConfig)
+    open: OpenConfig = field(default_factory=OpenConfig)
+    release: ReleaseConfig = field(default_factory=ReleaseConfig)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+    guide: GuideConfig = field(default_factory=GuideConfig)
     safety: SafetyWeights = field(default_factory=SafetyWeights)
-    #: grasp pose in the handle frame while approaching (in front of and beside the bar), inserting
-    #: (beside the bar, tip past it), hooking (bar in the pocket) and opening (pulling on the bar).
-    pregrasp_offset: tuple[float, float, float] = (0.0, -0.022, -0.07)
-    approach_offset: tuple[float, float, float] = (0.0, -0.022, 0.0)
-    #: (the bar sits 3 mm toward the finger from the grasp frame: the pocket's middle, clear of the
-    #: tip's open end.)
-    hook_offset: tuple[float, float, float] = (0.0, 0.003, 0.0)
-    open_offset: tuple[float, float, float] = (0.0, 0.003, -0.016)
-    #: the hand points this much (rad) below the handle's normal, tilted about the handle's horizontal
-    #: axis: a Panda reaches a forward-and-down hand at handle height with margin on its wrist joint,
-    #: a level one only at its wrist limit; the hook still closes around the bar.
-    approach_pitch: float = 0.3
-    switch_position: float = 0.015
-    switch_angle: float = 0.15
-    hook_tolerance: float = 0.006
-    #: how far (m) from the insert target's depth (handle frame z, toward the door) the grasp frame
-    #: may be when inserting ends. The hook phase slides the finger sideways, and its tip must pass
-    #: behind the bar to do so: at 5 mm short, the tip's nearest corner clears the bar's back face by
-    #: about 4.5 mm at the default pitch; at 14 mm short (which ``switch_position`` alone lets
-    #: through) it sits level with the bar, and sliding sideways drives the tip's corner into it.
-    #: Seen on the stuck door: hooking again under a held door, a finger that jammed this way pulled
-    #: the tank down to its floor and never hooked. None: no depth test (the earlier behaviour).
-    insert_depth_tolerance: float | None = 0.005
-    #: how far (m) short of the hook target's depth the grasp frame may back out while hooking
-    #: before the task starts over from the approach, if the object was already opened and the
-    #: handle does not move (see ``backed_out``). About 10 mm short the tip's nearest corner reaches
-    #: the bar's back face: the finger can no longer pass behind the bar, and the tip's edge catches
-    #: on it instead. Seen on the stuck door: hooking under a held door, the hand drifted back while
-    #: it slid, and the planner (whose model lets the door open) pulled on that catch until the tank
-    #: was spent, then the finger went round to the wrong side of the bar. None: never (the earlier
-    #: behaviour).
-    hook_backout: float | None = 0.010
-    #: how far (m) along the bar the grasp frame may be from its target when inserting and hooking
-    along_tolerance: float = 0.03
-    slip_distance: float = 0.05
-    #: handle speed (m/s, opening direction) that, with the grasp frame within the slip bounds,
-    #: counts as the finger already pulling while inserting or hooking (see ``pulling``); 0: off.
-    drag_speed: float = 0.02
-    #: distance (m) of the handle from closed below which ``pulling`` never fires: a door that
-    #: falls open once moved (a dishwasher) is found opening by itself first and released instead.
-    drag_distance: float = 0.03
-    slip_lateral: float = 0.01
-    success_fraction: float = 0.9
-    #: optional preferred arm posture while approaching (joint targets; None: a Panda posture that
-    #: holds a hand level with a handle) and its weight per rad² (0: off).
-    posture: Sequence[float] | None = None
-    posture_weight: float = 0.0
-    #: noise schedule: while reaching, Σ is scaled by (d / noise_distance)², clipped to
-    #: [noise_floor, 1], where d is the grasp frame's distance to the phase's target; opening uses
-    #: noise_open (the hand must travel far, but stay hooked).
-    noise_distance: float = 0.5
-    noise_floor: float = 1e-3
-    noise_open: float = 0.01
-    #: guides (see ``Task.guides``): a pose servo toward the phase's target, capped at
-    #: ``guide_speed`` (m/s) while approaching and ``guide_fine_speed`` when inserting and hooking;
-    #: while opening, servos that follow the handle along its path at each of ``open_speeds``
-    #: (m/s of the handle). Empty ``open_speeds`` and ``guide_speed = 0`` turn guides off.
-    guide_speed: float = 0.3
-    guide_fine_speed: float = 0.05
-    guide_gain: float = 2.0
-    open_speeds: tuple[float, ...] = (0.1, 0.05)
-    #: handle speed (m/s) above which the object is taken to open by itself (see running_ahead)
-    runaway_speed: float = 0.15
-    #: An object that opens by itself once free (see ``self_opening``) and is not held by the hook
-    #: is let go: the "release" phase backs the hand off at ``release_speed`` (m/s), up to
-    #: ``release_distance`` (m), away from the door and out of its sweep (``release_direction``),
-    #: with the object and contact costs.
-    release_speed: float = 0.4
-    release_distance: float = 0.3
-    #: opening rate (rad/s or m/s) that counts as opening by itself, within ``release_probe`` s
-    release_rate: float = 0.05
-    release_probe: float = 0.15
-    #: gain inertia floor (kg m²) of the low-level controller while opening (see
-    #: ``gain_inertia_floor`` and :class:`sabre.LowLevelController`), e.g. 0.03: pulling hard on a
-    #: held door, the hand's own joint (0.007 kg m²) then no longer lets the finger twist off the
-    #: bar, while hooking stays compliant so the finger yields around the bar. None (default): the
-    #: controller's own. Measured on the stuck door before ``insert_depth_tolerance`` existed
-    #: (README, Scenarios), 0.03 did not make more doors open after release over 20 seeds (14 of 17
-    #: held, against 14 of 19 held without); not re-measured since.
-    open_gain_inertia_floor: float | None = None
     extra: costs.Cost = field(default_factory=costs.Cost)
 
     phases = ("approach", "insert", "hook", "open", "release")
 
     def __post_init__(self) -> None:
-        for name in ("approach_weight", "object_weight", "contact_weight", "switch_position", "switch_angle",
-                     "hook_tolerance", "along_tolerance", "slip_distance", "slip_lateral", "drag_speed", "drag_distance",
-                     "posture_weight", "noise_floor", "noise_open", "guide_speed", "guide_fine_speed",
-                     "guide_gain", "runaway_speed", "release_speed", "release_distance", "release_rate"):
-            setattr(self, name, as_non_negative(name, getattr(self, name)))
-        for name in ("open_gain_inertia_floor", "insert_depth_tolerance", "hook_backout"):
-            if getattr(self, name) is not None:
-                setattr(self, name, as_non_negative(name, getattr(self, name)))
-        for name in ("horizon", "noise_distance", "release_probe"):
-            setattr(self, name, as_positive(name, getattr(self, name)))
-        for name in ("opening", "object_overshoot", "open_lead", "approach_pitch"):
-            value = getattr(self, name)
-            if value is not None and not np.isfinite(value):
-                raise InvalidValueError(f"{name} must be finite, got {value}")
-        if not 0.0 < self.success_fraction <= 1.0:
-            raise InvalidValueError(f"success_fraction must be in (0, 1], got {self.success_fraction}")
+        for name, kind in (("approach", ApproachConfig), ("hook", HookConfig), ("open", OpenConfig),
+                           ("release", ReleaseConfig), ("noise", NoiseConfig), ("guide", GuideConfig),
+                           ("safety", SafetyWeights)):
+            if not isinstance(getattr(self, name), kind):
+                raise TypeError(f"{name} must be a sabre.tasks.{kind.__name__}, got {type(getattr(self, name)).__name__}")
+        self.contact_weight = as_non_negative("contact_weight", self.contact_weight)
+        self.horizon = as_positive("horizon", self.horizon)
+        if self.opening is not None:
+            self.opening = _finite("opening", self.opening)
 
     def posture_term(self, scene: Scene) -> costs.Cost:
+        """The posture cost of the approach (empty when ``approach.posture_weight`` is 0)."""
         names = scene.joint_names
-        if self.posture_weight <= 0.0:
+        if self.approach.posture_weight <= 0.0:
             return costs.Cost()
-        if self.posture is not None:
-            target = np.asarray(self.posture, dtype=float)
-            weights = np.where(np.arange(scene.nq) < 3, 0.0, self.posture_weight)
+        if self.approach.posture is not None:
+            target = np.asarray(self.approach.posture, dtype=float)
+            weights = np.where(np.arange(scene.nq) < 3, 0.0, self.approach.posture_weight)
         elif all(f"panda_joint{i}" in names for i in (2, 4, 6)):
             target = np.zeros(scene.nq)
             weights = np.zeros(scene.nq)
             for joint, value in (("panda_joint2", 1.0), ("panda_joint4", -1.2), ("panda_joint6", 2.9)):
                 i = names.index(joint)
-                target[i], weights[i] = value, self.posture_weight
+                target[i], weights[i] = value, self.approach.posture_weight
         else:
             return costs.Cost()
         return costs.Cost([costs.Posture(target, weights)])
 
     def lead(self, scene: Scene) -> float:
-        return float(self.open_lead)
+        """How far ahead (rad or m) of the opening the open-phase pose target sits."""
+        return float(self.open.lead)
 
     def target_opening(self, scene: Scene) -> float:
+        """The opening to reach (rad or m): ``opening``, or 75 % of the range."""
         if self.opening is not None:
             return float(self.opening)
         return float(scene.o_lower[0] + 0.75 * (scene.o_upper[0] - scene.o_lower[0]))
@@ -311,7 +464,7 @@ class OpenObject(Task):
         return float(np.linalg.norm(moved) / max(hi - lo, 1e-12))
 
     def object_setpoint(self, scene: Scene) -> float:
-        """o* of the object cost (34): ``opening`` plus ``object_overshoot``.
+        """o* of the object cost (34): ``opening`` plus ``open.object_overshoot``.
 
         The power cost (36) charges w_p·τ_r·ȯ per step for moving the object against its
         resisting torque τ_r (friction, damping), and over a horizon T the object cost's pull
@@ -321,21 +474,21 @@ class OpenObject(Task):
         so by default o* lies twice that gap beyond it (the object ends up a gap past the
         opening, or at its limit).
         """
-        if self.object_overshoot is not None:
-            return self.target_opening(scene) + float(self.object_overshoot)
-        speed = self.open_speeds[0] if self.open_speeds else 0.1
+        if self.open.object_overshoot is not None:
+            return self.target_opening(scene) + float(self.open.object_overshoot)
+        speed = self.open.speeds[0] if self.open.speeds else 0.1
         rate = speed / max(self.handle_travel(scene, float(scene.o_lower[0])), 1e-6)
         resisting = float(scene.object_friction[0] + scene.object_damping[0] * rate)
-        gap = self.safety.power * resisting / (max(self.object_weight, 1e-12) * self.horizon)
+        gap = self.safety.power * resisting / (max(self.open.object_weight, 1e-12) * self.horizon)
         return self.target_opening(scene) + 2.0 * gap
 
     def grasp_offset(self, scene: Scene, phase: str) -> np.ndarray:
         """Pose of the grasp target in the handle frame for `phase`."""
-        xyz = {"approach": self.pregrasp_offset, "insert": self.approach_offset, "hook": self.hook_offset}.get(phase, self.open_offset)
+        xyz = {"approach": self.approach.pregrasp_offset, "insert": self.approach.insert_offset, "hook": self.hook.offset}.get(phase, self.open.offset)
         closed = scene.object_fk(scene.o_lower, "handle_frame")
         # Tilt about whichever handle axis (x or y) is horizontal, so that z points downward.
         axis = 0 if abs(closed[2, 0]) < abs(closed[2, 1]) else 1
-        angle = self.approach_pitch
+        angle = self.approach.pitch
         c, s_ = np.cos(angle), np.sin(angle)
         rot = np.eye(3)
         if axis == 0:
@@ -352,45 +505,45 @@ class OpenObject(Task):
     def cost(self, scene: Scene, phase: str) -> costs.Cost:
         if phase == "release":
             return (
-                costs.ObjectState([self.object_setpoint(scene)], self.object_weight)
+                costs.ObjectState([self.object_setpoint(scene)], self.open.object_weight)
                 + costs.Contact(self.contact_weight)
                 + self.safety.terms(scene)
                 + self.extra
             )
         if phase in ("approach", "insert", "hook"):
             return (
-                costs.TargetPose(self.grasp_offset(scene, phase), "grasp", "handle_frame", self.approach_weight, self.approach_weight)
+                costs.TargetPose(self.grasp_offset(scene, phase), "grasp", "handle_frame", self.approach.weight, self.approach.weight)
                 + (costs.Contact(self.contact_weight) + self.posture_term(scene) if phase == "approach" else costs.Cost())
                 # Also before the hook holds: a door that can open by itself (a dishwasher past its
                 # balance point, resting on the hand after a slip) should be let go, not held.
-                + costs.ObjectState([self.object_setpoint(scene)], self.object_weight)
+                + costs.ObjectState([self.object_setpoint(scene)], self.open.object_weight)
                 + self.safety.terms(scene)
                 + self.extra
             )
         return (
-            costs.TargetPose(self.grasp_offset(scene, phase), "grasp", "handle_frame", weights=tuple(self.open_pose_weights),
+            costs.TargetPose(self.grasp_offset(scene, phase), "grasp", "handle_frame", weights=tuple(self.open.pose_weights),
                              lead=self.lead(scene), lead_limit=self.target_opening(scene))
-            + costs.ObjectState([self.object_setpoint(scene)], self.object_weight)
+            + costs.ObjectState([self.object_setpoint(scene)], self.open.object_weight)
             + self.safety.terms(scene)
             + self.extra
         )
 
-    def approach_error(self, scene: Scene, x: np.ndarray, phase: str = "insert") -> tuple[float, float]:
-        """Distance (m) and angle (rad) of the grasp frame from the target of `phase`."""
+    def approach_error(self, scene: Scene, x: np.ndarray, phase: str = "insert") -> GraspError:
+        """Distance (m) and angle (rad) of the grasp frame from the target of `phase` at state x (nx,)."""
         nq, no = scene.nq, scene.no
         target = scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame") @ self.grasp_offset(scene, phase)
         pose = scene.fk(x[:nq], "grasp")
         dp = float(np.linalg.norm(pose[:3, 3] - target[:3, 3]))
         cos = (np.trace(target[:3, :3].T @ pose[:3, :3]) - 1.0) / 2.0
-        return dp, float(np.arccos(np.clip(cos, -1.0, 1.0)))
+        return GraspError(distance=dp, angle=float(np.arccos(np.clip(cos, -1.0, 1.0))))
 
-    def pocket_error(self, scene: Scene, x: np.ndarray, phase: str) -> tuple[float, float]:
+    def pocket_error(self, scene: Scene, x: np.ndarray, phase: str) -> PocketError:
         """(across, along) distance (m) of the grasp frame from the target of `phase`: across the
         bar (handle frame y and z) and along it (x). Sliding along the bar does not matter for
         hooking; only the position across it does."""
         handle, offset = self._grasp_from_target(scene, x, phase)
         e = handle[:3, :3].T @ offset
-        return float(np.hypot(e[1], e[2])), float(abs(e[0]))
+        return PocketError(across=float(np.hypot(e[1], e[2])), along=float(abs(e[0])))
 
     def depth_error(self, scene: Scene, x: np.ndarray, phase: str) -> float:
         """Signed distance (m) of the grasp frame from the target of `phase` along the handle
@@ -412,12 +565,12 @@ class OpenObject(Task):
         nq, no = scene.nq, scene.no
         handle = scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame")
         grasp = np.linalg.solve(handle, scene.fk(x[:nq], "grasp"))
-        return float(grasp[1, 3] - self.open_offset[1])
+        return float(grasp[1, 3] - self.open.offset[1])
 
     def self_opening(self, scene: Scene, x: np.ndarray) -> bool:
         """Whether the object, left alone, opens further by itself (a dishwasher door past its
-        balance point): the rollout model run for ``release_probe`` s from x with the robot at rest
-        and moved 5 m away from the object, checked against ``release_rate``."""
+        balance point): the rollout model run for ``release.probe`` s from x with the robot at rest
+        and moved 5 m away from the object, checked against ``release.rate``."""
         nq, no = scene.nq, scene.no
         if self.success(scene, x) or float(x[2 * nq]) >= scene.o_upper[0] - 1e-3:
             return False
@@ -427,9 +580,9 @@ class OpenObject(Task):
         norm = float(np.linalg.norm(away))
         free[:2] = scene.object_pose[:2, 3] + 5.0 * (away / norm if norm > 1e-9 else np.array([-1.0, 0.0]))
         free[nq : 2 * nq] = 0.0
-        steps = max(1, int(round(self.release_probe / model.dt)))
+        steps = max(1, int(round(self.release.probe / model.dt)))
         end = model.rollout(free, np.zeros((1, steps, scene.nu))).states[0, -1]
-        return float(end[2 * nq + no]) > self.release_rate
+        return float(end[2 * nq + no]) > self.release.rate
 
     def release_direction(self, scene: Scene, x: np.ndarray) -> np.ndarray:
         """(3,) unit direction in which the hand backs off when releasing: away from the door
@@ -458,9 +611,7 @@ class OpenObject(Task):
         way = back + radial / norm
         return way / float(np.linalg.norm(way))
 
-    def _probe_model(self, scene: Scene):
-        from .sim import RolloutModel
-
+    def _probe_model(self, scene: Scene) -> RolloutModel:
         cache = self.__dict__.setdefault("_probe_models", {})
         if id(scene) not in cache:
             cache.clear()
@@ -473,28 +624,30 @@ class OpenObject(Task):
         if phase in ("approach", "insert", "hook") and float(x[2 * scene.nq]) > 0.0 and self.self_opening(scene, x):
             return "release"
         if phase == "approach":
-            dp, angle = self.approach_error(scene, x, "approach")
-            if dp < 2.0 * self.switch_position and angle < self.switch_angle:
+            error = self.approach_error(scene, x, "approach")
+            if error.distance < 2.0 * self.approach.switch_position and error.angle < self.approach.switch_angle:
                 return "insert"
         if phase == "insert":
-            _, angle = self.approach_error(scene, x, "insert")
-            across, along = self.pocket_error(scene, x, "insert")
-            depth = self.insert_depth_tolerance
+            angle = self.approach_error(scene, x, "insert").angle
+            pocket = self.pocket_error(scene, x, "insert")
+            across, along = pocket.across, pocket.along
+            depth = self.hook.insert_depth_tolerance
             deep = depth is None or abs(self.depth_error(scene, x, "insert")) < depth
-            if across < self.switch_position and along < self.along_tolerance and angle < self.switch_angle and deep:
+            if across < self.approach.switch_position and along < self.hook.along_tolerance and angle < self.approach.switch_angle and deep:
                 return "hook"
         if phase == "hook":
-            _, angle = self.approach_error(scene, x, "hook")
-            across, along = self.pocket_error(scene, x, "hook")
-            if across < self.hook_tolerance and along < self.along_tolerance and angle < self.switch_angle:
+            angle = self.approach_error(scene, x, "hook").angle
+            pocket = self.pocket_error(scene, x, "hook")
+            across, along = pocket.across, pocket.along
+            if across < self.hook.tolerance and along < self.hook.along_tolerance and angle < self.approach.switch_angle:
                 return "open"
         if phase in ("insert", "hook") and self.pulling(scene, x):
             return "open"
         if phase == "hook" and self.backed_out(scene, x):
             return "approach"
         if phase == "open" and not self.success(scene, x):
-            dp, _ = self.approach_error(scene, x, "open")
-            if dp > self.slip_distance or abs(self.lateral_error(scene, x)) > self.slip_lateral:
+            dp = self.approach_error(scene, x, "open").distance
+            if dp > self.open.slip_distance or abs(self.lateral_error(scene, x)) > self.open.slip_lateral:
                 if self.self_opening(scene, x):
                     return "release"
                 if not self.running_ahead(scene, x):
@@ -505,28 +658,28 @@ class OpenObject(Task):
         nq, no = scene.nq, scene.no
         q, o = x[:nq], x[2 * nq : 2 * nq + no]
         if phase == "release":
-            if self.release_speed <= 0.0:
+            if self.release.speed <= 0.0:
                 return None
             pose = scene.fk(q, "grasp")
             way = self.release_direction(scene, x)
-            back = np.minimum(self.release_speed * dt * np.arange(steps + 1), self.release_distance)
+            back = np.minimum(self.release.speed * dt * np.arange(steps + 1), self.release.distance)
             targets = np.repeat(pose[None], steps + 1, axis=0)
             targets[:, :3, 3] += back[:, None] * way
-            return servo_guide(scene, q, targets, dt, gain=self.guide_gain, max_linear=2.0 * self.release_speed, max_angular=1.0)[None]
+            return servo_guide(scene, q, targets, dt, gain=self.guide.gain, max_linear=2.0 * self.release.speed, max_angular=1.0)[None]
         offset = self.grasp_offset(scene, phase)
         if phase != "open":
-            if self.guide_speed <= 0.0:
+            if self.guide.speed <= 0.0:
                 return None
             target = scene.object_fk(o, "handle_frame") @ offset
-            speed = self.guide_speed if phase == "approach" else self.guide_fine_speed
+            speed = self.guide.speed if phase == "approach" else self.guide.fine_speed
             targets = np.broadcast_to(target, (steps + 1, 4, 4))
-            return servo_guide(scene, q, targets, dt, gain=self.guide_gain, max_linear=speed, max_angular=4.0 * speed)[None]
-        if not self.open_speeds:
+            return servo_guide(scene, q, targets, dt, gain=self.guide.gain, max_linear=speed, max_angular=4.0 * speed)[None]
+        if not self.open.speeds:
             return None
         travel = self.handle_travel(scene, float(o[0]))
         end = min(self.object_setpoint(scene), scene.o_upper[0])
         out = []
-        speeds = list(self.open_speeds)
+        speeds = list(self.open.speeds)
         own = float(x[2 * nq + no]) * travel
         if own > max(speeds):
             speeds.insert(0, own)  # follow the object at its own pace
@@ -534,40 +687,40 @@ class OpenObject(Task):
             rate = speed / max(travel, 1e-6)
             openings = np.minimum(o[0] + rate * dt * np.arange(steps + 1), max(end, o[0]))
             targets = scene.object_fk_many(openings[:, None], "handle_frame") @ offset
-            out.append(servo_guide(scene, q, targets, dt, gain=self.guide_gain, max_linear=2.0 * speed + 0.05, max_angular=2.0))
+            out.append(servo_guide(scene, q, targets, dt, gain=self.guide.gain, max_linear=2.0 * speed + 0.05, max_angular=2.0))
         return np.stack(out)
 
     def gain_inertia_floor(self, phase: str) -> float | None:
-        return self.open_gain_inertia_floor if phase == "open" else None
+        return self.open.gain_inertia_floor if phase == "open" else None
 
     def pulling(self, scene: Scene, x: np.ndarray) -> bool:
         """Whether the finger already pulls the object open before the hook test passed: the
-        handle opens faster than ``drag_speed`` (m/s) while the grasp frame is within the open
+        handle opens faster than ``hook.drag_speed`` (m/s) while the grasp frame is within the open
         phase's slip bounds (the bar sits in the pocket, just not where the hook target put it),
-        and the handle is at least ``drag_distance`` (m) from closed. An object that opens by
+        and the handle is at least ``hook.drag_distance`` (m) from closed. An object that opens by
         itself is caught by ``self_opening`` first."""
-        if self.drag_speed <= 0.0:
+        if self.hook.drag_speed <= 0.0:
             return False
-        if self.handle_from_closed(scene, x) < self.drag_distance:
+        if self.handle_from_closed(scene, x) < self.hook.drag_distance:
             return False
-        if self.handle_speed(scene, x) <= self.drag_speed:
+        if self.handle_speed(scene, x) <= self.hook.drag_speed:
             return False
-        dp, _ = self.approach_error(scene, x, "open")
-        return dp <= self.slip_distance and abs(self.lateral_error(scene, x)) <= self.slip_lateral
+        dp = self.approach_error(scene, x, "open").distance
+        return dp <= self.open.slip_distance and abs(self.lateral_error(scene, x)) <= self.open.slip_lateral
 
     def backed_out(self, scene: Scene, x: np.ndarray) -> bool:
         """Whether the finger, hooking an object already opened, has backed out in front of the bar
-        without moving it: the grasp frame more than ``hook_backout`` (m) short of the hook target's
-        depth, the handle at least ``drag_distance`` (m) from closed (as for ``pulling``) and opening
-        no faster than ``drag_speed`` (m/s). A finger that catches the bar with its tip often drags
+        without moving it: the grasp frame more than ``hook.backout`` (m) short of the hook target's
+        depth, the handle at least ``hook.drag_distance`` (m) from closed (as for ``pulling``) and opening
+        no faster than ``hook.drag_speed`` (m/s). A finger that catches the bar with its tip often drags
         a free door open that way until the bar slides into the pocket (``pulling``), and on a closed
         door that is how the drag starts; a door that was opened and does not move now (held, or
         stuck) only takes the tank's energy for the catch."""
-        if self.hook_backout is None or self.depth_error(scene, x, "hook") >= -self.hook_backout:
+        if self.hook.backout is None or self.depth_error(scene, x, "hook") >= -self.hook.backout:
             return False
-        if self.handle_from_closed(scene, x) < self.drag_distance:
+        if self.handle_from_closed(scene, x) < self.hook.drag_distance:
             return False
-        return self.handle_speed(scene, x) <= self.drag_speed
+        return self.handle_speed(scene, x) <= self.hook.drag_speed
 
     def handle_speed(self, scene: Scene, x: np.ndarray) -> float:
         """Speed (m/s) of the handle in the opening direction (negative while closing)."""
@@ -581,19 +734,20 @@ class OpenObject(Task):
         return float(np.linalg.norm(scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame")[:3, 3] - closed))
 
     def running_ahead(self, scene: Scene, x: np.ndarray) -> bool:
-        """Whether the object opens by itself faster than ``runaway_speed`` (m/s at the handle), as
+        """Whether the object opens by itself faster than ``release.runaway_speed`` (m/s at the handle), as
         a dishwasher door does past its balance point. The hand then rides along (its finger sits
         in the door's path) instead of starting over from the approach."""
-        return self.handle_speed(scene, x) > self.runaway_speed
+        return self.handle_speed(scene, x) > self.release.runaway_speed
 
     def noise_scale(self, scene: Scene, x: np.ndarray, phase: str) -> float:
         if phase in ("open", "release"):
-            return self.noise_open
-        d, _ = self.approach_error(scene, x, phase)
-        return float(np.clip((d / self.noise_distance) ** 2, self.noise_floor, 1.0))
+            return self.noise.open
+        d = self.approach_error(scene, x, phase).distance
+        return float(np.clip((d / self.noise.distance) ** 2, self.noise.floor, 1.0))
 
     def opening_of(self, scene: Scene, x: np.ndarray) -> float:
+        """The object's opening (rad or m) at state x."""
         return float(x[2 * scene.nq])
 
     def success(self, scene: Scene, x: np.ndarray) -> bool:
-        return self.opening_of(scene, x) >= self.success_fraction * self.target_opening(scene)
+        return self.opening_of(scene, x) >= self.open.success_fraction * self.target_opening(scene)
