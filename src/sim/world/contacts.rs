@@ -185,4 +185,32 @@ mod tests {
             assert!((tau[j] - expected[j]).abs() < 1e-9 * expected[j].abs().max(1.0), "joint {j}: {tau:?} vs {expected:?}");
         }
     }
+
+    #[test]
+    fn object_takes_the_opposite_of_the_force_on_the_robot() {
+        // Newton's third law seen from the drawer: its momentum changes by the force that the
+        // contacts put on it, −Σ f (f on the robot), less its 0.5 N dry friction while it slides.
+        let scene = probe_and_drawer();
+        let x0 = state([0.62, 0.3], [0.3, 0.0], 0.0, 0.0);
+        let mut world = world_at(&scene, &servo_config(0.0, false), &x0);
+        let (mut x, mut engine) = (x0.clone(), x0.clone());
+        let mass = 2.0;
+        let mut pushed = 0;
+        for _ in 0..12 {
+            world.read_state(&mut engine);
+            let before = engine[5];
+            world.step_once(&[0.3, 0.2], &mut x);
+            world.read_state(&mut engine);
+            let force_on_robot: Vector3<f64> = world.contacts().iter().map(|c| Vector3::from(c.force)).sum();
+            if force_on_robot.norm() == 0.0 {
+                continue;
+            }
+            pushed += 1;
+            assert!(engine[5] > 0.0, "the drawer slides open");
+            let momentum_rate = mass * (engine[5] - before) / world.dt();
+            let expected = -force_on_robot.x - 0.5;
+            assert!((momentum_rate - expected).abs() < 1e-6 * expected.abs().max(1.0), "{momentum_rate} vs {expected}");
+        }
+        assert!(pushed >= 10, "pushed in {pushed} steps");
+    }
 }

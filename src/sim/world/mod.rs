@@ -237,3 +237,36 @@ fn vec_from_rapier(v: Vector) -> Vector3<f64> {
 fn pose_to_rapier(iso: &Isometry3<f64>) -> Pose {
     Pose::from(*iso)
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::sim::test_scene::{probe_and_drawer, servo_config, state, world_at};
+
+    #[test]
+    fn a_restored_world_repeats_a_fresh_one_bit_for_bit() {
+        let scene = probe_and_drawer();
+        let config = servo_config(400.0, true);
+        let x0 = state([0.62, 0.3], [0.3, 0.0], 0.0, 0.0);
+        let template = world_at(&scene, &config, &x0);
+        let run = |world: &mut super::SimWorld| {
+            let mut x = x0.clone();
+            (0..8)
+                .flat_map(|_| {
+                    world.step_once(&[0.3, 0.2], &mut x);
+                    x.iter().chain(&world.interaction().tau_ext).map(|v| v.to_bits()).collect::<Vec<_>>()
+                })
+                .collect::<Vec<_>>()
+        };
+        let mut fresh = template.clone();
+        let expected = run(&mut fresh);
+        // A world that has pushed the drawer elsewhere, restored and placed again.
+        let mut used = template.clone();
+        let mut x = x0.clone();
+        for _ in 0..20 {
+            used.step_once(&[1.0, -1.0], &mut x);
+        }
+        used.restore_from(&template);
+        used.set_state(&x0);
+        assert_eq!(run(&mut used), expected);
+    }
+}

@@ -134,3 +134,85 @@ impl SimWorld {
         )
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Mutex;
+
+    use nalgebra::Isometry3;
+
+    use crate::error::Result;
+    use crate::model::scene::Scene;
+    use crate::sim::evaluator::{StepEvaluator, StepView};
+    use crate::sim::test_scene::{probe_and_drawer, servo_config, state, world_at};
+
+    /// Records what it is shown: the arm's and the handle's poses, τ_ext and the contact flag.
+    struct Recorder {
+        seen: Mutex<Vec<(Isometry3<f64>, Isometry3<f64>, Vec<f64>, bool)>>,
+    }
+
+    impl StepEvaluator for Recorder {
+        fn validate(&self, _: &Scene) -> Result<()> {
+            Ok(())
+        }
+        fn needs_object_frames(&self) -> bool {
+            true
+        }
+        fn evaluate(&self, scene: &Scene, view: &StepView) -> f64 {
+            let arm = view.robot.poses[scene.robot.link_id("arm").unwrap()];
+            let handle = view.object.poses[scene.object.link_id("handle").unwrap()];
+            self.seen.lock().unwrap().push((arm, handle, view.tau_ext.to_vec(), view.contact));
+            1.5
+        }
+    }
+
+    #[test]
+    fn evaluator_sees_the_frames_and_interaction_of_the_step() {
+        let scene = probe_and_drawer();
+        let x0 = state([0.62, 0.3], [0.3, 0.0], 0.0, 0.0);
+        let mut world = world_at(&scene, &servo_config(0.0, false), &x0);
+        let recorder = Recorder { seen: Mutex::new(Vec::new()) };
+        let mut x = x0.clone();
+        let mut touched = false;
+        for _ in 0..6 {
+            world.step_once(&[0.3, 0.2], &mut x);
+            assert_eq!(world.evaluate_step(&recorder, &x, &[0.3, 0.2]), 1.5);
+            let (arm, handle, tau, contact) = recorder.seen.lock().unwrap().pop().unwrap();
+            let fk_arm = scene.fk(&x[..2], "arm").unwrap();
+            let fk_handle = scene.object_fk(&x[4..5], "handle").unwrap();
+            assert!((arm.to_homogeneous() - fk_arm.to_homogeneous()).norm() < 1e-12);
+            assert!((handle.to_homogeneous() - fk_handle.to_homogeneous()).norm() < 1e-12);
+            assert_eq!((tau, contact), (world.interaction().tau_ext.clone(), world.interaction().contact));
+            touched |= contact;
+        }
+        assert!(touched);
+    }
+
+    #[test]
+    fn step_once_reports_the_object_displacement_rate() {
+        let scene = probe_and_drawer();
+        let x0 = state([0.62, 0.3], [0.3, 0.0], 0.0, 0.0);
+        let mut world = world_at(&scene, &servo_config(0.0, false), &x0);
+        let mut x = x0.clone();
+        for _ in 0..6 {
+            let before = x[4];
+            world.step_once(&[0.3, 0.2], &mut x);
+            assert_eq!(x[5], (x[4] - before) / world.dt());
+        }
+        assert!(x[4] > 0.0, "the drawer was pushed open");
+    }
+
+    #[test]
+    fn engine_clock_counts_pipeline_steps_only() {
+        let scene = probe_and_drawer();
+        let far = state([-0.5, 0.0], [0.0, 0.0], 0.0, 0.0);
+        let mut x = far.clone();
+        let mut skipping = world_at(&scene, &servo_config(0.0, true), &far);
+        let mut stepping = world_at(&scene, &servo_config(0.0, false), &far);
+        for _ in 0..3 {
+            skipping.step_once(&[0.0, 0.0], &mut x);
+            stepping.step_once(&[0.0, 0.0], &mut x);
+        }
+        assert_eq!((skipping.engine_clock().steps, stepping.engine_clock().steps), (0, 3));
+    }
+}
