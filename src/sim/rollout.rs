@@ -42,8 +42,8 @@ impl Default for RolloutConfig {
             multibody_robot: false,
             skip_quiescent_steps: true,
             contact_friction: 0.2,
-            // One TGS substep suffices for a hook pulling a handle at 15 ms (the scripted openings
-            // of all four objects come out the same) and saves a sixth of the contact-step time.
+            // One TGS iteration holds a hooked handle at 15 ms steps; each further one adds to the
+            // cost of every contact step.
             solver_iterations: 1,
         }
     }

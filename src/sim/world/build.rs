@@ -400,11 +400,9 @@ impl SimWorld {
         let mut params = IntegrationParameters::default();
         params.dt = config.dt;
         params.num_solver_iterations = config.solver_iterations.max(1);
-        // Proxies are re-placed every step; recycled manifolds would keep contacts from the
-        // pose before the jump (seen as forces across centimetre gaps).
         // Recycled manifolds keep a contact's normal and separation while bodies move less than
-        // 5 cm: far too coarse for a 1 cm bar and a 16 mm hook (a finger passing beside the bar
-        // keeps "touching" it long after), and wrong for proxies that are re-placed every step.
+        // 5 cm: too coarse for a 1 cm bar and a 16 mm hook (a finger passing beside the bar would
+        // keep touching it), and wrong for proxies, which jump to a new pose every step.
         params.contact_recycling = false;
         if matches!(config.drive, RobotDrive::KinematicServo { .. }) {
             // Proxies re-enter a little of what they pushed every step; a stiffer, less damped contact

@@ -77,13 +77,12 @@ impl SimWorld {
     /// One step under the velocity command `u` (projected onto the velocity limits); writes the
     /// state after the step into `x` (nx). For the servo drives of the rollout model.
     ///
-    /// The object's velocity in `x` is the rate at which it moved over the step. With 15 ms steps
-    /// the proxies are placed a little inside what they push, and Rapier moves the object out by
-    /// position correction, a velocity it discards after the step; the joint's dry-friction row then
-    /// leaves a velocity of the wrong sign (a door pulled open at 0.18 rad/s read −0.07 rad/s, with 1
-    /// to 8 solver iterations alike; without dry friction the two agree). The engine keeps its own
-    /// velocity: writing the displacement rate back changes the contact dynamics (the door coasts
-    /// between steps) and with them the closed loop, whose plans were validated without it.
+    /// The object's velocity in `x` is the rate at which it moved over the step. The proxies are
+    /// placed a little inside what they push, and Rapier moves the object out by position
+    /// correction, a velocity it discards after the step, so the engine's own velocity of a pushed
+    /// object under dry friction can even have the wrong sign. The engine keeps that velocity:
+    /// writing the displacement rate back would change the contact dynamics (the object would
+    /// coast between steps) and with them the closed loop the rollouts model.
     pub fn step_once(&mut self, u: &[f64], x: &mut [f64]) {
         self.set_velocity_command(u);
         self.record_object_coords();
