@@ -3,8 +3,9 @@
 use nalgebra::{Isometry3, Matrix3, Point3, Vector6};
 
 use crate::error::{Result, SabreError};
-use crate::model::kinematics::Frames;
 use crate::model::scene::Scene;
+use crate::sim::StepEvaluator;
+pub use crate::sim::StepView;
 
 /// SE(3) logarithm: the twist ξ = (v, ω) (linear first) with exp(ξ) = T.
 pub fn se3_log(t: &Isometry3<f64>) -> Vector6<f64> {
@@ -156,20 +157,6 @@ pub fn base_clearance(
         weight,
         weight_slope,
     })
-}
-
-/// What a term sees of one rollout step.
-pub struct StepView<'a> {
-    /// State after the step, [q, q̇, o, ȯ].
-    pub x: &'a [f64],
-    /// Command applied during the step.
-    pub u: &'a [f64],
-    pub tau_ext: &'a [f64],
-    pub contact: bool,
-    /// Robot link poses at the step's q.
-    pub robot: &'a Frames,
-    /// Object link poses at the step's o.
-    pub object: &'a Frames,
 }
 
 /// A sum of terms, compiled once and evaluated inside the rollout workers.
@@ -357,42 +344,20 @@ impl Cost {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use nalgebra::{Translation3, UnitQuaternion, Vector3};
-
-    fn se3_exp(xi: &Vector6<f64>) -> Isometry3<f64> {
-        let v = Vector3::new(xi[0], xi[1], xi[2]);
-        let w = Vector3::new(xi[3], xi[4], xi[5]);
-        let theta = w.norm();
-        let k = w.cross_matrix();
-        let (a, b) = if theta < 1e-9 {
-            (0.5, 1.0 / 6.0)
-        } else {
-            ((1.0 - theta.cos()) / (theta * theta), (theta - theta.sin()) / (theta * theta * theta))
-        };
-        let vmat = Matrix3::identity() + a * k + b * k * k;
-        Isometry3::from_parts(Translation3::from(vmat * v), UnitQuaternion::from_scaled_axis(w))
+/// The sampler's cost as the rollouts' per-step evaluator.
+impl StepEvaluator for Cost {
+    fn validate(&self, scene: &Scene) -> Result<()> {
+        Cost::validate(self, scene)
     }
 
-    #[test]
-    fn log_inverts_the_exponential() {
-        for xi in [
-            Vector6::new(0.1, -0.2, 0.3, 0.0, 0.0, 0.0),
-            Vector6::new(0.1, -0.2, 0.3, 0.4, -0.5, 0.6),
-            Vector6::new(-1.0, 0.5, 0.2, 2.5, 0.3, -0.4),
-            Vector6::new(0.0, 0.0, 0.0, 1e-8, 0.0, 0.0),
-        ] {
-            let back = se3_log(&se3_exp(&xi));
-            assert!((back - xi).norm() < 1e-9, "{xi:?} -> {back:?}");
-        }
+    fn needs_object_frames(&self) -> bool {
+        Cost::needs_object_frames(self)
     }
 
-    #[test]
-    fn pure_translation_log_is_the_translation() {
-        let t = Isometry3::translation(0.3, -0.1, 2.0);
-        let xi = se3_log(&t);
-        assert!((xi - Vector6::new(0.3, -0.1, 2.0, 0.0, 0.0, 0.0)).norm() < 1e-12);
+    fn evaluate(&self, scene: &Scene, view: &StepView) -> f64 {
+        self.step(scene, view)
     }
 }
+
+#[cfg(test)]
+mod tests;

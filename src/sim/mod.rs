@@ -1,9 +1,13 @@
 //! Rapier worlds: the reduced-order rollout model (batch, parallel) and the full-dynamics plant.
 
+pub mod evaluator;
 pub mod plant;
 pub mod rollout;
 pub mod world;
+#[cfg(test)]
+pub(crate) mod test_scene;
 
+pub use evaluator::{StepEvaluator, StepView};
 pub use plant::{Plant, PlantConfig, DEFAULT_TAU_EXT_CUTOFF};
 pub use rollout::{default_threads, RolloutBatch, RolloutConfig, RolloutModel};
 pub use world::{EngineClock, Interaction, SimWorld};

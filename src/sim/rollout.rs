@@ -6,8 +6,8 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 use rayon::prelude::*;
 
+use super::evaluator::StepEvaluator;
 use super::world::{RobotColliders, RobotDrive, SimWorld, WorldConfig};
-use crate::cost::Cost;
 use crate::error::{ensure_finite, Result, SabreError};
 use crate::model::scene::Scene;
 
@@ -42,8 +42,8 @@ impl Default for RolloutConfig {
             multibody_robot: false,
             skip_quiescent_steps: true,
             contact_friction: 0.2,
-            // One TGS substep suffices for a hook pulling a handle at 15 ms (the scripted openings
-            // of all four objects come out the same) and saves a sixth of the contact-step time.
+            // One TGS iteration holds a hooked handle at 15 ms steps; each further one adds to the
+            // cost of every contact step.
             solver_iterations: 1,
         }
     }
@@ -219,7 +219,7 @@ impl RolloutModel {
 
     /// Simulates one input sequence `u` (K × nu) from `x0`; returns the step at which the physics
     /// produced non-finite numbers, if it did.
-    fn rollout_one(&self, world: &mut SimWorld, x0: &[f64], u: &[f64], cost: Option<&Cost>, out: RolloutSlices) -> Option<usize> {
+    fn rollout_one(&self, world: &mut SimWorld, x0: &[f64], u: &[f64], cost: Option<&dyn StepEvaluator>, out: RolloutSlices) -> Option<usize> {
         let nx = self.scene.nx();
         let nq = self.scene.nq();
         let k = out.contact.len();
@@ -231,11 +231,13 @@ impl RolloutModel {
             let u_step = &u[step * nq..(step + 1) * nq];
             let x = &mut out.states[(step + 1) * nx..(step + 2) * nx];
             world.step_once(u_step, x);
+            #[cfg(test)]
+            tests::inject_failure(u_step, x);
             if x.iter().any(|v| !v.is_finite()) {
                 return Some(step);
             }
             if let Some(cost) = cost {
-                *out.cost += world.step_cost(cost, x, u_step);
+                *out.cost += world.evaluate_step(cost, x, u_step);
             }
             let interaction = world.interaction();
             out.tau_ext[step * nq..(step + 1) * nq].copy_from_slice(&interaction.tau_ext);
@@ -251,7 +253,7 @@ impl RolloutModel {
         self.rollout_with_cost(x0, u, n, k, threads, None)
     }
 
-    /// [`Self::rollout`] that also sums `cost` over each rollout's steps, inside the workers.
+    /// [`Self::rollout`] that also sums `cost`'s score of every step over each rollout, inside the workers.
     pub fn rollout_with_cost(
         &self,
         x0: &[f64],
@@ -259,7 +261,7 @@ impl RolloutModel {
         n: usize,
         k: usize,
         threads: Option<usize>,
-        cost: Option<&Cost>,
+        cost: Option<&dyn StepEvaluator>,
     ) -> Result<RolloutBatch> {
         let nx = self.scene.nx();
         let nq = self.scene.nq();
@@ -364,5 +366,113 @@ impl RolloutModel {
         };
         pool(threads)?.install(run);
         Ok(batch)
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::model::scene::Scene;
+    use crate::sim::evaluator::{StepEvaluator, StepView};
+    use crate::sim::test_scene::{probe_and_drawer, state};
+
+    /// A command value that makes the physics of its step report non-finite numbers (test builds only).
+    pub(crate) const NON_FINITE_COMMAND: f64 = 0.123_456_789;
+
+    pub(super) fn inject_failure(u: &[f64], x: &mut [f64]) {
+        if u[0] == NON_FINITE_COMMAND {
+            x[0] = f64::NAN;
+        }
+    }
+
+    /// Scores a step by its state and command; panics on a command of `panic_on` in joint 0.
+    struct Probe {
+        panic_on: f64,
+    }
+
+    impl StepEvaluator for Probe {
+        fn validate(&self, _: &Scene) -> Result<()> {
+            Ok(())
+        }
+        fn needs_object_frames(&self) -> bool {
+            false
+        }
+        fn evaluate(&self, _: &Scene, view: &StepView) -> f64 {
+            assert!(view.u[0] != self.panic_on, "evaluator fault");
+            view.x[0] * view.x[0] + view.u[1].abs()
+        }
+    }
+
+    const N: usize = 4;
+    const K: usize = 8;
+
+    fn inputs() -> Vec<f64> {
+        (0..N * K * 2).map(|e| 0.3 * ((e as f64) * 0.7).sin()).collect()
+    }
+
+    fn batch(u: &[f64], evaluator: &Probe) -> RolloutBatch {
+        let model = RolloutModel::new(probe_and_drawer(), RolloutConfig::default()).expect("model");
+        let x0 = state([0.3, 0.0], [0.0, 0.0], 0.0, 0.0);
+        model.rollout_with_cost(&x0, u, N, K, Some(2), Some(evaluator)).expect("batch")
+    }
+
+    /// Rollout `i` of two batches is the same, bit for bit.
+    fn same_rollout(a: &RolloutBatch, b: &RolloutBatch, i: usize) -> bool {
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        let (nx, nq) = (a.nx, a.nq);
+        bits(&a.states[i * (K + 1) * nx..(i + 1) * (K + 1) * nx]) == bits(&b.states[i * (K + 1) * nx..(i + 1) * (K + 1) * nx])
+            && bits(&a.tau_ext[i * K * nq..(i + 1) * K * nq]) == bits(&b.tau_ext[i * K * nq..(i + 1) * K * nq])
+            && bits(&a.wrench[i * K * 6..(i + 1) * K * 6]) == bits(&b.wrench[i * K * 6..(i + 1) * K * 6])
+            && a.contact[i * K..(i + 1) * K] == b.contact[i * K..(i + 1) * K]
+            && a.costs[i].to_bits() == b.costs[i].to_bits()
+    }
+
+    /// Asserts rollout `i` is marked failed at `step`: +∞ cost, outputs NaN from that step, no contact.
+    fn assert_failed_at(batch: &RolloutBatch, clean: &RolloutBatch, i: usize, step: usize) {
+        let (nx, nq) = (batch.nx, batch.nq);
+        assert!(batch.failed[i]);
+        assert_eq!(batch.costs[i], f64::INFINITY);
+        let states = &batch.states[i * (K + 1) * nx..(i + 1) * (K + 1) * nx];
+        assert_eq!(states[..(step + 1) * nx], clean.states[i * (K + 1) * nx..i * (K + 1) * nx + (step + 1) * nx]);
+        assert!(states[(step + 1) * nx..].iter().all(|v| v.is_nan()));
+        assert!(batch.tau_ext[i * K * nq..(i + 1) * K * nq][step * nq..].iter().all(|v| v.is_nan()));
+        assert!(batch.wrench[i * K * 6..(i + 1) * K * 6][step * 6..].iter().all(|v| v.is_nan()));
+        assert!(batch.contact[i * K..(i + 1) * K][step..].iter().all(|c| !c));
+    }
+
+    #[test]
+    fn non_finite_physics_fails_that_rollout_alone() {
+        let probe = Probe { panic_on: f64::NAN };
+        let u = inputs();
+        let clean = batch(&u, &probe);
+        assert!(clean.failed.iter().all(|f| !f) && clean.costs.iter().all(|c| c.is_finite()));
+        let mut poisoned = u.clone();
+        poisoned[(2 * K + 3) * 2] = NON_FINITE_COMMAND;
+        let failing = batch(&poisoned, &probe);
+        assert_eq!(failing.failed, vec![false, false, true, false]);
+        assert_failed_at(&failing, &clean, 2, 3);
+        for i in [0, 1, 3] {
+            assert!(same_rollout(&failing, &clean, i), "rollout {i} changed");
+        }
+        let mut w = Vec::new();
+        crate::mppi::weights(&failing.costs, crate::mppi::LikelihoodMapping::Invariant { h: 10.0 }, &mut w);
+        assert_eq!(w[2], 0.0);
+        assert!(w.iter().enumerate().all(|(i, &v)| i == 2 || v > 0.0));
+        assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn panic_inside_a_rollout_fails_it_from_the_first_step() {
+        let u = inputs();
+        let clean = batch(&u, &Probe { panic_on: f64::NAN });
+        let mut poisoned = u.clone();
+        let fault = 0.0625;
+        poisoned[(K + 5) * 2] = fault;
+        let failing = batch(&poisoned, &Probe { panic_on: fault });
+        assert_eq!(failing.failed, vec![false, true, false, false]);
+        assert_failed_at(&failing, &clean, 1, 0);
+        for i in [0, 2, 3] {
+            assert!(same_rollout(&failing, &clean, i), "rollout {i} changed");
+        }
     }
 }

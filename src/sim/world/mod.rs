@@ -1,0 +1,272 @@
+//! The Rapier world of one robot and one articulated object: its types (configuration, layout,
+//! mutable physics state, interaction readings) and the conversions the other files share. What
+//! each part of the world does lives beside it: `build` (construction), `servo` (driving the robot
+//! and setting or reading the state), `step` (one step and its evaluation), `quiescence` (steps
+//! that cannot move the object) and `contacts` (τ_ext, the wrist wrench and contact reports).
+
+mod build;
+mod contacts;
+mod quiescence;
+mod servo;
+mod step;
+
+use std::sync::Arc;
+
+use nalgebra::{DMatrix, DVector, Isometry3, Point3, Vector3};
+use rapier3d_f64::prelude::*;
+
+use crate::model::dynamics::DynamicsWorkspace;
+use crate::model::kinematics::{Frames, Shape};
+use crate::model::scene::Scene;
+
+/// Which robot colliders exist in the world.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RobotColliders {
+    /// Every collision primitive of the robot (the plant).
+    All,
+    /// Only these links' primitives (the reduced-order rollout model: hand, hook, forearm).
+    Links(Vec<usize>),
+}
+
+/// How the robot's joints are driven.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RobotDrive {
+    /// The closed loop of (57) integrated in joint space, with the integral action of the plant's
+    /// controller (53): q̈ = Λ (u − q̇) + Λ_I ∫(u − q̇) + M(q)⁻¹ τ_ext, each joint's acceleration bounded
+    /// by effort / inertia; gravity and Coriolis terms are compensated by the servo, as in (57). Each contact body of the robot is a free Rapier body ("proxy") carrying
+    /// the robot's effective mass at that body: every step it is placed at its forward-kinematics pose
+    /// with its forward-kinematics velocity, Rapier's contact solver resolves its contacts with the
+    /// dynamic object (so forces stay bounded by the robot's inertia, also in jams), and the contact
+    /// forces act back on the joints through τ_ext on the next step.
+    KinematicServo { bandwidth: f64, integral_gain: f64, integral_limit: f64, skip_quiescent: bool },
+    /// The same closed loop simulated by Rapier's multibody solver: implicit velocity motors per
+    /// joint (torque-limited), robot links without gravity. Higher fidelity, several times slower.
+    MultibodyServo { bandwidth: f64 },
+    /// Joint torques applied by the caller; gravity acts on the robot (the plant).
+    Torque,
+}
+
+impl RobotDrive {
+    fn bandwidth(&self) -> Option<f64> {
+        match *self {
+            RobotDrive::KinematicServo { bandwidth, .. } | RobotDrive::MultibodyServo { bandwidth } => Some(bandwidth),
+            RobotDrive::Torque => None,
+        }
+    }
+}
+
+/// Physics settings shared by the rollout model and the plant.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WorldConfig {
+    pub dt: f64,
+    pub colliders: RobotColliders,
+    pub drive: RobotDrive,
+    /// Coulomb friction coefficient between robot and object surfaces; low, as the paper advises,
+    /// so that plans rely on geometry (hooking) rather than on friction that is hard to know.
+    pub contact_friction: f64,
+    pub solver_iterations: usize,
+}
+
+const ROBOT_GROUP: Group = Group::GROUP_1;
+const OBJECT_GROUP: Group = Group::GROUP_2;
+const OWNER_ROBOT: u128 = 1 << 64;
+const OWNER_OBJECT: u128 = 2 << 64;
+
+/// One movable joint as Rapier sees it.
+#[derive(Debug, Clone, Copy)]
+struct DofRef {
+    link_id: usize,
+    dof: usize,
+    /// Index in the joint's 6-vector of coordinates (0 = linear x, 3 = angular x).
+    coord: usize,
+    axis: JointAxis,
+    parent_body: RigidBodyHandle,
+    child_body: RigidBodyHandle,
+}
+
+impl DofRef {
+    /// This coordinate's current value in multibody `mb`.
+    fn value(&self, mb: &Multibody) -> f64 {
+        mb.link(self.link_id).expect("link").joint().coords()[self.coord]
+    }
+}
+
+/// Static facts about a built world, shared by every copy of it.
+#[derive(Debug)]
+pub struct WorldLayout {
+    pub nq: usize,
+    pub no: usize,
+    drive: RobotDrive,
+    /// Proxy bodies of the robot (kinematic servo): link owning the body, the body, its centre of
+    /// mass in the link frame.
+    proxies: Vec<(usize, RigidBodyHandle, Point3<f64>)>,
+    /// Largest joint acceleration the servo can produce: effort / M_ii at the home configuration.
+    acceleration_limits: Vec<f64>,
+    position_limits: Vec<(f64, f64)>,
+    robot_handle: Option<MultibodyJointHandle>,
+    object_handle: MultibodyJointHandle,
+    robot_dofs: Vec<DofRef>,
+    object_dofs: Vec<DofRef>,
+    velocity_limits: Vec<f64>,
+    effort_limits: Vec<f64>,
+    /// Robot links whose contact forces the wrist force-torque sensor measures.
+    pub sensor_links: Vec<bool>,
+    pub sensor_link: usize,
+    /// Bounding spheres (link, centre in the link frame, radius) of the robot's contact geometry
+    /// and of the object's links, for the quiescence test.
+    robot_spheres: Vec<(usize, Point3<f64>, f64)>,
+    /// Object collision primitives (link, pose in the link frame, shape).
+    object_shapes: Vec<(usize, Isometry3<f64>, Shape)>,
+    object_friction: Vec<f64>,
+}
+
+/// Per-step interaction readings.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Interaction {
+    /// Any contact between the robot and the object (or its cabinet) carried force in this step.
+    pub contact: bool,
+    /// τ_ext = Σ J_cᵀ f_c over contacts on the robot, f_c the force acting on the robot (35).
+    pub tau_ext: Vec<f64>,
+    /// Force (world frame) and torque about the sensor origin (world frame) acting on the robot
+    /// links at and beyond the wrist sensor.
+    pub wrench: [f64; 6],
+}
+
+/// One robot–object contact point that carried force in the last step.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ContactReport {
+    /// Index of the robot link (in the robot tree) whose collider touches.
+    pub robot_link: usize,
+    /// Index of the object link (in the object tree) whose collider touches.
+    pub object_link: usize,
+    /// Contact point, world frame (m).
+    pub point: [f64; 3],
+    /// Force acting on the robot at the point, world frame (N).
+    pub force: [f64; 3],
+}
+
+/// The mutable Rapier state; cloning it is how a world is reset to a pristine snapshot.
+#[derive(Clone)]
+struct PhysicsState {
+    islands: IslandManager,
+    broad_phase: BroadPhaseBvh,
+    narrow_phase: NarrowPhase,
+    bodies: RigidBodySet,
+    colliders: ColliderSet,
+    impulse_joints: ImpulseJointSet,
+    multibody_joints: MultibodyJointSet,
+    soft_bodies: SoftBodySet,
+    ccd_solver: CCDSolver,
+    /// Robot configuration and velocity when the robot is a kinematic servo (else unused).
+    robot_q: Vec<f64>,
+    robot_qd: Vec<f64>,
+    /// Accumulated velocity error of the servo's integral term.
+    robot_integral: Vec<f64>,
+    /// Velocity command of the next step (servo drives).
+    command: Vec<f64>,
+    /// Interaction measured in the last step.
+    last: Interaction,
+    /// Factorised robot mass matrix for the contact term of the kinematic servo, and the
+    /// configuration it was computed at (recomputed once the robot has moved on).
+    mass_factor: Option<nalgebra::linalg::Cholesky<f64, nalgebra::Dyn>>,
+    mass_factor_q: Vec<f64>,
+}
+
+/// A Rapier world holding one robot and one articulated object.
+pub struct SimWorld {
+    state: PhysicsState,
+    pipeline: PhysicsPipeline,
+    params: IntegrationParameters,
+    gravity: Vector,
+    pub layout: Arc<WorldLayout>,
+    scene: Arc<Scene>,
+    jacobian: Vec<f64>,
+    /// Scratch buffer (joint displacements, next configuration, state) reused every step.
+    scratch: Vec<f64>,
+    /// Object coordinates at the start of the step (see `step_once`).
+    object_coords: Vec<f64>,
+    dynamics: DynamicsWorkspace,
+    /// Object link poses for cost evaluation (a cache keyed by the configuration). The robot's
+    /// are `dynamics.frames`: one step places the proxies, takes contact Jacobians and evaluates the
+    /// cost at the same configuration, so one cache computes them once.
+    object_frames: Frames,
+    mass_matrix: DMatrix<f64>,
+    gravity_torque: DVector<f64>,
+    engine: EngineClock,
+}
+
+/// Work done inside Rapier's `PhysicsPipeline::step` by one world since it was built: what the
+/// physics engine itself costs, apart from sabre's servo, interaction and cost work around it.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct EngineClock {
+    /// Steps that went through the pipeline (steps skipped as quiescent are not counted).
+    pub steps: u64,
+    /// Wall time spent inside those steps (s).
+    pub seconds: f64,
+}
+
+impl Clone for SimWorld {
+    fn clone(&self) -> Self {
+        Self {
+            state: self.state.clone(),
+            pipeline: PhysicsPipeline::new(),
+            params: self.params,
+            gravity: self.gravity,
+            layout: self.layout.clone(),
+            scene: self.scene.clone(),
+            jacobian: self.jacobian.clone(),
+            scratch: self.scratch.clone(),
+            object_coords: self.object_coords.clone(),
+            dynamics: self.dynamics.clone(),
+            object_frames: self.object_frames.clone(),
+            mass_matrix: self.mass_matrix.clone(),
+            gravity_torque: self.gravity_torque.clone(),
+            engine: self.engine,
+        }
+    }
+}
+
+fn vec_to_rapier(v: &Vector3<f64>) -> Vector {
+    Vector::new(v.x, v.y, v.z)
+}
+
+fn vec_from_rapier(v: Vector) -> Vector3<f64> {
+    Vector3::new(v.x, v.y, v.z)
+}
+
+fn pose_to_rapier(iso: &Isometry3<f64>) -> Pose {
+    Pose::from(*iso)
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::sim::test_scene::{probe_and_drawer, servo_config, state, world_at};
+
+    #[test]
+    fn a_restored_world_repeats_a_fresh_one_bit_for_bit() {
+        let scene = probe_and_drawer();
+        let config = servo_config(400.0, true);
+        let x0 = state([0.62, 0.3], [0.3, 0.0], 0.0, 0.0);
+        let template = world_at(&scene, &config, &x0);
+        let run = |world: &mut super::SimWorld| {
+            let mut x = x0.clone();
+            (0..8)
+                .flat_map(|_| {
+                    world.step_once(&[0.3, 0.2], &mut x);
+                    x.iter().chain(&world.interaction().tau_ext).map(|v| v.to_bits()).collect::<Vec<_>>()
+                })
+                .collect::<Vec<_>>()
+        };
+        let mut fresh = template.clone();
+        let expected = run(&mut fresh);
+        // A world that has pushed the drawer elsewhere, restored and placed again.
+        let mut used = template.clone();
+        let mut x = x0.clone();
+        for _ in 0..20 {
+            used.step_once(&[1.0, -1.0], &mut x);
+        }
+        used.restore_from(&template);
+        used.set_state(&x0);
+        assert_eq!(run(&mut used), expected);
+    }
+}

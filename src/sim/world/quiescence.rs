@@ -1,0 +1,168 @@
+//! The quiescence test: a step is skipped when the object is held at rest and no robot contact
+//! body can reach it within the step; bounding-sphere geometry for that test.
+
+use nalgebra::{Isometry3, Point3, Vector3};
+
+use super::SimWorld;
+use crate::model::kinematics::{KinematicTree, Shape};
+
+/// Radius of a sphere about the primitive's centre that contains it.
+fn bounding_radius(shape: &Shape) -> f64 {
+    match *shape {
+        Shape::Box { half_extents } => half_extents.norm(),
+        Shape::Sphere { radius } => radius,
+        Shape::Cylinder { radius, half_length } => (radius * radius + half_length * half_length).sqrt(),
+        Shape::Capsule { radius, half_length } => radius + half_length,
+    }
+}
+
+/// Distance from `point` to a primitive placed at `pose` (exact for boxes and spheres, through the
+/// bounding sphere otherwise; never more than the true distance).
+fn distance_to_shape(pose: &Isometry3<f64>, shape: &Shape, point: &Point3<f64>) -> f64 {
+    let local = pose.inverse_transform_point(point);
+    match *shape {
+        Shape::Box { half_extents } => {
+            let outside = Vector3::new(
+                (local.x.abs() - half_extents.x).max(0.0),
+                (local.y.abs() - half_extents.y).max(0.0),
+                (local.z.abs() - half_extents.z).max(0.0),
+            );
+            outside.norm()
+        }
+        _ => (local.coords.norm() - bounding_radius(shape)).max(0.0),
+    }
+}
+
+/// One bounding sphere per link with collision geometry (of the links `include` accepts).
+pub(super) fn link_spheres(tree: &KinematicTree, include: &dyn Fn(usize) -> bool) -> Vec<(usize, Point3<f64>, f64)> {
+    let mut out = Vec::new();
+    for (link, l) in tree.links.iter().enumerate() {
+        if l.collisions.is_empty() || !include(link) {
+            continue;
+        }
+        let centers: Vec<Point3<f64>> = l.collisions.iter().map(|c| Point3::from(c.origin.translation.vector)).collect();
+        let center = Point3::from(centers.iter().map(|c| c.coords).sum::<Vector3<f64>>() / centers.len() as f64);
+        let radius = l
+            .collisions
+            .iter()
+            .zip(&centers)
+            .map(|(c, p)| (p - center).norm() + bounding_radius(&c.shape))
+            .fold(0.0, f64::max);
+        out.push((link, center, radius));
+    }
+    out
+}
+
+impl SimWorld {
+    /// True when the object is at rest and statically held (dry friction at least its gravity
+    /// torque, or gravity pressing it onto a limit), and no robot contact body can reach any object
+    /// link within this step (bounding spheres, with the contact prediction distance and each
+    /// body's travel as margin). The robot frames must be those of the step's start (placed proxies).
+    pub(super) fn quiescent(&mut self) -> bool {
+        let (nq, no) = (self.layout.nq, self.layout.no);
+        let mut x = std::mem::take(&mut self.scratch);
+        x.resize(2 * (nq + no), 0.0);
+        self.read_state(&mut x);
+        let o = &x[2 * nq..2 * nq + no];
+        let od = &x[2 * nq + no..];
+        let at_rest = od.iter().all(|v| v.abs() < 1e-9);
+        let mut quiet = at_rest;
+        if quiet {
+            // Rest is kept only if no generalized force beats the dry friction, or a limit takes it.
+            let g = crate::model::dynamics::gravity_torque(&self.scene.object, &self.scene.object_pose, o, &Vector3::new(0.0, 0.0, -9.81));
+            let limits = self.scene.object_limits();
+            for i in 0..no {
+                // g is the torque that holds the object still; gravity itself pushes with −g.
+                let push = -g[i];
+                let held_by_friction = push.abs() <= self.layout.object_friction[i];
+                let on_lower = o[i] <= limits[i].lower + 1e-6 && push <= 0.0;
+                let on_upper = o[i] >= limits[i].upper - 1e-6 && push >= 0.0;
+                if !(held_by_friction || on_lower || on_upper) {
+                    quiet = false;
+                }
+            }
+        }
+        if quiet {
+            let frames = &self.dynamics.frames; // robot frames at the step's start (place_proxies)
+            let object_poses = self.scene.object.link_poses(&self.scene.object_pose, o);
+            let dt = self.params.dt;
+            let margin = self.params.normalized_prediction_distance * self.params.length_unit + 0.02;
+            for &(link, center, radius) in &self.layout.robot_spheres {
+                let c = frames.poses[link] * center;
+                let nearest = self
+                    .layout
+                    .object_shapes
+                    .iter()
+                    .map(|(olink, origin, shape)| distance_to_shape(&(object_poses[*olink] * origin), shape, &c))
+                    .fold(f64::INFINITY, f64::min);
+                if nearest >= radius + margin {
+                    // Travel bound of this body over the step: its link's linear speed at the
+                    // centre (only needed when the static clearance does not already decide).
+                    let mut jac = std::mem::take(&mut self.jacobian);
+                    self.scene.robot.frames_jacobian_into(frames, link, &c, &mut jac);
+                    let mut v = Vector3::zeros();
+                    for (col, &rate) in self.state.robot_qd.iter().enumerate() {
+                        v += Vector3::new(jac[6 * col], jac[6 * col + 1], jac[6 * col + 2]) * rate;
+                    }
+                    self.jacobian = jac;
+                    if nearest >= radius + v.norm() * dt + margin {
+                        continue;
+                    }
+                }
+                quiet = false;
+                break;
+            }
+        }
+        self.scratch = x;
+        quiet
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use crate::model::scene::Scene;
+    use crate::sim::test_scene::{probe_and_drawer, probe_and_lift, servo_config, state, world_at};
+
+    /// Whether one step from `x` under command `u` went through Rapier's pipeline.
+    fn engine_ran(scene: &Arc<Scene>, x: Vec<f64>, u: [f64; 2]) -> bool {
+        let mut world = world_at(scene, &servo_config(0.0, true), &x);
+        let mut out = x.clone();
+        world.step_once(&u, &mut out);
+        world.engine_clock().steps == 1
+    }
+
+    // The drawer's front face is at x = 0.95; the arm's ball (radius 0.05) at x = s + 0.3; a body
+    // is clear when its centre is at least radius + margin (0.01 prediction + 0.02) = 0.08 away.
+
+    #[test]
+    fn far_still_robot_and_drawer_held_by_friction_skip_the_engine() {
+        assert!(!engine_ran(&probe_and_drawer(), state([-0.5, 0.0], [0.0, 0.0], 0.0, 0.0), [0.0, 0.0]));
+    }
+
+    #[test]
+    fn robot_touching_the_object_runs_the_engine() {
+        assert!(engine_ran(&probe_and_drawer(), state([0.6, 0.0], [0.0, 0.0], 0.0, 0.0), [0.0, 0.0]));
+    }
+
+    #[test]
+    fn robot_whose_travel_can_reach_the_object_runs_the_engine() {
+        // 0.085 from the face: clear at rest, but at 1 m/s it covers 0.015 within the step.
+        assert!(!engine_ran(&probe_and_drawer(), state([0.565, 0.0], [0.0, 0.0], 0.0, 0.0), [0.0, 0.0]));
+        assert!(engine_ran(&probe_and_drawer(), state([0.565, 0.0], [1.0, 0.0], 0.0, 0.0), [1.0, 0.0]));
+    }
+
+    #[test]
+    fn moving_object_runs_the_engine() {
+        assert!(engine_ran(&probe_and_drawer(), state([-0.5, 0.0], [0.0, 0.0], 0.2, 0.1), [0.0, 0.0]));
+    }
+
+    #[test]
+    fn object_gravity_does_not_hold_runs_the_engine_unless_on_a_limit() {
+        let scene = probe_and_lift();
+        // Frictionless vertical joint: mid-travel gravity moves it; at the lower limit it rests.
+        assert!(engine_ran(&scene, state([-0.5, 0.0], [0.0, 0.0], 0.25, 0.0), [0.0, 0.0]));
+        assert!(!engine_ran(&scene, state([-0.5, 0.0], [0.0, 0.0], 0.0, 0.0), [0.0, 0.0]));
+    }
+}

@@ -1,0 +1,347 @@
+//! Driving the robot: the kinematic servo's integration, the velocity command, joint torques, the
+//! object lock, and setting or reading the state x = [q, q̇, o, ȯ] (proxies placed at the robot's
+//! forward kinematics).
+
+use nalgebra::{DVector, Isometry3, Vector3};
+use rapier3d_f64::prelude::*;
+
+use super::{pose_to_rapier, DofRef, RobotDrive, SimWorld};
+use crate::model::dynamics::joint_space_terms;
+
+impl SimWorld {
+    fn set_tree_state(
+        multibodies: &mut MultibodyJointSet,
+        bodies: &mut RigidBodySet,
+        handle: MultibodyJointHandle,
+        dofs: &[DofRef],
+        q: &[f64],
+        qd: &[f64],
+        displacement: &mut Vec<f64>,
+    ) {
+        let (mb, _) = multibodies.get_mut(handle).expect("multibody");
+        displacement.clear();
+        displacement.resize(mb.ndofs(), 0.0);
+        for (i, d) in dofs.iter().enumerate() {
+            let current = d.value(mb);
+            displacement[d.dof] = q[i] - current;
+        }
+        mb.apply_displacements(displacement);
+        {
+            let mut v = mb.generalized_velocity_mut();
+            v.fill(0.0);
+            for (i, d) in dofs.iter().enumerate() {
+                v[d.dof] = qd[i];
+            }
+        }
+        mb.forward_kinematics(bodies, false);
+        mb.update_rigid_bodies(bodies, true);
+    }
+
+    /// Places robot and object at state x = [q, q̇, o, ȯ] (x must be validated by the caller).
+    pub fn set_state(&mut self, x: &[f64]) {
+        let (nq, no) = (self.layout.nq, self.layout.no);
+        let layout = self.layout.clone();
+        match layout.robot_handle {
+            Some(handle) => Self::set_tree_state(
+                &mut self.state.multibody_joints,
+                &mut self.state.bodies,
+                handle,
+                &layout.robot_dofs,
+                &x[..nq],
+                &x[nq..2 * nq],
+                &mut self.scratch,
+            ),
+            None => {
+                self.state.robot_q.copy_from_slice(&x[..nq]);
+                self.state.robot_qd.copy_from_slice(&x[nq..2 * nq]);
+                self.state.robot_integral.iter_mut().for_each(|v| *v = 0.0);
+                self.state.mass_factor = None;
+                let qd = self.state.robot_qd.clone();
+                self.place_proxies(&qd);
+            }
+        }
+        Self::set_tree_state(
+            &mut self.state.multibody_joints,
+            &mut self.state.bodies,
+            layout.object_handle,
+            &layout.object_dofs,
+            &x[2 * nq..2 * nq + no],
+            &x[2 * nq + no..],
+            &mut self.scratch,
+        );
+        self.state.command.iter_mut().for_each(|v| *v = 0.0);
+        self.state.last.contact = false;
+        self.state.last.tau_ext.iter_mut().for_each(|v| *v = 0.0);
+        self.state.last.wrench = [0.0; 6];
+    }
+
+    /// Places every proxy body at the forward kinematics of `robot_q` with the velocity that the
+    /// joint velocities `qd` give it.
+    fn place_proxies(&mut self, qd: &[f64]) {
+        let frames = &mut self.dynamics.frames;
+        self.scene.robot.update_frames(&Isometry3::identity(), &self.state.robot_q, frames);
+        for &(link, body, com) in &self.layout.proxies {
+            let pose = frames.poses[link];
+            let com_world = pose * com;
+            self.scene.robot.frames_jacobian_into(frames, link, &com_world, &mut self.jacobian);
+            let mut twist = [0.0; 6];
+            for (c, &v) in qd.iter().enumerate() {
+                for (r, t) in twist.iter_mut().enumerate() {
+                    *t += self.jacobian[6 * c + r] * v;
+                }
+            }
+            let rb = &mut self.state.bodies[body];
+            rb.set_position(pose_to_rapier(&pose), true);
+            rb.set_linvel(Vector::new(twist[0], twist[1], twist[2]), true);
+            rb.set_angvel(Vector::new(twist[3], twist[4], twist[5]), true);
+        }
+    }
+
+    /// Writes the current state into `x` (length nx): the engine's own velocities, which for the
+    /// object in a servo world are not its motion (see [`Self::step_once`], which reports that).
+    pub fn read_state(&self, x: &mut [f64]) {
+        let (nq, no) = (self.layout.nq, self.layout.no);
+        let mbs = &self.state.multibody_joints;
+        match self.layout.robot_handle {
+            Some(handle) => {
+                let (robot, _) = mbs.get(handle).expect("robot");
+                let rv = robot.generalized_velocity();
+                for (i, d) in self.layout.robot_dofs.iter().enumerate() {
+                    x[i] = d.value(robot);
+                    x[nq + i] = rv[d.dof];
+                }
+            }
+            None => {
+                x[..nq].copy_from_slice(&self.state.robot_q);
+                x[nq..2 * nq].copy_from_slice(&self.state.robot_qd);
+            }
+        }
+        let (object, _) = mbs.get(self.layout.object_handle).expect("object");
+        let ov = object.generalized_velocity();
+        for (i, d) in self.layout.object_dofs.iter().enumerate() {
+            x[2 * nq + i] = d.value(object);
+            x[2 * nq + no + i] = ov[d.dof];
+        }
+    }
+
+    /// Sets the joint velocity command of the next step for the servo drives, projected onto the
+    /// joint velocity limits.
+    pub fn set_velocity_command(&mut self, u: &[f64]) {
+        let layout = self.layout.clone();
+        for (i, c) in self.state.command.iter_mut().enumerate() {
+            let limit = layout.velocity_limits[i];
+            *c = u[i].clamp(-limit, limit);
+        }
+        if let (Some(handle), RobotDrive::MultibodyServo { bandwidth }) = (layout.robot_handle, layout.drive) {
+            let (mb, _) = self.state.multibody_joints.get_mut(handle).expect("robot");
+            for (i, d) in layout.robot_dofs.iter().enumerate() {
+                if let Some(link) = mb.link_mut(d.link_id) {
+                    link.joint.data.set_motor_velocity(d.axis, self.state.command[i], bandwidth);
+                }
+            }
+        }
+    }
+
+    /// Applies joint torques (clamped to the effort limits) for the next step as equal and opposite
+    /// wrenches on each joint's child and parent bodies, which Rapier maps to exactly τ_i on that joint.
+    pub fn apply_joint_torques(&mut self, tau: &[f64], applied: &mut [f64]) {
+        let Some(handle) = self.layout.robot_handle else { return };
+        let bodies = &mut self.state.bodies;
+        for (_, rb) in bodies.iter_mut() {
+            rb.reset_forces(false);
+            rb.reset_torques(false);
+        }
+        let (mb, _) = self.state.multibody_joints.get(handle).expect("robot");
+        for (i, d) in self.layout.robot_dofs.iter().enumerate() {
+            let limit = self.layout.effort_limits[i];
+            let t = tau[i].clamp(-limit, limit);
+            applied[i] = t;
+            if t == 0.0 {
+                continue;
+            }
+            let link = mb.link(d.link_id).expect("link");
+            let frame = *link.local_to_world() * link.joint().data.local_frame2;
+            let axis = frame.rotation * Vector::X;
+            let origin = frame.translation;
+            match d.axis {
+                JointAxis::AngX => {
+                    bodies[d.child_body].add_torque(axis * t, true);
+                    bodies[d.parent_body].add_torque(-axis * t, true);
+                }
+                _ => {
+                    bodies[d.child_body].add_force_at_point(axis * t, origin, true);
+                    bodies[d.parent_body].add_force_at_point(-axis * t, origin, true);
+                }
+            }
+        }
+    }
+
+    /// Locks (or releases) the object's joints in place: a stuck door or drawer. The joint's limits
+    /// collapse onto its current value (a hard constraint that transmits any force), then return.
+    pub fn hold_object(&mut self, hold: bool) {
+        let object_limits = self.scene.object_limits();
+        let (mb, _) = self.state.multibody_joints.get_mut(self.layout.object_handle).expect("object");
+        for (i, d) in self.layout.object_dofs.iter().enumerate() {
+            let value = d.value(mb);
+            if let Some(link) = mb.link_mut(d.link_id) {
+                let limits = if hold { [value, value] } else { [object_limits[i].lower, object_limits[i].upper] };
+                link.joint.data.set_limits(d.axis, limits);
+            }
+        }
+        if hold {
+            let mut v = mb.generalized_velocity_mut();
+            for d in &self.layout.object_dofs {
+                v[d.dof] = 0.0;
+            }
+        }
+    }
+
+    /// One step of the kinematic servo: semi-implicit Euler of q̈ = Λ (u − q̇) + Λ_I ∫(u − q̇) + M⁻¹ τ_ext.
+    pub(super) fn advance_kinematic_robot(&mut self, bandwidth: f64, integral_gain: f64, integral_limit: f64) {
+        let dt = self.params.dt;
+        let nq = self.layout.nq;
+        let in_contact = self.state.last.tau_ext.iter().any(|&t| t != 0.0);
+        // M(q) varies slowly; refactorising it only after a joint moved by MASS_REFRESH keeps the
+        // contact term within a few percent at a fraction of the cost.
+        const MASS_REFRESH: f64 = 0.02;
+        let stale = self.state.mass_factor.is_none()
+            || self
+                .state
+                .mass_factor_q
+                .iter()
+                .zip(&self.state.robot_q)
+                .any(|(a, b)| (a - b).abs() > MASS_REFRESH);
+        if in_contact && stale {
+            joint_space_terms(
+                &self.scene.robot,
+                &Isometry3::identity(),
+                &self.state.robot_q,
+                &Vector3::zeros(),
+                &mut self.dynamics,
+                &mut self.mass_matrix,
+                &mut self.gravity_torque,
+            );
+            self.state.mass_factor = self.mass_matrix.clone().cholesky();
+            self.state.mass_factor_q.clone_from(&self.state.robot_q);
+        }
+        let contact_acceleration = match (&self.state.mass_factor, in_contact) {
+            (Some(factor), true) => Some(factor.solve(&DVector::from_column_slice(&self.state.last.tau_ext))),
+            _ => None,
+        };
+        let mut q_next = std::mem::take(&mut self.scratch);
+        q_next.clear();
+        for i in 0..nq {
+            let qd = self.state.robot_qd[i];
+            let external = contact_acceleration.as_ref().map_or(0.0, |a| a[i]);
+            // The integral is the position lag behind the integrated command, ∫u dt − (q − q₀),
+            // booked with the same velocity that moves q so that it settles at zero lag exactly.
+            let integral = self.state.robot_integral[i];
+            let drive = bandwidth * self.state.command[i] + integral_gain * integral + external;
+            let target = (qd + dt * drive) / (1.0 + dt * bandwidth);
+            let max_change = self.layout.acceleration_limits[i] * dt;
+            let saturated = (target - qd).abs() > max_change;
+            let velocity_limit = self.layout.velocity_limits[i];
+            let unclamped = qd + (target - qd).clamp(-max_change, max_change);
+            let mut qd_next = unclamped.clamp(-velocity_limit, velocity_limit);
+            let saturated = saturated || qd_next != unclamped;
+            let (lower, upper) = self.layout.position_limits[i];
+            let mut next = self.state.robot_q[i] + dt * qd_next;
+            let at_limit = next < lower || next > upper;
+            if at_limit {
+                next = next.clamp(lower, upper);
+                qd_next = (next - self.state.robot_q[i]) / dt;
+            }
+            // Anti-windup: a joint that is saturated or at a limit does not accumulate lag it
+            // cannot act on.
+            if !saturated && !at_limit {
+                let lag = integral + dt * self.state.command[i] - (next - self.state.robot_q[i]);
+                self.state.robot_integral[i] = lag.clamp(-integral_limit, integral_limit);
+            }
+            q_next.push(next);
+            self.state.robot_qd[i] = qd_next;
+        }
+        // The proxies start the step where the robot is, moving as it will move during the step.
+        let qd = self.state.robot_qd.clone();
+        self.place_proxies(&qd);
+        self.state.robot_q.copy_from_slice(&q_next);
+        self.scratch = q_next;
+    }
+
+    pub(super) fn read_robot_q(&self, q: &mut [f64]) {
+        match self.layout.robot_handle {
+            Some(handle) => {
+                let (robot, _) = self.state.multibody_joints.get(handle).expect("robot");
+                for (i, d) in self.layout.robot_dofs.iter().enumerate() {
+                    q[i] = d.value(robot);
+                }
+            }
+            None => q.copy_from_slice(&self.state.robot_q),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::sim::test_scene::{probe_and_drawer, servo_config, state, world_at, BANDWIDTH, DT};
+
+    /// Runs `steps` steps under the constant command `u` from `x0`; returns the state after each.
+    fn run(integral_gain: f64, x0: &[f64], u: [f64; 2], steps: usize) -> Vec<Vec<f64>> {
+        let scene = probe_and_drawer();
+        let mut world = world_at(&scene, &servo_config(integral_gain, false), x0);
+        let mut x = x0.to_vec();
+        (0..steps)
+            .map(|_| {
+                world.step_once(&u, &mut x);
+                x.clone()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn free_motion_follows_the_semi_implicit_servo_law() {
+        let (gain, u) = (400.0, [0.5, 0.8]);
+        let x0 = state([-0.5, 0.0], [0.0, 0.0], 0.0, 0.0);
+        let states = run(gain, &x0, u, 10);
+        // q̇' = (q̇ + dt (Λ u + Λ_I I)) / (1 + dt Λ), q' = q + dt q̇', I' = I + dt (u − q̇').
+        let (mut q, mut qd, mut integral) = ([-0.5, 0.0], [0.0, 0.0], [0.0, 0.0]);
+        for x in &states {
+            for j in 0..2 {
+                qd[j] = (qd[j] + DT * (BANDWIDTH * u[j] + gain * integral[j])) / (1.0 + DT * BANDWIDTH);
+                q[j] += DT * qd[j];
+                integral[j] += DT * (u[j] - qd[j]);
+                assert!((x[j] - q[j]).abs() < 1e-12 && (x[2 + j] - qd[j]).abs() < 1e-12, "joint {j}: {x:?} vs {q:?}, {qd:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn integral_action_settles_at_zero_lag() {
+        let u = [0.0, 0.2];
+        let x0 = state([-0.5, -1.0], [0.0, 0.0], 0.0, 0.0);
+        let steps = 300;
+        let travelled = u[1] * DT * steps as f64;
+        let with = run(400.0, &x0, u, steps);
+        let lag = -1.0 + travelled - with.last().unwrap()[1];
+        assert!(lag.abs() < 1e-9, "lag {lag}");
+        // Without it a first-order lag stays behind by Σ_k (u − q̇_k) dt = u/Λ.
+        let without = run(0.0, &x0, u, steps);
+        let lag = -1.0 + travelled - without.last().unwrap()[1];
+        assert!((lag - u[1] / BANDWIDTH).abs() < 1e-9, "lag {lag}");
+    }
+
+    #[test]
+    fn position_limit_clamps_and_stops_the_joint() {
+        let states = run(400.0, &state([-0.95, 0.0], [0.0, 0.0], 0.0, 0.0), [-1.0, 0.0], 20);
+        assert!(states.iter().all(|x| x[0] >= -1.0));
+        let last = states.last().unwrap();
+        assert_eq!((last[0], last[2]), (-1.0, 0.0));
+    }
+
+    #[test]
+    fn velocity_limit_clamps_command_and_servo() {
+        // The turn joint's limit is 2 rad/s; the integral's catch-up would push past it.
+        let states = run(400.0, &state([-0.5, -2.9], [0.0, 0.0], 0.0, 0.0), [0.0, 10.0], 60);
+        assert!(states.iter().all(|x| x[3] <= 2.0));
+        assert_eq!(states.last().unwrap()[3], 2.0);
+    }
+}
