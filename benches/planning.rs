@@ -38,8 +38,15 @@ fn approach_cost(scene: &Scene) -> Cost {
             lower: limits.iter().map(|l| l.lower).collect(),
             upper: limits.iter().map(|l| l.upper).collect(),
         },
-        Term::SelfCollision { pairs: scene.sphere_pairs.clone(), weight: 1000.0, weight_slope: 100.0 },
-        Term::Power { weight: 10.0, p_max: 0.0 },
+        Term::SelfCollision {
+            pairs: scene.sphere_pairs.clone(),
+            weight: 1000.0,
+            weight_slope: 100.0,
+        },
+        Term::Power {
+            weight: 10.0,
+            p_max: 0.0,
+        },
     ])
 }
 
@@ -56,7 +63,10 @@ fn open_cost(scene: &Scene) -> Cost {
         },
         weights: [100.0, 10000.0, 1000.0, 1000.0, 1000.0, 1000.0],
     };
-    terms[1] = Term::ObjectState { target: vec![1.18], weights: vec![100.0] };
+    terms[1] = Term::ObjectState {
+        target: vec![1.18],
+        weights: vec![100.0],
+    };
     Cost::new(terms)
 }
 
@@ -88,14 +98,17 @@ struct OpenPhase {
 /// built from the task parameters recorded with it (the terms of `open_cost`, plus arm reach and
 /// base clearance, with the task's tilted grasp).
 fn open_phase(scene: &Scene) -> OpenPhase {
-    let data: serde_json::Value =
-        serde_json::from_str(include_str!("data/shelf_open_phase.json")).expect("benches/data/shelf_open_phase.json is valid JSON");
+    let data: serde_json::Value = serde_json::from_str(include_str!("data/shelf_open_phase.json"))
+        .expect("benches/data/shelf_open_phase.json is valid JSON");
     let offset = Matrix4::from_row_slice(&floats(&data["grasp_offset"]));
     let offset: Isometry3<f64> = nalgebra::try_convert(offset).expect("grasp offset is a rigid transform");
     let safety = &data["safety"];
     let value = |v: &serde_json::Value| v.as_f64().expect("a number");
     let limits = scene.robot_limits();
-    let base_link = scene.robot.link_id(safety["base_link"].as_str().expect("base link name")).expect("base link");
+    let base_link = scene
+        .robot
+        .link_id(safety["base_link"].as_str().expect("base link name"))
+        .expect("base link");
     let reach = scene.arm_reach.as_ref().expect("the robot declares its arm reach");
     let terms = vec![
         Term::TargetPose {
@@ -108,16 +121,32 @@ fn open_phase(scene: &Scene) -> OpenPhase {
             },
             weights: floats(&data["pose_weights"]).try_into().expect("six pose weights"),
         },
-        Term::ObjectState { target: floats(&data["object_target"]), weights: vec![value(&data["object_weight"])] },
+        Term::ObjectState {
+            target: floats(&data["object_target"]),
+            weights: vec![value(&data["object_weight"])],
+        },
         Term::JointLimits {
             weight: value(&safety["joint_limit"]),
             weight_slope: value(&safety["joint_limit_slope"]),
             lower: limits.iter().map(|l| l.lower).collect(),
             upper: limits.iter().map(|l| l.upper).collect(),
         },
-        Term::SelfCollision { pairs: scene.sphere_pairs.clone(), weight: value(&safety["self_collision"]), weight_slope: value(&safety["self_collision_slope"]) },
-        Term::Power { weight: value(&safety["power"]), p_max: value(&safety["p_max"]) },
-        Term::ArmReach { base_link: reach.base_link, frame_link: reach.frame_link, r_max: reach.max, weight: value(&safety["reach"]), weight_slope: value(&safety["reach_slope"]) },
+        Term::SelfCollision {
+            pairs: scene.sphere_pairs.clone(),
+            weight: value(&safety["self_collision"]),
+            weight_slope: value(&safety["self_collision_slope"]),
+        },
+        Term::Power {
+            weight: value(&safety["power"]),
+            p_max: value(&safety["p_max"]),
+        },
+        Term::ArmReach {
+            base_link: reach.base_link,
+            frame_link: reach.frame_link,
+            r_max: reach.max,
+            weight: value(&safety["reach"]),
+            weight_slope: value(&safety["reach_slope"]),
+        },
         base_clearance(
             scene,
             base_link,
@@ -188,7 +217,10 @@ fn planning(c: &mut Criterion) {
     let model = Arc::new(RolloutModel::new(scene.clone(), RolloutConfig::default()).expect("model"));
     let mut group = c.benchmark_group("planning_iteration_shelf_40x67");
     group.sample_size(40);
-    for (name, x0, cost) in [("free", scene.default_state(), approach_cost(&scene)), ("in_contact", hooked_state(), open_cost(&scene))] {
+    for (name, x0, cost) in [
+        ("free", scene.default_state(), approach_cost(&scene)),
+        ("in_contact", hooked_state(), open_cost(&scene)),
+    ] {
         for threads in [1usize, 2] {
             let mut config = MppiConfig::paper_defaults(scene.nu());
             config.threads = Some(threads);
@@ -231,22 +263,26 @@ fn planning(c: &mut Criterion) {
         let seed = config.seed;
         let mut mppi = Mppi::new(model.clone(), config).expect("sampler");
         let mut breakdown = Breakdown::default();
-        group.bench_with_input(BenchmarkId::new("open_phase", format!("{threads}_threads")), &threads, |b, _| {
-            b.iter_custom(|iterations| {
-                let mut total = Duration::ZERO;
-                for _ in 0..iterations {
-                    mppi.reset(seed, open.nominal_t0);
-                    mppi.set_nominal(&open.nominal, open.nominal_t0).expect("plan");
-                    mppi.set_noise_scale(open.noise_scale).expect("noise scale");
-                    mppi.set_guides(&open.guides).expect("guides");
-                    let start = Instant::now();
-                    let stats = mppi.iterate(&open.x0, open.t, &open.cost).expect("iteration");
-                    total += start.elapsed();
-                    breakdown.add(stats);
-                }
-                total
-            })
-        });
+        group.bench_with_input(
+            BenchmarkId::new("open_phase", format!("{threads}_threads")),
+            &threads,
+            |b, _| {
+                b.iter_custom(|iterations| {
+                    let mut total = Duration::ZERO;
+                    for _ in 0..iterations {
+                        mppi.reset(seed, open.nominal_t0);
+                        mppi.set_nominal(&open.nominal, open.nominal_t0).expect("plan");
+                        mppi.set_noise_scale(open.noise_scale).expect("noise scale");
+                        mppi.set_guides(&open.guides).expect("guides");
+                        let start = Instant::now();
+                        let stats = mppi.iterate(&open.x0, open.t, &open.cost).expect("iteration");
+                        total += start.elapsed();
+                        breakdown.add(stats);
+                    }
+                    total
+                })
+            },
+        );
         breakdown.report("open_phase", threads);
     }
     group.finish();

@@ -33,10 +33,21 @@ fn batches(scene: &Scene) -> Vec<(&'static str, Vec<f64>, Vec<f64>)> {
         .as_array()
         .unwrap()
         .iter()
-        .flat_map(|row| row.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect::<Vec<_>>())
+        .flat_map(|row| {
+            row.as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap())
+                .collect::<Vec<_>>()
+        })
         .collect();
-    let contact: Vec<f64> = (0..N).flat_map(|_| nominal.iter().map(|&u| u + rng.random_range(-0.02..0.02)).collect::<Vec<_>>()).collect();
-    vec![("free_motion", scene.default_state(), free), ("in_contact", x_hooked, contact)]
+    let contact: Vec<f64> = (0..N)
+        .flat_map(|_| nominal.iter().map(|&u| u + rng.random_range(-0.02..0.02)).collect::<Vec<_>>())
+        .collect();
+    vec![
+        ("free_motion", scene.default_state(), free),
+        ("in_contact", x_hooked, contact),
+    ]
 }
 
 fn rollout(c: &mut Criterion) {
@@ -47,9 +58,11 @@ fn rollout(c: &mut Criterion) {
     group.sample_size(30);
     for (name, x0, u) in batches(&scene) {
         for threads in [1usize, 2] {
-            group.bench_with_input(BenchmarkId::new(name, format!("{threads}_threads")), &threads, |b, &threads| {
-                b.iter(|| model.rollout(&x0, &u, N, K, Some(threads)).expect("rollout"))
-            });
+            group.bench_with_input(
+                BenchmarkId::new(name, format!("{threads}_threads")),
+                &threads,
+                |b, &threads| b.iter(|| model.rollout(&x0, &u, N, K, Some(threads)).expect("rollout")),
+            );
         }
     }
     group.finish();

@@ -31,16 +31,29 @@ struct Case {
 }
 
 fn index(scene: &Scene, name: &str) -> usize {
-    scene.robot.active_joint_names().iter().position(|n| n == name).expect("joint")
+    scene
+        .robot
+        .active_joint_names()
+        .iter()
+        .position(|n| n == name)
+        .expect("joint")
 }
 
 fn filter(scene: &Arc<Scene>, screening: bool) -> SafetyFilter {
-    let mut f = SafetyFilter::new(scene.clone(), SafetyConfig { screening, ..SafetyConfig::default() }).expect("filter");
+    let mut f = SafetyFilter::new(
+        scene.clone(),
+        SafetyConfig {
+            screening,
+            ..SafetyConfig::default()
+        },
+    )
+    .expect("filter");
     // One obstacle 3.5 cm in front of the binding posture's hand, seven scattered around the workspace.
     f.add_obstacle([2.62, 0.005, 0.885], 0.08).expect("slot");
     for i in 0..7 {
         let a = i as f64 * 0.9;
-        f.add_obstacle([1.2 * a.cos(), 1.2 * a.sin(), 0.3 + 0.15 * i as f64], 0.1).expect("slot");
+        f.add_obstacle([1.2 * a.cos(), 1.2 * a.sin(), 0.3 + 0.15 * i as f64], 0.1)
+            .expect("slot");
     }
     f
 }
@@ -90,7 +103,10 @@ fn filter_qp(c: &mut Criterion) {
         call(&mut f);
         let out = f.output().clone();
         let active: Vec<String> = out.active.iter().map(|&i| f.constraint_name(i)).collect();
-        eprintln!("{name}: {:?}, {} rows, {} iterations, {:?}, active {active:?}", out.method, out.qp_rows, out.iterations, out.status);
+        eprintln!(
+            "{name}: {:?}, {} rows, {} iterations, {:?}, active {active:?}",
+            out.method, out.qp_rows, out.iterations, out.status
+        );
         group.bench_function(name, |b| b.iter(|| call(&mut f)));
     }
     group.finish();
@@ -120,17 +136,28 @@ fn inner_tick(c: &mut Criterion) {
                 1,
                 0,
                 &mut trace,
-                Some(InnerSafety { filter: Some(&mut f), tank: Some(&mut tank) }),
+                Some(InnerSafety {
+                    filter: Some(&mut f),
+                    tank: Some(&mut tank),
+                }),
             )
             .expect("tick")
         })
     });
     group.bench_function("tick_controller_plant_only", |b| {
-        b.iter(|| follow_reference_safe(&mut plant, &mut controller, &reference, 0.0, 0.015, 1, 0, &mut trace, None).expect("tick"))
+        b.iter(|| {
+            follow_reference_safe(&mut plant, &mut controller, &reference, 0.0, 0.015, 1, 0, &mut trace, None).expect("tick")
+        })
     });
     group.finish();
     let s = f.stats();
-    eprintln!("filter during the ticks: {} calls, {} with Clarabel, {} fallbacks, mean {:.1} µs", s.calls, s.interior_point_calls, s.fallbacks, 1e6 * s.mean_time());
+    eprintln!(
+        "filter during the ticks: {} calls, {} with Clarabel, {} fallbacks, mean {:.1} µs",
+        s.calls,
+        s.interior_point_calls,
+        s.fallbacks,
+        1e6 * s.mean_time()
+    );
 }
 
 criterion_group!(benches, filter_qp, inner_tick);

@@ -7,21 +7,13 @@ use thiserror::Error;
 pub enum SabreError {
     /// An array had the wrong number of elements or the wrong layout.
     #[error("{what}: expected shape {expected}, got {got}")]
-    Shape {
-        what: String,
-        expected: String,
-        got: String,
-    },
+    Shape { what: String, expected: String, got: String },
     /// A value was NaN, infinite or outside its admissible range.
     #[error("{what}: {detail}")]
     InvalidValue { what: String, detail: String },
     /// A built-in robot or object name that does not exist.
     #[error("unknown {kind} '{name}'; available: {available}")]
-    UnknownAsset {
-        kind: String,
-        name: String,
-        available: String,
-    },
+    UnknownAsset { kind: String, name: String, available: String },
     /// A URDF that is missing, unreadable, malformed or uses unsupported features.
     #[error("URDF {source_name}: {detail}")]
     Urdf { source_name: String, detail: String },

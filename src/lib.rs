@@ -15,4 +15,3 @@ mod python;
 
 pub use error::{Result, SabreError};
 pub use model::Scene;
-

@@ -29,7 +29,10 @@ fn integrate(q0: &[f64], guide: &[f64], mut visit: impl FnMut(&[f64], &[f64])) -
 }
 
 fn pose_error(a: &Isometry3<f64>, b: &Isometry3<f64>) -> (f64, f64) {
-    ((a.translation.vector - b.translation.vector).norm(), a.rotation.angle_to(&b.rotation))
+    (
+        (a.translation.vector - b.translation.vector).norm(),
+        a.rotation.angle_to(&b.rotation),
+    )
 }
 
 #[test]
@@ -41,7 +44,12 @@ fn reaches_a_static_target_within_the_horizon() {
     let target = Isometry3::from_parts(Translation3::new(0.1, 0.1, -0.05), UnitQuaternion::identity())
         * start
         * Isometry3::rotation(Vector3::new(0.1, 0.2, 0.2).normalize() * 0.3);
-    let config = ServoGuideConfig { gain: 4.0, max_linear: 0.5, max_angular: 1.0, ..Default::default() };
+    let config = ServoGuideConfig {
+        gain: 4.0,
+        max_linear: 0.5,
+        max_angular: 1.0,
+        ..Default::default()
+    };
     let guide = servo_guide(&scene, &q0, &vec![target; K + 1], DT, "grasp", &config).unwrap();
     assert_eq!(guide.len(), K * scene.nq());
     let q = integrate(&q0, &guide, |_, _| {});
@@ -49,7 +57,10 @@ fn reaches_a_static_target_within_the_horizon() {
     let (dp0, da0) = pose_error(&start, &target);
     // Once the rate cap lets go, the error shrinks by (1 − gain·dt) per step (explicit Euler on ė = −gain·e).
     let decay = (1.0 - config.gain * DT).powi(K as i32);
-    assert!(dp < 2.0 * decay * dp0 && da < 2.0 * decay * da0, "final error {dp} m, {da} rad (from {dp0} m, {da0} rad)");
+    assert!(
+        dp < 2.0 * decay * dp0 && da < 2.0 * decay * da0,
+        "final error {dp} m, {da} rad (from {dp0} m, {da0} rad)"
+    );
 }
 
 #[test]
@@ -65,23 +76,48 @@ fn a_joint_at_its_margin_is_held_and_the_others_take_over() {
     let mut beyond = q0.clone();
     beyond[elbow] += 0.3;
     let target = scene.fk(&beyond, "grasp").unwrap();
-    let config = ServoGuideConfig { gain: 4.0, max_linear: 0.5, max_angular: 1.0, joint_margin: margin, ..Default::default() };
+    let config = ServoGuideConfig {
+        gain: 4.0,
+        max_linear: 0.5,
+        max_angular: 1.0,
+        joint_margin: margin,
+        ..Default::default()
+    };
     let guide = servo_guide(&scene, &q0, &vec![target; K + 1], DT, "grasp", &config).unwrap();
     let mut highest = f64::NEG_INFINITY;
     let q = integrate(&q0, &guide, |q, v| {
         highest = highest.max(q[elbow]);
         for (i, l) in limits.iter().enumerate() {
-            assert!(v[i].abs() <= l.velocity * (1.0 + 1e-12), "joint {i} speed {} over {}", v[i], l.velocity);
-            assert!(q[i] <= l.upper - margin + 1e-9 && q[i] >= l.lower + margin - 1e-9, "joint {i} at {} left its margin", q[i]);
+            assert!(
+                v[i].abs() <= l.velocity * (1.0 + 1e-12),
+                "joint {i} speed {} over {}",
+                v[i],
+                l.velocity
+            );
+            assert!(
+                q[i] <= l.upper - margin + 1e-9 && q[i] >= l.lower + margin - 1e-9,
+                "joint {i} at {} left its margin",
+                q[i]
+            );
         }
     });
     assert!(highest <= limits[elbow].upper - margin + 1e-9);
     let (dp, da) = pose_error(&scene.fk(&q, "grasp").unwrap(), &target);
     assert!(dp < 5e-3 && da < 2e-2, "redundancy should reach the target: {dp} m, {da} rad");
     // Without the margin rule the same servo would have driven the elbow past it.
-    let loose = ServoGuideConfig { joint_margin: -1.0, ..config };
-    let free = integrate(&q0, &servo_guide(&scene, &q0, &vec![target; K + 1], DT, "grasp", &loose).unwrap(), |_, _| {});
-    assert!(free[elbow] > limits[elbow].upper - margin, "the check above must be able to fail");
+    let loose = ServoGuideConfig {
+        joint_margin: -1.0,
+        ..config
+    };
+    let free = integrate(
+        &q0,
+        &servo_guide(&scene, &q0, &vec![target; K + 1], DT, "grasp", &loose).unwrap(),
+        |_, _| {},
+    );
+    assert!(
+        free[elbow] > limits[elbow].upper - margin,
+        "the check above must be able to fail"
+    );
     assert_eq!(q.len(), nq);
 }
 
@@ -91,18 +127,33 @@ fn rates_are_capped_and_speeds_scaled_together() {
     let q0 = scene.home_configuration();
     let start = scene.fk(&q0, "grasp").unwrap();
     let far = Isometry3::from_parts(Translation3::new(1.0, 0.0, 0.0), UnitQuaternion::identity()) * start;
-    let slow = ServoGuideConfig { max_linear: 0.1, ..Default::default() };
+    let slow = ServoGuideConfig {
+        max_linear: 0.1,
+        ..Default::default()
+    };
     let guide = servo_guide(&scene, &q0, &vec![far; K + 1], DT, "grasp", &slow).unwrap();
     let q = integrate(&q0, &guide, |_, _| {});
     // At most 0.1 m/s for K·DT seconds (to first order in the step).
     let moved = (scene.fk(&q, "grasp").unwrap().translation.vector - start.translation.vector).norm();
     let bound = 0.1 * K as f64 * DT;
-    assert!(moved <= 1.02 * bound && moved >= 0.9 * bound, "moved {moved} m, cap allows {bound} m");
+    assert!(
+        moved <= 1.02 * bound && moved >= 0.9 * bound,
+        "moved {moved} m, cap allows {bound} m"
+    );
     let tight = vec![0.05; scene.nq()];
-    let capped = ServoGuideConfig { max_linear: 1.0, velocity_limit: Some(tight.clone()), ..Default::default() };
+    let capped = ServoGuideConfig {
+        max_linear: 1.0,
+        velocity_limit: Some(tight.clone()),
+        ..Default::default()
+    };
     let guide = servo_guide(&scene, &q0, &vec![far; K + 1], DT, "grasp", &capped).unwrap();
     assert!(guide.iter().all(|v| v.abs() <= 0.05 + 1e-12));
-    assert!(guide.chunks(scene.nq()).all(|v| v.iter().any(|x| (x.abs() - 0.05).abs() < 1e-12)), "one joint at the cap each step");
+    assert!(
+        guide
+            .chunks(scene.nq())
+            .all(|v| v.iter().any(|x| (x.abs() - 0.05).abs() < 1e-12)),
+        "one joint at the cap each step"
+    );
 }
 
 #[test]
@@ -120,7 +171,13 @@ fn bad_input_is_rejected() {
     assert!(invalid(servo_guide(&scene, &nan, &[pose, pose], DT, "grasp", &config)));
     let shifted = Isometry3::from_parts(Translation3::new(f64::NAN, 0.0, 0.0), UnitQuaternion::identity());
     assert!(invalid(servo_guide(&scene, &q0, &[pose, shifted], DT, "grasp", &config)));
-    let negative = ServoGuideConfig { velocity_limit: Some(vec![-1.0; scene.nq()]), ..Default::default() };
+    let negative = ServoGuideConfig {
+        velocity_limit: Some(vec![-1.0; scene.nq()]),
+        ..Default::default()
+    };
     assert!(invalid(servo_guide(&scene, &q0, &[pose, pose], DT, "grasp", &negative)));
-    assert!(matches!(servo_guide(&scene, &q0, &[pose, pose], DT, "gripper_of_doom", &config), Err(SabreError::UnknownFrame { .. })));
+    assert!(matches!(
+        servo_guide(&scene, &q0, &[pose, pose], DT, "gripper_of_doom", &config),
+        Err(SabreError::UnknownFrame { .. })
+    ));
 }

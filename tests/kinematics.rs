@@ -111,7 +111,12 @@ fn zero_configuration_matches_hand_computed_panda_geometry() {
         assert_vec_close(frame, &pos(&pose), &(m + p), 1e-9);
     }
     // The famous Panda zero-pose flange position (0.088, 0, 0.926) above the arm base.
-    assert_vec_close("flange", &(pos(&s.fk(&q, "panda_link8").unwrap()) - m), &v3(0.088, 0.0, 0.926), 1e-9);
+    assert_vec_close(
+        "flange",
+        &(pos(&s.fk(&q, "panda_link8").unwrap()) - m),
+        &v3(0.088, 0.0, 0.926),
+        1e-9,
+    );
 
     // Orientations at q = 0: links 1, 3, 5 are aligned with the world; 2, 4, 6 are rotated +-90 deg
     // about x; link 7 and the flange (link 8) point down (rotation of pi about x).
@@ -137,7 +142,12 @@ fn zero_configuration_matches_hand_computed_panda_geometry() {
     let c = std::f64::consts::FRAC_1_SQRT_2;
     let flange = pos(&s.fk(&q, "panda_link8").unwrap());
     let grasp = s.fk(&q, "grasp").unwrap();
-    assert_vec_close("grasp position", &pos(&grasp), &(flange + 0.015 * v3(c, -c, 0.0) + 0.095 * v3(0.0, 0.0, -1.0)), 1e-9);
+    assert_vec_close(
+        "grasp position",
+        &pos(&grasp),
+        &(flange + 0.015 * v3(c, -c, 0.0) + 0.095 * v3(0.0, 0.0, -1.0)),
+        1e-9,
+    );
     let hand_y = rot(&grasp).column(1).into_owned();
     assert_vec_close("grasp y axis", &hand_y, &v3(c, -c, 0.0), 1e-9);
     let hand_z = rot(&grasp).column(2).into_owned();
@@ -151,8 +161,18 @@ fn single_arm_joints_move_links_as_hand_computed() {
     // joint 1 (vertical axis through the arm base) by +90 deg swings the elbow offset from +x to +y.
     let mut q = vec![0.0; 10];
     q[qi(&s, "panda_joint1")] = std::f64::consts::FRAC_PI_2;
-    assert_vec_close("link4 after joint1", &pos(&s.fk(&q, "panda_link4").unwrap()), &(m + v3(0.0, 0.0825, 0.649)), 1e-9);
-    assert_vec_close("link7 after joint1", &pos(&s.fk(&q, "panda_link7").unwrap()), &(m + v3(0.0, 0.088, 1.033)), 1e-9);
+    assert_vec_close(
+        "link4 after joint1",
+        &pos(&s.fk(&q, "panda_link4").unwrap()),
+        &(m + v3(0.0, 0.0825, 0.649)),
+        1e-9,
+    );
+    assert_vec_close(
+        "link7 after joint1",
+        &pos(&s.fk(&q, "panda_link7").unwrap()),
+        &(m + v3(0.0, 0.088, 1.033)),
+        1e-9,
+    );
 
     // joint 2 rotates about the world +y axis through the shoulder (0, 0, 0.333):
     // the upper arm (length 0.316) tilts forward by the joint angle.
@@ -172,7 +192,12 @@ fn single_arm_joints_move_links_as_hand_computed() {
     let rel = v3(-0.0825, 0.0, 0.384);
     // rotation by theta about -y = rotation by -theta about +y
     let ry = *Rotation3::from_axis_angle(&Vector3::y_axis(), -theta).matrix();
-    assert_vec_close("link5 after joint4", &pos(&s.fk(&q, "panda_link5").unwrap()), &(m + elbow + ry * rel), 1e-9);
+    assert_vec_close(
+        "link5 after joint4",
+        &pos(&s.fk(&q, "panda_link5").unwrap()),
+        &(m + elbow + ry * rel),
+        1e-9,
+    );
 }
 
 #[test]
@@ -180,13 +205,25 @@ fn base_joints_translate_and_rotate_every_frame() {
     let s = scene();
     let mut rng = ChaCha8Rng::seed_from_u64(11);
     let (ix, iy, iyaw) = (qi(&s, "base_x"), qi(&s, "base_y"), qi(&s, "base_yaw"));
-    let frames = ["base_link", "panda_link0", "panda_link3", "panda_link8", "panda_hand", "grasp", "hook_finger"];
+    let frames = [
+        "base_link",
+        "panda_link0",
+        "panda_link3",
+        "panda_link8",
+        "panda_hand",
+        "grasp",
+        "hook_finger",
+    ];
     for _ in 0..3 {
         let mut q0 = random_q(&s, &mut rng);
         q0[ix] = 0.0;
         q0[iy] = 0.0;
         q0[iyaw] = 0.0;
-        let (dx, dy, yaw) = (rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0), rng.random_range(-3.0..3.0));
+        let (dx, dy, yaw) = (
+            rng.random_range(-3.0..3.0),
+            rng.random_range(-3.0..3.0),
+            rng.random_range(-3.0..3.0),
+        );
 
         let mut qt = q0.clone();
         qt[ix] = dx;
@@ -250,7 +287,16 @@ fn fd_jacobian(s: &Scene, q: &[f64], frame: &str) -> DMatrix<f64> {
 fn jacobian_matches_finite_differences_of_fk() {
     let s = scene();
     let mut rng = ChaCha8Rng::seed_from_u64(3);
-    let frames = ["grasp", "hook_finger", "panda_hand", "panda_link8", "panda_link4", "panda_link2", "base_link", "world"];
+    let frames = [
+        "grasp",
+        "hook_finger",
+        "panda_hand",
+        "panda_link8",
+        "panda_link4",
+        "panda_link2",
+        "base_link",
+        "world",
+    ];
     for _ in 0..6 {
         let q = random_q(&s, &mut rng);
         for frame in frames {
@@ -258,7 +304,10 @@ fn jacobian_matches_finite_differences_of_fk() {
             assert_eq!(j.shape(), (6, 10), "{frame}");
             let fd = fd_jacobian(&s, &q, frame);
             let err = (&j - &fd).abs().max();
-            assert!(err < 1e-6, "{frame} at q = {q:?}: Jacobian differs from finite differences by {err:e}\nanalytic {j}\nfd {fd}");
+            assert!(
+                err < 1e-6,
+                "{frame} at q = {q:?}: Jacobian differs from finite differences by {err:e}\nanalytic {j}\nfd {fd}"
+            );
         }
     }
 }
@@ -300,19 +349,44 @@ fn reference_inertials() -> HashMap<String, RefInertial> {
     let doc = roxmltree::Document::parse(ROBOT_URDF).unwrap();
     let mut out = HashMap::new();
     for link in doc.root_element().children().filter(|n| n.has_tag_name("link")) {
-        let Some(inertial) = link.children().find(|n| n.has_tag_name("inertial")) else { continue };
+        let Some(inertial) = link.children().find(|n| n.has_tag_name("inertial")) else {
+            continue;
+        };
         let child = |tag: &str| inertial.children().find(|n| n.has_tag_name(tag)).unwrap();
         let origin = child("origin");
         let rpy = floats(origin.attribute("rpy").unwrap_or("0 0 0"));
-        assert!(rpy.iter().all(|v| *v == 0.0), "the reference assumes unrotated inertial frames");
+        assert!(
+            rpy.iter().all(|v| *v == 0.0),
+            "the reference assumes unrotated inertial frames"
+        );
         let xyz = floats(origin.attribute("xyz").unwrap_or("0 0 0"));
         let mass: f64 = child("mass").attribute("value").unwrap().parse().unwrap();
         let i = child("inertia");
         let a = |k: &str| -> f64 { i.attribute(k).unwrap().parse().unwrap() };
-        let inertia = Matrix3::new(a("ixx"), a("ixy"), a("ixz"), a("ixy"), a("iyy"), a("iyz"), a("ixz"), a("iyz"), a("izz"));
-        out.insert(link.attribute("name").unwrap().to_string(), RefInertial { mass, com: v3(xyz[0], xyz[1], xyz[2]), inertia });
+        let inertia = Matrix3::new(
+            a("ixx"),
+            a("ixy"),
+            a("ixz"),
+            a("ixy"),
+            a("iyy"),
+            a("iyz"),
+            a("ixz"),
+            a("iyz"),
+            a("izz"),
+        );
+        out.insert(
+            link.attribute("name").unwrap().to_string(),
+            RefInertial {
+                mass,
+                com: v3(xyz[0], xyz[1], xyz[2]),
+                inertia,
+            },
+        );
     }
-    assert!(out.len() >= 13, "expected inertials for the base links, the Panda links, the hand and the hook");
+    assert!(
+        out.len() >= 13,
+        "expected inertials for the base links, the Panda links, the hand and the hook"
+    );
     out
 }
 
@@ -351,7 +425,15 @@ fn terms(s: &Scene, q: &[f64]) -> (DMatrix<f64>, DVector<f64>) {
     let mut ws = DynamicsWorkspace::default();
     let mut m = DMatrix::zeros(0, 0);
     let mut g = DVector::zeros(0);
-    joint_space_terms(&s.robot, &Isometry3::identity(), q, &v3(0.0, 0.0, -GRAVITY), &mut ws, &mut m, &mut g);
+    joint_space_terms(
+        &s.robot,
+        &Isometry3::identity(),
+        q,
+        &v3(0.0, 0.0, -GRAVITY),
+        &mut ws,
+        &mut m,
+        &mut g,
+    );
     (m, g)
 }
 
@@ -405,10 +487,16 @@ fn mass_matrix_is_symmetric_positive_definite_and_matches_kinetic_energy() {
         let v = DVector::from_column_slice(&qd);
         let ke = 0.5 * v.dot(&(&m * &v));
         let ke_ref = t(&qd);
-        assert!((ke - ke_ref).abs() < 1e-7 * (1.0 + ke_ref), "½ q̇ᵀMq̇ = {ke}, kinetic energy = {ke_ref}");
+        assert!(
+            (ke - ke_ref).abs() < 1e-7 * (1.0 + ke_ref),
+            "½ q̇ᵀMq̇ = {ke}, kinetic energy = {ke_ref}"
+        );
         let e = mechanical_energy(&s.robot, &Isometry3::identity(), &q, &qd, &v3(0.0, 0.0, -GRAVITY));
         let e_ref = ke_ref + reference_potential_energy(&s, &inertials, &q);
-        assert!((e - e_ref).abs() < 1e-7 * (1.0 + e_ref.abs()), "mechanical energy {e} vs {e_ref}");
+        assert!(
+            (e - e_ref).abs() < 1e-7 * (1.0 + e_ref.abs()),
+            "mechanical energy {e} vs {e_ref}"
+        );
     }
 }
 
@@ -423,7 +511,10 @@ fn potential_energy_matches_urdf_inertials_and_gravity_torque_is_its_gradient() 
         let q = random_q(&s, &mut rng);
         let v = potential_energy(&s.robot, &Isometry3::identity(), &q, &gravity);
         let v_ref = reference_potential_energy(&s, &inertials, &q);
-        assert!((v - v_ref).abs() < 1e-9 * (1.0 + v_ref.abs()), "potential energy {v} vs {v_ref}");
+        assert!(
+            (v - v_ref).abs() < 1e-9 * (1.0 + v_ref.abs()),
+            "potential energy {v} vs {v_ref}"
+        );
 
         let (_, g) = terms(&s, &q);
         assert_eq!(g.len(), s.nq());
@@ -432,16 +523,29 @@ fn potential_energy_matches_urdf_inertials_and_gravity_torque_is_its_gradient() 
             let mut qm = q.clone();
             qp[i] += h;
             qm[i] -= h;
-            let grad = (reference_potential_energy(&s, &inertials, &qp) - reference_potential_energy(&s, &inertials, &qm)) / (2.0 * h);
+            let grad =
+                (reference_potential_energy(&s, &inertials, &qp) - reference_potential_energy(&s, &inertials, &qm)) / (2.0 * h);
             let grad_core = (potential_energy(&s.robot, &Isometry3::identity(), &qp, &gravity)
                 - potential_energy(&s.robot, &Isometry3::identity(), &qm, &gravity))
                 / (2.0 * h);
-            assert!((g[i] - grad).abs() < 1e-5 * (1.0 + grad.abs()), "g[{i}] = {} but dV/dq = {grad}", g[i]);
-            assert!((g[i] - grad_core).abs() < 1e-5 * (1.0 + grad.abs()), "g[{i}] = {} but d potential_energy/dq = {grad_core}", g[i]);
+            assert!(
+                (g[i] - grad).abs() < 1e-5 * (1.0 + grad.abs()),
+                "g[{i}] = {} but dV/dq = {grad}",
+                g[i]
+            );
+            assert!(
+                (g[i] - grad_core).abs() < 1e-5 * (1.0 + grad.abs()),
+                "g[{i}] = {} but d potential_energy/dq = {grad_core}",
+                g[i]
+            );
         }
         // base translation and yaw never change the potential energy
         for i in 0..3 {
-            assert!(g[i].abs() < 1e-9, "g[{i}] = {} should vanish (base joints are horizontal)", g[i]);
+            assert!(
+                g[i].abs() < 1e-9,
+                "g[{i}] = {} should vanish (base joints are horizontal)",
+                g[i]
+            );
         }
     }
     // A known value: with the arm stretched up at q = 0, no joint has a gravity torque except
@@ -520,7 +624,12 @@ fn minimal_urdfs_load() {
 #[test]
 fn malformed_xml_is_a_urdf_error() {
     expect_urdf_error("truncated", &ROBOT_OK[..ROBOT_OK.len() - 20], OBJECT_OK, "");
-    expect_urdf_error("mismatched tag", "<robot name='x'><link name='a'></joint></robot>", OBJECT_OK, "xml");
+    expect_urdf_error(
+        "mismatched tag",
+        "<robot name='x'><link name='a'></joint></robot>",
+        OBJECT_OK,
+        "xml",
+    );
     expect_urdf_error("empty", "", OBJECT_OK, "");
     expect_urdf_error("not xml", "this is not a URDF", OBJECT_OK, "");
     expect_urdf_error("object malformed", ROBOT_OK, "<robot name='o'><link name='a'>", "");
@@ -531,7 +640,10 @@ fn mesh_geometry_is_a_urdf_error() {
     let robot = ROBOT_OK.replace(r#"<box size="0.1 0.1 0.2"/>"#, r#"<mesh filename="package://bot/arm.stl"/>"#);
     assert_ne!(robot, ROBOT_OK);
     expect_urdf_error("mesh in robot", &robot, OBJECT_OK, "mesh");
-    let object = OBJECT_OK.replace(r#"<box size="0.02 0.3 0.5"/>"#, r#"<mesh filename="door.dae" scale="1 1 1"/>"#);
+    let object = OBJECT_OK.replace(
+        r#"<box size="0.02 0.3 0.5"/>"#,
+        r#"<mesh filename="door.dae" scale="1 1 1"/>"#,
+    );
     expect_urdf_error("mesh in object", ROBOT_OK, &object, "mesh");
 }
 
@@ -585,7 +697,10 @@ fn other_invalid_urdfs_are_urdf_errors() {
 
 #[test]
 fn bad_arguments_give_the_matching_error_variant() {
-    assert!(matches!(Scene::load("robby", "shelf", None), Err(SabreError::UnknownAsset { .. })));
+    assert!(matches!(
+        Scene::load("robby", "shelf", None),
+        Err(SabreError::UnknownAsset { .. })
+    ));
     match Scene::load("royalpanda", "fridge", None) {
         Err(SabreError::UnknownAsset { available, .. }) => {
             for name in ["shelf", "microwave", "dishwasher", "drawer"] {
@@ -594,7 +709,10 @@ fn bad_arguments_give_the_matching_error_variant() {
         }
         other => panic!("expected UnknownAsset, got {other:?}"),
     }
-    assert!(matches!(Scene::load("royalpanda", "shelf", Some(&[1.0, 0.0, 0.0])), Err(SabreError::Shape { .. })));
+    assert!(matches!(
+        Scene::load("royalpanda", "shelf", Some(&[1.0, 0.0, 0.0])),
+        Err(SabreError::Shape { .. })
+    ));
     assert!(matches!(
         Scene::load("royalpanda", "shelf", Some(&[1.0, 0.0, 0.0, 0.0, f64::NAN, 0.0])),
         Err(SabreError::InvalidValue { .. })
@@ -609,8 +727,17 @@ fn bad_arguments_give_the_matching_error_variant() {
     q[4] = f64::NAN;
     assert!(matches!(s.jacobian(&q, "grasp"), Err(SabreError::InvalidValue { .. })));
     assert!(matches!(s.fk(&[0.0; 10], "gripper"), Err(SabreError::UnknownFrame { .. })));
-    assert!(matches!(s.jacobian(&[0.0; 10], "handle_frame"), Err(SabreError::UnknownFrame { .. })));
+    assert!(matches!(
+        s.jacobian(&[0.0; 10], "handle_frame"),
+        Err(SabreError::UnknownFrame { .. })
+    ));
     assert!(matches!(s.object_fk(&[0.0], "grasp"), Err(SabreError::UnknownFrame { .. })));
-    assert!(matches!(s.object_fk(&[0.0, 0.0], "handle_frame"), Err(SabreError::Shape { .. })));
-    assert!(matches!(s.object_fk(&[f64::NAN], "handle_frame"), Err(SabreError::InvalidValue { .. })));
+    assert!(matches!(
+        s.object_fk(&[0.0, 0.0], "handle_frame"),
+        Err(SabreError::Shape { .. })
+    ));
+    assert!(matches!(
+        s.object_fk(&[f64::NAN], "handle_frame"),
+        Err(SabreError::InvalidValue { .. })
+    ));
 }

@@ -20,14 +20,23 @@ fn scene() -> Arc<Scene> {
 }
 
 fn joint(scene: &Scene, name: &str) -> usize {
-    scene.robot.active_joint_names().iter().position(|n| n == name).expect("joint exists")
+    scene
+        .robot
+        .active_joint_names()
+        .iter()
+        .position(|n| n == name)
+        .expect("joint exists")
 }
 
 /// A filter with eight obstacles scattered around the robot's workspace.
 fn filter_with_obstacles(scene: &Arc<Scene>, config: SafetyConfig, rng: &mut ChaCha8Rng) -> SafetyFilter {
     let mut f = SafetyFilter::new(scene.clone(), config).expect("filter");
     for _ in 0..8 {
-        let c = [rng.random_range(-0.5..1.5), rng.random_range(-1.0..1.0), rng.random_range(0.2..1.5)];
+        let c = [
+            rng.random_range(-0.5..1.5),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(0.2..1.5),
+        ];
         f.add_obstacle(c, rng.random_range(0.05..0.3)).expect("slot free");
     }
     f
@@ -39,7 +48,11 @@ fn random_state(scene: &Scene, rng: &mut ChaCha8Rng) -> Vec<f64> {
     let mut x = scene.default_state();
     let nq = scene.nq();
     for (j, l) in scene.robot_limits().iter().enumerate() {
-        let (lo, hi) = if j < 2 { (-2.2, 2.2) } else { (l.lower.max(-6.0), l.upper.min(6.0)) };
+        let (lo, hi) = if j < 2 {
+            (-2.2, 2.2)
+        } else {
+            (l.lower.max(-6.0), l.upper.min(6.0))
+        };
         x[j] = if rng.random_bool(0.33) {
             // Near a limit, up to 0.05 beyond it.
             if rng.random_bool(0.5) {
@@ -57,7 +70,11 @@ fn random_state(scene: &Scene, rng: &mut ChaCha8Rng) -> Vec<f64> {
 
 fn random_command(scene: &Scene, rng: &mut ChaCha8Rng) -> Vec<f64> {
     // Up to 1.5× the velocity limits: the filter must also bring over-limit commands in.
-    scene.robot_limits().iter().map(|l| rng.random_range(-1.5..1.5) * l.velocity).collect()
+    scene
+        .robot_limits()
+        .iter()
+        .map(|l| rng.random_range(-1.5..1.5) * l.velocity)
+        .collect()
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -81,7 +98,9 @@ fn penalties(f: &SafetyFilter) -> Vec<f64> {
 fn projected_gradient(a: &[f64], b: &[f64], gamma: &[f64], v: &[f64], u_ref: &[f64]) -> Vec<f64> {
     let nq = v.len();
     let row = |r: usize| &a[r * nq..(r + 1) * nq];
-    let relevant: Vec<usize> = (0..b.len()).filter(|&r| b[r] > -dot(&row(r).iter().map(|x| x.abs()).collect::<Vec<_>>(), v)).collect();
+    let relevant: Vec<usize> = (0..b.len())
+        .filter(|&r| b[r] > -dot(&row(r).iter().map(|x| x.abs()).collect::<Vec<_>>(), v))
+        .collect();
     let lipschitz = 1.0 + relevant.iter().map(|&r| gamma[r] * dot(row(r), row(r))).sum::<f64>();
     let project = |u: &mut Vec<f64>| u.iter_mut().zip(v).for_each(|(x, l)| *x = x.clamp(-l, *l));
     let gradient = |u: &[f64]| {
@@ -121,7 +140,14 @@ fn random_states_meet_input_limits_exactly_and_every_row_up_to_its_slack() {
     let mut rng = ChaCha8Rng::seed_from_u64(11);
     let mut screened = filter_with_obstacles(&scene, SafetyConfig::default(), &mut rng);
     let mut rng_full = ChaCha8Rng::seed_from_u64(11);
-    let mut full = filter_with_obstacles(&scene, SafetyConfig { screening: false, ..SafetyConfig::default() }, &mut rng_full);
+    let mut full = filter_with_obstacles(
+        &scene,
+        SafetyConfig {
+            screening: false,
+            ..SafetyConfig::default()
+        },
+        &mut rng_full,
+    );
     let nq = scene.nq();
     let v = screened.input_limits().to_vec();
     let mut solver_calls = 0;
@@ -139,7 +165,12 @@ fn random_states_meet_input_limits_exactly_and_every_row_up_to_its_slack() {
         let (a, b, _) = rows(&mut screened, &x, Some((&tau, energy)));
         for r in 0..b.len() {
             let lhs = dot(&a[r * nq..(r + 1) * nq], &out.u) + out.slack[r];
-            assert!(lhs >= b[r] - 1e-6, "row {} violated: {lhs} < {}", screened.constraint_name(r), b[r]);
+            assert!(
+                lhs >= b[r] - 1e-6,
+                "row {} violated: {lhs} < {}",
+                screened.constraint_name(r),
+                b[r]
+            );
             assert!(out.slack[r] >= 0.0);
         }
         // The full problem (no screening) has the same solution, to the solver's accuracy: about
@@ -147,10 +178,18 @@ fn random_states_meet_input_limits_exactly_and_every_row_up_to_its_slack() {
         // (degenerate), where interior-point iterates stop short of the bound.
         let reference = full.filter(&x, &u_ref, Some((&tau, energy))).expect("filter");
         for j in 0..nq {
-            assert!((reference.u[j] - out.u[j]).abs() < 1e-4, "screened and full QP differ in u[{j}]: {} vs {}", out.u[j], reference.u[j]);
+            assert!(
+                (reference.u[j] - out.u[j]).abs() < 1e-4,
+                "screened and full QP differ in u[{j}]: {} vs {}",
+                out.u[j],
+                reference.u[j]
+            );
         }
     }
-    assert!(solver_calls > 300, "the random states should mostly need the solver, got {solver_calls}");
+    assert!(
+        solver_calls > 300,
+        "the random states should mostly need the solver, got {solver_calls}"
+    );
     assert_eq!(screened.stats().calls, 400);
     assert_eq!(screened.stats().fallbacks, 0);
 }
@@ -159,7 +198,14 @@ fn random_states_meet_input_limits_exactly_and_every_row_up_to_its_slack() {
 fn a_safe_command_far_from_every_limit_comes_back_unchanged() {
     let scene = scene();
     for screening in [true, false] {
-        let mut f = SafetyFilter::new(scene.clone(), SafetyConfig { screening, ..SafetyConfig::default() }).unwrap();
+        let mut f = SafetyFilter::new(
+            scene.clone(),
+            SafetyConfig {
+                screening,
+                ..SafetyConfig::default()
+            },
+        )
+        .unwrap();
         f.add_obstacle([3.0, 3.0, 1.0], 0.2).unwrap();
         let x = scene.default_state();
         let u_ref = [0.1, -0.1, 0.05, 0.2, -0.2, 0.1, 0.1, -0.1, 0.2, 0.1];
@@ -168,7 +214,12 @@ fn a_safe_command_far_from_every_limit_comes_back_unchanged() {
         let out = f.filter(&x, &u_ref, Some((&tau, 10.0))).unwrap().clone();
         assert_eq!(out.status, FilterStatus::Solved);
         for j in 0..10 {
-            assert!((out.u[j] - u_ref[j]).abs() < 1e-6, "screening={screening}: u[{j}] {} vs {}", out.u[j], u_ref[j]);
+            assert!(
+                (out.u[j] - u_ref[j]).abs() < 1e-6,
+                "screening={screening}: u[{j}] {} vs {}",
+                out.u[j],
+                u_ref[j]
+            );
         }
         assert!(out.active.is_empty(), "screening={screening}: {:?}", out.active);
         assert!(out.slack.iter().all(|&s| s < 1e-6));
@@ -200,7 +251,11 @@ fn optimality_conditions_hold_and_match_an_independent_solution() {
             let lambda = gamma[r] * out.slack[r];
             let row = &a[r * nq..(r + 1) * nq];
             let residual = dot(row, &out.u) + out.slack[r] - b[r];
-            assert!(lambda * residual.abs() < 1e-5, "trial {trial}: complementarity of {}: λ {lambda}, residual {residual}", f.constraint_name(r));
+            assert!(
+                lambda * residual.abs() < 1e-5,
+                "trial {trial}: complementarity of {}: λ {lambda}, residual {residual}",
+                f.constraint_name(r)
+            );
             g.iter_mut().zip(row).for_each(|(gi, ai)| *gi -= lambda * ai);
         }
         for j in 0..nq {
@@ -209,7 +264,11 @@ fn optimality_conditions_hold_and_match_an_independent_solution() {
             if out.u[j] >= v[j] - 1e-5 {
                 assert!(g[j] <= tol, "trial {trial}: stationarity at the upper bound of {j}: {}", g[j]);
             } else if out.u[j] <= -v[j] + 1e-5 {
-                assert!(g[j] >= -tol, "trial {trial}: stationarity at the lower bound of {j}: {}", g[j]);
+                assert!(
+                    g[j] >= -tol,
+                    "trial {trial}: stationarity at the lower bound of {j}: {}",
+                    g[j]
+                );
             } else {
                 assert!(g[j].abs() <= tol, "trial {trial}: stationarity of {j}: {}", g[j]);
             }
@@ -217,7 +276,12 @@ fn optimality_conditions_hold_and_match_an_independent_solution() {
         if trial < 25 {
             let independent = projected_gradient(&a, &b, &gamma, &v, &u_ref);
             for j in 0..nq {
-                assert!((independent[j] - out.u[j]).abs() < 1e-4, "trial {trial}: u[{j}] {} vs projected gradient {}", out.u[j], independent[j]);
+                assert!(
+                    (independent[j] - out.u[j]).abs() < 1e-4,
+                    "trial {trial}: u[{j}] {} vs projected gradient {}",
+                    out.u[j],
+                    independent[j]
+                );
             }
         }
         checked += 1;
@@ -235,7 +299,12 @@ fn warm_active_set_reproduces_the_full_qp_along_a_slow_trajectory() {
     // The reference solves the full QP with Clarabel to a much tighter tolerance: where a row is
     // about to bind (multiplier and residual both near zero) an interior-point solution is only
     // accurate to about the square root of its tolerance.
-    let tight = SafetyConfig { screening: false, tolerance: 1e-12, max_iterations: 200, ..SafetyConfig::default() };
+    let tight = SafetyConfig {
+        screening: false,
+        tolerance: 1e-12,
+        max_iterations: 200,
+        ..SafetyConfig::default()
+    };
     let mut full = SafetyFilter::new(scene.clone(), tight).unwrap();
     for f in [&mut fast, &mut full] {
         f.add_obstacle([0.85, 0.0, 0.95], 0.1).unwrap();
@@ -258,7 +327,13 @@ fn warm_active_set_reproduces_the_full_qp_along_a_slow_trajectory() {
         let b = full.filter(&x, &u_ref, Some((&tau, energy))).unwrap();
         assert_ne!(b.status, FilterStatus::Fallback);
         for j in 0..10 {
-            assert!((a.u[j] - b.u[j]).abs() < 2e-6, "step {k} ({:?}): u[{j}] {} vs full QP {}", a.method, a.u[j], b.u[j]);
+            assert!(
+                (a.u[j] - b.u[j]).abs() < 2e-6,
+                "step {k} ({:?}): u[{j}] {} vs full QP {}",
+                a.method,
+                a.u[j],
+                b.u[j]
+            );
         }
         for (sa, sb) in a.slack.iter().zip(&b.slack) {
             assert!((sa - sb).abs() < 2e-6, "step {k} ({:?}): slack {sa} vs {sb}", a.method);
@@ -267,8 +342,14 @@ fn warm_active_set_reproduces_the_full_qp_along_a_slow_trajectory() {
     }
     eprintln!("methods (projection, active set, interior point): {methods:?}");
     let active_set = methods[SolveMethod::ActiveSet as usize];
-    assert!(active_set > 300, "active-set path taken {active_set} times of 400 ({methods:?})");
-    assert_eq!(fast.stats().interior_point_calls as usize, methods[SolveMethod::InteriorPoint as usize]);
+    assert!(
+        active_set > 300,
+        "active-set path taken {active_set} times of 400 ({methods:?})"
+    );
+    assert_eq!(
+        fast.stats().interior_point_calls as usize,
+        methods[SolveMethod::InteriorPoint as usize]
+    );
 }
 
 #[test]
@@ -296,7 +377,11 @@ fn row_gradients_match_finite_differences_of_the_barriers() {
             }
             let numeric = (h_plus[r] - h_minus[r]) / (2.0 * eps);
             let analytic = dot(&a[r * nq..(r + 1) * nq], &dir);
-            assert!((numeric - analytic).abs() < 1e-6 * (1.0 + analytic.abs()), "{}: ḣ {analytic} vs finite difference {numeric}", f.constraint_name(r));
+            assert!(
+                (numeric - analytic).abs() < 1e-6 * (1.0 + analytic.abs()),
+                "{}: ḣ {analytic} vs finite difference {numeric}",
+                f.constraint_name(r)
+            );
             compared += 1;
         }
     }
@@ -315,12 +400,40 @@ fn barriers_agree_with_the_sampler_cost_terms() {
     let reach = scene.arm_reach.clone().unwrap();
     let term = |t: Term| Cost::new(vec![t]);
     let costs = [
-        ("self_collision:", term(Term::SelfCollision { pairs: scene.sphere_pairs.clone(), weight: 1.0, weight_slope: 0.0 })),
-        ("base_box:", term(Term::BaseBox { lower: [-2.0, -2.0], upper: [2.0, 2.0], weight: 1.0, weight_slope: 0.0 })),
-        ("arm_reach", term(Term::ArmReach { base_link: reach.base_link, frame_link: reach.frame_link, r_max: reach.max, weight: 1.0, weight_slope: 0.0 })),
+        (
+            "self_collision:",
+            term(Term::SelfCollision {
+                pairs: scene.sphere_pairs.clone(),
+                weight: 1.0,
+                weight_slope: 0.0,
+            }),
+        ),
+        (
+            "base_box:",
+            term(Term::BaseBox {
+                lower: [-2.0, -2.0],
+                upper: [2.0, 2.0],
+                weight: 1.0,
+                weight_slope: 0.0,
+            }),
+        ),
+        (
+            "arm_reach",
+            term(Term::ArmReach {
+                base_link: reach.base_link,
+                frame_link: reach.frame_link,
+                r_max: reach.max,
+                weight: 1.0,
+                weight_slope: 0.0,
+            }),
+        ),
         (
             "obstacle:",
-            term(Term::Obstacles { spheres: vec![(center.into(), radius)], weight: 1.0, weight_slope: 0.0 }),
+            term(Term::Obstacles {
+                spheres: vec![(center.into(), radius)],
+                weight: 1.0,
+                weight_slope: 0.0,
+            }),
         ),
     ];
     assert!(names.iter().any(|n| n == &format!("obstacle:{id}:panda_hand")), "{names:?}");
@@ -330,13 +443,26 @@ fn barriers_agree_with_the_sampler_cost_terms() {
         let mut x = random_state(&scene, &mut rng);
         x[0] = rng.random_range(-0.4..0.4) + if rng.random_bool(0.5) { 2.0 } else { -2.0 };
         let (_, _, h) = rows(&mut f, &x, None);
-        scene.robot.update_frames(&nalgebra::Isometry3::identity(), &x[..scene.nq()], &mut frames);
+        scene
+            .robot
+            .update_frames(&nalgebra::Isometry3::identity(), &x[..scene.nq()], &mut frames);
         for (prefix, cost) in &costs {
-            let view = StepView { x: &x, u: &[0.0; 10], tau_ext: &[0.0; 10], contact: false, robot: &frames, object: &object };
+            let view = StepView {
+                x: &x,
+                u: &[0.0; 10],
+                tau_ext: &[0.0; 10],
+                contact: false,
+                robot: &frames,
+                object: &object,
+            };
             // The cost counts one unit per violated constraint; the filter's rows of that kind
             // must have exactly as many negative barriers.
             let violated_by_cost = cost.step(&scene, &view).round() as usize;
-            let violated_by_rows = names.iter().zip(&h).filter(|(n, h)| n.starts_with(prefix) && **h < 0.0).count();
+            let violated_by_rows = names
+                .iter()
+                .zip(&h)
+                .filter(|(n, h)| n.starts_with(prefix) && **h < 0.0)
+                .count();
             disagreements += usize::from(violated_by_cost != violated_by_rows);
         }
     }
@@ -395,7 +521,10 @@ fn tank_integrates_constant_power_exactly_and_respects_its_ceiling() {
     assert!(capped.history().is_empty());
     capped.reset();
     assert_eq!(capped.energy(), 10.0);
-    assert!(matches!(tank.step(&[1.0, f64::NAN, 0.0], &u, 1e-3), Err(SabreError::InvalidValue { .. })));
+    assert!(matches!(
+        tank.step(&[1.0, f64::NAN, 0.0], &u, 1e-3),
+        Err(SabreError::InvalidValue { .. })
+    ));
     assert!(matches!(tank.step(&[1.0], &u, 1e-3), Err(SabreError::Shape { .. })));
     assert!(tank.step(&tau, &u, 0.0).is_err());
     assert!(EnergyTank::new(1.0, 2.0, None, false).is_err());
@@ -406,7 +535,10 @@ fn tank_integrates_constant_power_exactly_and_respects_its_ceiling() {
 fn solver_failure_falls_back_to_the_safe_stop_and_is_counted() {
     let scene = scene();
     // One interior-point iteration cannot converge: every solver call must take the fallback.
-    let config = SafetyConfig { max_iterations: 1, ..SafetyConfig::default() };
+    let config = SafetyConfig {
+        max_iterations: 1,
+        ..SafetyConfig::default()
+    };
     let mut f = SafetyFilter::new(scene.clone(), config).unwrap();
     let mut x = scene.default_state();
     let j4 = joint(&scene, "panda_joint4");
@@ -516,7 +648,10 @@ fn inner_loop_filters_every_step_and_keeps_the_tank() {
         steps,
         1,
         &mut trace,
-        Some(InnerSafety { filter: Some(&mut filter), tank: Some(&mut tank) }),
+        Some(InnerSafety {
+            filter: Some(&mut filter),
+            tank: Some(&mut tank),
+        }),
     )
     .unwrap();
     assert_eq!(trace.filtered.len(), steps * nq);
@@ -538,11 +673,21 @@ fn inner_loop_filters_every_step_and_keeps_the_tank() {
 #[test]
 fn obstacles_are_added_moved_and_removed_in_fixed_slots() {
     let scene = scene();
-    let mut f = SafetyFilter::new(scene.clone(), SafetyConfig { max_obstacles: 2, ..SafetyConfig::default() }).unwrap();
+    let mut f = SafetyFilter::new(
+        scene.clone(),
+        SafetyConfig {
+            max_obstacles: 2,
+            ..SafetyConfig::default()
+        },
+    )
+    .unwrap();
     let rows_before = f.num_rows();
     let a = f.add_obstacle([1.0, 0.0, 1.0], 0.1).unwrap();
     let b = f.add_obstacle([0.0, 1.0, 1.0], 0.1).unwrap();
-    assert!(matches!(f.add_obstacle([0.0, 0.0, 0.0], 0.1), Err(SabreError::InvalidValue { .. })));
+    assert!(matches!(
+        f.add_obstacle([0.0, 0.0, 0.0], 0.1),
+        Err(SabreError::InvalidValue { .. })
+    ));
     assert_eq!(f.num_rows(), rows_before, "slots are part of the fixed structure");
     let x = scene.default_state();
     let index = |f: &SafetyFilter, name: &str| f.row_names().iter().position(|n| n == name).unwrap();
@@ -572,7 +717,10 @@ fn classes_can_be_switched_off_and_bad_input_is_an_error() {
     config.enabled.set(ConstraintClass::BaseBox, false);
     let mut f = SafetyFilter::new(scene.clone(), config).unwrap();
     let names = f.row_names();
-    assert!(!names.iter().any(|n| n.starts_with("obstacle") || n.starts_with("base_box")), "{names:?}");
+    assert!(
+        !names.iter().any(|n| n.starts_with("obstacle") || n.starts_with("base_box")),
+        "{names:?}"
+    );
     assert_eq!(names.len(), 10 + 3 + 1 + 1);
     assert!(f.add_obstacle([0.0; 3], 0.1).is_err());
     let x = scene.default_state();
@@ -580,15 +728,34 @@ fn classes_can_be_switched_off_and_bad_input_is_an_error() {
     assert!(matches!(f.filter(&x, &[0.0; 9], None), Err(SabreError::Shape { .. })));
     let mut bad = x.clone();
     bad[3] = f64::NAN;
-    assert!(matches!(f.filter(&bad, &[0.0; 10], None), Err(SabreError::InvalidValue { .. })));
-    assert!(matches!(f.filter(&x, &[f64::INFINITY; 10], None), Err(SabreError::InvalidValue { .. })));
-    assert!(matches!(f.filter(&x, &[0.0; 10], Some((&[0.0; 3], 5.0))), Err(SabreError::Shape { .. })));
-    assert!(matches!(f.filter(&x, &[0.0; 10], Some((&[0.0; 10], f64::NAN))), Err(SabreError::InvalidValue { .. })));
+    assert!(matches!(
+        f.filter(&bad, &[0.0; 10], None),
+        Err(SabreError::InvalidValue { .. })
+    ));
+    assert!(matches!(
+        f.filter(&x, &[f64::INFINITY; 10], None),
+        Err(SabreError::InvalidValue { .. })
+    ));
+    assert!(matches!(
+        f.filter(&x, &[0.0; 10], Some((&[0.0; 3], 5.0))),
+        Err(SabreError::Shape { .. })
+    ));
+    assert!(matches!(
+        f.filter(&x, &[0.0; 10], Some((&[0.0; 10], f64::NAN))),
+        Err(SabreError::InvalidValue { .. })
+    ));
     assert_eq!(f.stats().calls, 0, "rejected calls are not counted");
     let mut config = SafetyConfig::default();
     config.gamma.set(ConstraintClass::JointLimits, -1.0);
     assert!(SafetyFilter::new(scene.clone(), config).is_err());
-    assert!(SafetyFilter::new(scene.clone(), SafetyConfig { base_box: [1.0, -1.0, -2.0, 2.0], ..SafetyConfig::default() }).is_err());
+    assert!(SafetyFilter::new(
+        scene.clone(),
+        SafetyConfig {
+            base_box: [1.0, -1.0, -2.0, 2.0],
+            ..SafetyConfig::default()
+        }
+    )
+    .is_err());
     let model = RolloutModel::new(scene.clone(), RolloutConfig::default()).unwrap();
     assert!(f.filter_sequence(&model, &x, &[0.0; 15]).is_err());
     assert!(f.filter_sequence(&model, &x, &[]).is_err());

@@ -226,7 +226,11 @@ pub fn follow_reference_safe(
 ) -> Result<()> {
     let nq = plant.scene().nq();
     if reference.is_empty() || !reference.len().is_multiple_of(nq) {
-        return Err(SabreError::shape("reference", format!("(K, {nq})"), format!("{} elements", reference.len())));
+        return Err(SabreError::shape(
+            "reference",
+            format!("(K, {nq})"),
+            format!("{} elements", reference.len()),
+        ));
     }
     ensure_finite("reference", reference)?;
     if !(dt.is_finite() && dt > 0.0 && t0.is_finite()) {
@@ -234,7 +238,10 @@ pub fn follow_reference_safe(
     }
     if let Some(f) = safety.as_ref().and_then(|s| s.filter.as_ref()) {
         if f.scene().nq() != nq || f.scene().nx() != plant.scene().nx() {
-            return Err(SabreError::invalid("safety filter", "was built for a different scene than the plant's"));
+            return Err(SabreError::invalid(
+                "safety filter",
+                "was built for a different scene than the plant's",
+            ));
         }
     }
     let mut u_ref = vec![0.0; nq];
@@ -244,7 +251,10 @@ pub fn follow_reference_safe(
     for step in 0..steps {
         crate::mppi::interpolate(reference, nq, (plant.time() - t0) / dt, &mut u_ref);
         match safety.as_mut() {
-            Some(InnerSafety { filter: Some(filter), tank }) => {
+            Some(InnerSafety {
+                filter: Some(filter),
+                tank,
+            }) => {
                 let passivity = tank.as_ref().map(|t| (plant.measured_tau_ext(), t.energy()));
                 let out = filter.filter(plant.state(), &u_ref, passivity)?;
                 u.copy_from_slice(&out.u);

@@ -38,22 +38,46 @@ pub enum PoseTarget {
     /// moves. With a non-zero `lead` the link is taken at the object configuration `lead` ahead of
     /// the current one (each joint, capped at `lead_limit` unless already past it): a target that
     /// runs ahead along the articulation's path and so tells the sampler which way to pull.
-    ObjectLink { link: usize, offset: Isometry3<f64>, lead: f64, lead_limit: f64 },
+    ObjectLink {
+        link: usize,
+        offset: Isometry3<f64>,
+        lead: f64,
+        lead_limit: f64,
+    },
 }
 
 /// One cost term with its weights (defaults from the paper's Table I live on the Python side).
 #[derive(Debug, Clone, PartialEq)]
 pub enum Term {
     /// (29) ‖log(T⁻¹ T*)‖²_W of a robot frame; `weights` is diag(W), linear then angular.
-    TargetPose { link: usize, target: PoseTarget, weights: [f64; 6] },
+    TargetPose {
+        link: usize,
+        target: PoseTarget,
+        weights: [f64; 6],
+    },
     /// (30) w_γ when the robot touches the object in that step.
     Contact { weight: f64 },
     /// (31) per violated joint limit: w_j + w_s · violation².
-    JointLimits { weight: f64, weight_slope: f64, lower: Vec<f64>, upper: Vec<f64> },
+    JointLimits {
+        weight: f64,
+        weight_slope: f64,
+        lower: Vec<f64>,
+        upper: Vec<f64>,
+    },
     /// (32) if the planar distance r of `frame` from `base` exceeds r_max: w_r + w_rs (r − r_max)².
-    ArmReach { base_link: usize, frame_link: usize, r_max: f64, weight: f64, weight_slope: f64 },
+    ArmReach {
+        base_link: usize,
+        frame_link: usize,
+        r_max: f64,
+        weight: f64,
+        weight_slope: f64,
+    },
     /// (33) per sphere pair closer than d_min = r_i + r_j: w + w_s (d_min − d)².
-    SelfCollision { pairs: Vec<(usize, usize)>, weight: f64, weight_slope: f64 },
+    SelfCollision {
+        pairs: Vec<(usize, usize)>,
+        weight: f64,
+        weight_slope: f64,
+    },
     /// Σ_i w_i (q_i − q*_i)²: a preferred posture (a task-design hint that moves the sampler out of
     /// folded local minima; weights of zero leave a joint free).
     Posture { target: Vec<f64>, weights: Vec<f64> },
@@ -62,16 +86,33 @@ pub enum Term {
     /// (36) w_p · max(0, −τ_extᵀ u − p_max).
     Power { weight: f64, p_max: f64 },
     /// Base position box [x_min, x_max] × [y_min, y_max] (Cartesian limits, Sec. VI-A2): w + w_s · excess².
-    BaseBox { lower: [f64; 2], upper: [f64; 2], weight: f64, weight_slope: f64 },
+    BaseBox {
+        lower: [f64; 2],
+        upper: [f64; 2],
+        weight: f64,
+        weight_slope: f64,
+    },
     /// Sphere obstacles (centre, radius) against the robot's collision spheres: w + w_s · penetration².
-    Obstacles { spheres: Vec<(Point3<f64>, f64)>, weight: f64, weight_slope: f64 },
+    Obstacles {
+        spheres: Vec<(Point3<f64>, f64)>,
+        weight: f64,
+        weight_slope: f64,
+    },
     /// The robot base's footprint, a vertical cylinder about `base_link`'s origin (radius, and
     /// heights `bottom`..`top` above it), kept clear of the object's moving parts, which are
     /// represented by `points` (object link, point in the link frame): w + w_s · p², with p the
     /// deepest planar penetration of a point inside the height band. Keeps the base out of the
     /// sweep of a door that opens toward the robot (a dishwasher), which the rollout model, whose
     /// base has no collider, cannot otherwise foresee.
-    BaseClearance { base_link: usize, radius: f64, bottom: f64, top: f64, points: Vec<(usize, Point3<f64>)>, weight: f64, weight_slope: f64 },
+    BaseClearance {
+        base_link: usize,
+        radius: f64,
+        bottom: f64,
+        top: f64,
+        points: Vec<(usize, Point3<f64>)>,
+        weight: f64,
+        weight_slope: f64,
+    },
 }
 
 /// Points spread over the collision primitives of the object's moving links (in their link frames),
@@ -116,7 +157,11 @@ pub fn link_footprint(scene: &Scene, link: usize) -> Option<(f64, f64, f64)> {
         for corner in 0..8 {
             let sign = |bit: usize| if corner & bit == 0 { -1.0 } else { 1.0 };
             let p = c.origin * Point3::new(sign(1) * half.x, sign(2) * half.y, sign(4) * half.z);
-            let r = if round { c.origin.translation.vector.xy().norm() + half.x } else { p.coords.xy().norm() };
+            let r = if round {
+                c.origin.translation.vector.xy().norm() + half.x
+            } else {
+                p.coords.xy().norm()
+            };
             bound = Some(match bound {
                 None => (r, p.z, p.z),
                 Some((rr, lo, hi)) => (rr.max(r), lo.min(p.z), hi.max(p.z)),
@@ -139,13 +184,19 @@ pub fn base_clearance(
     weight_slope: f64,
 ) -> Result<Term> {
     if !(spacing.is_finite() && spacing > 0.0) {
-        return Err(SabreError::invalid("base clearance spacing", format!("must be positive, got {spacing}")));
+        return Err(SabreError::invalid(
+            "base clearance spacing",
+            format!("must be positive, got {spacing}"),
+        ));
     }
     let (radius, bottom, top) = match footprint {
         Some(f) => f,
         None => link_footprint(scene, base_link).ok_or_else(|| {
             let name = scene.robot.links.get(base_link).map_or("?", |l| l.name.as_str());
-            SabreError::invalid("base clearance", format!("link '{name}' has no collision geometry; give its footprint"))
+            SabreError::invalid(
+                "base clearance",
+                format!("link '{name}' has no collision geometry; give its footprint"),
+            )
         })?,
     };
     Ok(Term::BaseClearance {
@@ -195,20 +246,33 @@ impl Cost {
                         }
                     }
                 }
-                Term::JointLimits { lower, upper, weight, weight_slope } => {
+                Term::JointLimits {
+                    lower,
+                    upper,
+                    weight,
+                    weight_slope,
+                } => {
                     if lower.len() != scene.nq() || upper.len() != scene.nq() {
                         return bad("joint limit cost", format!("limits must have nq = {} entries", scene.nq()));
                     }
                     finite("joint limit cost", &[*weight, *weight_slope])?;
                 }
-                Term::ArmReach { base_link, frame_link, r_max, .. } => {
+                Term::ArmReach {
+                    base_link,
+                    frame_link,
+                    r_max,
+                    ..
+                } => {
                     if *base_link >= scene.robot.links.len() || *frame_link >= scene.robot.links.len() {
                         return bad("arm reach cost", "link index out of range".into());
                     }
                     finite("arm reach r_max", &[*r_max])?;
                 }
                 Term::SelfCollision { pairs, .. } => {
-                    if pairs.iter().any(|&(a, b)| a >= scene.spheres.len() || b >= scene.spheres.len()) {
+                    if pairs
+                        .iter()
+                        .any(|&(a, b)| a >= scene.spheres.len() || b >= scene.spheres.len())
+                    {
                         return bad("self-collision cost", "sphere index out of range".into());
                     }
                 }
@@ -234,13 +298,24 @@ impl Cost {
                         finite("obstacle", &[c.x, c.y, c.z, *r])?;
                     }
                 }
-                Term::BaseClearance { base_link, radius, bottom, top, points, weight, weight_slope } => {
+                Term::BaseClearance {
+                    base_link,
+                    radius,
+                    bottom,
+                    top,
+                    points,
+                    weight,
+                    weight_slope,
+                } => {
                     if *base_link >= scene.robot.links.len() || points.iter().any(|(l, _)| *l >= scene.object.links.len()) {
                         return bad("base clearance cost", "link index out of range".into());
                     }
                     finite("base clearance", &[*radius, *bottom, *top, *weight, *weight_slope])?;
                     if *radius < 0.0 || bottom > top {
-                        return bad("base clearance cost", format!("needs radius >= 0 and bottom <= top, got {radius}, {bottom}..{top}"));
+                        return bad(
+                            "base clearance cost",
+                            format!("needs radius >= 0 and bottom <= top, got {radius}, {bottom}..{top}"),
+                        );
                     }
                 }
             }
@@ -250,9 +325,15 @@ impl Cost {
 
     /// Whether any term needs the object's link poses.
     pub fn needs_object_frames(&self) -> bool {
-        self.terms
-            .iter()
-            .any(|t| matches!(t, Term::TargetPose { target: PoseTarget::ObjectLink { .. }, .. } | Term::BaseClearance { .. }))
+        self.terms.iter().any(|t| {
+            matches!(
+                t,
+                Term::TargetPose {
+                    target: PoseTarget::ObjectLink { .. },
+                    ..
+                } | Term::BaseClearance { .. }
+            )
+        })
     }
 
     /// Cost of one step.
@@ -269,15 +350,21 @@ impl Cost {
                     let desired = match target {
                         PoseTarget::World(t) => *t,
                         PoseTarget::ObjectLink { link, offset, lead, .. } if *lead == 0.0 => view.object.poses[*link] * offset,
-                        PoseTarget::ObjectLink { link, offset, lead, lead_limit } => {
-                            LEAD_POSES.with(|cell| {
-                                let (ahead, poses) = &mut *cell.borrow_mut();
-                                ahead.clear();
-                                ahead.extend(o.iter().map(|&v| if v >= *lead_limit { v } else { (v + lead).min(*lead_limit) }));
-                                scene.object.link_poses_into(&scene.object_pose, ahead, poses);
-                                poses[*link] * offset
-                            })
-                        }
+                        PoseTarget::ObjectLink {
+                            link,
+                            offset,
+                            lead,
+                            lead_limit,
+                        } => LEAD_POSES.with(|cell| {
+                            let (ahead, poses) = &mut *cell.borrow_mut();
+                            ahead.clear();
+                            ahead.extend(
+                                o.iter()
+                                    .map(|&v| if v >= *lead_limit { v } else { (v + lead).min(*lead_limit) }),
+                            );
+                            scene.object.link_poses_into(&scene.object_pose, ahead, poses);
+                            poses[*link] * offset
+                        }),
                     };
                     let xi = se3_log(&(current.inverse() * desired));
                     (0..6).map(|i| weights[i] * xi[i] * xi[i]).sum()
@@ -289,16 +376,33 @@ impl Cost {
                         0.0
                     }
                 }
-                Term::JointLimits { weight, weight_slope, lower, upper } => q
+                Term::JointLimits {
+                    weight,
+                    weight_slope,
+                    lower,
+                    upper,
+                } => q
                     .iter()
                     .enumerate()
-                    .map(|(i, &v)| hinge_square(v - upper[i], *weight, *weight_slope) + hinge_square(lower[i] - v, *weight, *weight_slope))
+                    .map(|(i, &v)| {
+                        hinge_square(v - upper[i], *weight, *weight_slope) + hinge_square(lower[i] - v, *weight, *weight_slope)
+                    })
                     .sum(),
-                Term::ArmReach { base_link, frame_link, r_max, weight, weight_slope } => {
+                Term::ArmReach {
+                    base_link,
+                    frame_link,
+                    r_max,
+                    weight,
+                    weight_slope,
+                } => {
                     let d = view.robot.poses[*frame_link].translation.vector - view.robot.poses[*base_link].translation.vector;
                     hinge_square((d.x * d.x + d.y * d.y).sqrt() - r_max, *weight, *weight_slope)
                 }
-                Term::SelfCollision { pairs, weight, weight_slope } => pairs
+                Term::SelfCollision {
+                    pairs,
+                    weight,
+                    weight_slope,
+                } => pairs
                     .iter()
                     .map(|&(a, b)| {
                         let (sa, sb) = (&scene.spheres[a], &scene.spheres[b]);
@@ -307,16 +411,38 @@ impl Cost {
                         hinge_square(sa.radius + sb.radius - (pa - pb).norm(), *weight, *weight_slope)
                     })
                     .sum(),
-                Term::Posture { target, weights } => q.iter().zip(target).zip(weights).map(|((v, t), w)| w * (v - t) * (v - t)).sum(),
-                Term::ObjectState { target, weights } => o.iter().zip(target).zip(weights).map(|((v, t), w)| w * (v - t) * (v - t)).sum(),
+                Term::Posture { target, weights } => q
+                    .iter()
+                    .zip(target)
+                    .zip(weights)
+                    .map(|((v, t), w)| w * (v - t) * (v - t))
+                    .sum(),
+                Term::ObjectState { target, weights } => o
+                    .iter()
+                    .zip(target)
+                    .zip(weights)
+                    .map(|((v, t), w)| w * (v - t) * (v - t))
+                    .sum(),
                 Term::Power { weight, p_max } => {
                     let dissipated: f64 = -view.tau_ext.iter().zip(view.u).map(|(t, u)| t * u).sum::<f64>();
                     weight * (dissipated - p_max).max(0.0)
                 }
-                Term::BaseBox { lower, upper, weight, weight_slope } => (0..2)
-                    .map(|i| hinge_square(q[i] - upper[i], *weight, *weight_slope) + hinge_square(lower[i] - q[i], *weight, *weight_slope))
+                Term::BaseBox {
+                    lower,
+                    upper,
+                    weight,
+                    weight_slope,
+                } => (0..2)
+                    .map(|i| {
+                        hinge_square(q[i] - upper[i], *weight, *weight_slope)
+                            + hinge_square(lower[i] - q[i], *weight, *weight_slope)
+                    })
                     .sum(),
-                Term::Obstacles { spheres, weight, weight_slope } => {
+                Term::Obstacles {
+                    spheres,
+                    weight,
+                    weight_slope,
+                } => {
                     let mut sum = 0.0;
                     for s in &scene.spheres {
                         let p = view.robot.poses[s.link] * Point3::from(s.center);
@@ -326,7 +452,15 @@ impl Cost {
                     }
                     sum
                 }
-                Term::BaseClearance { base_link, radius, bottom, top, points, weight, weight_slope } => {
+                Term::BaseClearance {
+                    base_link,
+                    radius,
+                    bottom,
+                    top,
+                    points,
+                    weight,
+                    weight_slope,
+                } => {
                     let base = view.robot.poses[*base_link].translation.vector;
                     let mut deepest = f64::NEG_INFINITY;
                     for (link, local) in points {

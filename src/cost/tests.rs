@@ -19,7 +19,13 @@ struct Step {
 
 impl Default for Step {
     fn default() -> Self {
-        Self { q: [0.0, 0.0], o: 0.0, u: [0.0, 0.0], tau_ext: [0.0, 0.0], contact: false }
+        Self {
+            q: [0.0, 0.0],
+            o: 0.0,
+            u: [0.0, 0.0],
+            tau_ext: [0.0, 0.0],
+            contact: false,
+        }
     }
 }
 
@@ -33,7 +39,14 @@ fn value(term: Term, step: Step) -> f64 {
     let mut object = Frames::default();
     scene.robot.update_frames(&Isometry3::identity(), &x[..2], &mut robot);
     scene.object.update_frames(&scene.object_pose, &x[4..5], &mut object);
-    let view = StepView { x: &x, u: &step.u, tau_ext: &step.tau_ext, contact: step.contact, robot: &robot, object: &object };
+    let view = StepView {
+        x: &x,
+        u: &step.u,
+        tau_ext: &step.tau_ext,
+        contact: step.contact,
+        robot: &robot,
+        object: &object,
+    };
     cost.step(&scene, &view)
 }
 
@@ -46,7 +59,10 @@ fn object_link(name: &str) -> usize {
 }
 
 fn assert_close(actual: f64, expected: f64) {
-    assert!((actual - expected).abs() <= 1e-12 * expected.abs().max(1.0), "got {actual}, expected {expected}");
+    assert!(
+        (actual - expected).abs() <= 1e-12 * expected.abs().max(1.0),
+        "got {actual}, expected {expected}"
+    );
 }
 
 const POSE_WEIGHTS: [f64; 6] = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
@@ -55,8 +71,21 @@ const POSE_WEIGHTS: [f64; 6] = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
 fn target_pose_world_translation_is_weighted_squared_offset() {
     // The arm is at (0.2, 0, 0.5), unrotated; the target 0.1 further along x and 0.2 along y.
     let target = PoseTarget::World(Isometry3::translation(0.3, 0.2, 0.5));
-    let term = Term::TargetPose { link: robot_link("arm"), target, weights: POSE_WEIGHTS };
-    assert_close(value(term, Step { q: [0.2, 0.0], ..Default::default() }), 1.0 * 0.01 + 2.0 * 0.04);
+    let term = Term::TargetPose {
+        link: robot_link("arm"),
+        target,
+        weights: POSE_WEIGHTS,
+    };
+    assert_close(
+        value(
+            term,
+            Step {
+                q: [0.2, 0.0],
+                ..Default::default()
+            },
+        ),
+        1.0 * 0.01 + 2.0 * 0.04,
+    );
 }
 
 #[test]
@@ -66,126 +95,376 @@ fn target_pose_world_rotation_is_weighted_squared_angle() {
         Translation3::new(0.0, 0.0, 0.5),
         UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.2),
     ));
-    let term = Term::TargetPose { link: robot_link("arm"), target, weights: POSE_WEIGHTS };
-    assert_close(value(term, Step { q: [0.0, 0.5], ..Default::default() }), 6.0 * 0.09);
+    let term = Term::TargetPose {
+        link: robot_link("arm"),
+        target,
+        weights: POSE_WEIGHTS,
+    };
+    assert_close(
+        value(
+            term,
+            Step {
+                q: [0.0, 0.5],
+                ..Default::default()
+            },
+        ),
+        6.0 * 0.09,
+    );
 }
 
 #[test]
 fn target_pose_object_link_follows_the_object() {
     // Handle at x = 1 + o − 0.05 = 1.05 for o = 0.1; arm at 0.5: offset 0.55 along x.
-    let target = PoseTarget::ObjectLink { link: object_link("handle"), offset: Isometry3::identity(), lead: 0.0, lead_limit: 1.0 };
-    let term = Term::TargetPose { link: robot_link("arm"), target, weights: POSE_WEIGHTS };
-    assert_close(value(term, Step { q: [0.5, 0.0], o: 0.1, ..Default::default() }), 1.0 * 0.55 * 0.55);
+    let target = PoseTarget::ObjectLink {
+        link: object_link("handle"),
+        offset: Isometry3::identity(),
+        lead: 0.0,
+        lead_limit: 1.0,
+    };
+    let term = Term::TargetPose {
+        link: robot_link("arm"),
+        target,
+        weights: POSE_WEIGHTS,
+    };
+    assert_close(
+        value(
+            term,
+            Step {
+                q: [0.5, 0.0],
+                o: 0.1,
+                ..Default::default()
+            },
+        ),
+        1.0 * 0.55 * 0.55,
+    );
 }
 
 #[test]
 fn target_pose_object_link_with_offset_is_taken_in_the_link_frame() {
     let offset = Isometry3::translation(0.0, 0.3, 0.0);
-    let target = PoseTarget::ObjectLink { link: object_link("handle"), offset, lead: 0.0, lead_limit: 1.0 };
-    let term = Term::TargetPose { link: robot_link("arm"), target, weights: POSE_WEIGHTS };
+    let target = PoseTarget::ObjectLink {
+        link: object_link("handle"),
+        offset,
+        lead: 0.0,
+        lead_limit: 1.0,
+    };
+    let term = Term::TargetPose {
+        link: robot_link("arm"),
+        target,
+        weights: POSE_WEIGHTS,
+    };
     // Target (0.95, 0.3, 0.5) from the arm at (0.5, 0, 0.5): (0.45, 0.3, 0).
-    assert_close(value(term, Step { q: [0.5, 0.0], o: 0.0, ..Default::default() }), 1.0 * 0.45 * 0.45 + 2.0 * 0.09);
+    assert_close(
+        value(
+            term,
+            Step {
+                q: [0.5, 0.0],
+                o: 0.0,
+                ..Default::default()
+            },
+        ),
+        1.0 * 0.45 * 0.45 + 2.0 * 0.09,
+    );
 }
 
 fn lead_term(lead: f64, lead_limit: f64) -> Term {
-    let target = PoseTarget::ObjectLink { link: object_link("handle"), offset: Isometry3::identity(), lead, lead_limit };
-    Term::TargetPose { link: robot_link("arm"), target, weights: POSE_WEIGHTS }
+    let target = PoseTarget::ObjectLink {
+        link: object_link("handle"),
+        offset: Isometry3::identity(),
+        lead,
+        lead_limit,
+    };
+    Term::TargetPose {
+        link: robot_link("arm"),
+        target,
+        weights: POSE_WEIGHTS,
+    }
 }
 
 #[test]
 fn target_pose_lead_takes_the_object_ahead() {
     // o = 0.1 led by 0.2 to 0.3 (below the cap 0.5): handle at 1.25, arm at 0.5.
-    assert_close(value(lead_term(0.2, 0.5), Step { q: [0.5, 0.0], o: 0.1, ..Default::default() }), 0.75 * 0.75);
+    assert_close(
+        value(
+            lead_term(0.2, 0.5),
+            Step {
+                q: [0.5, 0.0],
+                o: 0.1,
+                ..Default::default()
+            },
+        ),
+        0.75 * 0.75,
+    );
 }
 
 #[test]
 fn target_pose_lead_is_capped_at_lead_limit() {
     // o = 0.4 led by 0.2 would reach 0.6; the cap holds it at 0.5: handle at 1.45.
-    assert_close(value(lead_term(0.2, 0.5), Step { q: [0.5, 0.0], o: 0.4, ..Default::default() }), 0.95 * 0.95);
+    assert_close(
+        value(
+            lead_term(0.2, 0.5),
+            Step {
+                q: [0.5, 0.0],
+                o: 0.4,
+                ..Default::default()
+            },
+        ),
+        0.95 * 0.95,
+    );
 }
 
 #[test]
 fn target_pose_lead_leaves_an_object_already_past_the_cap() {
     // o = 0.7 is past the cap 0.5: the target stays with the object, handle at 1.65.
-    assert_close(value(lead_term(0.2, 0.5), Step { q: [0.5, 0.0], o: 0.7, ..Default::default() }), 1.15 * 1.15);
+    assert_close(
+        value(
+            lead_term(0.2, 0.5),
+            Step {
+                q: [0.5, 0.0],
+                o: 0.7,
+                ..Default::default()
+            },
+        ),
+        1.15 * 1.15,
+    );
 }
 
 #[test]
 fn contact_charges_its_weight_only_in_contact() {
-    assert_close(value(Term::Contact { weight: 7.0 }, Step { contact: true, ..Default::default() }), 7.0);
-    assert_eq!(value(Term::Contact { weight: 7.0 }, Step { contact: false, ..Default::default() }), 0.0);
+    assert_close(
+        value(
+            Term::Contact { weight: 7.0 },
+            Step {
+                contact: true,
+                ..Default::default()
+            },
+        ),
+        7.0,
+    );
+    assert_eq!(
+        value(
+            Term::Contact { weight: 7.0 },
+            Step {
+                contact: false,
+                ..Default::default()
+            }
+        ),
+        0.0
+    );
 }
 
 fn joint_limits(weight: f64, weight_slope: f64) -> Term {
-    Term::JointLimits { weight, weight_slope, lower: vec![-1.0, -3.0], upper: vec![1.0, 3.0] }
+    Term::JointLimits {
+        weight,
+        weight_slope,
+        lower: vec![-1.0, -3.0],
+        upper: vec![1.0, 3.0],
+    }
 }
 
 #[test]
 fn joint_limits_inside_cost_nothing() {
-    assert_eq!(value(joint_limits(10.0, 100.0), Step { q: [0.5, -2.0], ..Default::default() }), 0.0);
-    assert_eq!(value(joint_limits(10.0, 100.0), Step { q: [1.0, -3.0], ..Default::default() }), 0.0);
+    assert_eq!(
+        value(
+            joint_limits(10.0, 100.0),
+            Step {
+                q: [0.5, -2.0],
+                ..Default::default()
+            }
+        ),
+        0.0
+    );
+    assert_eq!(
+        value(
+            joint_limits(10.0, 100.0),
+            Step {
+                q: [1.0, -3.0],
+                ..Default::default()
+            }
+        ),
+        0.0
+    );
 }
 
 #[test]
 fn joint_limits_one_violation_is_weight_plus_slope_times_square() {
-    assert_close(value(joint_limits(10.0, 100.0), Step { q: [1.2, 0.0], ..Default::default() }), 10.0 + 100.0 * 0.04);
-    assert_close(value(joint_limits(10.0, 100.0), Step { q: [0.0, -3.3], ..Default::default() }), 10.0 + 100.0 * 0.09);
+    assert_close(
+        value(
+            joint_limits(10.0, 100.0),
+            Step {
+                q: [1.2, 0.0],
+                ..Default::default()
+            },
+        ),
+        10.0 + 100.0 * 0.04,
+    );
+    assert_close(
+        value(
+            joint_limits(10.0, 100.0),
+            Step {
+                q: [0.0, -3.3],
+                ..Default::default()
+            },
+        ),
+        10.0 + 100.0 * 0.09,
+    );
 }
 
 #[test]
 fn joint_limits_switch_on_just_past_the_limit() {
-    assert_close(value(joint_limits(10.0, 100.0), Step { q: [1.0 + 1e-9, 0.0], ..Default::default() }), 10.0 + 100.0 * 1e-18);
+    assert_close(
+        value(
+            joint_limits(10.0, 100.0),
+            Step {
+                q: [1.0 + 1e-9, 0.0],
+                ..Default::default()
+            },
+        ),
+        10.0 + 100.0 * 1e-18,
+    );
 }
 
 #[test]
 fn joint_limits_both_sides_violated_add_up() {
     // Joint 0 below its lower limit by 0.5, joint 1 above its upper limit by 0.5.
-    assert_close(value(joint_limits(10.0, 100.0), Step { q: [-1.5, 3.5], ..Default::default() }), 2.0 * 10.0 + 100.0 * 0.5);
+    assert_close(
+        value(
+            joint_limits(10.0, 100.0),
+            Step {
+                q: [-1.5, 3.5],
+                ..Default::default()
+            },
+        ),
+        2.0 * 10.0 + 100.0 * 0.5,
+    );
 }
 
 #[test]
 fn joint_limits_without_slope_charge_the_weight_alone() {
-    assert_close(value(joint_limits(10.0, 0.0), Step { q: [1.2, 0.0], ..Default::default() }), 10.0);
+    assert_close(
+        value(
+            joint_limits(10.0, 0.0),
+            Step {
+                q: [1.2, 0.0],
+                ..Default::default()
+            },
+        ),
+        10.0,
+    );
 }
 
 fn arm_reach(r_max: f64) -> Term {
-    Term::ArmReach { base_link: robot_link("cart"), frame_link: robot_link("tip"), r_max, weight: 3.0, weight_slope: 40.0 }
+    Term::ArmReach {
+        base_link: robot_link("cart"),
+        frame_link: robot_link("tip"),
+        r_max,
+        weight: 3.0,
+        weight_slope: 40.0,
+    }
 }
 
 #[test]
 fn arm_reach_charges_planar_distance_beyond_r_max() {
     // The tip is 0.3 m from the cart in the plane whatever the slide and turn.
-    assert_close(value(arm_reach(0.25), Step { q: [0.4, 1.0], ..Default::default() }), 3.0 + 40.0 * 0.05 * 0.05);
-    assert_eq!(value(arm_reach(0.35), Step { q: [0.4, 1.0], ..Default::default() }), 0.0);
+    assert_close(
+        value(
+            arm_reach(0.25),
+            Step {
+                q: [0.4, 1.0],
+                ..Default::default()
+            },
+        ),
+        3.0 + 40.0 * 0.05 * 0.05,
+    );
+    assert_eq!(
+        value(
+            arm_reach(0.35),
+            Step {
+                q: [0.4, 1.0],
+                ..Default::default()
+            }
+        ),
+        0.0
+    );
 }
 
 fn self_collision() -> Term {
-    Term::SelfCollision { pairs: vec![(0, 1)], weight: 5.0, weight_slope: 200.0 }
+    Term::SelfCollision {
+        pairs: vec![(0, 1)],
+        weight: 5.0,
+        weight_slope: 200.0,
+    }
 }
 
 #[test]
 fn self_collision_charges_sphere_overlap() {
     // root (r 0.1) at (0, 0, 0.5); probe (r 0.05) at (s + 0.1, 0, 0.5): d_min = 0.15.
-    assert_close(value(self_collision(), Step { q: [0.0, 0.0], ..Default::default() }), 5.0 + 200.0 * 0.05 * 0.05);
-    assert_eq!(value(self_collision(), Step { q: [0.1, 0.0], ..Default::default() }), 0.0);
+    assert_close(
+        value(
+            self_collision(),
+            Step {
+                q: [0.0, 0.0],
+                ..Default::default()
+            },
+        ),
+        5.0 + 200.0 * 0.05 * 0.05,
+    );
+    assert_eq!(
+        value(
+            self_collision(),
+            Step {
+                q: [0.1, 0.0],
+                ..Default::default()
+            }
+        ),
+        0.0
+    );
 }
 
 #[test]
 fn posture_is_weighted_squared_distance() {
-    let term = Term::Posture { target: vec![0.5, -1.0], weights: vec![2.0, 3.0] };
-    assert_close(value(term, Step { q: [0.2, 1.0], ..Default::default() }), 2.0 * 0.09 + 3.0 * 4.0);
+    let term = Term::Posture {
+        target: vec![0.5, -1.0],
+        weights: vec![2.0, 3.0],
+    };
+    assert_close(
+        value(
+            term,
+            Step {
+                q: [0.2, 1.0],
+                ..Default::default()
+            },
+        ),
+        2.0 * 0.09 + 3.0 * 4.0,
+    );
 }
 
 #[test]
 fn object_state_is_weighted_squared_distance() {
-    let term = Term::ObjectState { target: vec![0.4], weights: vec![50.0] };
-    assert_close(value(term, Step { o: 0.1, ..Default::default() }), 50.0 * 0.09);
+    let term = Term::ObjectState {
+        target: vec![0.4],
+        weights: vec![50.0],
+    };
+    assert_close(
+        value(
+            term,
+            Step {
+                o: 0.1,
+                ..Default::default()
+            },
+        ),
+        50.0 * 0.09,
+    );
 }
 
 #[test]
 fn power_charges_dissipated_power_above_p_max() {
     // −τ_extᵀu = −(2·(−3) + (−1)·1) = 7 W.
-    let step = || Step { u: [-3.0, 1.0], tau_ext: [2.0, -1.0], ..Default::default() };
+    let step = || Step {
+        u: [-3.0, 1.0],
+        tau_ext: [2.0, -1.0],
+        ..Default::default()
+    };
     assert_close(value(Term::Power { weight: 4.0, p_max: 5.0 }, step()), 4.0 * 2.0);
     assert_eq!(value(Term::Power { weight: 4.0, p_max: 8.0 }, step()), 0.0);
 }
@@ -193,24 +472,73 @@ fn power_charges_dissipated_power_above_p_max() {
 #[test]
 fn power_does_not_charge_power_put_into_the_robot() {
     // −τ_extᵀu = −7 W: the contact drives the robot along its command.
-    let step = Step { u: [3.0, -1.0], tau_ext: [2.0, -1.0], ..Default::default() };
+    let step = Step {
+        u: [3.0, -1.0],
+        tau_ext: [2.0, -1.0],
+        ..Default::default()
+    };
     assert_eq!(value(Term::Power { weight: 4.0, p_max: 0.0 }, step), 0.0);
 }
 
 fn base_box() -> Term {
-    Term::BaseBox { lower: [-0.5, -0.5], upper: [0.5, 0.5], weight: 2.0, weight_slope: 30.0 }
+    Term::BaseBox {
+        lower: [-0.5, -0.5],
+        upper: [0.5, 0.5],
+        weight: 2.0,
+        weight_slope: 30.0,
+    }
 }
 
 #[test]
 fn base_box_charges_each_coordinate_outside() {
-    assert_eq!(value(base_box(), Step { q: [0.5, -0.5], ..Default::default() }), 0.0);
-    assert_close(value(base_box(), Step { q: [0.7, 0.0], ..Default::default() }), 2.0 + 30.0 * 0.04);
-    assert_close(value(base_box(), Step { q: [0.3, -0.6], ..Default::default() }), 2.0 + 30.0 * 0.01);
-    assert_close(value(base_box(), Step { q: [-0.6, 0.8], ..Default::default() }), 4.0 + 30.0 * (0.01 + 0.09));
+    assert_eq!(
+        value(
+            base_box(),
+            Step {
+                q: [0.5, -0.5],
+                ..Default::default()
+            }
+        ),
+        0.0
+    );
+    assert_close(
+        value(
+            base_box(),
+            Step {
+                q: [0.7, 0.0],
+                ..Default::default()
+            },
+        ),
+        2.0 + 30.0 * 0.04,
+    );
+    assert_close(
+        value(
+            base_box(),
+            Step {
+                q: [0.3, -0.6],
+                ..Default::default()
+            },
+        ),
+        2.0 + 30.0 * 0.01,
+    );
+    assert_close(
+        value(
+            base_box(),
+            Step {
+                q: [-0.6, 0.8],
+                ..Default::default()
+            },
+        ),
+        4.0 + 30.0 * (0.01 + 0.09),
+    );
 }
 
 fn obstacle(center: [f64; 3], radius: f64) -> Term {
-    Term::Obstacles { spheres: vec![(Point3::from(center), radius)], weight: 6.0, weight_slope: 100.0 }
+    Term::Obstacles {
+        spheres: vec![(Point3::from(center), radius)],
+        weight: 6.0,
+        weight_slope: 100.0,
+    }
 }
 
 #[test]
@@ -248,28 +576,66 @@ fn base_clearance(top: f64) -> Term {
 fn base_clearance_charges_the_deepest_point_in_the_height_band() {
     // Cart at 0.8, front centre at 1.0 (height 0): 0.1 inside the 0.3 footprint; the higher
     // point, 0.05 from the cart, is above the band.
-    assert_close(value(base_clearance(0.1), Step { q: [0.8, 0.0], ..Default::default() }), 8.0 + 50.0 * 0.01);
+    assert_close(
+        value(
+            base_clearance(0.1),
+            Step {
+                q: [0.8, 0.0],
+                ..Default::default()
+            },
+        ),
+        8.0 + 50.0 * 0.01,
+    );
 }
 
 #[test]
 fn base_clearance_counts_a_point_once_the_band_reaches_it() {
-    assert_close(value(base_clearance(0.4), Step { q: [0.8, 0.0], ..Default::default() }), 8.0 + 50.0 * 0.25 * 0.25);
+    assert_close(
+        value(
+            base_clearance(0.4),
+            Step {
+                q: [0.8, 0.0],
+                ..Default::default()
+            },
+        ),
+        8.0 + 50.0 * 0.25 * 0.25,
+    );
 }
 
 #[test]
 fn base_clearance_is_free_outside_the_footprint() {
-    assert_eq!(value(base_clearance(0.4), Step { q: [0.4, 0.0], ..Default::default() }), 0.0);
+    assert_eq!(
+        value(
+            base_clearance(0.4),
+            Step {
+                q: [0.4, 0.0],
+                ..Default::default()
+            }
+        ),
+        0.0
+    );
 }
 
 #[test]
 fn terms_add_up() {
-    let step = || Step { q: [1.2, 0.0], contact: true, ..Default::default() };
+    let step = || Step {
+        q: [1.2, 0.0],
+        contact: true,
+        ..Default::default()
+    };
     let both = Cost::new(vec![Term::Contact { weight: 7.0 }, joint_limits(10.0, 100.0)]);
     let scene = probe_and_drawer();
     let x = state(step().q, [0.0, 0.0], 0.0, 0.0);
     let mut robot = Frames::default();
     scene.robot.update_frames(&Isometry3::identity(), &x[..2], &mut robot);
-    let view = StepView { x: &x, u: &[0.0, 0.0], tau_ext: &[0.0, 0.0], contact: true, robot: &robot, object: &Frames::default() };
+    let view = StepView {
+        x: &x,
+        u: &[0.0, 0.0],
+        tau_ext: &[0.0, 0.0],
+        contact: true,
+        robot: &robot,
+        object: &Frames::default(),
+    };
     assert_close(both.step(&scene, &view), 7.0 + 10.0 + 100.0 * 0.04);
 }
 
@@ -281,7 +647,10 @@ fn se3_exp(xi: &Vector6<f64>) -> Isometry3<f64> {
     let (a, b) = if theta < 1e-9 {
         (0.5, 1.0 / 6.0)
     } else {
-        ((1.0 - theta.cos()) / (theta * theta), (theta - theta.sin()) / (theta * theta * theta))
+        (
+            (1.0 - theta.cos()) / (theta * theta),
+            (theta - theta.sin()) / (theta * theta * theta),
+        )
     };
     let vmat = Matrix3::identity() + a * k + b * k * k;
     Isometry3::from_parts(Translation3::from(vmat * v), UnitQuaternion::from_scaled_axis(w))

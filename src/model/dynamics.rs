@@ -41,7 +41,11 @@ pub fn joint_space_terms(
         let r = pose.rotation.to_rotation_matrix();
         let inertia_world = r.matrix() * inertial.inertia * r.matrix().transpose();
         ws.columns.clear();
-        ws.columns.extend(tree.ancestor_active_joints(link).iter().map(|&j| tree.joints[j].q_index.expect("movable")));
+        ws.columns.extend(
+            tree.ancestor_active_joints(link)
+                .iter()
+                .map(|&j| tree.joints[j].q_index.expect("movable")),
+        );
         let cols = &ws.columns;
         for &a in cols {
             let ja = &ws.jacobian[6 * a..6 * a + 6];
@@ -65,7 +69,10 @@ pub fn potential_energy(tree: &KinematicTree, root_pose: &Isometry3<f64>, q: &[f
     tree.links
         .iter()
         .zip(poses.iter())
-        .filter_map(|(l, pose)| l.inertial.map(|i| -i.mass * gravity.dot(&(pose * Point3::from(i.com)).coords)))
+        .filter_map(|(l, pose)| {
+            l.inertial
+                .map(|i| -i.mass * gravity.dot(&(pose * Point3::from(i.com)).coords))
+        })
         .sum()
 }
 

@@ -243,10 +243,9 @@ impl KinematicTree {
     pub fn joint_motion(joint: &Joint, value: f64) -> Isometry3<f64> {
         match joint.kind {
             JointKind::Fixed => Isometry3::identity(),
-            JointKind::Revolute => Isometry3::from_parts(
-                Translation3::identity(),
-                UnitQuaternion::from_scaled_axis(joint.axis * value),
-            ),
+            JointKind::Revolute => {
+                Isometry3::from_parts(Translation3::identity(), UnitQuaternion::from_scaled_axis(joint.axis * value))
+            }
             JointKind::Prismatic => Isometry3::from_parts(Translation3::from(joint.axis * value), UnitQuaternion::identity()),
         }
     }
@@ -322,7 +321,13 @@ impl KinematicTree {
         for &j in &self.ancestor_active_joints[link] {
             let joint = &self.joints[j];
             let col = joint.q_index.expect("active joint has a coordinate");
-            fill_column(joint.kind, &frames.axes[j], &frames.origins[j], point, &mut out[6 * col..6 * col + 6]);
+            fill_column(
+                joint.kind,
+                &frames.axes[j],
+                &frames.origins[j],
+                point,
+                &mut out[6 * col..6 * col + 6],
+            );
         }
     }
 

@@ -146,7 +146,9 @@ impl Scene {
             .collect();
         if rollout_contact_links.is_empty() {
             // Without a declaration every link with collision geometry may touch the object.
-            rollout_contact_links = (0..tree.links.len()).filter(|&l| !tree.links[l].collisions.is_empty()).collect();
+            rollout_contact_links = (0..tree.links.len())
+                .filter(|&l| !tree.links[l].collisions.is_empty())
+                .collect();
         }
         let arm_reach = ext.arm_reach.as_ref().map(|a| ArmReach {
             base_link: tree.link_id(&a.base).expect("validated"),
@@ -277,7 +279,15 @@ impl Scene {
         let mut workspace = DynamicsWorkspace::default();
         let mut mass_matrix = DMatrix::zeros(nq, nq);
         let mut gravity_torque = DVector::zeros(nq);
-        joint_space_terms(&self.robot, &Isometry3::identity(), q, &super::GRAVITY, &mut workspace, &mut mass_matrix, &mut gravity_torque);
+        joint_space_terms(
+            &self.robot,
+            &Isometry3::identity(),
+            q,
+            &super::GRAVITY,
+            &mut workspace,
+            &mut mass_matrix,
+            &mut gravity_torque,
+        );
         Ok((mass_matrix, gravity_torque))
     }
 
@@ -294,16 +304,29 @@ impl Scene {
 
     /// True if the object's single movable joint is a hinge.
     pub fn object_is_revolute(&self) -> bool {
-        self.object.active_joints.iter().all(|&j| self.object.joints[j].kind == JointKind::Revolute)
+        self.object
+            .active_joints
+            .iter()
+            .all(|&j| self.object.joints[j].kind == JointKind::Revolute)
     }
 }
 
 /// World poses of one frame of `tree` (rooted at `root`) for every row of `values` (rows of
 /// `tree.nq()` entries, named `name` in errors).
-fn poses_many(tree: &KinematicTree, root: &Isometry3<f64>, name: &str, values: &[f64], frame: &str) -> Result<Vec<Isometry3<f64>>> {
+fn poses_many(
+    tree: &KinematicTree,
+    root: &Isometry3<f64>,
+    name: &str,
+    values: &[f64],
+    frame: &str,
+) -> Result<Vec<Isometry3<f64>>> {
     let n = tree.nq();
     if n == 0 || !values.len().is_multiple_of(n) {
-        return Err(SabreError::shape(name, format!("(·, {n})"), format!("{} elements", values.len())));
+        return Err(SabreError::shape(
+            name,
+            format!("(·, {n})"),
+            format!("{} elements", values.len()),
+        ));
     }
     ensure_finite(name, values)?;
     let link = tree.require_link(frame)?;
@@ -330,7 +353,13 @@ mod tests {
     fn fk_many_equals_fk_of_each_row() {
         let s = scene();
         let home = s.home_configuration();
-        let rows: Vec<f64> = (0..3).flat_map(|k| home.iter().enumerate().map(move |(i, v)| v + 0.1 * k as f64 * (i as f64).sin())).collect();
+        let rows: Vec<f64> = (0..3)
+            .flat_map(|k| {
+                home.iter()
+                    .enumerate()
+                    .map(move |(i, v)| v + 0.1 * k as f64 * (i as f64).sin())
+            })
+            .collect();
         let poses = s.fk_many(&rows, "grasp").unwrap();
         assert_eq!(poses.len(), 3);
         for (row, pose) in rows.chunks(s.nq()).zip(&poses) {
@@ -352,13 +381,21 @@ mod tests {
         rows.pop();
         rows[2] = f64::NAN;
         assert!(matches!(s.fk_many(&rows, "grasp"), Err(SabreError::InvalidValue { .. })));
-        assert!(matches!(s.fk_many(&s.home_configuration(), "gripper"), Err(SabreError::UnknownFrame { .. })));
+        assert!(matches!(
+            s.fk_many(&s.home_configuration(), "gripper"),
+            Err(SabreError::UnknownFrame { .. })
+        ));
     }
 
     #[test]
     fn gravity_torque_is_the_gradient_of_the_potential_energy() {
         let s = scene();
-        let q: Vec<f64> = s.home_configuration().iter().enumerate().map(|(i, v)| v + 0.05 * i as f64).collect();
+        let q: Vec<f64> = s
+            .home_configuration()
+            .iter()
+            .enumerate()
+            .map(|(i, v)| v + 0.05 * i as f64)
+            .collect();
         let (m, g) = s.mass_matrix_and_gravity(&q).unwrap();
         assert_eq!((m.nrows(), m.ncols(), g.len()), (s.nq(), s.nq(), s.nq()));
         assert!((&m - m.transpose()).norm() < 1e-12, "M(q) is symmetric");
@@ -368,8 +405,14 @@ mod tests {
             let (mut up, mut down) = (q.clone(), q.clone());
             up[i] += h;
             down[i] -= h;
-            let gradient = (potential_energy(&s.robot, &root, &up, &crate::model::GRAVITY) - potential_energy(&s.robot, &root, &down, &crate::model::GRAVITY)) / (2.0 * h);
-            assert!((g[i] - gradient).abs() < 1e-5 * (1.0 + gradient.abs()), "joint {i}: g = {}, dV/dq = {gradient}", g[i]);
+            let gradient = (potential_energy(&s.robot, &root, &up, &crate::model::GRAVITY)
+                - potential_energy(&s.robot, &root, &down, &crate::model::GRAVITY))
+                / (2.0 * h);
+            assert!(
+                (g[i] - gradient).abs() < 1e-5 * (1.0 + gradient.abs()),
+                "joint {i}: g = {}, dV/dq = {gradient}",
+                g[i]
+            );
         }
     }
 }

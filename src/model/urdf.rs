@@ -87,7 +87,10 @@ fn check_depth(source: &str, doc: &roxmltree::Document) -> Result<()> {
         let d = node.parent().map_or(0, |p| depth[p.id().get_usize()] + 1);
         depth[node.id().get_usize()] = d;
         if d > MAX_XML_DEPTH {
-            return Err(SabreError::urdf(source, format!("XML nested deeper than {MAX_XML_DEPTH} elements")));
+            return Err(SabreError::urdf(
+                source,
+                format!("XML nested deeper than {MAX_XML_DEPTH} elements"),
+            ));
         }
     }
     Ok(())
@@ -98,7 +101,10 @@ fn convert_shape(source: &str, link: &str, geometry: &urdf_rs::Geometry) -> Resu
         if v.is_finite() && v > 0.0 {
             Ok(v)
         } else {
-            Err(SabreError::urdf(source, format!("link '{link}': {what} must be positive and finite, got {v}")))
+            Err(SabreError::urdf(
+                source,
+                format!("link '{link}': {what} must be positive and finite, got {v}"),
+            ))
         }
     };
     Ok(match geometry {
@@ -135,7 +141,11 @@ fn convert_link(source: &str, link: &urdf_rs::Link) -> Result<Link> {
         let values = [link.inertial.mass.value, i.ixx, i.ixy, i.ixz, i.iyy, i.iyz, i.izz];
         finite_or_err(source, &format!("inertial of link '{}'", link.name), &values)?;
         let o = &link.inertial.origin;
-        finite_or_err(source, &format!("inertial origin of link '{}'", link.name), &[o.xyz[0], o.xyz[1], o.xyz[2], o.rpy[0], o.rpy[1], o.rpy[2]])?;
+        finite_or_err(
+            source,
+            &format!("inertial origin of link '{}'", link.name),
+            &[o.xyz[0], o.xyz[1], o.xyz[2], o.rpy[0], o.rpy[1], o.rpy[2]],
+        )?;
         let origin = origin_pose(&link.inertial.origin);
         let local = Matrix3::new(i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz);
         check_inertia(source, &link.name, &local)?;
@@ -155,7 +165,18 @@ fn convert_link(source: &str, link: &urdf_rs::Link) -> Result<Link> {
     };
     let mut collisions = Vec::with_capacity(link.collision.len());
     for c in &link.collision {
-        finite_or_err(source, &format!("collision origin of link '{}'", link.name), &[c.origin.xyz[0], c.origin.xyz[1], c.origin.xyz[2], c.origin.rpy[0], c.origin.rpy[1], c.origin.rpy[2]])?;
+        finite_or_err(
+            source,
+            &format!("collision origin of link '{}'", link.name),
+            &[
+                c.origin.xyz[0],
+                c.origin.xyz[1],
+                c.origin.xyz[2],
+                c.origin.rpy[0],
+                c.origin.rpy[1],
+                c.origin.rpy[2],
+            ],
+        )?;
         collisions.push(Collision {
             name: c.name.clone(),
             shape: convert_shape(source, &link.name, &c.geometry)?,
@@ -178,7 +199,10 @@ fn convert_joint(source: &str, joint: &urdf_rs::Joint, link_id: &dyn Fn(&str) ->
         ref other => {
             return Err(SabreError::urdf(
                 source,
-                format!("joint '{}' has unsupported type {other:?} (use fixed, revolute, continuous or prismatic)", joint.name),
+                format!(
+                    "joint '{}' has unsupported type {other:?} (use fixed, revolute, continuous or prismatic)",
+                    joint.name
+                ),
             ))
         }
     };
@@ -188,14 +212,21 @@ fn convert_joint(source: &str, joint: &urdf_rs::Joint, link_id: &dyn Fn(&str) ->
     let parent = find(&joint.parent.link)?;
     let child = find(&joint.child.link)?;
     let o = &joint.origin;
-    finite_or_err(source, &format!("origin of joint '{}'", joint.name), &[o.xyz[0], o.xyz[1], o.xyz[2], o.rpy[0], o.rpy[1], o.rpy[2]])?;
+    finite_or_err(
+        source,
+        &format!("origin of joint '{}'", joint.name),
+        &[o.xyz[0], o.xyz[1], o.xyz[2], o.rpy[0], o.rpy[1], o.rpy[2]],
+    )?;
     let axis = vec3(&joint.axis.xyz);
     let axis = if kind == JointKind::Fixed {
         Vector3::x()
     } else {
         let norm = axis.norm();
         if !norm.is_finite() || norm < 1e-9 {
-            return Err(SabreError::urdf(source, format!("joint '{}' has a zero or non-finite axis", joint.name)));
+            return Err(SabreError::urdf(
+                source,
+                format!("joint '{}' has a zero or non-finite axis", joint.name),
+            ));
         }
         axis / norm
     };
@@ -208,13 +239,22 @@ fn convert_joint(source: &str, joint: &urdf_rs::Joint, link_id: &dyn Fn(&str) ->
         (l.lower, l.upper)
     };
     if (kind != JointKind::Fixed && !(lower < upper)) || lower.is_nan() || upper.is_nan() {
-        return Err(SabreError::urdf(source, format!("joint '{}' has lower limit {lower} not below upper {upper}", joint.name)));
+        return Err(SabreError::urdf(
+            source,
+            format!("joint '{}' has lower limit {lower} not below upper {upper}", joint.name),
+        ));
     }
     // URDF leaves velocity and effort at 0 when a <limit> omits them: no bound. A negative or
     // non-finite bound is a mistake, not "unlimited".
     let bound = |what: &str, v: f64| -> Result<f64> {
         if !v.is_finite() || v < 0.0 {
-            Err(SabreError::urdf(source, format!("joint '{}' has {what} limit {v}; it must be finite and non-negative (0 or omitted: no limit)", joint.name)))
+            Err(SabreError::urdf(
+                source,
+                format!(
+                    "joint '{}' has {what} limit {v}; it must be finite and non-negative (0 or omitted: no limit)",
+                    joint.name
+                ),
+            ))
         } else if v == 0.0 {
             Ok(f64::INFINITY)
         } else {
@@ -227,7 +267,10 @@ fn convert_joint(source: &str, joint: &urdf_rs::Joint, link_id: &dyn Fn(&str) ->
     if !(damping.is_finite() && friction.is_finite() && damping >= 0.0 && friction >= 0.0) {
         return Err(SabreError::urdf(
             source,
-            format!("joint '{}' has damping {damping} and friction {friction}; both must be finite and non-negative", joint.name),
+            format!(
+                "joint '{}' has damping {damping} and friction {friction}; both must be finite and non-negative",
+                joint.name
+            ),
         ));
     }
     Ok(Joint {
@@ -250,14 +293,21 @@ fn convert_joint(source: &str, joint: &urdf_rs::Joint, link_id: &dyn Fn(&str) ->
 }
 
 fn parse_f64(source: &str, node: &roxmltree::Node, attr: &str) -> Result<f64> {
-    let text = node
-        .attribute(attr)
-        .ok_or_else(|| SabreError::urdf(source, format!("<sabre><{}> needs attribute '{attr}'", node.tag_name().name())))?;
-    text.trim()
-        .parse::<f64>()
-        .ok()
-        .filter(|v| v.is_finite())
-        .ok_or_else(|| SabreError::urdf(source, format!("<sabre><{}> attribute '{attr}'='{text}' is not a finite number", node.tag_name().name())))
+    let text = node.attribute(attr).ok_or_else(|| {
+        SabreError::urdf(
+            source,
+            format!("<sabre><{}> needs attribute '{attr}'", node.tag_name().name()),
+        )
+    })?;
+    text.trim().parse::<f64>().ok().filter(|v| v.is_finite()).ok_or_else(|| {
+        SabreError::urdf(
+            source,
+            format!(
+                "<sabre><{}> attribute '{attr}'='{text}' is not a finite number",
+                node.tag_name().name()
+            ),
+        )
+    })
 }
 
 fn parse_xyz(source: &str, node: &roxmltree::Node) -> Result<Vector3<f64>> {
@@ -266,7 +316,10 @@ fn parse_xyz(source: &str, node: &roxmltree::Node) -> Result<Vector3<f64>> {
     };
     let values: Vec<f64> = text.split_whitespace().filter_map(|t| t.parse().ok()).collect();
     if values.len() != 3 || values.iter().any(|v: &f64| !v.is_finite()) {
-        return Err(SabreError::urdf(source, format!("<sabre> xyz='{text}' must be three finite numbers")));
+        return Err(SabreError::urdf(
+            source,
+            format!("<sabre> xyz='{text}' must be three finite numbers"),
+        ));
     }
     Ok(Vector3::new(values[0], values[1], values[2]))
 }
@@ -280,9 +333,12 @@ fn parse_extension(source: &str, text: &str) -> Result<SabreExtension> {
     };
     for node in block.children().filter(|n| n.is_element()) {
         let attr = |name: &str| {
-            node.attribute(name)
-                .map(str::to_string)
-                .ok_or_else(|| SabreError::urdf(source, format!("<sabre><{}> needs attribute '{name}'", node.tag_name().name())))
+            node.attribute(name).map(str::to_string).ok_or_else(|| {
+                SabreError::urdf(
+                    source,
+                    format!("<sabre><{}> needs attribute '{name}'", node.tag_name().name()),
+                )
+            })
         };
         match node.tag_name().name() {
             "rollout_contact" => ext
@@ -327,7 +383,8 @@ pub fn parse_urdf(source: &str, text: &str) -> Result<ParsedUrdf> {
         .iter()
         .map(|l| convert_link(source, l))
         .collect::<Result<Vec<_>>>()?;
-    let names: std::collections::HashMap<&str, usize> = robot.links.iter().enumerate().map(|(i, l)| (l.name.as_str(), i)).collect();
+    let names: std::collections::HashMap<&str, usize> =
+        robot.links.iter().enumerate().map(|(i, l)| (l.name.as_str(), i)).collect();
     let lookup = |name: &str| names.get(name).copied();
     let joints = robot
         .joints
@@ -348,7 +405,10 @@ pub fn parse_urdf(source: &str, text: &str) -> Result<ParsedUrdf> {
     for (a, b) in &extension.pairs {
         for s in [a, b] {
             if !extension.spheres.iter().any(|sp| &sp.name == s) {
-                return Err(SabreError::urdf(source, format!("<sabre><pair> refers to unknown sphere '{s}'")));
+                return Err(SabreError::urdf(
+                    source,
+                    format!("<sabre><pair> refers to unknown sphere '{s}'"),
+                ));
             }
         }
     }
@@ -426,16 +486,42 @@ mod tests {
                  <joint name=\"j\" type=\"revolute\"><parent link=\"base\"/><child link=\"door\"/><axis xyz=\"0 0 1\"/>{limit}{dynamics}</joint></robot>"
             )
         };
-        let ok = joint("<limit lower=\"0\" upper=\"1\" effort=\"0\" velocity=\"0\"/>", "<dynamics damping=\"1\" friction=\"0.5\"/>");
+        let ok = joint(
+            "<limit lower=\"0\" upper=\"1\" effort=\"0\" velocity=\"0\"/>",
+            "<dynamics damping=\"1\" friction=\"0.5\"/>",
+        );
         let tree = parse_urdf("object", &ok).unwrap().tree;
         let limits = tree.active_limits()[0];
-        assert!(limits.effort.is_infinite() && limits.velocity.is_infinite(), "0 means no bound");
+        assert!(
+            limits.effort.is_infinite() && limits.velocity.is_infinite(),
+            "0 means no bound"
+        );
         for (limit, dynamics, says) in [
-            ("<limit lower=\"0\" upper=\"1\" effort=\"-5\" velocity=\"1\"/>", "", "effort limit -5"),
-            ("<limit lower=\"0\" upper=\"1\" effort=\"5\" velocity=\"-1\"/>", "", "velocity limit -1"),
-            ("<limit lower=\"0\" upper=\"1\" effort=\"inf\" velocity=\"1\"/>", "", "effort limit inf"),
-            ("<limit lower=\"0\" upper=\"1\" effort=\"1\" velocity=\"1\"/>", "<dynamics damping=\"inf\"/>", "damping inf"),
-            ("<limit lower=\"0\" upper=\"1\" effort=\"1\" velocity=\"1\"/>", "<dynamics damping=\"1\" friction=\"-1\"/>", "friction -1"),
+            (
+                "<limit lower=\"0\" upper=\"1\" effort=\"-5\" velocity=\"1\"/>",
+                "",
+                "effort limit -5",
+            ),
+            (
+                "<limit lower=\"0\" upper=\"1\" effort=\"5\" velocity=\"-1\"/>",
+                "",
+                "velocity limit -1",
+            ),
+            (
+                "<limit lower=\"0\" upper=\"1\" effort=\"inf\" velocity=\"1\"/>",
+                "",
+                "effort limit inf",
+            ),
+            (
+                "<limit lower=\"0\" upper=\"1\" effort=\"1\" velocity=\"1\"/>",
+                "<dynamics damping=\"inf\"/>",
+                "damping inf",
+            ),
+            (
+                "<limit lower=\"0\" upper=\"1\" effort=\"1\" velocity=\"1\"/>",
+                "<dynamics damping=\"1\" friction=\"-1\"/>",
+                "friction -1",
+            ),
         ] {
             assert!(urdf_error(&joint(limit, dynamics)).contains(says), "{limit} {dynamics}");
         }

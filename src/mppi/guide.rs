@@ -25,7 +25,14 @@ pub struct ServoGuideConfig {
 
 impl Default for ServoGuideConfig {
     fn default() -> Self {
-        Self { gain: 2.0, max_linear: 0.3, max_angular: 0.6, velocity_limit: None, damping: 1e-3, joint_margin: 0.05 }
+        Self {
+            gain: 2.0,
+            max_linear: 0.3,
+            max_angular: 0.6,
+            velocity_limit: None,
+            damping: 1e-3,
+            joint_margin: 0.05,
+        }
     }
 }
 
@@ -57,24 +64,48 @@ fn cap_rate(rate: &mut Vector6<f64>, max_linear: f64, max_angular: f64) {
 /// base takes over from an arm joint at its limit. One common factor brings every joint within its
 /// speed limit, keeping the direction. q is integrated with step `dt`: the guide is what the servo
 /// would do on the kinematics alone, which is all a sample needs to be.
-pub fn servo_guide(scene: &Scene, q0: &[f64], targets: &[Isometry3<f64>], dt: f64, frame: &str, config: &ServoGuideConfig) -> Result<Vec<f64>> {
+pub fn servo_guide(
+    scene: &Scene,
+    q0: &[f64],
+    targets: &[Isometry3<f64>],
+    dt: f64,
+    frame: &str,
+    config: &ServoGuideConfig,
+) -> Result<Vec<f64>> {
     let nq = scene.nq();
     crate::error::ensure_len("q0", q0, nq)?;
     ensure_finite("q0", q0)?;
     if targets.len() < 2 {
-        return Err(SabreError::invalid("targets", format!("the servo guide needs at least 2 poses (K + 1), got {}", targets.len())));
+        return Err(SabreError::invalid(
+            "targets",
+            format!("the servo guide needs at least 2 poses (K + 1), got {}", targets.len()),
+        ));
     }
-    let finite_pose = |t: &Isometry3<f64>| t.translation.vector.iter().chain(t.rotation.coords.iter()).all(|v| v.is_finite());
+    let finite_pose = |t: &Isometry3<f64>| {
+        t.translation
+            .vector
+            .iter()
+            .chain(t.rotation.coords.iter())
+            .all(|v| v.is_finite())
+    };
     if !targets.iter().all(finite_pose) {
         return Err(SabreError::invalid("targets", "must be finite"));
     }
-    for (name, value) in [("dt", dt), ("max_linear", config.max_linear), ("max_angular", config.max_angular), ("damping", config.damping)] {
+    for (name, value) in [
+        ("dt", dt),
+        ("max_linear", config.max_linear),
+        ("max_angular", config.max_angular),
+        ("damping", config.damping),
+    ] {
         if !(value.is_finite() && value > 0.0) {
             return Err(SabreError::invalid(name, format!("must be positive and finite, got {value}")));
         }
     }
     if !(config.gain.is_finite() && config.gain >= 0.0 && config.joint_margin.is_finite()) {
-        return Err(SabreError::invalid("gain, joint_margin", "gain must be non-negative and finite, joint_margin finite"));
+        return Err(SabreError::invalid(
+            "gain, joint_margin",
+            "gain must be non-negative and finite, joint_margin finite",
+        ));
     }
     let link = scene.robot.require_link(frame)?;
     let limits = scene.robot_limits();
@@ -103,7 +134,9 @@ pub fn servo_guide(scene: &Scene, q0: &[f64], targets: &[Isometry3<f64>], dt: f6
     for k in 0..steps {
         scene.robot.update_frames(&Isometry3::identity(), &q, &mut frames);
         let pose = frames.poses[link];
-        scene.robot.frames_jacobian_into(&frames, link, &pose.translation.vector.into(), &mut jacobian);
+        scene
+            .robot
+            .frames_jacobian_into(&frames, link, &pose.translation.vector.into(), &mut jacobian);
         let column = |c: usize| Vector6::from_column_slice(&jacobian[6 * c..6 * c + 6]);
         let mut rate = displacement(&targets[k], &targets[k + 1]) / dt + config.gain * displacement(&pose, &targets[k]);
         cap_rate(&mut rate, config.max_linear, config.max_angular);

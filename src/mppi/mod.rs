@@ -159,19 +159,30 @@ impl Mppi {
         let nu = scene.nu();
         let dt = model.dt();
         if config.rollouts < 3 {
-            return Err(SabreError::invalid("rollouts", "needs at least 3 (nominal, zero and one sample)"));
+            return Err(SabreError::invalid(
+                "rollouts",
+                "needs at least 3 (nominal, zero and one sample)",
+            ));
         }
         if !(config.horizon.is_finite() && config.horizon >= dt) {
             return Err(SabreError::invalid("horizon", format!("must be at least one step ({dt} s)")));
         }
         if config.sigma.len() != nu {
-            return Err(SabreError::shape("sigma", format!("({nu},)"), format!("({},)", config.sigma.len())));
+            return Err(SabreError::shape(
+                "sigma",
+                format!("({nu},)"),
+                format!("({},)", config.sigma.len()),
+            ));
         }
         ensure_finite("sigma", &config.sigma)?;
         if config.sigma.iter().any(|&s| s < 0.0) {
             return Err(SabreError::invalid("sigma", "variances must be non-negative"));
         }
-        for (name, v) in [("h", config.h), ("step_size", config.step_size), ("gradient_clip", config.gradient_clip)] {
+        for (name, v) in [
+            ("h", config.h),
+            ("step_size", config.step_size),
+            ("gradient_clip", config.gradient_clip),
+        ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(SabreError::invalid(name, format!("must be positive and finite, got {v}")));
             }
@@ -184,7 +195,11 @@ impl Mppi {
         let mut bound: Vec<f64> = limits.iter().map(|l| l.velocity).collect();
         if let Some(limit) = &config.input_limit {
             if limit.len() != nu {
-                return Err(SabreError::shape("input_limit", format!("({nu},)"), format!("({},)", limit.len())));
+                return Err(SabreError::shape(
+                    "input_limit",
+                    format!("({nu},)"),
+                    format!("({},)", limit.len()),
+                ));
             }
             if limit.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
                 return Err(SabreError::invalid("input_limit", "bounds must be positive and finite"));
@@ -193,7 +208,8 @@ impl Mppi {
                 *b = b.min(*l);
             }
         }
-        let smoother = (config.smoothing_window > 1).then(|| SavitzkyGolay::new(k, config.smoothing_window, config.smoothing_order));
+        let smoother =
+            (config.smoothing_window > 1).then(|| SavitzkyGolay::new(k, config.smoothing_window, config.smoothing_order));
         let n = config.rollouts;
         Ok(Self {
             lower: bound.iter().map(|b| -b).collect(),
@@ -267,7 +283,10 @@ impl Mppi {
     /// schedule: explore widely far from the goal, finely near it).
     pub fn set_noise_scale(&mut self, scale: f64) -> Result<()> {
         if !(scale.is_finite() && scale > 0.0) {
-            return Err(SabreError::invalid("noise_scale", format!("must be positive and finite, got {scale}")));
+            return Err(SabreError::invalid(
+                "noise_scale",
+                format!("must be positive and finite, got {scale}"),
+            ));
         }
         self.noise_scale = scale;
         Ok(())
@@ -301,7 +320,11 @@ impl Mppi {
     /// Replaces the policy mean (e.g. with a filtered sequence), K × nu starting at time `t0`.
     pub fn set_nominal(&mut self, nominal: &[f64], t0: f64) -> Result<()> {
         if nominal.len() != self.nominal.len() {
-            return Err(SabreError::shape("nominal", format!("({}, {})", self.k, self.nu), format!("{} elements", nominal.len())));
+            return Err(SabreError::shape(
+                "nominal",
+                format!("({}, {})", self.k, self.nu),
+                format!("{} elements", nominal.len()),
+            ));
         }
         ensure_finite("nominal", nominal)?;
         self.nominal.copy_from_slice(nominal);
@@ -378,9 +401,14 @@ impl Mppi {
     /// Rolls the current batch out from `x` with `cost`; records its timing in [`Self::stats`].
     pub fn rollout(&mut self, x: &[f64], cost: &Cost) -> Result<RolloutBatch> {
         let start = Instant::now();
-        let batch = self
-            .model
-            .rollout_with_cost(x, &self.samples, self.config.rollouts, self.k, self.config.threads, Some(cost))?;
+        let batch = self.model.rollout_with_cost(
+            x,
+            &self.samples,
+            self.config.rollouts,
+            self.k,
+            self.config.threads,
+            Some(cost),
+        )?;
         self.stats.rollout_time = start.elapsed().as_secs_f64();
         (self.stats.engine_steps, self.stats.engine_time) = batch.engine_totals();
         Ok(batch)
@@ -424,7 +452,11 @@ impl Mppi {
         let finite: Vec<f64> = costs.iter().copied().filter(|c| c.is_finite()).collect();
         self.stats.cost_min = finite.iter().copied().fold(f64::INFINITY, f64::min);
         self.stats.cost_max = finite.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        self.stats.cost_mean = if finite.is_empty() { f64::NAN } else { finite.iter().sum::<f64>() / finite.len() as f64 };
+        self.stats.cost_mean = if finite.is_empty() {
+            f64::NAN
+        } else {
+            finite.iter().sum::<f64>() / finite.len() as f64
+        };
         self.stats.nominal_cost = costs[0];
         self.stats.effective_sample_size = effective_sample_size(&w);
         self.stats.failed_rollouts = n - finite.len();
@@ -497,7 +529,10 @@ mod tests {
         let mut guide = vec![0.2; 2 * k];
         guide[2 * 2] = NON_FINITE_COMMAND;
         mppi.set_guides(&guide).unwrap();
-        let cost = Cost::new(vec![Term::Posture { target: vec![0.5, 0.0], weights: vec![1.0, 1.0] }]);
+        let cost = Cost::new(vec![Term::Posture {
+            target: vec![0.5, 0.0],
+            weights: vec![1.0, 1.0],
+        }]);
         let x0 = state([0.0, 0.0], [0.0, 0.0], 0.0, 0.0);
         let stats = mppi.iterate(&x0, 0.0, &cost).unwrap().clone();
         assert_eq!(stats.failed_rollouts, 1);

@@ -66,10 +66,12 @@ mod tests {
     #[test]
     fn cubic_polynomials_pass_through_unchanged() {
         let sg = SavitzkyGolay::new(66, 30, 3);
-        let data: Vec<f64> = (0..66).map(|i| {
-            let t = i as f64 * 0.1;
-            0.5 - t + 0.3 * t * t - 0.02 * t * t * t
-        }).collect();
+        let data: Vec<f64> = (0..66)
+            .map(|i| {
+                let t = i as f64 * 0.1;
+                0.5 - t + 0.3 * t * t - 0.02 * t * t * t
+            })
+            .collect();
         let mut out = vec![0.0; 66];
         sg.apply(&data, 1, &mut out);
         for (a, b) in data.iter().zip(&out) {

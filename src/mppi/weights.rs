@@ -78,7 +78,11 @@ mod tests {
     #[test]
     fn non_finite_costs_weigh_zero() {
         let mut w = Vec::new();
-        weights(&[1.0, f64::NAN, 2.0, f64::INFINITY], LikelihoodMapping::Invariant { h: 10.0 }, &mut w);
+        weights(
+            &[1.0, f64::NAN, 2.0, f64::INFINITY],
+            LikelihoodMapping::Invariant { h: 10.0 },
+            &mut w,
+        );
         assert_eq!(w[1], 0.0);
         assert_eq!(w[3], 0.0);
         assert!((w[0] + w[2] - 1.0).abs() < 1e-12);

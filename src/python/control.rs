@@ -30,13 +30,23 @@ impl PyLowLevelConfig {
     #[new]
     fn new() -> Self {
         let c = LowLevelConfig::default();
-        Self { bandwidth: c.bandwidth, integral_gain: c.integral_gain, integral_limit: c.integral_limit, gain_inertia_floor: c.gain_inertia_floor }
+        Self {
+            bandwidth: c.bandwidth,
+            integral_gain: c.integral_gain,
+            integral_limit: c.integral_limit,
+            gain_inertia_floor: c.gain_inertia_floor,
+        }
     }
 }
 
 impl From<&PyLowLevelConfig> for LowLevelConfig {
     fn from(c: &PyLowLevelConfig) -> Self {
-        Self { bandwidth: c.bandwidth, integral_gain: c.integral_gain, integral_limit: c.integral_limit, gain_inertia_floor: c.gain_inertia_floor }
+        Self {
+            bandwidth: c.bandwidth,
+            integral_gain: c.integral_gain,
+            integral_limit: c.integral_limit,
+            gain_inertia_floor: c.gain_inertia_floor,
+        }
     }
 }
 

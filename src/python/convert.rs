@@ -23,15 +23,23 @@ pub(crate) fn view<'a>(name: &str, array: &'a PyReadonlyArrayDyn<'_, f64>, shape
         let fmt = |s: Vec<String>| format!("({})", s.join(", "));
         return Err(SabreError::shape(
             name,
-            fmt(shape.iter().map(|&e| if e < 0 { "·".into() } else { e.to_string() }).collect()),
+            fmt(shape
+                .iter()
+                .map(|&e| if e < 0 { "·".into() } else { e.to_string() })
+                .collect()),
             fmt(got.iter().map(|g| g.to_string()).collect()),
         ));
     }
     // rust-numpy also hands out Fortran-ordered memory as a slice; only C order matches our layout.
     if !array.is_c_contiguous() {
-        return Err(SabreError::invalid(name, "array must be C-contiguous (use numpy.ascontiguousarray)"));
+        return Err(SabreError::invalid(
+            name,
+            "array must be C-contiguous (use numpy.ascontiguousarray)",
+        ));
     }
-    array.as_slice().map_err(|_| SabreError::invalid(name, "array must be C-contiguous"))
+    array
+        .as_slice()
+        .map_err(|_| SabreError::invalid(name, "array must be C-contiguous"))
 }
 
 /// A float64 array of `shape` holding `data` in row-major order.
@@ -68,5 +76,8 @@ pub(crate) fn isometry(name: &str, m: &[f64]) -> crate::Result<Isometry3<f64>> {
     if (rot.transpose() * rot - Matrix3::identity()).norm() > 1e-6 || (rot.determinant() - 1.0).abs() > 1e-6 {
         return Err(SabreError::invalid(name, "rotation block is not a rotation matrix"));
     }
-    Ok(Isometry3::from_parts(Translation3::new(m[3], m[7], m[11]), UnitQuaternion::from_matrix(&rot)))
+    Ok(Isometry3::from_parts(
+        Translation3::new(m[3], m[7], m[11]),
+        UnitQuaternion::from_matrix(&rot),
+    ))
 }

@@ -142,12 +142,16 @@ fn describe(py: Python<'_>, error: &PyErr) -> String {
 
 /// The fields of a `kind` term as `T`, or an `InvalidValueError` naming the field and the reason.
 fn fields<'a, 'py, T: FromPyObject<'a, 'py, Error = PyErr>>(spec: &'a Bound<'py, PyAny>, kind: &str) -> crate::Result<T> {
-    spec.extract::<T>().map_err(|error| spec_error(format!("'{kind}': {}", describe(spec.py(), &error))))
+    spec.extract::<T>()
+        .map_err(|error| spec_error(format!("'{kind}': {}", describe(spec.py(), &error))))
 }
 
 /// Turns one term specification (a dict made by `sabre.costs`) into a core term.
 fn term_from_spec(scene: &Scene, spec: &Bound<'_, PyAny>) -> crate::Result<Term> {
-    let kind: String = spec.get_item("kind").and_then(|v| v.extract()).map_err(|e| spec_error(format!("kind: {}", describe(spec.py(), &e))))?;
+    let kind: String = spec
+        .get_item("kind")
+        .and_then(|v| v.extract())
+        .map_err(|e| spec_error(format!("kind: {}", describe(spec.py(), &e))))?;
     Ok(match kind.as_str() {
         "pose" => {
             let s: PoseSpec = fields(spec, &kind)?;
@@ -156,15 +160,31 @@ fn term_from_spec(scene: &Scene, spec: &Bound<'_, PyAny>) -> crate::Result<Term>
             }
             let pose = isometry("pose target", &s.target)?;
             let target = match s.object_frame {
-                Some(name) => PoseTarget::ObjectLink { link: scene.object.require_link(&name)?, offset: pose, lead: s.lead.0, lead_limit: s.lead_limit },
+                Some(name) => PoseTarget::ObjectLink {
+                    link: scene.object.require_link(&name)?,
+                    offset: pose,
+                    lead: s.lead.0,
+                    lead_limit: s.lead_limit,
+                },
                 None => PoseTarget::World(pose),
             };
-            Term::TargetPose { link: scene.robot.require_link(&s.frame)?, target, weights: s.weights }
+            Term::TargetPose {
+                link: scene.robot.require_link(&s.frame)?,
+                target,
+                weights: s.weights,
+            }
         }
-        "contact" => Term::Contact { weight: fields::<WeightSpec>(spec, &kind)?.weight.0 },
+        "contact" => Term::Contact {
+            weight: fields::<WeightSpec>(spec, &kind)?.weight.0,
+        },
         "joint_limits" => {
             let s: JointLimitsSpec = fields(spec, &kind)?;
-            Term::JointLimits { weight: s.weight.0, weight_slope: s.weight_slope.0, lower: s.lower, upper: s.upper }
+            Term::JointLimits {
+                weight: s.weight.0,
+                weight_slope: s.weight_slope.0,
+                lower: s.lower,
+                upper: s.upper,
+            }
         }
         "arm_reach" => {
             let s: ArmReachSpec = fields(spec, &kind)?;
@@ -178,23 +198,41 @@ fn term_from_spec(scene: &Scene, spec: &Bound<'_, PyAny>) -> crate::Result<Term>
         }
         "self_collision" => {
             let s: BarrierSpec = fields(spec, &kind)?;
-            Term::SelfCollision { pairs: scene.sphere_pairs.clone(), weight: s.weight.0, weight_slope: s.weight_slope.0 }
+            Term::SelfCollision {
+                pairs: scene.sphere_pairs.clone(),
+                weight: s.weight.0,
+                weight_slope: s.weight_slope.0,
+            }
         }
         "posture" => {
             let s: TargetSpec = fields(spec, &kind)?;
-            Term::Posture { target: s.target, weights: s.weights }
+            Term::Posture {
+                target: s.target,
+                weights: s.weights,
+            }
         }
         "object" => {
             let s: TargetSpec = fields(spec, &kind)?;
-            Term::ObjectState { target: s.target, weights: s.weights }
+            Term::ObjectState {
+                target: s.target,
+                weights: s.weights,
+            }
         }
         "power" => {
             let s: PowerSpec = fields(spec, &kind)?;
-            Term::Power { weight: s.weight.0, p_max: s.p_max.0 }
+            Term::Power {
+                weight: s.weight.0,
+                p_max: s.p_max.0,
+            }
         }
         "base_box" => {
             let s: BaseBoxSpec = fields(spec, &kind)?;
-            Term::BaseBox { lower: s.lower, upper: s.upper, weight: s.weight.0, weight_slope: s.weight_slope.0 }
+            Term::BaseBox {
+                lower: s.lower,
+                upper: s.upper,
+                weight: s.weight.0,
+                weight_slope: s.weight_slope.0,
+            }
         }
         "obstacles" => {
             let s: ObstaclesSpec = fields(spec, &kind)?;
@@ -202,7 +240,12 @@ fn term_from_spec(scene: &Scene, spec: &Bound<'_, PyAny>) -> crate::Result<Term>
                 return Err(spec_error("obstacles need 3 centre coordinates per radius"));
             }
             Term::Obstacles {
-                spheres: s.centers.chunks_exact(3).zip(&s.radii).map(|(c, &r)| (Point3::new(c[0], c[1], c[2]), r)).collect(),
+                spheres: s
+                    .centers
+                    .chunks_exact(3)
+                    .zip(&s.radii)
+                    .map(|(c, &r)| (Point3::new(c[0], c[1], c[2]), r))
+                    .collect(),
                 weight: s.weight.0,
                 weight_slope: s.weight_slope.0,
             }
@@ -211,7 +254,15 @@ fn term_from_spec(scene: &Scene, spec: &Bound<'_, PyAny>) -> crate::Result<Term>
             let s: BaseClearanceSpec = fields(spec, &kind)?;
             let base_link = scene.robot.require_link(&s.link)?;
             let footprint = s.footprint.map(|f| (f[0], f[1], f[2]));
-            crate::cost::base_clearance(scene, base_link, footprint, s.margin.0, s.spacing.0, s.weight.0, s.weight_slope.0)?
+            crate::cost::base_clearance(
+                scene,
+                base_link,
+                footprint,
+                s.margin.0,
+                s.spacing.0,
+                s.weight.0,
+                s.weight_slope.0,
+            )?
         }
         other => return Err(spec_error(format!("unknown kind '{other}'"))),
     })
@@ -228,7 +279,10 @@ impl PyCost {
     #[new]
     fn new(scene: &PyScene, terms: Vec<Bound<'_, PyAny>>) -> PyResult<Self> {
         run(|| {
-            let terms = terms.iter().map(|t| term_from_spec(&scene.inner, t)).collect::<crate::Result<Vec<_>>>()?;
+            let terms = terms
+                .iter()
+                .map(|t| term_from_spec(&scene.inner, t))
+                .collect::<crate::Result<Vec<_>>>()?;
             let cost = Cost::new(terms);
             cost.validate(&scene.inner)?;
             Ok(Self { inner: Arc::new(cost) })

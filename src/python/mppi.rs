@@ -115,7 +115,11 @@ impl PyServoGuideConfig {
     pub(crate) fn to_core(&self, nq: usize) -> crate::Result<ServoGuideConfig> {
         if let Some(limit) = &self.velocity_limit {
             if limit.len() != nq {
-                return Err(SabreError::shape("velocity_limit", format!("({nq})"), format!("({})", limit.len())));
+                return Err(SabreError::shape(
+                    "velocity_limit",
+                    format!("({nq})"),
+                    format!("({})", limit.len()),
+                ));
             }
         }
         Ok(ServoGuideConfig {
@@ -177,7 +181,10 @@ impl PyPlanner {
             cost.inner.validate(model.inner.scene())?;
             Mppi::new(model.inner.clone(), config)
         })?;
-        Ok(Self { inner: Mutex::new(planner), cost: Mutex::new(cost.inner.clone()) })
+        Ok(Self {
+            inner: Mutex::new(planner),
+            cost: Mutex::new(cost.inner.clone()),
+        })
     }
 
     #[getter]
@@ -214,7 +221,11 @@ impl PyPlanner {
     /// Builds the batch for time t and returns it, (N, K, nu).
     fn sample<'py>(&self, py: Python<'py>, t: f64) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let mut planner = lock(&self.inner);
-        let (n, k, nu) = (planner.config().rollouts, planner.horizon_steps(), planner.model().scene().nu());
+        let (n, k, nu) = (
+            planner.config().rollouts,
+            planner.horizon_steps(),
+            planner.model().scene().nu(),
+        );
         let samples = planner.sample(t).to_vec();
         array(py, samples, &[n, k, nu])
     }
@@ -225,7 +236,13 @@ impl PyPlanner {
         &self,
         py: Python<'py>,
         x: PyReadonlyArrayDyn<'py, f64>,
-    ) -> PyResult<(Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<bool>>)> {
+    ) -> PyResult<(
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyArrayDyn<bool>>,
+    )> {
         let cost = lock(&self.cost).clone();
         let inner = &self.inner;
         let x = run(|| view("x", &x, &[-1]))?;
@@ -311,7 +328,9 @@ pub fn likelihood_weights(costs: Vec<f64>, mapping: &str, parameter: f64) -> PyR
         "naive" => LikelihoodMapping::Naive { lambda: parameter },
         "baseline" => LikelihoodMapping::Baseline { lambda: parameter },
         "invariant" => LikelihoodMapping::Invariant { h: parameter },
-        other => return Err(SabreError::invalid("mapping", format!("unknown mapping '{other}' (naive, baseline, invariant)")).into()),
+        other => {
+            return Err(SabreError::invalid("mapping", format!("unknown mapping '{other}' (naive, baseline, invariant)")).into())
+        }
     };
     let mut out = Vec::new();
     crate::mppi::weights(&costs, mapping, &mut out);

@@ -118,16 +118,28 @@ pub struct PyEnergyTankConfig {
 impl PyEnergyTankConfig {
     #[new]
     fn new() -> Self {
-        Self { initial: DEFAULT_TANK_INITIAL, floor: SafetyConfig::default().tank_floor, ceiling: None, record_history: true }
+        Self {
+            initial: DEFAULT_TANK_INITIAL,
+            floor: SafetyConfig::default().tank_floor,
+            ceiling: None,
+            record_history: true,
+        }
     }
 }
 
 /// (τ_ext, S) for the passivity row: both or neither.
-fn passivity_inputs<'a>(nq: usize, tau_ext: &'a Option<PyReadonlyArrayDyn<'_, f64>>, tank_energy: Option<f64>) -> crate::Result<Option<(&'a [f64], f64)>> {
+fn passivity_inputs<'a>(
+    nq: usize,
+    tau_ext: &'a Option<PyReadonlyArrayDyn<'_, f64>>,
+    tank_energy: Option<f64>,
+) -> crate::Result<Option<(&'a [f64], f64)>> {
     match (tau_ext, tank_energy) {
         (Some(tau), Some(energy)) => Ok(Some((view("tau_ext", tau, &[nq as isize])?, energy))),
         (None, None) => Ok(None),
-        _ => Err(SabreError::invalid("passivity", "give both tau_ext and tank_energy, or neither")),
+        _ => Err(SabreError::invalid(
+            "passivity",
+            "give both tau_ext and tank_energy, or neither",
+        )),
     }
 }
 
@@ -193,7 +205,11 @@ impl PySafetyFilter {
     fn new(scene: &PyScene, config: &PySafetyConfig) -> PyResult<Self> {
         run(|| {
             let filter = SafetyFilter::new(scene.inner.clone(), config.to_core()?)?;
-            Ok(Self { inner: Mutex::new(filter), nq: scene.inner.nq(), nx: scene.inner.nx() })
+            Ok(Self {
+                inner: Mutex::new(filter),
+                nq: scene.inner.nq(),
+                nx: scene.inner.nx(),
+            })
         })
     }
 
@@ -256,7 +272,10 @@ impl PySafetyFilter {
     /// (id, centre, radius) of each obstacle present.
     #[getter]
     fn obstacles(&self) -> Vec<(u64, [f64; 3], f64)> {
-        lock(&self.inner).obstacles().map(|o| (o.id, [o.center.x, o.center.y, o.center.z], o.radius)).collect()
+        lock(&self.inner)
+            .obstacles()
+            .map(|o| (o.id, [o.center.x, o.center.y, o.center.z], o.radius))
+            .collect()
     }
     #[getter]
     fn row_names(&self) -> Vec<String> {
@@ -294,11 +313,18 @@ impl PySafetyFilter {
         x: PyReadonlyArrayDyn<'py, f64>,
         tau_ext: Option<PyReadonlyArrayDyn<'py, f64>>,
         tank_energy: Option<f64>,
-    ) -> PyResult<(Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<f64>>)> {
+    ) -> PyResult<(
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyArrayDyn<f64>>,
+        Bound<'py, PyArrayDyn<f64>>,
+    )> {
         let x = run(|| view("x", &x, &[self.nx as isize]))?;
         let passivity = run(|| passivity_inputs(self.nq, &tau_ext, tank_energy))?;
         let mut f = lock(&self.inner);
-        let (a, b, h) = run(|| f.constraint_rows(x, passivity).map(|(a, b, h)| (a.to_vec(), b.to_vec(), h.to_vec())))?;
+        let (a, b, h) = run(|| {
+            f.constraint_rows(x, passivity)
+                .map(|(a, b, h)| (a.to_vec(), b.to_vec(), h.to_vec()))
+        })?;
         let r = b.len();
         Ok((array(py, a, &[r, self.nq])?, array(py, b, &[r])?, array(py, h, &[r])?))
     }
@@ -336,7 +362,8 @@ pub struct PyEnergyTank {
 impl PyEnergyTank {
     #[new]
     fn new(config: &PyEnergyTankConfig) -> PyResult<Self> {
-        run(|| EnergyTank::new(config.initial, config.floor, config.ceiling, config.record_history)).map(|t| Self { inner: Mutex::new(t) })
+        run(|| EnergyTank::new(config.initial, config.floor, config.ceiling, config.record_history))
+            .map(|t| Self { inner: Mutex::new(t) })
     }
     /// One Euler step of (49), S += dt τ_extᵀu; returns the new energy.
     fn step(&self, tau_ext: PyReadonlyArrayDyn<'_, f64>, u: PyReadonlyArrayDyn<'_, f64>, dt: f64) -> PyResult<f64> {

@@ -126,7 +126,11 @@ impl PyScene {
         self.inner.home_configuration()
     }
     fn rollout_contact_links(&self) -> Vec<String> {
-        self.inner.rollout_contact_links.iter().map(|&l| self.inner.robot.links[l].name.clone()).collect()
+        self.inner
+            .rollout_contact_links
+            .iter()
+            .map(|&l| self.inner.robot.links[l].name.clone())
+            .collect()
     }
     /// Self-collision spheres as (name, link, centre xyz, radius) and the checked pairs (by name).
     fn self_collision(&self) -> (Vec<SphereRow>, Vec<(String, String)>) {
@@ -134,17 +138,31 @@ impl PyScene {
         (
             s.spheres
                 .iter()
-                .map(|sp| (sp.name.clone(), s.robot.links[sp.link].name.clone(), [sp.center.x, sp.center.y, sp.center.z], sp.radius))
+                .map(|sp| {
+                    (
+                        sp.name.clone(),
+                        s.robot.links[sp.link].name.clone(),
+                        [sp.center.x, sp.center.y, sp.center.z],
+                        sp.radius,
+                    )
+                })
                 .collect(),
-            s.sphere_pairs.iter().map(|&(a, b)| (s.spheres[a].name.clone(), s.spheres[b].name.clone())).collect(),
+            s.sphere_pairs
+                .iter()
+                .map(|&(a, b)| (s.spheres[a].name.clone(), s.spheres[b].name.clone()))
+                .collect(),
         )
     }
     /// (base link, frame, max) of the planar arm-reach limit (40), if declared.
     fn arm_reach(&self) -> Option<(String, String, f64)> {
         let s = &self.inner;
-        s.arm_reach
-            .as_ref()
-            .map(|a| (s.robot.links[a.base_link].name.clone(), s.robot.links[a.frame_link].name.clone(), a.max))
+        s.arm_reach.as_ref().map(|a| {
+            (
+                s.robot.links[a.base_link].name.clone(),
+                s.robot.links[a.frame_link].name.clone(),
+                a.max,
+            )
+        })
     }
 
     /// World pose (4, 4) of a robot frame at q (nq,).
@@ -155,28 +173,48 @@ impl PyScene {
     }
 
     /// World poses (M, 4, 4) of a robot frame for M configurations (M, nq).
-    fn fk_many<'py>(&self, py: Python<'py>, q: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    fn fk_many<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArrayDyn<'py, f64>,
+        frame: &str,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let nq = self.inner.nq() as isize;
         let poses = run(|| self.inner.fk_many(view("q", &q, &[-1, nq])?, frame))?;
         poses_array(py, &poses)
     }
 
     /// Geometric Jacobian (6, nq) of a robot frame's origin, world frame, linear rows first.
-    fn jacobian<'py>(&self, py: Python<'py>, q: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    fn jacobian<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArrayDyn<'py, f64>,
+        frame: &str,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let nq = self.inner.nq() as isize;
         let j = run(|| self.inner.jacobian(view("q", &q, &[nq])?, frame))?;
         array(py, j.transpose().as_slice().to_vec(), &[6, self.inner.nq()])
     }
 
     /// World pose (4, 4) of an object frame at object configuration o (no,).
-    fn object_fk<'py>(&self, py: Python<'py>, o: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    fn object_fk<'py>(
+        &self,
+        py: Python<'py>,
+        o: PyReadonlyArrayDyn<'py, f64>,
+        frame: &str,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let no = self.inner.no() as isize;
         let pose = run(|| self.inner.object_fk(view("o", &o, &[no])?, frame))?;
         pose_array(py, &pose)
     }
 
     /// World poses (M, 4, 4) of an object frame for M object configurations (M, no).
-    fn object_fk_many<'py>(&self, py: Python<'py>, o: PyReadonlyArrayDyn<'py, f64>, frame: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    fn object_fk_many<'py>(
+        &self,
+        py: Python<'py>,
+        o: PyReadonlyArrayDyn<'py, f64>,
+        frame: &str,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let no = self.inner.no() as isize;
         let poses = run(|| self.inner.object_fk_many(view("o", &o, &[-1, no])?, frame))?;
         poses_array(py, &poses)
@@ -197,7 +235,10 @@ impl PyScene {
         let (out, steps) = run(|| {
             let q0 = view("q0", &q0, &[nq as isize])?;
             let targets = view("targets", &targets, &[-1, 4, 4])?;
-            let poses = targets.chunks(16).map(|m| isometry("targets", m)).collect::<crate::Result<Vec<_>>>()?;
+            let poses = targets
+                .chunks(16)
+                .map(|m| isometry("targets", m))
+                .collect::<crate::Result<Vec<_>>>()?;
             let config = config.to_core(nq)?;
             let out = crate::mppi::servo_guide(&self.inner, q0, &poses, dt, frame, &config)?;
             Ok((out, poses.len().saturating_sub(1)))
@@ -213,6 +254,9 @@ impl PyScene {
     ) -> PyResult<(Array<'py>, Array<'py>)> {
         let nq = self.inner.nq();
         let (m, g) = run(|| self.inner.mass_matrix_and_gravity(view("q", &q, &[nq as isize])?))?;
-        Ok((array(py, m.transpose().as_slice().to_vec(), &[nq, nq])?, array(py, g.as_slice().to_vec(), &[nq])?))
+        Ok((
+            array(py, m.transpose().as_slice().to_vec(), &[nq, nq])?,
+            array(py, g.as_slice().to_vec(), &[nq])?,
+        ))
     }
 }

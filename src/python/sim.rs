@@ -90,13 +90,23 @@ pub struct PyPlantConfig {
 
 impl From<PlantConfig> for PyPlantConfig {
     fn from(c: PlantConfig) -> Self {
-        Self { dt: c.dt, contact_friction: c.contact_friction, solver_iterations: c.solver_iterations, tau_ext_cutoff: c.tau_ext_cutoff }
+        Self {
+            dt: c.dt,
+            contact_friction: c.contact_friction,
+            solver_iterations: c.solver_iterations,
+            tau_ext_cutoff: c.tau_ext_cutoff,
+        }
     }
 }
 
 impl From<&PyPlantConfig> for PlantConfig {
     fn from(c: &PyPlantConfig) -> Self {
-        Self { dt: c.dt, contact_friction: c.contact_friction, solver_iterations: c.solver_iterations, tau_ext_cutoff: c.tau_ext_cutoff }
+        Self {
+            dt: c.dt,
+            contact_friction: c.contact_friction,
+            solver_iterations: c.solver_iterations,
+            tau_ext_cutoff: c.tau_ext_cutoff,
+        }
     }
 }
 
@@ -213,7 +223,13 @@ impl PyPlant {
     }
 
     /// Runs `steps` plant steps, each with torques from the low-level controller tracking `u_ref`.
-    fn track(&self, py: Python<'_>, controller: &PyLowLevelController, u_ref: PyReadonlyArrayDyn<'_, f64>, steps: usize) -> PyResult<()> {
+    fn track(
+        &self,
+        py: Python<'_>,
+        controller: &PyLowLevelController,
+        u_ref: PyReadonlyArrayDyn<'_, f64>,
+        steps: usize,
+    ) -> PyResult<()> {
         let u_ref = self.with(|p| Ok(view("u_ref", &u_ref, &[p.scene().nq() as isize])?.to_vec()))?;
         let plant = &self.inner;
         let controller = &controller.inner;
@@ -257,7 +273,16 @@ impl PyPlant {
         let trace = run_detached(py, || {
             let (mut plant, mut controller) = (lock(plant), lock(controller));
             let mut trace = TrackTrace::default();
-            follow_reference(&mut plant, &mut controller, reference, t0, dt, steps, record_every, &mut trace)?;
+            follow_reference(
+                &mut plant,
+                &mut controller,
+                reference,
+                t0,
+                dt,
+                steps,
+                record_every,
+                &mut trace,
+            )?;
             Ok(trace)
         })?;
         let m = trace.time.len();
@@ -300,9 +325,22 @@ impl PyPlant {
             let mut controller = lock(controller);
             let mut filter = safety.map(|f| lock(&f.inner));
             let mut tank = tank.map(|t| lock(&t.inner));
-            let stage = InnerSafety { filter: filter.as_deref_mut(), tank: tank.as_deref_mut() };
+            let stage = InnerSafety {
+                filter: filter.as_deref_mut(),
+                tank: tank.as_deref_mut(),
+            };
             let mut trace = TrackTrace::default();
-            follow_reference_safe(&mut plant, &mut controller, reference, t0, dt, steps, record_every, &mut trace, Some(stage))?;
+            follow_reference_safe(
+                &mut plant,
+                &mut controller,
+                reference,
+                t0,
+                dt,
+                steps,
+                record_every,
+                &mut trace,
+                Some(stage),
+            )?;
             Ok(trace)
         })?;
         let m = trace.time.len();
@@ -316,7 +354,10 @@ impl PyPlant {
         d.set_item("contact", trace.contact.into_pyarray(py).reshape(vec![m])?)?;
         if has_filter {
             d.set_item("filtered", array(py, trace.filtered, &[m, nq])?)?;
-            d.set_item("filter_status", trace.filter_status.iter().map(|s| s.name()).collect::<Vec<_>>())?;
+            d.set_item(
+                "filter_status",
+                trace.filter_status.iter().map(|s| s.name()).collect::<Vec<_>>(),
+            )?;
         }
         if has_tank {
             d.set_item("tank_energy", array(py, trace.tank_energy, &[m])?)?;
@@ -348,10 +389,16 @@ impl PyPlant {
     fn contacts(&self) -> PyResult<Vec<ContactRow>> {
         self.with(|p| {
             let scene = p.scene();
-            Ok(p
-                .contacts()
+            Ok(p.contacts()
                 .into_iter()
-                .map(|c| (scene.robot.links[c.robot_link].name.clone(), scene.object.links[c.object_link].name.clone(), c.point, c.force))
+                .map(|c| {
+                    (
+                        scene.robot.links[c.robot_link].name.clone(),
+                        scene.object.links[c.object_link].name.clone(),
+                        c.point,
+                        c.force,
+                    )
+                })
                 .collect())
         })
     }

@@ -69,7 +69,15 @@ impl ActiveSet {
 
     /// Solves the remembered active set for `u_ref`; on success writes the command and the slacks
     /// (zero off the active set) and returns the number of active rows.
-    pub fn try_solve(&mut self, rows: &Rows, penalty: &[f64], limits: &[f64], u_ref: &[f64], u_out: &mut [f64], slack_out: &mut [f64]) -> Option<usize> {
+    pub fn try_solve(
+        &mut self,
+        rows: &Rows,
+        penalty: &[f64],
+        limits: &[f64],
+        u_ref: &[f64],
+        u_out: &mut [f64],
+        slack_out: &mut [f64],
+    ) -> Option<usize> {
         if !self.valid {
             return None;
         }

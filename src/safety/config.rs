@@ -149,13 +149,22 @@ impl SafetyConfig {
         }
         let [x0, x1, y0, y1] = self.base_box;
         if !self.base_box.iter().all(|v| v.is_finite()) || x0 >= x1 || y0 >= y1 {
-            return bad("base_box".into(), format!("needs finite x_min < x_max and y_min < y_max, got {:?}", self.base_box));
+            return bad(
+                "base_box".into(),
+                format!("needs finite x_min < x_max and y_min < y_max, got {:?}", self.base_box),
+            );
         }
         if !(self.tank_floor.is_finite() && self.tank_floor >= 0.0) {
-            return bad("tank_floor".into(), format!("must be finite and non-negative, got {}", self.tank_floor));
+            return bad(
+                "tank_floor".into(),
+                format!("must be finite and non-negative, got {}", self.tank_floor),
+            );
         }
         if self.max_obstacles > MAX_OBSTACLE_SLOTS {
-            return bad("max_obstacles".into(), format!("at most {MAX_OBSTACLE_SLOTS}, got {}", self.max_obstacles));
+            return bad(
+                "max_obstacles".into(),
+                format!("at most {MAX_OBSTACLE_SLOTS}, got {}", self.max_obstacles),
+            );
         }
         if self.max_iterations == 0 {
             return bad("max_iterations".into(), "must be at least 1".into());

@@ -12,14 +12,23 @@ use crate::model::scene::Scene;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) enum RowKind {
     /// Coordinate `joint` of q between its position limits.
-    JointLimit { joint: usize },
+    JointLimit {
+        joint: usize,
+    },
     /// Entry `pair` of `scene.sphere_pairs`.
-    SelfCollision { pair: usize },
+    SelfCollision {
+        pair: usize,
+    },
     ArmReach,
     /// Coordinate `axis` (0 = base x, 1 = base y) of q inside the base box.
-    BaseBox { axis: usize },
+    BaseBox {
+        axis: usize,
+    },
     /// Obstacle slot `slot` against robot sphere `sphere`.
-    Obstacle { slot: usize, sphere: usize },
+    Obstacle {
+        slot: usize,
+        sphere: usize,
+    },
     Passivity,
 }
 
@@ -102,25 +111,44 @@ impl Rows {
             for (joint, l) in scene.robot_limits().iter().enumerate() {
                 // Unlimited coordinates (continuous joints, free base axes) have no barrier.
                 if l.lower.is_finite() && l.upper.is_finite() && l.upper > l.lower {
-                    rows.push(Row { kind: RowKind::JointLimit { joint }, class: ConstraintClass::JointLimits, cols: vec![joint] });
+                    rows.push(Row {
+                        kind: RowKind::JointLimit { joint },
+                        class: ConstraintClass::JointLimits,
+                        cols: vec![joint],
+                    });
                 }
             }
         }
         if on(ConstraintClass::SelfCollision) {
             for (pair, &(a, b)) in scene.sphere_pairs.iter().enumerate() {
-                let cols = union(&link_cols(&scene, scene.spheres[a].link), &link_cols(&scene, scene.spheres[b].link));
-                rows.push(Row { kind: RowKind::SelfCollision { pair }, class: ConstraintClass::SelfCollision, cols });
+                let cols = union(
+                    &link_cols(&scene, scene.spheres[a].link),
+                    &link_cols(&scene, scene.spheres[b].link),
+                );
+                rows.push(Row {
+                    kind: RowKind::SelfCollision { pair },
+                    class: ConstraintClass::SelfCollision,
+                    cols,
+                });
             }
         }
         if on(ConstraintClass::ArmReach) {
             if let Some(reach) = &scene.arm_reach {
                 let cols = union(&link_cols(&scene, reach.frame_link), &link_cols(&scene, reach.base_link));
-                rows.push(Row { kind: RowKind::ArmReach, class: ConstraintClass::ArmReach, cols });
+                rows.push(Row {
+                    kind: RowKind::ArmReach,
+                    class: ConstraintClass::ArmReach,
+                    cols,
+                });
             }
         }
         if on(ConstraintClass::BaseBox) && nq >= 2 {
             for axis in 0..2 {
-                rows.push(Row { kind: RowKind::BaseBox { axis }, class: ConstraintClass::BaseBox, cols: vec![axis] });
+                rows.push(Row {
+                    kind: RowKind::BaseBox { axis },
+                    class: ConstraintClass::BaseBox,
+                    cols: vec![axis],
+                });
             }
         }
         if on(ConstraintClass::Obstacles) {
@@ -135,7 +163,11 @@ impl Rows {
             }
         }
         if on(ConstraintClass::Passivity) {
-            rows.push(Row { kind: RowKind::Passivity, class: ConstraintClass::Passivity, cols: (0..nq).collect() });
+            rows.push(Row {
+                kind: RowKind::Passivity,
+                class: ConstraintClass::Passivity,
+                cols: (0..nq).collect(),
+            });
         }
         let r = rows.len();
         let gamma = rows.iter().map(|row| config.gamma.get(row.class)).collect();
@@ -191,12 +223,17 @@ impl Rows {
         let nq = self.nq;
         let scene = self.scene.clone();
         scene.robot.update_frames(&Isometry3::identity(), q, &mut self.frames);
-        let need_spheres = self.rows.iter().any(|r| matches!(r.kind, RowKind::SelfCollision { .. } | RowKind::Obstacle { .. }));
+        let need_spheres = self
+            .rows
+            .iter()
+            .any(|r| matches!(r.kind, RowKind::SelfCollision { .. } | RowKind::Obstacle { .. }));
         if need_spheres {
             for (i, s) in scene.spheres.iter().enumerate() {
                 let p = self.frames.poses[s.link] * Point3::from(s.center);
                 self.sphere_pos[i] = p;
-                scene.robot.frames_jacobian_into(&self.frames, s.link, &p, &mut self.sphere_jac[i * 6 * nq..(i + 1) * 6 * nq]);
+                scene
+                    .robot
+                    .frames_jacobian_into(&self.frames, s.link, &p, &mut self.sphere_jac[i * 6 * nq..(i + 1) * 6 * nq]);
             }
         }
         let limits = &scene.robot.joints;

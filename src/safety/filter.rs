@@ -166,7 +166,10 @@ impl SafetyFilter {
         if let Some(j) = velocity_limits.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
             return Err(SabreError::invalid(
                 "robot velocity limits",
-                format!("joint {j} has velocity limit {}; the filter needs finite positive input limits", velocity_limits[j]),
+                format!(
+                    "joint {j} has velocity limit {}; the filter needs finite positive input limits",
+                    velocity_limits[j]
+                ),
             ));
         }
         let rows = Rows::new(scene.clone(), &config);
@@ -262,17 +265,30 @@ impl SafetyFilter {
     pub fn add_obstacle(&mut self, center: [f64; 3], radius: f64) -> Result<u64> {
         ensure_finite("obstacle center", &center)?;
         if !(radius.is_finite() && radius > 0.0) {
-            return Err(SabreError::invalid("obstacle radius", format!("must be finite and positive, got {radius}")));
+            return Err(SabreError::invalid(
+                "obstacle radius",
+                format!("must be finite and positive, got {radius}"),
+            ));
         }
         if !self.config.enabled.get(ConstraintClass::Obstacles) {
-            return Err(SabreError::invalid("obstacles", "the obstacle class is disabled in this filter's config"));
+            return Err(SabreError::invalid(
+                "obstacles",
+                "the obstacle class is disabled in this filter's config",
+            ));
         }
         let slot = self.obstacles.iter().position(|o| o.is_none()).ok_or_else(|| {
-            SabreError::invalid("obstacles", format!("all {} obstacle slots are in use; remove one first", self.obstacles.len()))
+            SabreError::invalid(
+                "obstacles",
+                format!("all {} obstacle slots are in use; remove one first", self.obstacles.len()),
+            )
         })?;
         let id = self.next_obstacle_id;
         self.next_obstacle_id += 1;
-        self.obstacles[slot] = Some(Obstacle { id, center: center.into(), radius });
+        self.obstacles[slot] = Some(Obstacle {
+            id,
+            center: center.into(),
+            radius,
+        });
         Ok(id)
     }
 
@@ -421,11 +437,27 @@ impl SafetyFilter {
             out.method = SolveMethod::Projection;
             out.iterations = 0;
             out.qp_rows = 0;
-            self.active_set.remember(&self.rows, &self.row_penalty, &out.slack, &out.u, &self.velocity_limits, REMEMBER);
+            self.active_set.remember(
+                &self.rows,
+                &self.row_penalty,
+                &out.slack,
+                &out.u,
+                &self.velocity_limits,
+                REMEMBER,
+            );
         } else if let Some(k) = self
             .config
             .screening
-            .then(|| self.active_set.try_solve(&self.rows, &self.row_penalty, &self.velocity_limits, u_ref, &mut self.output.u, &mut self.output.slack))
+            .then(|| {
+                self.active_set.try_solve(
+                    &self.rows,
+                    &self.row_penalty,
+                    &self.velocity_limits,
+                    u_ref,
+                    &mut self.output.u,
+                    &mut self.output.slack,
+                )
+            })
             .flatten()
         {
             let out = &mut self.output;
@@ -447,9 +479,14 @@ impl SafetyFilter {
             out.iterations = iterations;
             out.qp_rows = self.assignment.iter().filter(|&&a| a != EMPTY).count();
             self.stats.interior_point_calls += 1;
-            let converged = matches!(status, SolverStatus::Solved | SolverStatus::AlmostSolved) && x.iter().all(|v| v.is_finite());
+            let converged =
+                matches!(status, SolverStatus::Solved | SolverStatus::AlmostSolved) && x.iter().all(|v| v.is_finite());
             if converged {
-                out.status = if status == SolverStatus::Solved { FilterStatus::Solved } else { FilterStatus::AlmostSolved };
+                out.status = if status == SolverStatus::Solved {
+                    FilterStatus::Solved
+                } else {
+                    FilterStatus::AlmostSolved
+                };
                 // Interior-point iterates sit within the tolerance of the bounds; clip so the input
                 // limits hold exactly.
                 for j in 0..nq {
@@ -460,13 +497,24 @@ impl SafetyFilter {
                         out.slack[row] = x[nq + s].max(0.0);
                     }
                 }
-                self.active_set.remember(&self.rows, &self.row_penalty, &out.slack, &out.u, &self.velocity_limits, REMEMBER);
+                self.active_set.remember(
+                    &self.rows,
+                    &self.row_penalty,
+                    &out.slack,
+                    &out.u,
+                    &self.velocity_limits,
+                    REMEMBER,
+                );
             } else {
                 out.status = FilterStatus::Fallback;
                 out.u.fill(0.0);
                 // The slack the safe stop needs: the deficit of each live row at u = 0.
                 for ri in 0..r {
-                    out.slack[ri] = if self.rows.live[ri] { self.rows.bound[ri].max(0.0) } else { 0.0 };
+                    out.slack[ri] = if self.rows.live[ri] {
+                        self.rows.bound[ri].max(0.0)
+                    } else {
+                        0.0
+                    };
                 }
                 self.active_set.forget();
             }
@@ -524,8 +572,17 @@ impl SafetyFilter {
         self.rows.evaluate(&x[..nq], &self.obstacles, passivity);
         self.assignment.clear();
         self.assignment.extend(0..self.rows.len());
-        self.full.load(&self.assignment, &self.rows.coef, &self.rows.bound, &self.row_penalty, u_ref)?;
+        self.full
+            .load(&self.assignment, &self.rows.coef, &self.rows.bound, &self.row_penalty, u_ref)?;
         let (n, m, p, q, a, b) = self.full.dense();
-        Ok(QpMatrices { n, m, nu: nq, p, q, a, b })
+        Ok(QpMatrices {
+            n,
+            m,
+            nu: nq,
+            p,
+            q,
+            a,
+            b,
+        })
     }
 }

@@ -33,7 +33,14 @@ pub(crate) const EMPTY: usize = usize::MAX;
 
 impl SlotQp {
     /// A QP with one slot per entry of `slot_cols`; `penalties` are the slots' initial Γ.
-    pub fn new(nq: usize, slot_cols: Vec<Vec<usize>>, penalties: &[f64], velocity_limits: &[f64], variable_penalty: bool, config: &SafetyConfig) -> Result<Self> {
+    pub fn new(
+        nq: usize,
+        slot_cols: Vec<Vec<usize>>,
+        penalties: &[f64],
+        velocity_limits: &[f64],
+        variable_penalty: bool,
+        config: &SafetyConfig,
+    ) -> Result<Self> {
         let slots = slot_cols.len();
         let (n, m) = (nq + slots, slots + 2 * nq);
         // A in CSC: u columns hold the slots that use them, then the two bound rows; each slack

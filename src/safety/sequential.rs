@@ -38,7 +38,10 @@ impl SafetyFilter {
         let (nq, nx) = (scene.nq(), scene.nx());
         let other = world.scene();
         if other.nq() != nq || other.nx() != nx || other.robot.name != scene.robot.name {
-            return Err(SabreError::invalid("rollout model", "simulates a different scene than the filter's"));
+            return Err(SabreError::invalid(
+                "rollout model",
+                "simulates a different scene than the filter's",
+            ));
         }
         scene.check_state(x0)?;
         if u.is_empty() || !u.len().is_multiple_of(nq) {
@@ -66,7 +69,9 @@ impl SafetyFilter {
             let next = &mut rest[..nx];
             world.step_once(&out.u[step * nq..(step + 1) * nq], next);
             if let Some(i) = next.iter().position(|v| !v.is_finite()) {
-                return Err(SabreError::Simulation(format!("rollout state entry {i} became non-finite at step {step} of the sequential filter")));
+                return Err(SabreError::Simulation(format!(
+                    "rollout state entry {i} became non-finite at step {step} of the sequential filter"
+                )));
             }
         }
         Ok(())

@@ -26,14 +26,23 @@ impl EnergyTank {
     /// must be at least `initial`. With `record_history` every step's energy is kept (S(0) first).
     pub fn new(initial: f64, floor: f64, ceiling: Option<f64>, record_history: bool) -> Result<Self> {
         if !(floor.is_finite() && floor >= 0.0) {
-            return Err(SabreError::invalid("tank floor", format!("must be finite and non-negative, got {floor}")));
+            return Err(SabreError::invalid(
+                "tank floor",
+                format!("must be finite and non-negative, got {floor}"),
+            ));
         }
         if !(initial.is_finite() && initial >= floor) {
-            return Err(SabreError::invalid("tank initial energy", format!("must be finite and at least the floor {floor}, got {initial}")));
+            return Err(SabreError::invalid(
+                "tank initial energy",
+                format!("must be finite and at least the floor {floor}, got {initial}"),
+            ));
         }
         if let Some(c) = ceiling {
             if !(c.is_finite() && c >= initial) {
-                return Err(SabreError::invalid("tank ceiling", format!("must be finite and at least the initial energy {initial}, got {c}")));
+                return Err(SabreError::invalid(
+                    "tank ceiling",
+                    format!("must be finite and at least the initial energy {initial}, got {c}"),
+                ));
             }
         }
         let mut tank = Self {

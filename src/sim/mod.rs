@@ -3,9 +3,9 @@
 pub mod evaluator;
 pub mod plant;
 pub mod rollout;
-pub mod world;
 #[cfg(test)]
 pub(crate) mod test_scene;
+pub mod world;
 
 pub use evaluator::{StepEvaluator, StepView};
 pub use plant::{Plant, PlantConfig, DEFAULT_TAU_EXT_CUTOFF};

@@ -61,7 +61,12 @@ impl Plant {
         let measurement_blend = match config.tau_ext_cutoff {
             None => None,
             Some(f) if f.is_finite() && f > 0.0 => Some(1.0 - (-2.0 * std::f64::consts::PI * f * config.dt).exp()),
-            Some(f) => return Err(SabreError::invalid("tau_ext_cutoff", format!("must be finite and positive (Hz) or None, got {f}"))),
+            Some(f) => {
+                return Err(SabreError::invalid(
+                    "tau_ext_cutoff",
+                    format!("must be finite and positive (Hz) or None, got {f}"),
+                ))
+            }
         };
         let world_config = WorldConfig {
             dt: config.dt,
@@ -192,7 +197,7 @@ impl Plant {
             &self.scene.object_pose,
             &self.x[2 * nq..2 * nq + no],
             &self.x[2 * nq + no..],
-            &nalgebra::Vector3::new(0.0, 0.0, -9.81),
+            &crate::model::GRAVITY,
         )
     }
 }

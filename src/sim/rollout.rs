@@ -219,7 +219,14 @@ impl RolloutModel {
 
     /// Simulates one input sequence `u` (K × nu) from `x0`; returns the step at which the physics
     /// produced non-finite numbers, if it did.
-    fn rollout_one(&self, world: &mut SimWorld, x0: &[f64], u: &[f64], cost: Option<&dyn StepEvaluator>, out: RolloutSlices) -> Option<usize> {
+    fn rollout_one(
+        &self,
+        world: &mut SimWorld,
+        x0: &[f64],
+        u: &[f64],
+        cost: Option<&dyn StepEvaluator>,
+        out: RolloutSlices,
+    ) -> Option<usize> {
         let nx = self.scene.nx();
         let nq = self.scene.nq();
         let k = out.contact.len();
@@ -267,12 +274,19 @@ impl RolloutModel {
         let nq = self.scene.nq();
         self.scene.check_state(x0)?;
         if u.len() != n * k * nq {
-            return Err(SabreError::shape("U", format!("({n}, {k}, {nq})"), format!("{} elements", u.len())));
+            return Err(SabreError::shape(
+                "U",
+                format!("({n}, {k}, {nq})"),
+                format!("{} elements", u.len()),
+            ));
         }
         ensure_finite("U", u)?;
         let threads = threads.unwrap_or_else(default_threads);
         if !(1..=MAX_THREADS).contains(&threads) {
-            return Err(SabreError::invalid("threads", format!("must be between 1 and {MAX_THREADS}, got {threads}")));
+            return Err(SabreError::invalid(
+                "threads",
+                format!("must be between 1 and {MAX_THREADS}, got {threads}"),
+            ));
         }
         // Sizes come from the caller: check them before allocating, so that an absurd batch is an
         // error and not an allocation failure that aborts the process.
@@ -281,7 +295,10 @@ impl RolloutModel {
             .and_then(|v| v.checked_mul(nx.max(nq).max(6)))
             .filter(|&v| v <= MAX_BATCH_ELEMENTS)
             .ok_or_else(|| {
-                SabreError::invalid("U", format!("a batch of {n} rollouts × {k} steps is too large (limit {MAX_BATCH_ELEMENTS} values per output)"))
+                SabreError::invalid(
+                    "U",
+                    format!("a batch of {n} rollouts × {k} steps is too large (limit {MAX_BATCH_ELEMENTS} values per output)"),
+                )
             })?;
         let zeros = |len: usize| -> Result<Vec<f64>> {
             let mut v = Vec::new();
@@ -413,7 +430,9 @@ pub(crate) mod tests {
     fn batch(u: &[f64], evaluator: &Probe) -> RolloutBatch {
         let model = RolloutModel::new(probe_and_drawer(), RolloutConfig::default()).expect("model");
         let x0 = state([0.3, 0.0], [0.0, 0.0], 0.0, 0.0);
-        model.rollout_with_cost(&x0, u, N, K, Some(2), Some(evaluator)).expect("batch")
+        model
+            .rollout_with_cost(&x0, u, N, K, Some(2), Some(evaluator))
+            .expect("batch")
     }
 
     /// Rollout `i` of two batches is the same, bit for bit.
@@ -433,10 +452,17 @@ pub(crate) mod tests {
         assert!(batch.failed[i]);
         assert_eq!(batch.costs[i], f64::INFINITY);
         let states = &batch.states[i * (K + 1) * nx..(i + 1) * (K + 1) * nx];
-        assert_eq!(states[..(step + 1) * nx], clean.states[i * (K + 1) * nx..i * (K + 1) * nx + (step + 1) * nx]);
+        assert_eq!(
+            states[..(step + 1) * nx],
+            clean.states[i * (K + 1) * nx..i * (K + 1) * nx + (step + 1) * nx]
+        );
         assert!(states[(step + 1) * nx..].iter().all(|v| v.is_nan()));
-        assert!(batch.tau_ext[i * K * nq..(i + 1) * K * nq][step * nq..].iter().all(|v| v.is_nan()));
-        assert!(batch.wrench[i * K * 6..(i + 1) * K * 6][step * 6..].iter().all(|v| v.is_nan()));
+        assert!(batch.tau_ext[i * K * nq..(i + 1) * K * nq][step * nq..]
+            .iter()
+            .all(|v| v.is_nan()));
+        assert!(batch.wrench[i * K * 6..(i + 1) * K * 6][step * 6..]
+            .iter()
+            .all(|v| v.is_nan()));
         assert!(batch.contact[i * K..(i + 1) * K][step..].iter().all(|c| !c));
     }
 

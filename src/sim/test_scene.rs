@@ -99,7 +99,12 @@ pub fn servo_config(integral_gain: f64, skip_quiescent: bool) -> WorldConfig {
     WorldConfig {
         dt: DT,
         colliders: RobotColliders::All,
-        drive: RobotDrive::KinematicServo { bandwidth: BANDWIDTH, integral_gain, integral_limit: 0.1, skip_quiescent },
+        drive: RobotDrive::KinematicServo {
+            bandwidth: BANDWIDTH,
+            integral_gain,
+            integral_limit: 0.1,
+            skip_quiescent,
+        },
         contact_friction: 0.2,
         solver_iterations: 1,
     }

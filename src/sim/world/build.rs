@@ -48,7 +48,17 @@ fn mass_properties(tree: &KinematicTree, group: &[usize], offset: &[Isometry3<f6
             let local = MassProperties::with_inertia_matrix(
                 vec_to_rapier(&inertial.com),
                 inertial.mass,
-                Matrix::from_cols_array(&[m[(0, 0)], m[(1, 0)], m[(2, 0)], m[(0, 1)], m[(1, 1)], m[(2, 1)], m[(0, 2)], m[(1, 2)], m[(2, 2)]]),
+                Matrix::from_cols_array(&[
+                    m[(0, 0)],
+                    m[(1, 0)],
+                    m[(2, 0)],
+                    m[(0, 1)],
+                    m[(1, 1)],
+                    m[(2, 1)],
+                    m[(0, 2)],
+                    m[(1, 2)],
+                    m[(2, 2)],
+                ]),
             );
             total += local.transform_by(&pose_to_rapier(&offset[link]));
         }
@@ -261,11 +271,17 @@ impl SimWorld {
     /// Builds the world once; copies of it are reset, never rebuilt.
     pub fn new(scene: Arc<Scene>, config: &WorldConfig) -> Result<Self> {
         if !(config.dt.is_finite() && config.dt > 0.0) {
-            return Err(SabreError::invalid("dt", format!("must be positive and finite, got {}", config.dt)));
+            return Err(SabreError::invalid(
+                "dt",
+                format!("must be positive and finite, got {}", config.dt),
+            ));
         }
         if let Some(bandwidth) = config.drive.bandwidth() {
             if !(bandwidth.is_finite() && bandwidth > 0.0) {
-                return Err(SabreError::invalid("servo bandwidth", format!("must be positive, got {bandwidth}")));
+                return Err(SabreError::invalid(
+                    "servo bandwidth",
+                    format!("must be positive, got {bandwidth}"),
+                ));
             }
         }
         let nq = scene.nq();
@@ -373,7 +389,12 @@ impl SimWorld {
             .enumerate()
             .flat_map(|(link, l)| l.collisions.iter().map(move |c| (link, c.origin, c.shape)))
             .collect();
-        let object_friction = scene.object.active_joints.iter().map(|&j| scene.object.joints[j].friction).collect();
+        let object_friction = scene
+            .object
+            .active_joints
+            .iter()
+            .map(|&j| scene.object.joints[j].friction)
+            .collect();
         let layout = WorldLayout {
             robot_spheres,
             object_shapes,
@@ -418,7 +439,7 @@ impl SimWorld {
             state,
             pipeline: PhysicsPipeline::new(),
             params,
-            gravity: Vector::new(0.0, 0.0, -9.81),
+            gravity: vec_to_rapier(&crate::model::GRAVITY),
             layout: Arc::new(layout),
             jacobian: vec![0.0; 6 * nq],
             scratch: Vec::new(),
@@ -444,7 +465,14 @@ mod tests {
     use crate::sim::SimWorld;
 
     fn colliders_by_owner(world: &SimWorld) -> (usize, usize) {
-        let owner = |o: u128| world.state.colliders.iter().filter(|(_, c)| c.user_data & !0xffff_ffff_ffff_ffff == o).count();
+        let owner = |o: u128| {
+            world
+                .state
+                .colliders
+                .iter()
+                .filter(|(_, c)| c.user_data & !0xffff_ffff_ffff_ffff == o)
+                .count()
+        };
         (owner(OWNER_ROBOT), owner(OWNER_OBJECT))
     }
 
@@ -464,7 +492,13 @@ mod tests {
     fn torque_and_multibody_drives_build_every_robot_body_as_a_multibody() {
         let scene = probe_and_drawer();
         for drive in [RobotDrive::Torque, RobotDrive::MultibodyServo { bandwidth: 40.0 }] {
-            let config = WorldConfig { dt: 0.01, colliders: RobotColliders::All, drive, contact_friction: 0.2, solver_iterations: 4 };
+            let config = WorldConfig {
+                dt: 0.01,
+                colliders: RobotColliders::All,
+                drive,
+                contact_friction: 0.2,
+                solver_iterations: 4,
+            };
             let world = world_at(&scene, &config, &scene.default_state());
             assert!(world.layout.proxies.is_empty());
             assert!(world.layout.robot_handle.is_some());
@@ -505,18 +539,27 @@ mod tests {
         let world = world_at(&scene, &servo_config(0.0, false), &state([s, theta], [sd, thetad], 0.0, 0.0));
         let rb = &world.state.bodies[world.layout.proxies[0].1];
         let p = rb.translation();
-        assert!((Vector3::new(p.x, p.y, p.z) - Vector3::new(s, 0.0, 0.5)).norm() < 1e-12, "{p:?}");
+        assert!(
+            (Vector3::new(p.x, p.y, p.z) - Vector3::new(s, 0.0, 0.5)).norm() < 1e-12,
+            "{p:?}"
+        );
         // A turn by θ about z: the quaternion (0, 0, sin θ/2, cos θ/2).
         let r = rb.rotation();
         let quaternion = [r.x, r.y, r.z, r.w];
         let expected = [0.0, 0.0, (theta / 2.0).sin(), (theta / 2.0).cos()];
-        assert!(quaternion.iter().zip(expected).all(|(a, b)| (a - b).abs() < 1e-12), "{quaternion:?}");
+        assert!(
+            quaternion.iter().zip(expected).all(|(a, b)| (a - b).abs() < 1e-12),
+            "{quaternion:?}"
+        );
         // The body's twist: ω = θ̇ ẑ, and every point of the arm moves as its kinematics say.
         let angvel = rb.angvel();
         assert!((Vector3::new(angvel.x, angvel.y, angvel.z) - Vector3::z() * thetad).norm() < 1e-12);
         for local in [0.0, 0.15, 0.3] {
             let v = velocity_at(&world, theta, s, local);
-            assert!((v - arm_point_velocity(theta, sd, thetad, local)).norm() < 1e-12, "point {local}: {v}");
+            assert!(
+                (v - arm_point_velocity(theta, sd, thetad, local)).norm() < 1e-12,
+                "point {local}: {v}"
+            );
         }
     }
 
@@ -535,7 +578,10 @@ mod tests {
         world.set_state(&state([s, theta], [sd, thetad], 0.0, 0.0));
         for local in [0.0, 0.15, 0.3] {
             let v = velocity_at(&world, theta, s, local);
-            assert!((v - arm_point_velocity(theta, sd, thetad, local)).norm() < 1e-12, "point {local}: {v}");
+            assert!(
+                (v - arm_point_velocity(theta, sd, thetad, local)).norm() < 1e-12,
+                "point {local}: {v}"
+            );
         }
     }
 
@@ -553,6 +599,9 @@ mod tests {
         let rb = &world.state.bodies[world.layout.proxies[0].1];
         assert!((rb.mass() - 0.0325 / 0.0225).abs() < 1e-9, "proxy mass {}", rb.mass());
         let com = rb.local_center_of_mass();
-        assert!((Vector3::new(com.x, com.y, com.z) - Vector3::new(0.15, 0.0, 0.0)).norm() < 1e-12, "{com:?}");
+        assert!(
+            (Vector3::new(com.x, com.y, com.z) - Vector3::new(0.15, 0.0, 0.0)).norm() < 1e-12,
+            "{com:?}"
+        );
     }
 }

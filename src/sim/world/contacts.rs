@@ -13,7 +13,10 @@ impl SimWorld {
         let mut out = Vec::new();
         let inv_dt = 1.0 / self.params.dt;
         for pair in self.state.narrow_phase.contact_pairs() {
-            let (Some(c1), Some(c2)) = (self.state.colliders.get(pair.collider1), self.state.colliders.get(pair.collider2)) else {
+            let (Some(c1), Some(c2)) = (
+                self.state.colliders.get(pair.collider1),
+                self.state.colliders.get(pair.collider2),
+            ) else {
                 continue;
             };
             let owner = |c: &Collider| c.user_data & !0xffff_ffff_ffff_ffff;
@@ -79,7 +82,10 @@ impl SimWorld {
         let inv_dt = 1.0 / self.params.dt;
         let mut poses_ready = false;
         for pair in self.state.narrow_phase.contact_pairs() {
-            let (Some(c1), Some(c2)) = (self.state.colliders.get(pair.collider1), self.state.colliders.get(pair.collider2)) else {
+            let (Some(c1), Some(c2)) = (
+                self.state.colliders.get(pair.collider1),
+                self.state.colliders.get(pair.collider2),
+            ) else {
                 continue;
             };
             let owner = |c: &Collider| c.user_data & !0xffff_ffff_ffff_ffff;
@@ -99,13 +105,17 @@ impl SimWorld {
                         let mut q = std::mem::take(&mut self.scratch);
                         q.resize(nq, 0.0);
                         self.read_robot_q(&mut q);
-                        self.scene.robot.update_frames(&Isometry3::identity(), &q, &mut self.dynamics.frames);
+                        self.scene
+                            .robot
+                            .update_frames(&Isometry3::identity(), &q, &mut self.dynamics.frames);
                         self.scratch = q;
                         poses_ready = true;
                     }
                     let point = Point3::from(p);
                     let frames = &self.dynamics.frames;
-                    self.scene.robot.frames_jacobian_into(frames, robot_link, &point, &mut self.jacobian);
+                    self.scene
+                        .robot
+                        .frames_jacobian_into(frames, robot_link, &point, &mut self.jacobian);
                     for (c, t) in last.tau_ext.iter_mut().enumerate() {
                         let col = &self.jacobian[6 * c..6 * c + 3];
                         *t += col[0] * force.x + col[1] * force.y + col[2] * force.z;
@@ -113,7 +123,11 @@ impl SimWorld {
                     if self.layout.sensor_links[robot_link] {
                         let sensor = frames.poses[self.layout.sensor_link].translation.vector;
                         let torque = (p - sensor).cross(&force);
-                        for (w, v) in last.wrench.iter_mut().zip([force.x, force.y, force.z, torque.x, torque.y, torque.z]) {
+                        for (w, v) in last
+                            .wrench
+                            .iter_mut()
+                            .zip([force.x, force.y, force.z, torque.x, torque.y, torque.z])
+                        {
                             *w += v;
                         }
                     }
@@ -157,7 +171,10 @@ mod tests {
         assert!((Vector3::new(wrench[0], wrench[1], wrench[2]) - total).norm() < 1e-9 * total.norm().max(1.0));
         // The sensor is the arm's origin (its last joint's child): torque Σ (p − o) × f.
         let origin = world.scene().fk(&world.state.robot_q, "arm").unwrap().translation.vector;
-        let torque: Vector3<f64> = reports.iter().map(|c| (Vector3::from(c.point) - origin).cross(&Vector3::from(c.force))).sum();
+        let torque: Vector3<f64> = reports
+            .iter()
+            .map(|c| (Vector3::from(c.point) - origin).cross(&Vector3::from(c.force)))
+            .sum();
         assert!((Vector3::new(wrench[3], wrench[4], wrench[5]) - torque).norm() < 1e-9 * torque.norm().max(1.0));
     }
 
@@ -180,9 +197,15 @@ mod tests {
             }
         }
         let tau = &world.interaction().tau_ext;
-        assert!(expected[0].abs() > 1e-3 && expected[1].abs() > 1e-6, "both joints loaded: {expected:?}");
+        assert!(
+            expected[0].abs() > 1e-3 && expected[1].abs() > 1e-6,
+            "both joints loaded: {expected:?}"
+        );
         for j in 0..2 {
-            assert!((tau[j] - expected[j]).abs() < 1e-9 * expected[j].abs().max(1.0), "joint {j}: {tau:?} vs {expected:?}");
+            assert!(
+                (tau[j] - expected[j]).abs() < 1e-9 * expected[j].abs().max(1.0),
+                "joint {j}: {tau:?} vs {expected:?}"
+            );
         }
     }
 
@@ -209,7 +232,10 @@ mod tests {
             assert!(engine[5] > 0.0, "the drawer slides open");
             let momentum_rate = mass * (engine[5] - before) / world.dt();
             let expected = -force_on_robot.x - 0.5;
-            assert!((momentum_rate - expected).abs() < 1e-6 * expected.abs().max(1.0), "{momentum_rate} vs {expected}");
+            assert!(
+                (momentum_rate - expected).abs() < 1e-6 * expected.abs().max(1.0),
+                "{momentum_rate} vs {expected}"
+            );
         }
         assert!(pushed >= 10, "pushed in {pushed} steps");
     }

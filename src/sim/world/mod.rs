@@ -38,7 +38,12 @@ pub enum RobotDrive {
     /// with its forward-kinematics velocity, Rapier's contact solver resolves its contacts with the
     /// dynamic object (so forces stay bounded by the robot's inertia, also in jams), and the contact
     /// forces act back on the joints through τ_ext on the next step.
-    KinematicServo { bandwidth: f64, integral_gain: f64, integral_limit: f64, skip_quiescent: bool },
+    KinematicServo {
+        bandwidth: f64,
+        integral_gain: f64,
+        integral_limit: f64,
+        skip_quiescent: bool,
+    },
     /// The same closed loop simulated by Rapier's multibody solver: implicit velocity motors per
     /// joint (torque-limited), robot links without gravity. Higher fidelity, several times slower.
     MultibodyServo { bandwidth: f64 },
@@ -253,7 +258,10 @@ mod tests {
             (0..8)
                 .flat_map(|_| {
                     world.step_once(&[0.3, 0.2], &mut x);
-                    x.iter().chain(&world.interaction().tau_ext).map(|v| v.to_bits()).collect::<Vec<_>>()
+                    x.iter()
+                        .chain(&world.interaction().tau_ext)
+                        .map(|v| v.to_bits())
+                        .collect::<Vec<_>>()
                 })
                 .collect::<Vec<_>>()
         };

@@ -40,7 +40,11 @@ pub(super) fn link_spheres(tree: &KinematicTree, include: &dyn Fn(usize) -> bool
         if l.collisions.is_empty() || !include(link) {
             continue;
         }
-        let centers: Vec<Point3<f64>> = l.collisions.iter().map(|c| Point3::from(c.origin.translation.vector)).collect();
+        let centers: Vec<Point3<f64>> = l
+            .collisions
+            .iter()
+            .map(|c| Point3::from(c.origin.translation.vector))
+            .collect();
         let center = Point3::from(centers.iter().map(|c| c.coords).sum::<Vector3<f64>>() / centers.len() as f64);
         let radius = l
             .collisions
@@ -69,7 +73,8 @@ impl SimWorld {
         let mut quiet = at_rest;
         if quiet {
             // Rest is kept only if no generalized force beats the dry friction, or a limit takes it.
-            let g = crate::model::dynamics::gravity_torque(&self.scene.object, &self.scene.object_pose, o, &Vector3::new(0.0, 0.0, -9.81));
+            let g =
+                crate::model::dynamics::gravity_torque(&self.scene.object, &self.scene.object_pose, o, &crate::model::GRAVITY);
             let limits = self.scene.object_limits();
             for i in 0..no {
                 // g is the torque that holds the object still; gravity itself pushes with −g.
@@ -138,24 +143,44 @@ mod tests {
 
     #[test]
     fn far_still_robot_and_drawer_held_by_friction_skip_the_engine() {
-        assert!(!engine_ran(&probe_and_drawer(), state([-0.5, 0.0], [0.0, 0.0], 0.0, 0.0), [0.0, 0.0]));
+        assert!(!engine_ran(
+            &probe_and_drawer(),
+            state([-0.5, 0.0], [0.0, 0.0], 0.0, 0.0),
+            [0.0, 0.0]
+        ));
     }
 
     #[test]
     fn robot_touching_the_object_runs_the_engine() {
-        assert!(engine_ran(&probe_and_drawer(), state([0.6, 0.0], [0.0, 0.0], 0.0, 0.0), [0.0, 0.0]));
+        assert!(engine_ran(
+            &probe_and_drawer(),
+            state([0.6, 0.0], [0.0, 0.0], 0.0, 0.0),
+            [0.0, 0.0]
+        ));
     }
 
     #[test]
     fn robot_whose_travel_can_reach_the_object_runs_the_engine() {
         // 0.085 from the face: clear at rest, but at 1 m/s it covers 0.015 within the step.
-        assert!(!engine_ran(&probe_and_drawer(), state([0.565, 0.0], [0.0, 0.0], 0.0, 0.0), [0.0, 0.0]));
-        assert!(engine_ran(&probe_and_drawer(), state([0.565, 0.0], [1.0, 0.0], 0.0, 0.0), [1.0, 0.0]));
+        assert!(!engine_ran(
+            &probe_and_drawer(),
+            state([0.565, 0.0], [0.0, 0.0], 0.0, 0.0),
+            [0.0, 0.0]
+        ));
+        assert!(engine_ran(
+            &probe_and_drawer(),
+            state([0.565, 0.0], [1.0, 0.0], 0.0, 0.0),
+            [1.0, 0.0]
+        ));
     }
 
     #[test]
     fn moving_object_runs_the_engine() {
-        assert!(engine_ran(&probe_and_drawer(), state([-0.5, 0.0], [0.0, 0.0], 0.2, 0.1), [0.0, 0.0]));
+        assert!(engine_ran(
+            &probe_and_drawer(),
+            state([-0.5, 0.0], [0.0, 0.0], 0.2, 0.1),
+            [0.0, 0.0]
+        ));
     }
 
     #[test]

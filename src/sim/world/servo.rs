@@ -79,11 +79,15 @@ impl SimWorld {
     /// joint velocities `qd` give it.
     fn place_proxies(&mut self, qd: &[f64]) {
         let frames = &mut self.dynamics.frames;
-        self.scene.robot.update_frames(&Isometry3::identity(), &self.state.robot_q, frames);
+        self.scene
+            .robot
+            .update_frames(&Isometry3::identity(), &self.state.robot_q, frames);
         for &(link, body, com) in &self.layout.proxies {
             let pose = frames.poses[link];
             let com_world = pose * com;
-            self.scene.robot.frames_jacobian_into(frames, link, &com_world, &mut self.jacobian);
+            self.scene
+                .robot
+                .frames_jacobian_into(frames, link, &com_world, &mut self.jacobian);
             let mut twist = [0.0; 6];
             for (c, &v) in qd.iter().enumerate() {
                 for (r, t) in twist.iter_mut().enumerate() {
@@ -180,11 +184,19 @@ impl SimWorld {
     /// collapse onto its current value (a hard constraint that transmits any force), then return.
     pub fn hold_object(&mut self, hold: bool) {
         let object_limits = self.scene.object_limits();
-        let (mb, _) = self.state.multibody_joints.get_mut(self.layout.object_handle).expect("object");
+        let (mb, _) = self
+            .state
+            .multibody_joints
+            .get_mut(self.layout.object_handle)
+            .expect("object");
         for (i, d) in self.layout.object_dofs.iter().enumerate() {
             let value = d.value(mb);
             if let Some(link) = mb.link_mut(d.link_id) {
-                let limits = if hold { [value, value] } else { [object_limits[i].lower, object_limits[i].upper] };
+                let limits = if hold {
+                    [value, value]
+                } else {
+                    [object_limits[i].lower, object_limits[i].upper]
+                };
                 link.joint.data.set_limits(d.axis, limits);
             }
         }
@@ -309,7 +321,10 @@ mod tests {
                 qd[j] = (qd[j] + DT * (BANDWIDTH * u[j] + gain * integral[j])) / (1.0 + DT * BANDWIDTH);
                 q[j] += DT * qd[j];
                 integral[j] += DT * (u[j] - qd[j]);
-                assert!((x[j] - q[j]).abs() < 1e-12 && (x[2 + j] - qd[j]).abs() < 1e-12, "joint {j}: {x:?} vs {q:?}, {qd:?}");
+                assert!(
+                    (x[j] - q[j]).abs() < 1e-12 && (x[2 + j] - qd[j]).abs() < 1e-12,
+                    "joint {j}: {x:?} vs {q:?}, {qd:?}"
+                );
             }
         }
     }

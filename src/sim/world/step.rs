@@ -118,7 +118,9 @@ impl SimWorld {
         let object_frames = &mut self.object_frames;
         self.scene.robot.update_frames(&Isometry3::identity(), &x[..nq], robot_frames);
         if evaluator.needs_object_frames() {
-            self.scene.object.update_frames(&self.scene.object_pose, &x[2 * nq..2 * nq + no], object_frames);
+            self.scene
+                .object
+                .update_frames(&self.scene.object_pose, &x[2 * nq..2 * nq + no], object_frames);
         }
         evaluator.evaluate(
             &self.scene,
@@ -160,7 +162,10 @@ mod tests {
         fn evaluate(&self, scene: &Scene, view: &StepView) -> f64 {
             let arm = view.robot.poses[scene.robot.link_id("arm").unwrap()];
             let handle = view.object.poses[scene.object.link_id("handle").unwrap()];
-            self.seen.lock().unwrap().push((arm, handle, view.tau_ext.to_vec(), view.contact));
+            self.seen
+                .lock()
+                .unwrap()
+                .push((arm, handle, view.tau_ext.to_vec(), view.contact));
             1.5
         }
     }
@@ -170,7 +175,9 @@ mod tests {
         let scene = probe_and_drawer();
         let x0 = state([0.62, 0.3], [0.3, 0.0], 0.0, 0.0);
         let mut world = world_at(&scene, &servo_config(0.0, false), &x0);
-        let recorder = Recorder { seen: Mutex::new(Vec::new()) };
+        let recorder = Recorder {
+            seen: Mutex::new(Vec::new()),
+        };
         let mut x = x0.clone();
         let mut touched = false;
         for _ in 0..6 {
@@ -181,7 +188,10 @@ mod tests {
             let fk_handle = scene.object_fk(&x[4..5], "handle").unwrap();
             assert!((arm.to_homogeneous() - fk_arm.to_homogeneous()).norm() < 1e-12);
             assert!((handle.to_homogeneous() - fk_handle.to_homogeneous()).norm() < 1e-12);
-            assert_eq!((tau, contact), (world.interaction().tau_ext.clone(), world.interaction().contact));
+            assert_eq!(
+                (tau, contact),
+                (world.interaction().tau_ext.clone(), world.interaction().contact)
+            );
             touched |= contact;
         }
         assert!(touched);
