@@ -12,6 +12,7 @@
 //! - `binding_warm`: the same call again: the previous active set is re-solved and verified (the
 //!   common case at 1 kHz);
 //! - `binding_full_qp`: the same with every shortcut off (Clarabel solves all 57 rows).
+//!
 //! The tick runs `follow_reference_safe` for one plant step (interpolation, filter with the tank,
 //! low-level controller, plant step, tank update) with the `binding` posture and command.
 
@@ -93,7 +94,7 @@ fn filter_qp(c: &mut Criterion) {
     ];
     for (name, case, screening, cold) in cases {
         let mut f = filter(&scene, screening);
-        let mut call = |f: &mut SafetyFilter| {
+        let call = |f: &mut SafetyFilter| {
             if cold {
                 f.forget_active_set();
             }

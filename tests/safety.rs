@@ -2,6 +2,7 @@
 //! something independent of Clarabel: the rows' own definition, optimality conditions rebuilt from
 //! the returned primal, a projected-gradient solution of the same problem, finite differences of
 //! h, the cost terms' notion of violation, closed-form tank energies and simulated rollouts.
+#![allow(clippy::needless_range_loop)] // index loops name the joint in each failure message
 
 use std::sync::Arc;
 

@@ -238,7 +238,8 @@ fn convert_joint(source: &str, joint: &urdf_rs::Joint, link_id: &dyn Fn(&str) ->
     } else {
         (l.lower, l.upper)
     };
-    if (kind != JointKind::Fixed && !(lower < upper)) || lower.is_nan() || upper.is_nan() {
+    let ordered = lower.partial_cmp(&upper) == Some(std::cmp::Ordering::Less);
+    if (kind != JointKind::Fixed && !ordered) || lower.is_nan() || upper.is_nan() {
         return Err(SabreError::urdf(
             source,
             format!("joint '{}' has lower limit {lower} not below upper {upper}", joint.name),

@@ -304,7 +304,7 @@ impl Mppi {
     pub fn set_guides(&mut self, guides: &[f64]) -> Result<()> {
         let row = self.k * self.nu;
         let slots = self.config.rollouts - 2;
-        if guides.len() % row != 0 || guides.len() / row > slots {
+        if !guides.len().is_multiple_of(row) || guides.len() / row > slots {
             return Err(SabreError::shape(
                 "guides",
                 format!("(M, {}, {}) with M <= {slots}", self.k, self.nu),

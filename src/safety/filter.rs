@@ -489,8 +489,8 @@ impl SafetyFilter {
                 };
                 // Interior-point iterates sit within the tolerance of the bounds; clip so the input
                 // limits hold exactly.
-                for j in 0..nq {
-                    out.u[j] = x[j].clamp(-self.velocity_limits[j], self.velocity_limits[j]);
+                for ((u, &value), &limit) in out.u.iter_mut().zip(&x[..nq]).zip(&self.velocity_limits) {
+                    *u = value.clamp(-limit, limit);
                 }
                 for (s, &row) in self.assignment.iter().enumerate() {
                     if row != EMPTY {

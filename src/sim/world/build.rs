@@ -418,13 +418,15 @@ impl SimWorld {
             sensor_links,
             sensor_link,
         };
-        let mut params = IntegrationParameters::default();
-        params.dt = config.dt;
-        params.num_solver_iterations = config.solver_iterations.max(1);
-        // Recycled manifolds keep a contact's normal and separation while bodies move less than
-        // 5 cm: too coarse for a 1 cm bar and a 16 mm hook (a finger passing beside the bar would
-        // keep touching it), and wrong for proxies, which jump to a new pose every step.
-        params.contact_recycling = false;
+        let mut params = IntegrationParameters {
+            dt: config.dt,
+            num_solver_iterations: config.solver_iterations.max(1),
+            // Recycled manifolds keep a contact's normal and separation while bodies move less than
+            // 5 cm: too coarse for a 1 cm bar and a 16 mm hook (a finger passing beside the bar would
+            // keep touching it), and wrong for proxies, which jump to a new pose every step.
+            contact_recycling: false,
+            ..IntegrationParameters::default()
+        };
         if matches!(config.drive, RobotDrive::KinematicServo { .. }) {
             // Proxies re-enter a little of what they pushed every step; a stiffer, less damped contact
             // than Rapier's default (30 Hz, ζ = 10) resolves that within a step or two at dt = 15 ms,

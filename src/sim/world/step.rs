@@ -147,9 +147,12 @@ mod tests {
     use crate::sim::evaluator::{StepEvaluator, StepView};
     use crate::sim::test_scene::{probe_and_drawer, servo_config, state, world_at};
 
-    /// Records what it is shown: the arm's and the handle's poses, τ_ext and the contact flag.
+    /// What the recorder saw of one step: the arm's and the handle's poses, τ_ext, the contact flag.
+    type Seen = (Isometry3<f64>, Isometry3<f64>, Vec<f64>, bool);
+
+    /// Records what it is shown.
     struct Recorder {
-        seen: Mutex<Vec<(Isometry3<f64>, Isometry3<f64>, Vec<f64>, bool)>>,
+        seen: Mutex<Vec<Seen>>,
     }
 
     impl StepEvaluator for Recorder {
