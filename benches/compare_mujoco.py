@@ -47,7 +47,7 @@ import numpy as np
 import sabre
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from mujoco_scene import build_mujoco_model  # noqa: E402
+from mujoco_scene import build_mujoco_model
 
 N = 40
 K = 66
@@ -356,8 +356,8 @@ def main(argv: list[str] | None = None) -> int:
     labels = [
         (f"nominal {K} steps: contact fraction", "nominal_contact_fraction", ""),
         (f"nominal {K} steps: final opening", "nominal_final_opening", unit),
-        (f"batch: contact fraction", "batch_contact_fraction", ""),
-        (f"batch: mean final opening", "batch_mean_final_opening", unit),
+        ("batch: contact fraction", "batch_contact_fraction", ""),
+        ("batch: mean final opening", "batch_mean_final_opening", unit),
         (f"pull phase {len(pull_U)} steps: contact fraction", "pull_phase_contact_fraction", ""),
         (f"pull phase {len(pull_U)} steps: final opening", "pull_phase_final_opening", unit),
     ]

@@ -152,10 +152,14 @@ def main() -> None:
     rng = np.random.default_rng(3)
     all_cases = cases(scene, rng)
     screened, full = make_filter(scene, True), make_filter(scene, False)
-    qps = {name: [screened.qp_matrices(x, u, tau_ext=t, tank_energy=s) for x, u, t, s in inputs] for name, inputs in all_cases.items()}
+    qps = {
+        name: [screened.qp_matrices(x, u, tau_ext=t, tank_energy=s) for x, u, t, s in inputs]
+        for name, inputs in all_cases.items()
+    }
     solver = OsqpFilter([qp for qs in qps.values() for qp in qs])
 
-    print(f"FILTER-QP: {len(screened.row_names)} ZBF rows + {2 * scene.nq} input bounds; Clarabel (sabre) vs OSQP {osqp.__version__}")
+    print(f"FILTER-QP: {len(screened.row_names)} ZBF rows + {2 * scene.nq} input bounds; "
+          f"Clarabel (sabre) vs OSQP {osqp.__version__}")
     header = (
         f"{'case':<12} {'calls':>5} {'sabre':>9} {'(core)':>8} {'sabre full':>10} {'OSQP':>9} {'(OSQP)':>8} "
         f"{'OSQP/sabre':>10} {'OSQP/full':>9} {'max |du|':>9} {'rows':>5}"

@@ -148,7 +148,7 @@ class _Urdf:
         root = ET.parse(path).getroot()
         self.name = root.get("name", path.stem)
         # Only direct <link>/<joint> children of <robot>: this skips the custom <sabre> block.
-        self.links = {l.get("name"): l for l in root.findall("link")}
+        self.links = {link.get("name"): link for link in root.findall("link")}
         self.joints = [j for j in root.findall("joint")]
         self.children: dict[str, list[ET.Element]] = {name: [] for name in self.links}
         child_links = set()
@@ -168,7 +168,10 @@ def _inertial_xml(link: ET.Element, indent: str) -> str:
     xyz, rpy = _origin(inertial)
     mass = float(inertial.find("mass").get("value"))
     i = inertial.find("inertia")
-    g = lambda k: float(i.get(k, "0"))
+
+    def g(k: str) -> float:
+        return float(i.get(k, "0"))
+
     full = np.array([[g("ixx"), g("ixy"), g("ixz")], [g("ixy"), g("iyy"), g("iyz")], [g("ixz"), g("iyz"), g("izz")]])
     rot = _rpy_matrix(rpy)
     full = rot @ full @ rot.T  # tensor expressed in the link frame

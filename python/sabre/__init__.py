@@ -6,17 +6,9 @@ this package is the public API.
 
 from __future__ import annotations
 
+from . import costs, guides, scenarios, tasks  # noqa: F401 (modules of the public API)
 from ._core import __version__
-from .errors import (
-    InvalidValueError,
-    SabreError,
-    ShapeError,
-    SimulationError,
-    UnknownAssetError,
-    UnknownFrameError,
-    UrdfError,
-)
-from . import costs, guides, scenarios, tasks
+from .control import LowLevelController, Trace
 from .controller import (
     VARIANTS,
     Controller,
@@ -27,9 +19,17 @@ from .controller import (
     paper_start_state,
     run_episode,
 )
+from .errors import (
+    InvalidValueError,
+    SabreError,
+    ShapeError,
+    SimulationError,
+    UnknownAssetError,
+    UnknownFrameError,
+    UrdfError,
+)
 from .plots import plot_episode
 from .realtime import RealtimeCascade, TickResult
-from .scene import OBJECTS, ROBOTS, Scene
 from .safety import (
     ConstraintRows,
     EnergyTank,
@@ -41,8 +41,8 @@ from .safety import (
     SafetyFilter,
     SequenceResult,
 )
+from .scene import OBJECTS, ROBOTS, Scene
 from .scripted import ScriptedMotion, hook_and_pull
-from .control import LowLevelController, Trace
 from .sim import ContactPoint, Plant, RolloutModel, RolloutResult, default_threads
 
 __all__ = [

@@ -26,8 +26,8 @@ from . import (
     Scene,
     default_threads,
     hook_and_pull,
-    plot_episode,
     paper_start_state,
+    plot_episode,
     run_episode,
     tasks,
 )

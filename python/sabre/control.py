@@ -3,8 +3,8 @@ plant follow a planned reference, optionally through the FILTER-QP and the energ
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 

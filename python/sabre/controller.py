@@ -9,22 +9,31 @@ low-level controller (53), the outer loop re-plans at ``replan_rate`` in simulat
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
 
 import numpy as np
 
 from . import _core
 from ._validate import as_count, as_float_array, as_positive, core_config
+from .control import LowLevelController
 from .costs import Batch, CompiledCost
 from .errors import InvalidValueError, ShapeError
 from .safety import CLASSES, EnergyTank, SafetyConfig, SafetyFilter
 from .scene import Scene
-from .control import LowLevelController
 from .sim import MAX_THREADS, Plant, RolloutModel
 from .tasks import OpenObject, Task
 
-__all__ = ["ControllerConfig", "Controller", "IterationStats", "Episode", "run_episode", "paper_start_state", "likelihood_weights", "VARIANTS"]
+__all__ = [
+    "ControllerConfig",
+    "Controller",
+    "IterationStats",
+    "Episode",
+    "run_episode",
+    "paper_start_state",
+    "likelihood_weights",
+    "VARIANTS",
+]
 
 #: Controller variants Π_N, Π_I, Π_O, Π_IO (paper Sec. VI): N no filter, I inner FILTER-QP with the tank, O sequential
 #: FILTER-QP in the outer loop, IO both.
@@ -270,7 +279,9 @@ class Controller:
         for variant N, which has no filter (give the sampler an ``Obstacles`` cost term too)."""
         ids = {f.add_obstacle(center, radius) for f in self.filters}
         if len(ids) > 1:
-            raise InvalidValueError("the inner and outer filters disagree on obstacle ids; manage them through the controller only")
+            raise InvalidValueError(
+                "the inner and outer filters disagree on obstacle ids; manage them through the controller only"
+            )
         return ids.pop() if ids else None
 
     def move_obstacle(self, obstacle_id: int, center: Sequence[float] | np.ndarray) -> None:
@@ -570,8 +581,10 @@ def run_episode(
             planning_times.append(stats.iteration_time)
             floor = controller.task.gain_inertia_floor(controller.phase)
             low_level.gain_inertia_floor = own_floor if floor is None else floor
-            trace = low_level.follow(plant, controller.nominal, controller.nominal_t0, controller.config.dt, steps_per_plan, record_every,
-                                 safety=controller.inner_filter, tank=controller.tank)
+            trace = low_level.follow(
+                plant, controller.nominal, controller.nominal_t0, controller.config.dt, steps_per_plan, record_every,
+                safety=controller.inner_filter, tank=controller.tank,
+            )
             chunks.append(trace, cost=stats.nominal_cost, phase=controller.task.phases.index(controller.phase))
             if bar is not None:
                 bar.update(round(steps_per_plan * plant.dt, 3))

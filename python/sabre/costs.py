@@ -20,9 +20,8 @@ returns one cost per rollout, added to the Rust costs::
 from __future__ import annotations
 
 import abc
-
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -58,14 +57,14 @@ class Term(abc.ABC):
     def spec(self, scene: Scene) -> dict | None:
         """The Rust specification of this term (None for Python-evaluated terms)."""
 
-    def __add__(self, other: "Term | Cost") -> "Cost":
+    def __add__(self, other: Term | Cost) -> Cost:
         return Cost([self]) + other
 
-    def compile(self, scene: Scene) -> "CompiledCost":
+    def compile(self, scene: Scene) -> CompiledCost:
         """This term alone, compiled (see :meth:`Cost.compile`)."""
         return Cost([self]).compile(scene)
 
-    def __radd__(self, other: "Term | Cost | int") -> "Cost":
+    def __radd__(self, other: Term | Cost | int) -> Cost:
         if other == 0:  # sum([...]) starts from 0
             return Cost([self])
         return Cost([other]) + self if isinstance(other, Term) else other + self
@@ -189,7 +188,11 @@ class SelfCollision(Term):
     weight_slope: float = 100.0
 
     def spec(self, scene: Scene) -> dict:
-        return {"kind": "self_collision", "weight": _weight("weight", self.weight), "weight_slope": _weight("weight_slope", self.weight_slope)}
+        return {
+            "kind": "self_collision",
+            "weight": _weight("weight", self.weight),
+            "weight_slope": _weight("weight_slope", self.weight_slope),
+        }
 
 
 @dataclass(frozen=True)
@@ -348,7 +351,8 @@ class PythonTerm(Term):
         n = batch.states.shape[0]
         values = np.asarray(self.function(batch), dtype=np.float64)
         if values.shape != (n,):
-            raise InvalidValueError(f"PythonTerm {getattr(self.function, '__name__', '?')}: returned shape {values.shape}, expected ({n},)")
+            name = getattr(self.function, "__name__", "?")
+            raise InvalidValueError(f"PythonTerm {name}: returned shape {values.shape}, expected ({n},)")
         # NaN or inf simply removes that rollout from the weighted average.
         return np.where(np.isnan(values), np.inf, values)
 
@@ -374,7 +378,7 @@ class Cost:
             if not isinstance(t, Term):
                 raise InvalidValueError(f"a cost is made of sabre.costs terms, got {type(t).__name__}")
 
-    def __add__(self, other: "Term | Cost") -> "Cost":
+    def __add__(self, other: Term | Cost) -> Cost:
         if isinstance(other, Term):
             return Cost(self.terms + (other,))
         if isinstance(other, Cost):

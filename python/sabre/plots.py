@@ -91,7 +91,8 @@ def plot_episode(episode: Episode, path: str | os.PathLike) -> None:
         ax_open.axhline(episode.target_opening, color="k", ls="--", lw=1, label=f"target {episode.target_opening:.2f} {unit}")
         top = max(top, episode.target_opening)
     if episode.success_opening is not None:
-        ax_open.axhline(episode.success_opening, color="C2", ls=":", lw=1.2, label=f"success {episode.success_opening:.2f} {unit}")
+        label = f"success {episode.success_opening:.2f} {unit}"
+        ax_open.axhline(episode.success_opening, color="C2", ls=":", lw=1.2, label=label)
     lower = float(min(0.0, np.nanmin(opening)))
     span = top - lower if top > lower else 1.0
     ax_open.set_ylim(lower - 0.03 * span, lower + 1.12 * span)

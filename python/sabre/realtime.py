@@ -13,15 +13,15 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
 from ._validate import as_float_array, as_positive
+from .control import LowLevelController
 from .controller import Controller
 from .errors import InvalidValueError
-from .control import LowLevelController
 
 __all__ = ["RealtimeCascade", "TickResult"]
 
@@ -62,7 +62,7 @@ class RealtimeCascade:
         self.ticks = 0
 
     # Outer loop -----------------------------------------------------------------------------
-    def start(self, x0: Sequence[float] | np.ndarray, t0: float = 0.0) -> "RealtimeCascade":
+    def start(self, x0: Sequence[float] | np.ndarray, t0: float = 0.0) -> RealtimeCascade:
         """Resets the controller, plans once from x0 (so the first tick has a reference) and starts
         the planning thread."""
         if self._thread is not None:
@@ -107,7 +107,7 @@ class RealtimeCascade:
             self._thread.join()
             self._thread = None
 
-    def __enter__(self) -> "RealtimeCascade":
+    def __enter__(self) -> RealtimeCascade:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -8,9 +8,9 @@ Every constraint is a zeroing barrier h(q) ≥ 0 turned into a row affine in the
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -64,8 +64,9 @@ class SafetyConfig:
     The mappings take overrides by class name (see :data:`CLASSES`); missing classes keep their
     defaults (:data:`DEFAULT_GAMMA`, :data:`DEFAULT_PENALTY`, :data:`DEFAULT_MARGIN`, from the
     core). ``gamma``: ZBF rate γ (1/s) — a joint approaches its limit no faster than γ × its
-    distance. ``penalty``: slack penalty Γ (Table I). ``margin``: Δ of Remark 1 in the units of that class's h (rad for joint limits, m for the base
-    box, m² for self-collision, arm reach and obstacles); the defaults keep the slack that the
+    distance. ``penalty``: slack penalty Γ (Table I). ``margin``: Δ of Remark 1 in the units of
+    that class's h (rad for joint limits, m for the base box, m² for self-collision, arm reach and
+    obstacles); the defaults keep the slack that the
     penalties allow inside the true limits. ``enabled``: classes without rows. ``base_box``:
     (x_min, x_max, y_min, y_max) in m, or None for no box. ``passivity_alpha``: α of (56)
     (1/s; the paper's 1 avoids chattering). ``tank_floor``: ε (J). ``max_obstacles``: obstacle

@@ -17,12 +17,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import costs, tasks
+from .control import LowLevelController
 from .controller import Controller, ControllerConfig, Episode, TraceChunks, paper_start_state, run_episode
 from .errors import InvalidValueError
 from .safety import EnergyTank, SafetyConfig, SafetyFilter
 from .scene import Scene
 from .scripted import hook_and_pull
-from .control import LowLevelController
 from .sim import Plant
 
 __all__ = [
@@ -145,7 +145,8 @@ def _scripted_episode(scene, variant, safety, x0, hold_seconds, release_seconds,
         t = plant.time
     d = chunks.arrays()
     return Episode(scene=scene, time=d["time"], state=d["state"], reference=d["reference"], wrench=d["wrench"],
-                   tau_ext=d["tau_ext"], tau_ext_measured=d["tau_ext_measured"], contact=d["contact"].astype(bool), cost=np.zeros(len(d["time"])),
+                   tau_ext=d["tau_ext"], tau_ext_measured=d["tau_ext_measured"], contact=d["contact"].astype(bool),
+                   cost=np.zeros(len(d["time"])),
                    phase=np.zeros(len(d["time"]), dtype=int), phases=("pull",), success=False, time_to_success=None,
                    command=d["command"], tank_energy=d["tank"], variant=variant,
                    filter_fallbacks=0 if inner is None else int(inner.stats.fallbacks), tank_floor=tank.floor)
@@ -266,8 +267,8 @@ def tank_chattering(alpha: float, seed: int = 0, hold_seconds: float = 5.0, rele
     """The stuck door with variant IO and passivity rate α; α = 1000 should chatter at the floor.
     A ``tank_initial`` just above the floor (2 J) reaches it sooner."""
     r = stuck_door("IO", seed, hold_seconds, release_seconds, obj, alpha, driver=driver, tank_initial=tank_initial)
-    return ChatteringResult(episode=r.episode, alpha=float(alpha), power_sign_changes_per_s=r.power_sign_changes_per_s, tank_min=r.tank_min,
-                            floor_power=r.floor_power)
+    return ChatteringResult(episode=r.episode, alpha=float(alpha), power_sign_changes_per_s=r.power_sign_changes_per_s,
+                            tank_min=r.tank_min, floor_power=r.floor_power)
 
 
 # -- obstacle corridor -------------------------------------------------------------------------

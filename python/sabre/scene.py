@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -44,7 +44,7 @@ class Scene:
 
     # -- construction -------------------------------------------------------------------------
     @classmethod
-    def load(cls, robot: str = "royalpanda", obj: str = "shelf", obj_pose: Sequence[float] | None = None) -> "Scene":
+    def load(cls, robot: str = "royalpanda", obj: str = "shelf", obj_pose: Sequence[float] | None = None) -> Scene:
         """A scene from built-in assets; ``obj_pose`` is (x, y, z, roll, pitch, yaw) of the object.
 
         Without ``obj_pose`` the object stands in front of the robot's default base pose
@@ -58,7 +58,7 @@ class Scene:
         robot_path: str | os.PathLike[str],
         obj_path: str | os.PathLike[str],
         obj_pose: Sequence[float] | None = None,
-    ) -> "Scene":
+    ) -> Scene:
         """A scene from a robot URDF and an object URDF on disk (primitives only, see README)."""
         for label, path in (("robot", robot_path), ("object", obj_path)):
             if not os.path.isfile(path):
@@ -66,7 +66,7 @@ class Scene:
         return cls(_core.Scene.from_urdf(os.fspath(robot_path), os.fspath(obj_path), _pose(obj_pose)))
 
     @classmethod
-    def from_urdf_strings(cls, robot_urdf: str, obj_urdf: str, obj_pose: Sequence[float] | None = None) -> "Scene":
+    def from_urdf_strings(cls, robot_urdf: str, obj_urdf: str, obj_pose: Sequence[float] | None = None) -> Scene:
         """A scene from URDF text."""
         return cls(_core.Scene.from_urdf_strings(robot_urdf, obj_urdf, _pose(obj_pose)))
 
@@ -173,7 +173,7 @@ class Scene:
     def self_collision_spheres(self) -> tuple[tuple[str, str, tuple[float, float, float], float], ...]:
         """(name, link, centre in link frame, radius) of each self-collision sphere."""
         spheres, _ = self._core.self_collision()
-        return tuple((n, l, tuple(c), r) for n, l, c, r in spheres)
+        return tuple((name, link, tuple(center), radius) for name, link, center, radius in spheres)
 
     @property
     def self_collision_pairs(self) -> tuple[tuple[str, str], ...]:

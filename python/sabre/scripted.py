@@ -107,9 +107,13 @@ def hook_and_pull(
     add(0, approach_time, lambda s: blend(grasp0, _offset(h0, pre_insert), s))
     add(1, 1.2, lambda s: blend(_offset(h0, pre_insert), _offset(h0, inserted), s))
     add(2, 0.8, lambda s: blend(_offset(h0, inserted), _offset(h0, hooked), s))
-    opening_profile = lambda s: o0[0] + (target - o0[0]) * (0.5 - 0.5 * np.cos(np.pi * np.clip(s, 0, 1)))
+    def opening_profile(s: float) -> float:
+        return o0[0] + (target - o0[0]) * (0.5 - 0.5 * np.cos(np.pi * np.clip(s, 0, 1)))
+
     # Take up the slack first (tip against the bar), then follow the handle along its path.
-    engage = lambda s: tuple(np.asarray(pulling) * min(1.0, 8.0 * s))
+    def engage(s: float) -> tuple[float, ...]:
+        return tuple(np.asarray(pulling) * min(1.0, 8.0 * s))
+
     add(3, pull_time, lambda s: _offset(handle(opening_profile(s)), engage(s)))
     if release_after:
         end = _offset(handle(target), pulling)

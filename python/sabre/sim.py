@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
 from . import _core
 from ._validate import as_count, as_float_array, as_non_negative, as_positive, core_config, readonly
-from .errors import InvalidValueError
 from .scene import Scene
 
 #: Default bandwidth (Hz) of :attr:`Plant.measured_tau_ext`.

@@ -7,8 +7,8 @@ iteration for anything else (logging, moving a target, ...).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 
@@ -124,7 +124,8 @@ class Reach(Task):
         self.target_pose = as_float_array("target_pose", self.target_pose, (4, 4))
 
     def cost(self, scene: Scene, phase: str) -> costs.Cost:
-        return costs.TargetPose(self.target_pose, self.frame, None, self.pose_weight, self.pose_weight) + self.safety.terms(scene) + self.extra
+        pose = costs.TargetPose(self.target_pose, self.frame, None, self.pose_weight, self.pose_weight)
+        return pose + self.safety.terms(scene) + self.extra
 
     def success(self, scene: Scene, x: np.ndarray) -> bool:
         pose = scene.fk(x[: scene.nq], self.frame)
@@ -484,7 +485,8 @@ class OpenObject(Task):
 
     def grasp_offset(self, scene: Scene, phase: str) -> np.ndarray:
         """Pose of the grasp target in the handle frame for `phase`."""
-        xyz = {"approach": self.approach.pregrasp_offset, "insert": self.approach.insert_offset, "hook": self.hook.offset}.get(phase, self.open.offset)
+        offsets = {"approach": self.approach.pregrasp_offset, "insert": self.approach.insert_offset, "hook": self.hook.offset}
+        xyz = offsets.get(phase, self.open.offset)
         closed = scene.object_fk(scene.o_lower, "handle_frame")
         # Tilt about whichever handle axis (x or y) is horizontal, so that z points downward.
         axis = 0 if abs(closed[2, 0]) < abs(closed[2, 1]) else 1
@@ -512,7 +514,9 @@ class OpenObject(Task):
             )
         if phase in ("approach", "insert", "hook"):
             return (
-                costs.TargetPose(self.grasp_offset(scene, phase), "grasp", "handle_frame", self.approach.weight, self.approach.weight)
+                costs.TargetPose(
+                    self.grasp_offset(scene, phase), "grasp", "handle_frame", self.approach.weight, self.approach.weight
+                )
                 + (costs.Contact(self.contact_weight) + self.posture_term(scene) if phase == "approach" else costs.Cost())
                 # Also before the hook holds: a door that can open by itself (a dishwasher past its
                 # balance point, resting on the hand after a slip) should be let go, not held.
@@ -633,7 +637,8 @@ class OpenObject(Task):
             across, along = pocket.across, pocket.along
             depth = self.hook.insert_depth_tolerance
             deep = depth is None or abs(self.depth_error(scene, x, "insert")) < depth
-            if across < self.approach.switch_position and along < self.hook.along_tolerance and angle < self.approach.switch_angle and deep:
+            aligned = along < self.hook.along_tolerance and angle < self.approach.switch_angle
+            if across < self.approach.switch_position and aligned and deep:
                 return "hook"
         if phase == "hook":
             angle = self.approach_error(scene, x, "hook").angle
@@ -665,7 +670,8 @@ class OpenObject(Task):
             back = np.minimum(self.release.speed * dt * np.arange(steps + 1), self.release.distance)
             targets = np.repeat(pose[None], steps + 1, axis=0)
             targets[:, :3, 3] += back[:, None] * way
-            return servo_guide(scene, q, targets, dt, gain=self.guide.gain, max_linear=2.0 * self.release.speed, max_angular=1.0)[None]
+            guide = servo_guide(scene, q, targets, dt, gain=self.guide.gain, max_linear=2.0 * self.release.speed, max_angular=1.0)
+            return guide[None]
         offset = self.grasp_offset(scene, phase)
         if phase != "open":
             if self.guide.speed <= 0.0:
