@@ -76,15 +76,21 @@ def shifted(seq: np.ndarray, steps: float) -> np.ndarray:
     return np.stack([np.interp(s, np.arange(k), seq[:, d]) for d in range(seq.shape[1])], axis=1)
 
 
-def expected_nominal(nominal: np.ndarray, inputs: np.ndarray, c: np.ndarray, config: sabre.ControllerConfig) -> tuple[np.ndarray, np.ndarray]:
-    """The updated nominal and the unclipped gradient estimate Σ_l w_l (u_l − μ)."""
+def expected_update(nominal: np.ndarray, inputs: np.ndarray, c: np.ndarray, config: sabre.ControllerConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The updated nominal, the unclipped gradient estimate Σ_l w_l (u_l − μ) and the smoothed
+    nominal before its projection onto the bounds."""
     w = invariant_weights(c, config.h)
     if w.sum() == 0.0:
-        return nominal.copy(), np.zeros_like(nominal)
+        return nominal.copy(), np.zeros_like(nominal), nominal.copy()
     gradient = np.einsum("l,lkd->kd", w, inputs - nominal)
     stepped = nominal + config.step_size * np.clip(gradient, -config.gradient_clip, config.gradient_clip)
     smoothed = savitzky_golay(stepped, config.smoothing_window, config.smoothing_order)
-    return np.clip(smoothed, -LIMIT, LIMIT), gradient
+    return np.clip(smoothed, -LIMIT, LIMIT), gradient, smoothed
+
+
+def expected_nominal(nominal: np.ndarray, inputs: np.ndarray, c: np.ndarray, config: sabre.ControllerConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The updated nominal and the unclipped gradient estimate."""
+    return expected_update(nominal, inputs, c, config)[:2]
 
 
 def make_controller(scene: sabre.Scene, choose, **overrides) -> tuple[sabre.Controller, ChosenCosts]:
@@ -136,6 +142,19 @@ def test_first_update_matches_numpy_with_clipping_inactive(scene):
     expected, gradient = expected_nominal(zero, inputs, against_ramp(inputs), controller.config)
     assert np.all(np.abs(gradient) < controller.config.gradient_clip)
     np.testing.assert_allclose(controller.nominal, expected, rtol=0, atol=1e-10)
+
+
+def test_smoothed_nominal_is_projected_onto_the_input_bounds(scene):
+    # no clipping, a full step and a sharp mapping: the nominal jumps to about the best sample,
+    # whose entries sit on the bounds often enough that the smoothed curve overshoots them
+    controller, task = make_controller(scene, against_ramp, h=60.0, step_size=1.0, gradient_clip=50.0)
+    controller.update(scene.default_state(), 0.0)
+    (inputs,) = task.batches
+    zero = np.zeros((controller.config.horizon_steps, scene.nu))
+    expected, _, smoothed = expected_update(zero, inputs, against_ramp(inputs), controller.config)
+    assert np.max(np.abs(smoothed)) > LIMIT + 1e-3
+    np.testing.assert_allclose(controller.nominal, expected, rtol=0, atol=1e-10)
+    assert np.max(np.abs(controller.nominal)) <= LIMIT
 
 
 def test_non_finite_costs_get_zero_weight_in_the_update(scene):
