@@ -64,8 +64,38 @@ def test_power_sign_changes_counts_only_near_the_floor():
     ep = scenarios.stuck_door("IO", hold_seconds=0.5, release_seconds=0.1, driver="scripted").episode
     mask = np.ones(len(ep.time), dtype=bool)
     # the tank starts at 10 J, far above the 2 J floor: nothing to count within 0.5 J of it
+    assert ep.tank_energy.min() - ep.tank_floor > 0.5
     assert scenarios.power_sign_changes_per_s(ep, mask, near=0.5) == 0.0
-    assert scenarios.power_sign_changes_per_s(ep, mask, near=100.0) >= 0.0
+
+
+def test_power_sign_changes_per_s_counts_the_flips_of_a_known_power_trace(scene):
+    """A made-up 1 kHz trace whose tank power τ̂ᵀu (the τ̂ of the step before against u) is
+    +1, +1, −1, −1, … W: one sign change every second step. Only the first 600 steps sit within
+    0.5 J of the floor, and steps 100–199 carry power inside the 0.01 W deadband (no sign)."""
+    m, dt, nq = 1000, 1e-3, scene.nq
+    time = dt * np.arange(1, m + 1)
+    tau = np.zeros((m, nq))
+    tau[:, 0] = np.where((np.arange(m) // 2) % 2 == 0, 1.0, -1.0)
+    tau[99:199, 0] *= 1e-3
+    command = np.zeros((m, nq))
+    command[:, 0] = 1.0
+    energy = np.where(np.arange(m) < 600, 2.2, 5.0)
+    zeros = np.zeros((m, nq))
+    ep = sabre.Episode(scene=scene, time=time, state=np.zeros((m, scene.nx)), reference=command, wrench=np.zeros((m, 6)),
+                       tau_ext=zeros, contact=np.zeros(m, bool), cost=np.zeros(m), phase=np.zeros(m, int), phases=("main",),
+                       success=False, time_to_success=None, command=command, tank_energy=energy, tank_floor=2.0,
+                       tau_ext_measured=tau)
+    power = scenarios.tank_power(ep)
+    np.testing.assert_array_equal(power[1:], tau[:-1, 0])
+    # independent count: sign flips between consecutive near-floor steps, both outside the deadband
+    signed = np.where(np.abs(power) > 0.01, np.sign(power), 0.0)
+    near = energy - 2.0 < 0.5
+    flips = sum(1 for k in range(1, m) if near[k] and near[k - 1] and signed[k] * signed[k - 1] < 0)
+    assert flips > 200
+    rate = scenarios.power_sign_changes_per_s(ep, np.ones(m, bool))
+    assert rate == pytest.approx(flips / (near.sum() * dt))
+    # the mask restricts the count too
+    assert scenarios.power_sign_changes_per_s(ep, np.arange(m) >= 600) == 0.0
 
 
 def test_stuck_door_rejects_a_hold_position_outside_the_range_and_unknown_drivers():
