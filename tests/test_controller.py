@@ -291,7 +291,7 @@ class _ZeroSequenceCost:
 
     def __call__(self, x):
         self.controller.reset()
-        return self.controller.update(x, 0.0)["nominal_cost"]
+        return self.controller.update(x, 0.0).nominal_cost
 
 
 def _se3_log(t: np.ndarray) -> np.ndarray:
