@@ -146,7 +146,7 @@ BAD_VALUES = {
     [(t, c) for t in TARGETS for c in BAD_SHAPES if not (c == "None" and TARGETS[t][3])],
 )
 def test_wrong_shape_is_a_shape_error(objs, target, case):
-    call, length, _, none_ok = TARGETS[target]
+    call, length, _, _none_ok = TARGETS[target]
     with pytest.raises(ShapeError) as e:
         call(objs, BAD_SHAPES[case](length(objs)))
     check(e, ShapeError, ValueError)

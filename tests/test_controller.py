@@ -69,7 +69,8 @@ def test_costs_compose_and_validate(scene):
         costs.PythonTerm(function=None)
 
 
-def _reach(scene, seed=0, threads=None, extra=costs.Cost(), rollouts=24):
+def _reach(scene, seed=0, threads=None, extra=None, rollouts=24):
+    extra = costs.Cost() if extra is None else extra
     q0 = scene.home_configuration()
     target = scene.fk(q0, "grasp")
     target[:3, 3] += [0.15, 0.10, -0.05]  # 19 cm away, same orientation
@@ -81,7 +82,7 @@ def _reach(scene, seed=0, threads=None, extra=costs.Cost(), rollouts=24):
 def test_controller_closes_70_percent_of_the_distance_to_a_target_in_the_rollout_model(scene):
     """Closed loop on the rollout model itself (update, then apply the reference for one step):
     after 300 iterations the grasp frame is within 30 % of its starting distance to the target."""
-    task, controller, target = _reach(scene)
+    _task, controller, target = _reach(scene)
     model = sabre.RolloutModel(scene)
     x = scene.default_state()
     start = np.linalg.norm(scene.fk(x[: scene.nq], "grasp")[:3, 3] - target[:3, 3])
@@ -222,7 +223,7 @@ def test_open_object_phases_switch_on_the_approach_pose(scene):
 def test_run_episode_closes_the_loop_on_the_plant(scene):
     """A short closed-loop reach on the 1 kHz plant: traces have the documented shapes, time runs at
     the plant rate, the plant follows the controller's reference, and the grasp frame approaches."""
-    task, controller, target = _reach(scene, rollouts=16)
+    _task, controller, target = _reach(scene, rollouts=16)
     x0 = scene.default_state()
     episode = sabre.run_episode(scene, controller, 1.5, x0=x0, replan_rate=50.0, record_every=5, progress=False)
     m = len(episode.time)

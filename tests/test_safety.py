@@ -6,6 +6,8 @@ barriers, closed-form tank energies, and rollouts/plant runs of the filtered com
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -46,7 +48,7 @@ def test_config_defaults_follow_table_one_and_validate(scene):
     assert c.enabled["base_box"] is False
     with pytest.raises(TypeError):
         c.gamma["joint_limits"] = 1.0  # read-only
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         c.tank_floor = 1.0  # frozen
     names = sabre.SafetyFilter(scene, c).row_names
     assert not any(n.startswith(("obstacle", "base_box")) for n in names)

@@ -10,7 +10,7 @@ zero sequence, then the best previous samples by weight, in order, shifted by th
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import pytest

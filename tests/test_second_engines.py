@@ -17,9 +17,9 @@ import pytest
 import sabre
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benches"))
-import compare_mujoco  # noqa: E402
-import compare_osqp  # noqa: E402
-from mujoco_scene import build_mujoco_model  # noqa: E402
+import compare_mujoco
+import compare_osqp
+from mujoco_scene import build_mujoco_model
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ import sabre
 
 OBJECTS = ("shelf", "microwave", "drawer", "dishwasher")
 NQ = 10
-O = 20  # index of the object coordinate in x = [q, q̇, o, ȯ]
+OPENING = 20  # index of the object coordinate in x = [q, q̇, o, ȯ]
 
 
 @pytest.fixture(scope="module")
@@ -72,8 +72,8 @@ def test_object_does_not_move_without_contact(scenes, name):
     assert not res.contact.any()
     assert np.all(res.tau_ext == 0.0) and np.all(res.wrench == 0.0)
     # Gravity rests the dishwasher door on its closed limit: tens of µrad of constraint give is all.
-    np.testing.assert_allclose(res.states[:, :, O], x0[O], atol=1e-4)
-    np.testing.assert_allclose(res.states[:, 2:, O + 1], 0.0, atol=1e-6)
+    np.testing.assert_allclose(res.states[:, :, OPENING], x0[OPENING], atol=1e-4)
+    np.testing.assert_allclose(res.states[:, 2:, OPENING + 1], 0.0, atol=1e-6)
 
 
 # Opening reached by the scripted open-loop hook-and-pull (rollout model and plant).
@@ -86,15 +86,15 @@ def test_scripted_hook_and_pull_opens_the_object_in_the_rollout_model(scenes, mo
     res = sabre.RolloutModel(scene).rollout(scene.default_state(), motion.U[None])
     x = res.states[0]
     assert not res.failed[0]
-    assert x[-1, O] >= MIN_OPENING[name]
-    assert x[-1, O] <= scene.o_upper[0] + 0.02
+    assert x[-1, OPENING] >= MIN_OPENING[name]
+    assert x[-1, OPENING] <= scene.o_upper[0] + 0.02
     pull = motion.phases == 3
     assert res.contact[0, pull].mean() > 0.5, "the hook holds the handle during most of the pull"
     # Power flows from the robot into the object while pulling it open: −τ_extᵀ q̇ > 0 (τ_ext acts
     # on the robot). Past its balance point the dishwasher door falls by itself and the hook holds
     # it back, so only the pull up to 0.05 rad counts there.
     power_into_object = -np.einsum("ki,ki->k", res.tau_ext[0], x[1:, NQ : 2 * NQ])
-    driven = pull & (x[1:, O] < 0.05) if name == "dishwasher" else pull
+    driven = pull & (x[1:, OPENING] < 0.05) if name == "dishwasher" else pull
     assert power_into_object[driven].sum() * motion.dt > 0.02
     # Nothing happens before the hook reaches the handle.
     approach = motion.phases == 0
@@ -111,10 +111,10 @@ def test_scripted_hook_and_pull_opens_the_object_in_the_plant(scenes, motions, n
     work = 0.0
     for k, u in enumerate(motion.U):
         controller.track(plant, u, steps=per_step)
-        driven = motion.phases[k] == 3 and (name != "dishwasher" or plant.state[O] < 0.05)
+        driven = motion.phases[k] == 3 and (name != "dishwasher" or plant.state[OPENING] < 0.05)
         if driven:
             work += -plant.tau_ext @ plant.state[NQ : 2 * NQ] * motion.dt
-    assert plant.state[O] >= MIN_OPENING[name]
+    assert plant.state[OPENING] >= MIN_OPENING[name]
     assert work > 0.02
 
 
@@ -197,20 +197,20 @@ def test_plant_and_rollout_model_agree_while_pulling_the_object_open(scenes, mot
     controller = sabre.LowLevelController(scene, dt=plant.dt)
     plant.reset(scene.default_state())
     per_step = int(round(motion.dt / plant.dt))
-    o_plant, od_plant = [plant.state[O]], [plant.state[O + 1]]
+    o_plant, od_plant = [plant.state[OPENING]], [plant.state[OPENING + 1]]
     for u in motion.U:
         controller.track(plant, u, steps=per_step)
-        o_plant.append(plant.state[O])
-        od_plant.append(plant.state[O + 1])
+        o_plant.append(plant.state[OPENING])
+        od_plant.append(plant.state[OPENING + 1])
     pull = np.r_[False, motion.phases == 3]
-    assert np.abs(x[pull, O] - np.asarray(o_plant)[pull]).max() < 0.02
-    mean_model, mean_plant = x[pull, O + 1].mean(), np.asarray(od_plant)[pull].mean()
+    assert np.abs(x[pull, OPENING] - np.asarray(o_plant)[pull]).max() < 0.02
+    mean_model, mean_plant = x[pull, OPENING + 1].mean(), np.asarray(od_plant)[pull].mean()
     assert mean_plant > 0.05
     assert abs(mean_model - mean_plant) < 0.1 * mean_plant
-    rate = np.diff(x[:, O]) / motion.dt
+    rate = np.diff(x[:, OPENING]) / motion.dt
     moving = pull[1:] & (np.abs(rate) > 0.02)
     assert moving.sum() > 100
-    np.testing.assert_allclose(x[1:, O + 1][moving], rate[moving], atol=1e-6)
+    np.testing.assert_allclose(x[1:, OPENING + 1][moving], rate[moving], atol=1e-6)
 
 
 def test_results_do_not_depend_on_the_thread_count(scenes, motions):
@@ -247,15 +247,15 @@ def test_free_swinging_object_conserves_energy_without_damping():
     scene = sabre.Scene.from_urdf_strings(robot, obj, [1.2, 0, 0, 0, 0, 0])
     plant = sabre.Plant(scene)
     x0 = scene.default_state()
-    x0[O] = 0.3
+    x0[OPENING] = 0.3
     plant.reset(x0)
     controller = sabre.LowLevelController(scene)
     e0 = plant.object_energy()
     energies = []
-    while plant.state[O] < 1.3 and plant.time < 3.0:
+    while plant.state[OPENING] < 1.3 and plant.time < 3.0:
         controller.track(plant, np.zeros(NQ), steps=5)
         energies.append(plant.object_energy())
-    assert plant.state[O] >= 1.3, "the door fell open under gravity"
+    assert plant.state[OPENING] >= 1.3, "the door fell open under gravity"
     energies = np.asarray(energies)
     assert np.abs(energies - e0).max() < 0.01 * abs(e0) + 0.02
 
@@ -264,9 +264,9 @@ def test_damped_object_never_gains_energy(scenes):
     scene = scenes["shelf"]
     plant = sabre.Plant(scene)
     x0 = scene.default_state()
-    x0[O], x0[O + 1] = 0.4, 1.5
+    x0[OPENING], x0[OPENING + 1] = 0.4, 1.5
     at_rest = x0.copy()
-    at_rest[O + 1] = 0.0
+    at_rest[OPENING + 1] = 0.0
     plant.reset(at_rest)
     kinetic = plant.object_energy()
     plant.reset(x0)
@@ -291,17 +291,17 @@ def test_hold_object_fault_injection(scenes, motions):
         controller.track(plant, u, steps=15)
     plant.hold_object(True)
     assert plant.object_held
-    held_at = plant.state[O]
+    held_at = plant.state[OPENING]
     forces = []
     for u in motion.U[start + 20 : start + 40]:
         controller.track(plant, u, steps=15)
         forces.append(np.linalg.norm(plant.wrench[:3]))
-    assert abs(plant.state[O] - held_at) < 1e-4
+    assert abs(plant.state[OPENING] - held_at) < 1e-4
     assert max(forces) > 10.0, "the robot pulls against the stuck door"
     plant.hold_object(False)
     for u in motion.U[start + 40 :]:
         controller.track(plant, u, steps=15)
-    assert plant.state[O] > held_at + 0.2, "released, the door opens again"
+    assert plant.state[OPENING] > held_at + 0.2, "released, the door opens again"
 
 
 def test_rollout_shapes_and_dtypes(scenes):
@@ -330,10 +330,10 @@ def test_skipping_quiescent_steps_changes_nothing(scenes, motions, name):
     U = motion.U[None, :300] + rng.normal(0.0, 0.05, size=(3, 300, NQ))
     a, b = fast.rollout(scene.default_state(), U), full.rollout(scene.default_state(), U)
     np.testing.assert_array_equal(a.states[:, :, : 2 * NQ], b.states[:, :, : 2 * NQ])
-    np.testing.assert_allclose(a.states[:, :, O], b.states[:, :, O], atol=1e-4)
+    np.testing.assert_allclose(a.states[:, :, OPENING], b.states[:, :, OPENING], atol=1e-4)
     # Full simulation lets a door resting on its limit settle into it over the first step
     # (≈1e-3 rad/s for a few µrad); the skipped steps keep it still.
-    np.testing.assert_allclose(a.states[:, :, O + 1], b.states[:, :, O + 1], atol=2e-3)
+    np.testing.assert_allclose(a.states[:, :, OPENING + 1], b.states[:, :, OPENING + 1], atol=2e-3)
     np.testing.assert_array_equal(a.contact, b.contact)
     assert not a.contact[:, :200].any()
     # The engine clock counts what went through Rapier: every step without skipping; with it, at
