@@ -8,7 +8,7 @@ import pytest
 
 import sabre
 
-ASSETS = Path(__file__).resolve().parents[1] / "assets"
+ASSETS = Path(__file__).resolve().parents[2] / "assets"
 ROBOT = (ASSETS / "robots" / "royalpanda.urdf").read_text()
 SHELF = (ASSETS / "objects" / "shelf.urdf").read_text()
 

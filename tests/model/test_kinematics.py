@@ -12,7 +12,7 @@ import pytest
 import sabre
 
 MOUNT = np.array([0.295, 0.005, 0.445])  # panda_link0 on base_link
-ROBOT_URDF = Path(__file__).resolve().parents[1] / "assets" / "robots" / "royalpanda.urdf"
+ROBOT_URDF = Path(__file__).resolve().parents[2] / "assets" / "robots" / "royalpanda.urdf"
 ROBOT_MASSES = {
     link.get("name"): float(link.find("inertial/mass").get("value"))
     for link in ET.parse(ROBOT_URDF).getroot().findall("link")

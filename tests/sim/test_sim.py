@@ -241,7 +241,7 @@ def test_free_swinging_object_conserves_energy_without_damping():
     energy (from the URDF inertials, not from Rapier) stays constant within 1 % until it nears the limit."""
     from pathlib import Path
 
-    assets = Path(__file__).resolve().parents[1] / "assets"
+    assets = Path(__file__).resolve().parents[2] / "assets"
     robot = (assets / "robots" / "royalpanda.urdf").read_text()
     obj = _frictionless((assets / "objects" / "dishwasher.urdf").read_text())
     scene = sabre.Scene.from_urdf_strings(robot, obj, [1.2, 0, 0, 0, 0, 0])

@@ -30,7 +30,7 @@ from sabre.errors import (
     UrdfError,
 )
 
-ASSETS = Path(__file__).resolve().parents[1] / "assets"
+ASSETS = Path(__file__).resolve().parents[2] / "assets"
 ROBOT_PATH = ASSETS / "robots" / "royalpanda.urdf"
 SHELF_PATH = ASSETS / "objects" / "shelf.urdf"
 

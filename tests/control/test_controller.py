@@ -13,7 +13,7 @@ import sabre
 from sabre import costs
 from sabre.errors import InvalidValueError
 
-ASSETS = Path(__file__).resolve().parents[1] / "assets"
+ASSETS = Path(__file__).resolve().parents[2] / "assets"
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,7 @@ import pytest
 
 import sabre
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benches"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benches"))
 import compare_mujoco
 import compare_osqp
 from mujoco_scene import build_mujoco_model
