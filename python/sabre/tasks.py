@@ -27,20 +27,21 @@ __all__ = [
 
 @dataclass(frozen=True)
 class SafetyWeights:
-    """Weights of the terms that every phase carries (Table I defaults)."""
+    """Weights of the terms that every phase carries: the defaults of the cost terms themselves
+    (Table I, :mod:`sabre.costs`)."""
 
-    joint_limit: float = 1000.0
-    joint_limit_slope: float = 100.0
-    reach: float = 1000.0
-    reach_slope: float = 100.0
-    self_collision: float = 1000.0
-    self_collision_slope: float = 100.0
-    power: float = 10.0
-    p_max: float = 0.0
+    joint_limit: float = costs.JointLimits.weight
+    joint_limit_slope: float = costs.JointLimits.weight_slope
+    reach: float = costs.ArmReach.weight
+    reach_slope: float = costs.ArmReach.weight_slope
+    self_collision: float = costs.SelfCollision.weight
+    self_collision_slope: float = costs.SelfCollision.weight_slope
+    power: float = costs.Power.weight
+    p_max: float = costs.Power.p_max
     #: Keeps the base out of the sweep of the object's moving parts (not in Table I; see
     #: :class:`sabre.costs.BaseClearance`). Zero weights leave it out.
-    base_clearance: float = 100.0
-    base_clearance_slope: float = 10000.0
+    base_clearance: float = costs.BaseClearance.weight
+    base_clearance_slope: float = costs.BaseClearance.weight_slope
     base_link: str = "base_link"
 
     def terms(self, scene: Scene) -> costs.Cost:
@@ -112,7 +113,7 @@ class Reach(Task):
 
     frame: str = "grasp"
     target_pose: np.ndarray = field(default_factory=lambda: np.eye(4))
-    pose_weight: float = 100.0
+    pose_weight: float = costs.TargetPose.linear_weight
     safety: SafetyWeights = field(default_factory=SafetyWeights)
     position_tolerance: float = 0.02
     angle_tolerance: float = 0.1
@@ -197,7 +198,7 @@ class ApproachConfig:
     pregrasp_offset: tuple[float, float, float] = (0.0, -0.022, -0.07)
     insert_offset: tuple[float, float, float] = (0.0, -0.022, 0.0)
     pitch: float = 0.3
-    weight: float = 100.0
+    weight: float = costs.TargetPose.linear_weight
     switch_position: float = 0.015
     switch_angle: float = 0.15
     posture: tuple[float, ...] | None = None
@@ -278,7 +279,7 @@ class OpenConfig:
     offset: tuple[float, float, float] = (0.0, 0.003, -0.016)
     pose_weights: tuple[float, float, float, float, float, float] = (100.0, 10000.0, 1000.0, 1000.0, 1000.0, 1000.0)
     lead: float = 0.0
-    object_weight: float = 100.0
+    object_weight: float = costs.ObjectState.weight
     object_overshoot: float | None = None
     speeds: tuple[float, ...] = (0.1, 0.05)
     slip_distance: float = 0.05
@@ -406,7 +407,7 @@ class OpenObject(Task):
 
     opening: float | None = None
     horizon: float = 1.0
-    contact_weight: float = 100.0
+    contact_weight: float = costs.Contact.weight
     approach: ApproachConfig = field(default_factory=ApproachConfig)
     hook: HookConfig = field(default_factory=HookConfig)
     open: OpenConfig = field(default_factory=OpenConfig)
