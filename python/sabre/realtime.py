@@ -81,8 +81,7 @@ class RealtimeCascade:
     def _plan_once(self) -> None:
         with self._lock:
             latest = self._latest
-        if latest is None:
-            raise RuntimeError("RealTimeLoop: planning before start() gave a first state")
+        assert latest is not None, "start() stores the first state before any planning"
         x, t = latest
         self.controller.update(x, t)
         plan = (np.array(self.controller.nominal), float(self.controller.nominal_t0), float(self.controller.config.dt))
