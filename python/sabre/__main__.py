@@ -95,9 +95,10 @@ def episode_command(obj: str, duration: float, start: str, seed: int, replan_rat
     print(f"[{obj}] success: {episode.success}, final opening {episode.opening[-1]:.3f} "
           f"(target {task.target_opening(scene):.3f}, success at {task.open.success_fraction:.0%}), time to open: {when}")
     print(f"  phases: {[(round(t, 2), p) for t, p in controller.phase_history]}")
+    tank_end = "—" if episode.tank_energy is None else f"{episode.tank_energy[-1]:.2f} J"
     power = episode.dissipated_energy() / max(episode.duration, 1e-9)
     print(f"  mean wrench in contact {episode.mean_wrench():.1f} N, dissipated energy {episode.dissipated_energy():.2f} J "
-          f"(mean dissipated power {power:.2f} W), tank at the end {episode.tank_energy[-1]:.2f} J")
+          f"(mean dissipated power {power:.2f} W), tank at the end {tank_end}")
     print(f"  planning iteration median {1e3 * np.median(episode.planning_times):.1f} ms, "
           f"real-time factor {episode.real_time_factor:.2f}")
     if plot:
@@ -112,7 +113,7 @@ class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
     def _get_help_string(self, action: argparse.Action) -> str:
         if action.default is None:
             return action.help or ""
-        return super()._get_help_string(action)
+        return super()._get_help_string(action) or ""
 
 
 class _TopHelpFormatter(_HelpFormatter, argparse.RawDescriptionHelpFormatter):

@@ -1,21 +1,49 @@
 """Type stubs of the private compiled module ``sabre._core`` (use the public ``sabre`` API instead).
 
 Config classes (``RolloutConfig()``, ``MppiConfig()``, ...) are constructed without arguments and
-hold the core's defaults; their attributes are read and written directly.
+hold the core's defaults; their attributes are read and written directly. Every class is a PyO3
+class: it cannot be subclassed (``@final``), is constructed by ``__new__``, and exposes its getters
+(and setters) as properties.
 """
 
 from __future__ import annotations
 
 import os
+from typing import final
 
 import numpy as np
 import numpy.typing as npt
+
+__all__ = [
+    "Scene",
+    "RolloutConfig",
+    "RolloutModel",
+    "RolloutResult",
+    "PlantConfig",
+    "Plant",
+    "LowLevelConfig",
+    "LowLevelController",
+    "Cost",
+    "MppiConfig",
+    "ServoGuideConfig",
+    "Planner",
+    "SafetyConfig",
+    "SafetyFilter",
+    "FilterResult",
+    "EnergyTankConfig",
+    "EnergyTank",
+    "default_threads",
+    "likelihood_weights",
+    "__version__",
+    "DEFAULT_TAU_EXT_CUTOFF",
+]
 
 __version__: str
 DEFAULT_TAU_EXT_CUTOFF: float
 
 def default_threads() -> int: ...
 
+@final
 class Scene:
     @staticmethod
     def load(robot: str, obj: str, obj_pose: list[float] | None = None) -> Scene: ...
@@ -66,6 +94,7 @@ class Scene:
     ) -> npt.NDArray[np.float64]: ...
     def mass_matrix_and_gravity(self, q: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
 
+@final
 class RolloutResult:
     @property
     def states(self) -> npt.NDArray[np.float64]: ...
@@ -82,6 +111,7 @@ class RolloutResult:
     @property
     def engine_time(self) -> npt.NDArray[np.float64]: ...
 
+@final
 class RolloutConfig:
     dt: float
     servo_bandwidth: float
@@ -91,22 +121,25 @@ class RolloutConfig:
     solver_iterations: int
     multibody_robot: bool
     skip_quiescent_steps: bool
-    def __init__(self) -> None: ...
+    def __new__(cls) -> RolloutConfig: ...
 
+@final
 class PlantConfig:
     dt: float
     contact_friction: float
     solver_iterations: int
     tau_ext_cutoff: float | None
-    def __init__(self) -> None: ...
+    def __new__(cls) -> PlantConfig: ...
 
+@final
 class LowLevelConfig:
     bandwidth: float
     integral_gain: float
     integral_limit: float
     gain_inertia_floor: float
-    def __init__(self) -> None: ...
+    def __new__(cls) -> LowLevelConfig: ...
 
+@final
 class MppiConfig:
     rollouts: int
     horizon: float
@@ -121,10 +154,11 @@ class MppiConfig:
     seed: int
     threads: int | None
     input_limit: list[float] | None
-    def __init__(self) -> None: ...
+    def __new__(cls) -> MppiConfig: ...
     @staticmethod
     def paper_sigma(nu: int) -> list[float]: ...
 
+@final
 class ServoGuideConfig:
     gain: float
     max_linear: float
@@ -132,8 +166,9 @@ class ServoGuideConfig:
     velocity_limit: list[float] | None
     damping: float
     joint_margin: float
-    def __init__(self) -> None: ...
+    def __new__(cls) -> ServoGuideConfig: ...
 
+@final
 class SafetyConfig:
     gamma: list[float]
     penalty: list[float]
@@ -146,25 +181,28 @@ class SafetyConfig:
     tolerance: float
     active_tolerance: float
     screening: bool
-    def __init__(self) -> None: ...
+    def __new__(cls) -> SafetyConfig: ...
     @staticmethod
     def classes() -> list[str]: ...
 
+@final
 class EnergyTankConfig:
     initial: float
     floor: float
     ceiling: float | None
     record_history: bool
-    def __init__(self) -> None: ...
+    def __new__(cls) -> EnergyTankConfig: ...
 
+@final
 class RolloutModel:
-    def __init__(self, scene: Scene, config: RolloutConfig) -> None: ...
+    def __new__(cls, scene: Scene, config: RolloutConfig) -> RolloutModel: ...
     @property
     def dt(self) -> float: ...
     def rollout(self, x0: npt.NDArray[np.float64], u: npt.NDArray[np.float64], threads: int | None = None) -> RolloutResult: ...
 
+@final
 class LowLevelController:
-    def __init__(self, scene: Scene, dt: float, config: LowLevelConfig) -> None: ...
+    def __new__(cls, scene: Scene, dt: float, config: LowLevelConfig) -> LowLevelController: ...
     @property
     def gain_inertia_floor(self) -> float: ...
     @gain_inertia_floor.setter
@@ -172,8 +210,9 @@ class LowLevelController:
     def reset(self) -> None: ...
     def torque(self, x: npt.NDArray[np.float64], u_ref: npt.NDArray[np.float64]) -> list[float]: ...
 
+@final
 class Plant:
-    def __init__(self, scene: Scene, config: PlantConfig) -> None: ...
+    def __new__(cls, scene: Scene, config: PlantConfig) -> Plant: ...
     def reset(self, x0: npt.NDArray[np.float64]) -> None: ...
     def step(self, tau: npt.NDArray[np.float64]) -> None: ...
     def follow(
@@ -228,13 +267,15 @@ class Plant:
 
 def likelihood_weights(costs: list[float], mapping: str, parameter: float) -> list[float]: ...
 
+@final
 class Cost:
-    def __init__(self, scene: Scene, terms: list[dict]) -> None: ...
+    def __new__(cls, scene: Scene, terms: list[dict]) -> Cost: ...
     @property
     def num_terms(self) -> int: ...
 
+@final
 class Planner:
-    def __init__(self, model: RolloutModel, cost: Cost, config: MppiConfig) -> None: ...
+    def __new__(cls, model: RolloutModel, cost: Cost, config: MppiConfig) -> Planner: ...
     @property
     def noise_scale(self) -> float: ...
     @noise_scale.setter
@@ -267,6 +308,7 @@ class Planner:
     @property
     def stats(self) -> dict: ...
 
+@final
 class FilterResult:
     @property
     def u(self) -> npt.NDArray[np.float64]: ...
@@ -291,8 +333,9 @@ class FilterResult:
     @property
     def method(self) -> str: ...
 
+@final
 class SafetyFilter:
-    def __init__(self, scene: Scene, config: SafetyConfig) -> None: ...
+    def __new__(cls, scene: Scene, config: SafetyConfig) -> SafetyFilter: ...
     def filter(
         self,
         x: npt.NDArray[np.float64],
@@ -327,8 +370,9 @@ class SafetyFilter:
         tank_energy: float | None = None,
     ) -> dict: ...
 
+@final
 class EnergyTank:
-    def __init__(self, config: EnergyTankConfig) -> None: ...
+    def __new__(cls, config: EnergyTankConfig) -> EnergyTank: ...
     def step(self, tau_ext: npt.NDArray[np.float64], u: npt.NDArray[np.float64], dt: float) -> float: ...
     def reset(self) -> None: ...
     @property

@@ -16,7 +16,7 @@ import numpy as np
 
 from . import _core
 from ._validate import as_count, as_float_array, as_positive, core_config
-from .control import LowLevelController
+from .control import LowLevelController, Trace
 from .costs import Batch, CompiledCost
 from .errors import InvalidValueError, ShapeError
 from .safety import CLASSES, EnergyTank, SafetyConfig, SafetyFilter
@@ -476,13 +476,14 @@ class TraceChunks:
     def __init__(self, *per_run: str) -> None:
         self._parts: dict[str, list[np.ndarray]] = {k: [] for k in self.FIELDS + per_run}
 
-    def append(self, trace, **per_run: float) -> None:
+    def append(self, trace: Trace, **per_run: float) -> None:
         p = self._parts
         p["time"].append(trace.time)
         p["state"].append(trace.state)
         p["reference"].append(trace.reference)
         p["command"].append(trace.reference if trace.filtered is None else trace.filtered)
-        p["tank"].append(trace.tank_energy)
+        if trace.tank_energy is not None:
+            p["tank"].append(trace.tank_energy)
         p["wrench"].append(trace.wrench)
         p["tau_ext"].append(trace.tau_ext)
         p["tau_ext_measured"].append(trace.tau_ext_measured)

@@ -167,9 +167,14 @@ class ArmReach(Term):
         declared = scene.arm_reach
         if declared is None and (self.base is None or self.frame is None or self.r_max is None):
             raise InvalidValueError("ArmReach: the robot declares no arm reach; give base, frame and r_max")
-        base = self.base or declared[0]
-        frame = self.frame or declared[1]
-        r_max = self.r_max if self.r_max is not None else declared[2]
+        if declared is None:
+            # Narrowed by the check above: with no declared reach, base, frame and r_max are all given.
+            assert self.base is not None and self.frame is not None and self.r_max is not None
+            base, frame, r_max = self.base, self.frame, self.r_max
+        else:
+            base = self.base or declared[0]
+            frame = self.frame or declared[1]
+            r_max = self.r_max if self.r_max is not None else declared[2]
         return {
             "kind": "arm_reach",
             "base": base,
@@ -199,8 +204,8 @@ class SelfCollision(Term):
 class Posture(Term):
     """Σ_i w_i (q_i − q*_i)²: a preferred robot posture (weights of 0 leave joints free)."""
 
-    target: Sequence[float] = ()
-    weights: Sequence[float] = ()
+    target: Sequence[float] | np.ndarray = ()
+    weights: Sequence[float] | np.ndarray = ()
 
     def spec(self, scene: Scene) -> dict:
         target = as_float_array("target", self.target, (scene.nq,))

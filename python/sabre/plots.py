@@ -10,6 +10,8 @@ import numpy as np
 from .errors import InvalidValueError
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
     from .controller import Episode
 
 __all__ = ["plot_episode"]
@@ -46,7 +48,7 @@ def _phase_spans(episode: Episode) -> list[tuple[float, float, int]]:
     return [(float(t[s - 1]) if s > 0 else 0.0, float(t[e - 1]), int(phase[s])) for s, e in zip(starts, ends)]
 
 
-def _shade(ax, spans: list[tuple[float, float, int]]) -> None:
+def _shade(ax: Axes, spans: list[tuple[float, float, int]]) -> None:
     for k, (start, end, index) in enumerate(spans):
         ax.axvspan(start, end, color=_PHASE_COLOURS[index % len(_PHASE_COLOURS)], lw=0, zorder=0)
         if k > 0:

@@ -54,7 +54,7 @@ class RealtimeCascade:
         self._plan: tuple[np.ndarray, float, float] | None = None  # (nominal, t0, dt)
         # the task's low-level gain inertia floor for the planned phase (None: the controller's own)
         self._floor: float | None = None
-        self._own_floor = None if low_level is None else low_level.gain_inertia_floor
+        self._own_floor = 0.0 if low_level is None else low_level.gain_inertia_floor
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._error: BaseException | None = None
@@ -80,7 +80,9 @@ class RealtimeCascade:
 
     def _plan_once(self) -> None:
         with self._lock:
-            x, t = self._latest
+            latest = self._latest
+        assert latest is not None, "start() stores the first state before any planning"
+        x, t = latest
         self.controller.update(x, t)
         plan = (np.array(self.controller.nominal), float(self.controller.nominal_t0), float(self.controller.config.dt))
         floor = self.controller.task.gain_inertia_floor(self.controller.phase)
@@ -110,7 +112,7 @@ class RealtimeCascade:
     def __enter__(self) -> RealtimeCascade:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()
 
     @property

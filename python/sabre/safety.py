@@ -27,6 +27,8 @@ __all__ = [
 
 # The core's defaults, the one source of every default below.
 _SAFETY = _core.SafetyConfig()
+_x_min, _x_max, _y_min, _y_max = _SAFETY.base_box
+_DEFAULT_BASE_BOX = (_x_min, _x_max, _y_min, _y_max)
 _TANK = _core.EnergyTankConfig()
 
 #: Constraint classes, in the order the core uses.
@@ -40,7 +42,7 @@ DEFAULT_PENALTY = MappingProxyType(dict(zip(CLASSES, _SAFETY.penalty)))
 DEFAULT_MARGIN = MappingProxyType(dict(zip(CLASSES[:-1], _SAFETY.margin[:-1])))
 
 
-def _vector(name: str, value, n: int) -> np.ndarray:
+def _vector(name: str, value: object, n: int) -> np.ndarray:
     """`value` as a float64 (n,) array; ready-made arrays pass untouched (the core checks their
     values and raises the same errors), anything else goes through the full conversion."""
     if type(value) is np.ndarray and value.dtype == np.float64 and value.shape == (n,) and value.flags.c_contiguous:
@@ -79,7 +81,7 @@ class SafetyConfig:
     penalty: Mapping[str, float] = field(default_factory=dict)
     margin: Mapping[str, float] = field(default_factory=dict)
     enabled: Mapping[str, bool] = field(default_factory=dict)
-    base_box: tuple[float, float, float, float] | None = tuple(_SAFETY.base_box)
+    base_box: tuple[float, float, float, float] | None = _DEFAULT_BASE_BOX
     passivity_alpha: float = _SAFETY.gamma[-1]
     tank_floor: float = _SAFETY.tank_floor
     max_obstacles: int = _SAFETY.max_obstacles
@@ -288,10 +290,12 @@ class SafetyFilter:
         self.config = config
         self._core = _core.SafetyFilter(scene._core, config._core_config())
 
-    def _passivity(self, tau_ext, tank_energy) -> tuple[np.ndarray | None, float | None]:
+    def _passivity(
+        self, tau_ext: Sequence[float] | np.ndarray | None, tank_energy: float | None
+    ) -> tuple[np.ndarray | None, float | None]:
         if (tau_ext is None) != (tank_energy is None):
             raise InvalidValueError("passivity: give both tau_ext and tank_energy, or neither")
-        if tau_ext is None:
+        if tau_ext is None or tank_energy is None:
             return None, None
         tau = _vector("tau_ext", tau_ext, self.scene.nq)
         energy = float(tank_energy)
@@ -355,7 +359,7 @@ class SafetyFilter:
     @property
     def obstacles(self) -> list[Obstacle]:
         """The sphere obstacles in place, in id order."""
-        return [Obstacle(int(i), tuple(c), float(r)) for i, c, r in self._core.obstacles]
+        return [Obstacle(int(i), (c[0], c[1], c[2]), float(r)) for i, c, r in self._core.obstacles]
 
     # -- inspection -------------------------------------------------------------------------
     @property

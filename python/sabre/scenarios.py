@@ -210,7 +210,7 @@ def stuck_door(variant: str = "IO", seed: int = 0, hold_seconds: float = 5.0, re
         ep = run_episode(scene, ctrl, schedule.duration, seed=seed, replan_rate=replan_rate, record_every=1,
                          stop_on_success=False, progress=False, on_replan=hold)
         was_held = schedule.start is not None
-        hold_start = schedule.start if was_held else float(ep.time[-1])
+        hold_start = schedule.start if schedule.start is not None else float(ep.time[-1])
     else:
         raise InvalidValueError(f"driver must be 'controller' or 'scripted', got {driver!r}")
     stuck = (ep.time >= hold_start - 1e-9) & (ep.time <= hold_start + hold_seconds + 1e-9) & was_held

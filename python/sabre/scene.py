@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -173,11 +173,11 @@ class Scene:
     def self_collision_spheres(self) -> tuple[tuple[str, str, tuple[float, float, float], float], ...]:
         """(name, link, centre in link frame, radius) of each self-collision sphere."""
         spheres, _ = self._core.self_collision()
-        return tuple((name, link, tuple(center), radius) for name, link, center, radius in spheres)
+        return tuple((name, link, (center[0], center[1], center[2]), radius) for name, link, center, radius in spheres)
 
     @property
     def self_collision_pairs(self) -> tuple[tuple[str, str], ...]:
-        return tuple(tuple(p) for p in self._core.self_collision()[1])
+        return tuple((a, b) for a, b in self._core.self_collision()[1])
 
     @property
     def arm_reach(self) -> tuple[str, str, float] | None:
@@ -211,7 +211,9 @@ class Scene:
         return self._poses_many("q", q, self.nq, self._core.fk_many, frame)
 
     @staticmethod
-    def _poses_many(name: str, values: np.ndarray, n: int, batched, frame: str) -> np.ndarray:
+    def _poses_many(
+        name: str, values: np.ndarray, n: int, batched: Callable[[np.ndarray, str], np.ndarray], frame: str
+    ) -> np.ndarray:
         values = np.asarray(values)
         if values.ndim < 1 or values.shape[-1] != n:
             raise ShapeError(f"{name}: expected shape (..., {n}), got {values.shape}")

@@ -6,6 +6,7 @@ interact as designed; the sampling-based controller does not need it.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,9 +82,9 @@ def hook_and_pull(
     def handle(o: float) -> np.ndarray:
         return scene.object_fk(np.array([o]), "handle_frame")
 
-    segments: list[tuple[int, float, callable]] = []
+    segments: list[tuple[int, float, Callable[[float], np.ndarray]]] = []
 
-    def add(phase: int, duration: float, pose_at) -> None:
+    def add(phase: int, duration: float, pose_at: Callable[[float], np.ndarray]) -> None:
         segments.append((phase, duration, pose_at))
 
     h0 = handle(o0[0])
@@ -111,8 +112,9 @@ def hook_and_pull(
         return o0[0] + (target - o0[0]) * (0.5 - 0.5 * np.cos(np.pi * np.clip(s, 0, 1)))
 
     # Take up the slack first (tip against the bar), then follow the handle along its path.
-    def engage(s: float) -> tuple[float, ...]:
-        return tuple(np.asarray(pulling) * min(1.0, 8.0 * s))
+    def engage(s: float) -> tuple[float, float, float]:
+        x, y, z = np.asarray(pulling) * min(1.0, 8.0 * s)
+        return (float(x), float(y), float(z))
 
     add(3, pull_time, lambda s: _offset(handle(opening_profile(s)), engage(s)))
     if release_after:
@@ -167,7 +169,7 @@ def hook_and_pull(
                 xy = q_next[base_joints]
                 depth = standoff - float(np.dot(np.r_[xy, 0.0] - front_point, front_normal))
                 if depth > 0.0:
-                    q_next[base_joints] = xy + depth * front_normal[:2] / max(np.linalg.norm(front_normal[:2]), 1e-9)
+                    q_next[base_joints] = xy + depth * front_normal[:2] / max(float(np.linalg.norm(front_normal[:2])), 1e-9)
             U[k] = (q_next - q) / dt  # what the joints can actually do at their limits
             q = q_next
             phases[k] = phase

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
@@ -18,6 +19,9 @@ from .errors import InvalidValueError
 from .guides import servo_guide
 from .scene import Scene
 from .sim import RolloutModel
+
+if TYPE_CHECKING:
+    from .controller import Controller
 
 __all__ = [
     "Task", "Reach", "OpenObject", "SafetyWeights", "ApproachConfig", "HookConfig", "OpenConfig", "ReleaseConfig",
@@ -61,7 +65,7 @@ class SafetyWeights:
 class Task:
     """Base class: a sequence of named phases, each with its cost."""
 
-    phases: tuple[str, ...] = ("main",)
+    phases: ClassVar[tuple[str, ...]] = ("main",)
 
     def initial_phase(self) -> str:
         """The phase a reset starts in (default: the first)."""
@@ -97,7 +101,7 @@ class Task:
         """
         return None
 
-    def on_step(self, scene: Scene, x: np.ndarray, t: float, controller) -> None:
+    def on_step(self, scene: Scene, x: np.ndarray, t: float, controller: Controller) -> None:
         """Hook called once per planning iteration, after the phase update."""
 
     def gain_inertia_floor(self, phase: str) -> float | None:
@@ -119,7 +123,7 @@ class Reach(Task):
     angle_tolerance: float = 0.1
     extra: costs.Cost = field(default_factory=costs.Cost)
 
-    phases = ("reach",)
+    phases: ClassVar[tuple[str, ...]] = ("reach",)
 
     def __post_init__(self) -> None:
         self.target_pose = as_float_array("target_pose", self.target_pose, (4, 4))
@@ -132,7 +136,7 @@ class Reach(Task):
         pose = scene.fk(x[: scene.nq], self.frame)
         dp = np.linalg.norm(pose[:3, 3] - self.target_pose[:3, 3])
         cos = (np.trace(self.target_pose[:3, :3].T @ pose[:3, :3]) - 1.0) / 2.0
-        return dp < self.position_tolerance and np.arccos(np.clip(cos, -1.0, 1.0)) < self.angle_tolerance
+        return bool(dp < self.position_tolerance and np.arccos(np.clip(cos, -1.0, 1.0)) < self.angle_tolerance)
 
 
 def _offset(xyz: tuple[float, float, float]) -> np.ndarray:
