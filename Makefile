@@ -5,14 +5,15 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.deps-stamp
 export VIRTUAL_ENV := $(CURDIR)/$(VENV)
 
-.PHONY: all venv build demo test test-rust test-python bench bench-rust bench-python clean
+.PHONY: all venv build demo test test-setup test-rust test-python bench bench-rust bench-python clean
 
 all: build
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet "maturin>=1.5,<2" "numpy>=1.24" "pytest>=7" "matplotlib>=3.7" "tqdm>=4.60" "mujoco>=3.1" "osqp>=0.6"
+	$(PY) -m pip install --quiet "maturin>=1.5,<2" "numpy>=1.24" "pytest>=7" "matplotlib>=3.7" "tqdm>=4.60" "mujoco>=3.1" "osqp>=0.6" \
+		"viser>=1.0" "trimesh>=4" "playwright>=1.40" "ray>=2.9"
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -27,7 +28,11 @@ demo: build
 test-rust:
 	cargo test --release
 
-test-python: build
+# The browser test drives Debian's chromium through Playwright (never `playwright install`).
+test-setup:
+	command -v chromium >/dev/null || (apt-get update && apt-get install -y chromium)
+
+test-python: build test-setup
 	$(PY) -m pytest -q tests
 
 test: test-rust test-python

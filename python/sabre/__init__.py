@@ -12,6 +12,7 @@ from .errors import (
     SabreError,
     ShapeError,
     SimulationError,
+    MissingExtraError,
     UnknownAssetError,
     UnknownFrameError,
     UrdfError,
@@ -63,4 +64,5 @@ __all__ = [
     "UrdfError",
     "UnknownFrameError",
     "SimulationError",
+    "MissingExtraError",
 ]

@@ -25,6 +25,7 @@ from . import (
     run_episode,
     tasks,
 )
+from .commands import register as register_commands
 
 
 def scripted_demo(obj: str, threads: int | None) -> int:
@@ -94,7 +95,7 @@ def plot_episode(episode, path: str) -> None:
 
 
 def episode_command(obj: str, duration: float, start: str, seed: int, replan_rate: float, plot: str | None,
-                    variant: str = "N", threads: int | None = None) -> int:
+                    variant: str = "N", threads: int | None = None, view: bool = False) -> int:
     """Closed-loop opening with the sampling-based controller in the plant."""
     scene = Scene.load(obj=obj)
     task = tasks.OpenObject()
@@ -102,7 +103,14 @@ def episode_command(obj: str, duration: float, start: str, seed: int, replan_rat
     x0 = paper_start_state(scene) if start == "paper" else scene.default_state()
     print(f"[{obj}] variant {variant}, seed {seed}: up to {duration:.0f} s of simulated time from the "
           f"{'paper' if start == 'paper' else 'default'} start, re-planning at {replan_rate:.0f} Hz")
-    episode = run_episode(scene, controller, duration, seed=seed, x0=x0, replan_rate=replan_rate)
+    viewer = None
+    if view:
+        from .viewer import Viewer
+
+        viewer = Viewer(scene)
+        viewer.look_at(0.5 * (x0[:3] + scene.object_pose[:3, 3]), distance=6.0)
+        print(f"  viewer: http://127.0.0.1:{viewer.port}")
+    episode = run_episode(scene, controller, duration, seed=seed, x0=x0, replan_rate=replan_rate, viewer=viewer)
     when = "—" if episode.time_to_success is None else f"{episode.time_to_success:.1f} s"
     print(f"[{obj}] success: {episode.success}, final opening {episode.opening[-1]:.3f} "
           f"(target {task.target_opening(scene):.3f}, success at {task.success_fraction:.0%}), time to open: {when}")
@@ -127,6 +135,7 @@ def main(argv: list[str] | None = None) -> int:
     demo.add_argument("--seed", type=int, default=0)
     demo.add_argument("--threads", type=int, default=None)
     demo.add_argument("--plot", default=None, help="PNG path (default: sabre_demo_<object>.png)")
+    demo.add_argument("--view", action="store_true", help="show the run live in the browser viewer")
     scripted = sub.add_parser("scripted", help="open-loop scripted hook-and-pull in the rollout model and the plant")
     scripted.add_argument("--object", choices=OBJECTS, default="shelf")
     scripted.add_argument("--threads", type=int, default=None)
@@ -138,10 +147,13 @@ def main(argv: list[str] | None = None) -> int:
     ep.add_argument("--replan-rate", type=float, default=100.0)
     ep.add_argument("--plot", default=None, help="write a PNG of opening, wrench and base path")
     ep.add_argument("--variant", choices=VARIANTS, default="N")
+    register_commands(sub)
     args = parser.parse_args(argv)
+    if hasattr(args, "run"):
+        return args.run(args)
     if args.command == "demo":
         plot = args.plot or f"sabre_demo_{args.object}.png"
-        episode_command(args.object, 60.0, "paper", args.seed, 50.0, plot, args.variant, args.threads)
+        episode_command(args.object, 60.0, "paper", args.seed, 50.0, plot, args.variant, args.threads, args.view)
         return 0  # the demo reports; `episode` exits non-zero on failure
     if args.command == "scripted":
         return scripted_demo(args.object, args.threads)

@@ -302,6 +302,9 @@ class Episode:
     tau_ext_measured (M, nq) the plant's τ_ext measurement after each step (what the tank and the
     passivity row read; ``tau_ext`` is the contact torque of the step itself),
     filter_fallbacks: inner-loop steps where the FILTER-QP fell back to the safe stop.
+    With ``run_episode(..., record_plans=True)``, one row per re-plan: plan_time (P,), plan_hand_path
+    (P, K + 1, 3) the grasp frame along the nominal plan's rollout, contact_points and contact_forces
+    (P, C, 3) the plant's robot–object contacts after the plan's inner loop (NaN rows pad to C).
     """
 
     scene: Scene
@@ -324,6 +327,23 @@ class Episode:
     filter_fallbacks: int = 0
     tank_floor: float = 2.0
     tau_ext_measured: np.ndarray | None = None
+    plan_time: np.ndarray | None = None
+    plan_hand_path: np.ndarray | None = None
+    contact_points: np.ndarray | None = None
+    contact_forces: np.ndarray | None = None
+
+    def save(self, path) -> None:
+        """Writes the episode to an ``.npz`` file that :meth:`load` reads back (built-in scenes only)."""
+        from .episode_io import save_episode
+
+        save_episode(self, path)
+
+    @classmethod
+    def load(cls, path) -> "Episode":
+        """Reads an episode written by :meth:`save`; the scene is rebuilt from its built-in assets."""
+        from .episode_io import load_episode
+
+        return load_episode(path)
 
     @property
     def opening(self) -> np.ndarray:
@@ -394,6 +414,41 @@ class TraceChunks:
         return {k: np.concatenate(v) if v else np.zeros(0) for k, v in self._parts.items()}
 
 
+class PlanRecorder:
+    """Per re-plan: the grasp frame along the nominal plan's rollout and the plant's contacts."""
+
+    def __init__(self, scene: Scene, controller: Controller) -> None:
+        self.scene = scene
+        self.controller = controller
+        self.frame = "grasp" if "grasp" in scene.frame_names else scene.frame_names[-1]
+        self.times: list[float] = []
+        self.paths: list[np.ndarray] = []
+        self.points: list[np.ndarray] = []
+        self.forces: list[np.ndarray] = []
+
+    def append(self, t: float, x: np.ndarray, plant: Plant) -> None:
+        nominal = np.ascontiguousarray(self.controller.nominal)[None]
+        states = self.controller.model.rollout(x, nominal, threads=1).states[0]
+        self.times.append(float(t))
+        self.paths.append(self.scene.fk_many(states[:, : self.scene.nq], self.frame)[:, :3, 3])
+        contacts = plant.contacts()
+        self.points.append(np.array([c.point for c in contacts]).reshape(-1, 3))
+        self.forces.append(np.array([c.force for c in contacts]).reshape(-1, 3))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        width = max([1] + [len(p) for p in self.points])
+
+        def padded(rows: list[np.ndarray]) -> np.ndarray:
+            out = np.full((len(rows), width, 3), np.nan)
+            for i, r in enumerate(rows):
+                out[i, : len(r)] = r
+            return out
+
+        paths = np.array(self.paths) if self.paths else np.zeros((0, 0, 3))
+        return {"plan_time": np.array(self.times), "plan_hand_path": paths,
+                "contact_points": padded(self.points), "contact_forces": padded(self.forces)}
+
+
 def paper_start_state(scene: Scene) -> np.ndarray:
     """The paper's starting condition: base at (−3, −3), arm folded near its joint limits and close
     to self-collision (shoulder back, elbow fully bent), everything at rest, object closed."""
@@ -423,6 +478,8 @@ def run_episode(
     plant: Plant | None = None,
     low_level: LowLevelController | None = None,
     on_replan: Callable[[float, np.ndarray, Plant, Controller], None] | None = None,
+    record_plans: bool = False,
+    viewer=None,
 ) -> Episode:
     """Runs the controller on the 1 kHz plant for `duration` seconds of simulated time.
 
@@ -431,7 +488,9 @@ def run_episode(
     ``on_replan(t, x, plant, controller)`` runs before each re-plan (for disturbances); returning
     True ends the episode there. Stops
     ``settle_time`` after the task succeeds if ``stop_on_success``. A progress bar (tqdm) shows for
-    runs longer than 10 s of simulated time unless ``progress=False``.
+    runs longer than 10 s of simulated time unless ``progress=False``. ``record_plans`` records the
+    nominal plan's hand path and the contacts at every re-plan (see :class:`Episode`); a
+    :class:`sabre.viewer.Viewer` passed as ``viewer`` shows the run live (and implies the recording).
     """
     duration = as_positive("duration", duration)
     replan_rate = as_positive("replan_rate", replan_rate)
@@ -455,6 +514,7 @@ def run_episode(
         except ImportError:
             bar = None
     chunks = TraceChunks("cost", "phase")
+    plans = PlanRecorder(scene, controller) if record_plans or viewer is not None else None
 
     planning_times = []
     success_time = None
@@ -472,6 +532,10 @@ def run_episode(
             trace = plant.follow(low_level, controller.nominal, controller.nominal_t0, controller.config.dt, steps_per_plan, record_every,
                                  safety=controller.inner_filter, tank=controller.tank)
             chunks.append(trace, cost=stats["nominal_cost"], phase=controller.task.phases.index(controller.phase))
+            if plans is not None:
+                plans.append(t, x, plant)
+                if viewer is not None:
+                    viewer.show_live(plant.state, plant.time, plans, controller)
             if bar is not None:
                 bar.update(round(steps_per_plan * plant.dt, 3))
             if success_time is None and controller.task.success(scene, plant.state):
@@ -506,6 +570,7 @@ def run_episode(
         variant=controller.config.variant,
         filter_fallbacks=0 if controller.inner_filter is None else int(controller.inner_filter.stats["fallbacks"]),
         tank_floor=controller.tank.floor,
+        **({} if plans is None else plans.arrays()),
     )
 
 
