@@ -45,10 +45,14 @@ def draw(name: str, records: list[dict], path) -> None:
         raise MissingExtraError("figures need matplotlib: pip install 'sabre-mpc[experiments]'") from err
     fig, ax = plt.subplots(figsize=(6.4, 3.8))
     if name == "fig3":
-        for mapping, runs in _group(records, "mapping").items():
-            s = runs[0]["series"]["weights"]
-            ax.plot(s["t"], s["y"], marker=".", label=f"{mapping} (ESS {np.mean([r['metrics']['effective_samples'] for r in runs]):.1f})")
-        ax.set(xlabel="rollout cost J", ylabel="normalised weight", title="Fig. 3: likelihood weight mappings")
+        for i, (mapping, runs) in enumerate(_group(records, "mapping").items()):
+            for scale, scaled in _group(runs, "scale").items():
+                w = scaled[0]["series"]["weights"]
+                ess = np.mean([r["metrics"]["effective_samples"] for r in scaled])
+                ax.plot(w["t"], w["y"], color=f"C{i}", ls="-" if scale == 1.0 else "--", marker=".",
+                        label=f"{mapping}, costs ×{scale:g} (ESS {ess:.1f})")
+        ax.set(xlabel="rollout, by increasing cost", ylabel="normalised weight", yscale="symlog", title="Fig. 3: likelihood weight mappings")
+        ax.set_yscale("symlog", linthresh=1e-3)
     elif name in ("fig4", "fig11", "fig12"):
         key = {"fig4": "variant", "fig11": "variant", "fig12": "alpha"}[name]
         series = "wrench" if name == "fig11" else "tank"
@@ -83,12 +87,19 @@ def draw(name: str, records: list[dict], path) -> None:
                 s = r["series"]["hand_xy"]
                 ax.plot(s["t"], s["y"], color=f"C{list(_group(records, 'variant')).index(variant)}",
                         label=f"{variant} hand" if j == 0 else None)
-        ax.set(xlabel="x (m)", ylabel="y (m)", title="Fig. 10: hand path with the sudden obstacle", aspect="equal")
+        obstacle = records[0]["series"]["obstacle"]
+        ax.add_patch(plt.Circle((obstacle["t"][0], obstacle["y"][0]), 0.08, color="grey", alpha=0.5, label="obstacle (r = 8 cm)"))
+        appeared = [r["metrics"]["appeared_at"] for r in records if np.isfinite(r["metrics"]["appeared_at"])]
+        note = f", appears at {np.mean(appeared):.1f} s" if appeared else ", never reached"
+        ax.set(xlabel="x (m)", ylabel="y (m)", title=f"Fig. 10: hand path with the sudden obstacle{note}", aspect="equal")
     elif name == "acceptance":
         groups = _group(records, "obj")
-        rate = [np.mean([r["metrics"]["success"] for r in runs]) for runs in groups.values()]
-        ax.bar(list(groups), rate)
-        ax.set(ylabel="success rate", ylim=(0, 1.05), title="Acceptance: opening from the paper's start (IO)")
+        for i, (obj, runs) in enumerate(groups.items()):
+            for r in runs:
+                s = r["series"]["opening"]
+                ax.plot(s["t"], s["y"], color=f"C{i}", lw=1,
+                        label=f"{obj} ({np.mean([q['metrics']['success'] for q in runs]):.0%} success)" if r is runs[0] else None)
+        ax.set(xlabel="time (s)", ylabel="opening (rad or m)", title="Acceptance: opening from the paper's start (IO)")
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
@@ -113,6 +124,7 @@ def summary(name: str, records: list[dict], *, seeds: int, short: bool) -> str:
         cells = []
         for m in metrics:
             v = np.asarray(values.get(m, []), dtype=float)
-            cells.append("—" if v.size == 0 else f"{np.nanmean(v):.3g} ± {np.nanstd(v):.2g}")
+            v = v[np.isfinite(v)]
+            cells.append("—" if v.size == 0 else f"{v.mean():.3g} ± {v.std():.2g}")
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

@@ -53,22 +53,22 @@ def specs(name: str, seeds: int, short: bool) -> list[RunSpec]:
     out: list[RunSpec] = []
     for seed in range(seeds):
         if name == "fig3":
-            out += [_spec(name, seed, mapping=m, parameter=p) for m, p in
-                    (("naive", 10.0), ("baseline", 10.0), ("invariant", 10.0))]
+            out += [_spec(name, seed, mapping=m, parameter=p, scale=k) for m, p in
+                    (("naive", 0.2), ("baseline", 0.2), ("invariant", 10.0)) for k in (1.0, 1000.0)]
         elif name == "fig4":
-            out.append(_spec(name, seed, variant="IO", driver="scripted", hold=1.0 if short else 5.0))
+            out.append(_spec(name, seed, variant="IO", driver="scripted", hold=3.0 if short else 5.0))
         elif name == "fig8":
-            out += [_spec(name, seed, variant=v, duration=2.0 if short else 60.0) for v in ("N", "I", "O", "IO")]
+            out += [_spec(name, seed, variant=v, duration=8.0 if short else 60.0) for v in ("N", "I", "O", "IO")]
         elif name == "fig10":
-            out += [_spec(name, seed, variant=v, duration=1.5 if short else 6.0) for v in ("N", "IO")]
+            out += [_spec(name, seed, variant=v, duration=4.0 if short else 6.0) for v in ("N", "IO")]
         elif name == "fig11":
             out += [_spec(name, seed, variant=v, driver="scripted" if short else "controller",
-                          hold=1.0 if short else 5.0, release=0.5 if short else 10.0) for v in ("N", "IO")]
+                          hold=3.0 if short else 5.0, release=0.5 if short else 10.0) for v in ("N", "IO")]
         elif name == "fig12":
             out += [_spec(name, seed, alpha=a, driver="scripted" if short else "controller",
-                          hold=1.0 if short else 5.0) for a in (1.0, 1000.0)]
+                          hold=1.5 if short else 5.0, tank_initial=2.5) for a in (1.0, 1000.0)]
         elif name == "acceptance":
-            out += [_spec(name, seed, obj=o, duration=2.0 if short else 60.0)
+            out += [_spec(name, seed, obj=o, duration=8.0 if short else 60.0)
                     for o in ("shelf", "microwave", "dishwasher", "drawer")]
         else:
             raise InvalidValueError(f"unknown experiment {name!r}; one of {NAMES}")
@@ -87,14 +87,16 @@ def run_one(spec: RunSpec) -> dict:
 
     c, seed = spec.options, spec.seed
     if spec.name == "fig3":
-        costs = np.sort(np.random.default_rng(seed).gamma(2.0, 50.0, size=64) + 100.0)
+        # the same rollouts with costs scaled by `scale`: (55) gives the same weights, exp(−λJ) does not
+        costs = c["scale"] * np.sort(np.random.default_rng(seed).gamma(2.0, 5.0, size=64) + 10.0)
         w = likelihood_weights(costs, c["mapping"], c["parameter"])
-        return {"metrics": {"effective_samples": float(1.0 / np.sum(w ** 2)), "max_weight": float(w.max())},
-                "series": {"weights": {"t": costs.tolist(), "y": w.tolist()}}}
+        ess = float(1.0 / np.sum(w ** 2)) if w.sum() > 0 else 0.0
+        return {"metrics": {"effective_samples": ess, "max_weight": float(w.max())},
+                "series": {"weights": {"t": list(range(len(w))), "y": w.tolist()}}}
     if spec.name in ("fig4", "fig11", "fig12"):
         variant = c.get("variant", "IO")
         r = scenarios.stuck_door(variant, seed, c["hold"], c.get("release", 0.5), alpha=c.get("alpha", 1.0),
-                                 driver=c["driver"])
+                                 driver=c["driver"], tank_initial=c.get("tank_initial", 10.0))
         ep = r.episode
         force = np.linalg.norm(ep.wrench[:, :3], axis=1)
         return {"metrics": {"mean_wrench_stuck": float(r.mean_wrench_stuck), "tank_min": float(r.tank_min),
@@ -113,9 +115,12 @@ def run_one(spec: RunSpec) -> dict:
         r = scenarios.obstacle_corridor(c["variant"], seed, c["duration"])
         ep = r.episode
         hand = ep.scene.fk_many(ep.state[:, : ep.scene.nq], "grasp")[:, :3, 3]
+        # the scenario's obstacle sits half-way between the start and the target 0.5 m to the side
+        centre = hand[0] + 0.5 * np.array([-0.15, 0.5, 0.0])
         return {"metrics": {"cartesian_violation": float(r.cartesian_violation), "reached": float(r.reached),
                             "appeared_at": float("nan") if r.appeared_at is None else float(r.appeared_at)},
-                "series": {"hand_xy": _series(hand[:, 0], hand[:, 1]), "base_xy": _series(ep.state[:, 0], ep.state[:, 1])}}
+                "series": {"hand_xy": _series(hand[:, 0], hand[:, 1]), "base_xy": _series(ep.state[:, 0], ep.state[:, 1]),
+                           "obstacle": {"t": [float(centre[0])], "y": [float(centre[1])]}}}
     raise InvalidValueError(f"unknown experiment {spec.name!r}")
 
 
