@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet "maturin>=1.5,<2" "numpy>=1.24" "pytest>=7" "matplotlib>=3.7" "tqdm>=4.60" "mujoco>=3.1" "osqp>=0.6" \
-		"viser>=1.0" "trimesh>=4" "playwright>=1.40" "ray>=2.9"
+		"viser>=1.0" "trimesh>=4" "pycollada>=0.8" "example-robot-data>=4" "playwright>=1.40" "ray>=2.9"
 	touch $(STAMP)
 
 venv: $(STAMP)

@@ -9,6 +9,7 @@ Needs the ``viewer`` extra: ``pip install 'sabre-mpc[viewer]'``.
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 import xml.etree.ElementTree as ET
@@ -36,6 +37,28 @@ def _viser():
     except ImportError as err:
         raise MissingExtraError("the viewer needs viser and trimesh: pip install 'sabre-mpc[viewer]'") from err
     return viser, trimesh
+
+
+def panda_mesh_folder() -> Path | None:
+    """The Panda visual meshes (link0.dae … link7.dae) of the ``example-robot-data`` package, if installed."""
+    for entry in sys.path:
+        folder = Path(entry) / "cmeel.prefix/share/example-robot-data/robots/panda_description/meshes/visual"
+        if (folder / "link0.dae").is_file():
+            return folder
+    return None
+
+
+def _panda_meshes(trimesh, folder: Path, link: str) -> list:
+    """The coloured parts of one Panda link's visual mesh, in the link frame (the robot's arm links
+    follow the Franka description's frames, so the meshes need no offset)."""
+    scene = trimesh.load(folder / f"link{link.removeprefix('panda_link')}.dae", force="scene")
+    parts = []
+    for node in scene.graph.nodes_geometry:
+        transform, geometry = scene.graph[node]
+        mesh = scene.geometry[geometry].copy()
+        mesh.apply_transform(transform)
+        parts.append(mesh)
+    return parts
 
 
 def asset_path(kind: str, name: str) -> Path:
@@ -132,14 +155,17 @@ class Viewer:
     contact points with their forces, and the tank energy and phase in the side panel.
 
     Open ``http://<host>:<port>`` in a browser. :meth:`replay` adds a timeline; ``run_episode(...,
-    viewer=Viewer(scene))`` shows a run live.
+    viewer=Viewer(scene))`` shows a run live. ``panda_meshes``: draw the arm links panda_link0 …
+    panda_link7 with the Panda's visual meshes from ``example-robot-data`` when it is installed
+    (the URDF's primitives otherwise, and always for the base, hand and hook).
     """
 
-    def __init__(self, scene: Scene, *, host: str = "127.0.0.1", port: int = 8080) -> None:
+    def __init__(self, scene: Scene, *, host: str = "127.0.0.1", port: int = 8080, panda_meshes: bool = True) -> None:
         viser, trimesh = _viser()
         self.scene = scene
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.port = self.server.get_port()
+        self._meshes = panda_mesh_folder() if panda_meshes else None
         self._robot_links = self._add_links(trimesh, "robot", asset_path("robots", scene.robot_name), scene.frame_names)
         self._object_links = self._add_links(trimesh, "object", asset_path("objects", scene.object_name),
                                              scene.object_frame_names)
@@ -154,7 +180,16 @@ class Viewer:
     def _add_links(self, trimesh, prefix: str, urdf: Path, frames: tuple[str, ...]) -> dict[str, object]:
         handles = {}
         shapes = [s for s in urdf_visuals(urdf) if s.link in frames]
+        meshed = set()
+        if prefix == "robot" and self._meshes is not None:
+            meshed = {f"panda_link{i}" for i in range(8)} & set(frames)
+            for link in sorted(meshed):
+                handles[link] = self.server.scene.add_frame(f"/{prefix}/{link}", show_axes=False)
+                for j, part in enumerate(_panda_meshes(trimesh, self._meshes, link)):
+                    self.server.scene.add_mesh_trimesh(f"/{prefix}/{link}/mesh{j}", part)
         for i, shape in enumerate(shapes):
+            if shape.link in meshed:
+                continue
             if shape.link not in handles:
                 handles[shape.link] = self.server.scene.add_frame(f"/{prefix}/{shape.link}", show_axes=False)
             mesh = _mesh(trimesh, shape)
@@ -239,9 +274,10 @@ class Replay:
         self.playing = gui.add_checkbox("play", False)
         self.slider.on_update(lambda _event: self._show(self.slider.value))
         base = episode.state[:, :2]
-        target = 0.5 * (np.r_[base.mean(axis=0), 0.5] + scene.object_pose[:3, 3])
+        # nearer the object than the base: the door and the hand are what the viewer is for
+        target = 0.4 * np.r_[base.mean(axis=0), 0.6] + 0.6 * np.r_[scene.object_pose[:2, 3], 0.6]
         extent = np.linalg.norm(np.ptp(np.vstack([base, scene.object_pose[None, :2, 3]]), axis=0))
-        viewer.look_at(target, distance=max(2.8, 1.1 * extent))
+        viewer.look_at(target, distance=max(2.4, 1.1 * extent))
         self.seek(0.0)
 
     def index(self, t: float) -> int:
