@@ -168,3 +168,32 @@ def _pixels(png: bytes) -> np.ndarray:
 def _brown(pixels: np.ndarray) -> np.ndarray:
     r, g, b = pixels[..., 0], pixels[..., 1], pixels[..., 2]
     return (r - b > 30) & (r > g) & (g > b)
+
+
+def test_run_episode_with_a_live_viewer_leaves_it_showing_the_final_state():
+    pytest.importorskip("viser")
+    from sabre.viewer import Viewer
+
+    scene = sabre.Scene.load(obj="shelf")
+    viewer = Viewer(scene, port=0)
+    try:
+        controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=1, rollouts=8))
+        plant = sabre.Plant(scene)
+        episode = sabre.run_episode(scene, controller, 0.2, seed=1, x0=scene.default_state(), viewer=viewer,
+                                    plant=plant, progress=False)
+        final = plant.state
+        hand = viewer._robot_links["panda_link7"]
+        np.testing.assert_allclose(hand.position, scene.fk(final[: scene.nq], "panda_link7")[:3, 3], atol=1e-6)
+        assert viewer._time.value == pytest.approx(plant.time, abs=1e-3)
+        assert viewer._tank.value == pytest.approx(controller.tank.energy, abs=1e-3)
+        assert episode.plan_hand_path is not None and len(episode.plan_time) == 4
+    finally:
+        viewer.close()
+
+
+def test_view_command_is_registered():
+    from sabre.__main__ import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["view", "--help"])
+    assert exit_.value.code == 0
