@@ -31,7 +31,8 @@ def test_episode_save_load_round_trips_every_array_and_scalar(tmp_path):
     assert loaded.scene.object_name == "drawer" and loaded.scene.robot_name == episode.scene.robot_name
     np.testing.assert_array_equal(loaded.scene.object_pose, episode.scene.object_pose)
     for name in ("time", "state", "reference", "command", "wrench", "tau_ext", "contact", "cost", "phase",
-                 "tank_energy", "planning_times", "plan_time", "plan_hand_path", "contact_points", "contact_forces"):
+                 "tank_energy", "planning_times", "plan_time", "plan_hand_path", "contact_points", "contact_forces",
+                 "sample_hand_paths", "sample_weights"):
         np.testing.assert_array_equal(getattr(loaded, name), getattr(episode, name), err_msg=name)
     assert loaded.contact.dtype == bool
     assert (loaded.phases, loaded.success, loaded.time_to_success, loaded.variant) == (
@@ -47,6 +48,28 @@ def test_recorded_nominal_hand_path_starts_at_the_grasp_frame_of_the_plan_state(
     # the first plan starts from x0: its path's first point is the grasp frame there
     start = scene.fk(episode.state[0, : scene.nq] * 0 + scene.default_state()[: scene.nq], "grasp")[:3, 3]
     np.testing.assert_allclose(episode.plan_hand_path[0, 0], start, atol=1e-9)
+
+
+def test_recorded_samples_are_the_heaviest_rollouts_with_their_invariant_weights():
+    episode = short_episode()
+    p, s, k1, _ = episode.sample_hand_paths.shape
+    assert p == len(episode.plan_time) and s == 8 and k1 == episode.plan_hand_path.shape[1]
+    w = episode.sample_weights
+    # all 8 rollouts kept: their weights (55) sum to one, heaviest first
+    np.testing.assert_allclose(w.sum(axis=1), 1.0, rtol=1e-12)
+    assert (np.diff(w, axis=1) <= 0).all()
+    # every sampled rollout starts where the plan starts
+    np.testing.assert_allclose(episode.sample_hand_paths[:, :, 0], episode.plan_hand_path[:, None, 0].repeat(s, 1), atol=1e-9)
+
+
+def test_recording_plans_does_not_change_the_episode():
+    scene = sabre.Scene.load(obj="shelf")
+    runs = []
+    for record in (False, True):
+        controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=3, rollouts=8))
+        runs.append(sabre.run_episode(scene, controller, 0.3, seed=3, x0=scene.default_state(), record_plans=record,
+                                      progress=False))
+    np.testing.assert_array_equal(runs[0].state, runs[1].state)
 
 
 def test_pose_to_xyz_rpy_inverts_the_scene_object_placement():

@@ -137,6 +137,9 @@ class Controller:
         self.scene = scene
         self.task = task
         self.config = config or ControllerConfig()
+        #: keep the last iteration's rollouts: ``last_samples`` = (states (N, K+1, nx), costs (N,))
+        self.keep_samples = False
+        self.last_samples: tuple[np.ndarray, np.ndarray] | None = None
         c = self.config
         self.model = RolloutModel(scene, c.dt, servo_bandwidth=c.servo_bandwidth, contact_friction=c.contact_friction)
         self.phase = task.initial_phase()
@@ -239,7 +242,7 @@ class Controller:
                 raise ShapeError(f"task.guides: expected (M, {self.config.horizon_steps}, {self.scene.nu}), got {guides.shape}")
             self._planner.set_guides(np.ascontiguousarray(guides[: self.config.rollouts - 2]))
         guide_time = time.perf_counter() - start
-        if not self._cost.python_terms:
+        if not self._cost.python_terms and not self.keep_samples:
             stats = self._planner.iterate(x, t)
         else:
             inputs = self._planner.sample(t)
@@ -250,6 +253,8 @@ class Controller:
                 costs = costs + term.evaluate(self.scene, batch)
             stats = self._planner.update(costs)
             stats["iteration_time"] = time.perf_counter() - start
+            if self.keep_samples:
+                self.last_samples = (states, np.asarray(costs, dtype=np.float64))
         if self.outer_filter is not None:
             # Algorithm 1: filter the optimised sequence step by step along its rollout; the
             # filtered sequence is the reference and the next round's nominal.
@@ -303,7 +308,8 @@ class Episode:
     passivity row read; ``tau_ext`` is the contact torque of the step itself),
     filter_fallbacks: inner-loop steps where the FILTER-QP fell back to the safe stop.
     With ``run_episode(..., record_plans=True)``, one row per re-plan: plan_time (P,), plan_hand_path
-    (P, K + 1, 3) the grasp frame along the nominal plan's rollout, contact_points and contact_forces
+    (P, K + 1, 3) the grasp frame along the nominal plan's rollout, sample_hand_paths (P, S, K + 1, 3)
+    and sample_weights (P, S) along the S heaviest sampled rollouts, contact_points and contact_forces
     (P, C, 3) the plant's robot–object contacts after the plan's inner loop (NaN rows pad to C).
     """
 
@@ -329,6 +335,8 @@ class Episode:
     tau_ext_measured: np.ndarray | None = None
     plan_time: np.ndarray | None = None
     plan_hand_path: np.ndarray | None = None
+    sample_hand_paths: np.ndarray | None = None
+    sample_weights: np.ndarray | None = None
     contact_points: np.ndarray | None = None
     contact_forces: np.ndarray | None = None
 
@@ -415,7 +423,10 @@ class TraceChunks:
 
 
 class PlanRecorder:
-    """Per re-plan: the grasp frame along the nominal plan's rollout and the plant's contacts."""
+    """Per re-plan: the grasp frame along the nominal plan's rollout and along the ``SAMPLES``
+    heaviest sampled rollouts with their weights (55), and the plant's contacts."""
+
+    SAMPLES = 16
 
     def __init__(self, scene: Scene, controller: Controller) -> None:
         self.scene = scene
@@ -425,12 +436,24 @@ class PlanRecorder:
         self.paths: list[np.ndarray] = []
         self.points: list[np.ndarray] = []
         self.forces: list[np.ndarray] = []
+        self.sample_paths: list[np.ndarray] = []
+        self.sample_weights: list[np.ndarray] = []
+        controller.keep_samples = True
+
+    def close(self) -> None:
+        self.controller.keep_samples = False
 
     def append(self, t: float, x: np.ndarray, plant: Plant) -> None:
         nominal = np.ascontiguousarray(self.controller.nominal)[None]
         states = self.controller.model.rollout(x, nominal, threads=1).states[0]
         self.times.append(float(t))
         self.paths.append(self.scene.fk_many(states[:, : self.scene.nq], self.frame)[:, :3, 3])
+        if self.controller.last_samples is not None:
+            states, costs = self.controller.last_samples
+            weights = likelihood_weights(costs, "invariant", self.controller.config.h)
+            best = np.argsort(-weights)[: self.SAMPLES]
+            self.sample_paths.append(self.scene.fk_many(states[best, :, : self.scene.nq], self.frame)[..., :3, 3])
+            self.sample_weights.append(weights[best])
         contacts = plant.contacts()
         self.points.append(np.array([c.point for c in contacts]).reshape(-1, 3))
         self.forces.append(np.array([c.force for c in contacts]).reshape(-1, 3))
@@ -445,7 +468,10 @@ class PlanRecorder:
             return out
 
         paths = np.array(self.paths) if self.paths else np.zeros((0, 0, 3))
-        return {"plan_time": np.array(self.times), "plan_hand_path": paths,
+        out = {}
+        if self.sample_paths and len(self.sample_paths) == len(self.times):
+            out = {"sample_hand_paths": np.array(self.sample_paths), "sample_weights": np.array(self.sample_weights)}
+        return {**out, "plan_time": np.array(self.times), "plan_hand_path": paths,
                 "contact_points": padded(self.points), "contact_forces": padded(self.forces)}
 
 
@@ -545,6 +571,8 @@ def run_episode(
     finally:
         # a task's per-phase floor must not outlive the episode, even one that raised
         low_level.gain_inertia_floor = own_floor
+        if plans is not None:
+            plans.close()
         if bar is not None:
             bar.close()
     wall = time.perf_counter() - wall

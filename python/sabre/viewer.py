@@ -27,6 +27,8 @@ _ASSETS = Path(__file__).resolve().parents[2] / "assets"
 _DEFAULT_RGBA = (0.7, 0.7, 0.72, 1.0)
 _PATH_COLOR = (40, 180, 60)
 _CONTACT_COLOR = (230, 30, 30)
+_LIGHT = np.array([70.0, 110.0, 230.0])  # sampled rollout of negligible weight
+_HEAVY = np.array([255.0, 150.0, 0.0])  # the heaviest sampled rollout
 _FORCE_SCALE = 0.01  # m of arrow per N of contact force
 
 
@@ -219,10 +221,19 @@ class Viewer:
                     handles[name].wxyz = _wxyz(pose[:3, :3])
 
     def show_plan(self, hand_path: np.ndarray | None, points: np.ndarray | None = None,
-                  forces: np.ndarray | None = None) -> None:
-        """The nominal plan's hand path (K, 3) as a polyline, contact points (C, 3) and their forces
-        on the robot (C, 3, N) as arrows; NaN rows are ignored."""
+                  forces: np.ndarray | None = None, samples: np.ndarray | None = None,
+                  weights: np.ndarray | None = None) -> None:
+        """The nominal plan's hand path (K, 3) as a polyline, the sampled rollouts' hand paths
+        (S, K, 3) coloured by their weights (S,) from blue (light) to orange (heavy), contact points
+        (C, 3) and their forces on the robot (C, 3, N) as arrows; NaN rows are ignored."""
         scene = self.server.scene
+        if samples is not None and weights is not None and len(samples):
+            share = np.asarray(weights) / max(float(np.max(weights)), 1e-300)
+            colours = np.outer(1.0 - share, _LIGHT) + np.outer(share, _HEAVY)
+            segments = np.concatenate([np.stack([p[:-1], p[1:]], axis=1) for p in samples])
+            per_segment = np.repeat(colours, samples.shape[1] - 1, axis=0)
+            scene.add_line_segments("/plan/samples", segments, np.repeat(per_segment[:, None], 2, axis=1).astype(np.uint8),
+                                    thickness=0.004)
         if hand_path is not None and len(hand_path) > 1:
             segments = np.stack([hand_path[:-1], hand_path[1:]], axis=1)
             scene.add_line_segments("/plan/nominal", segments, _PATH_COLOR, thickness=0.012)
@@ -243,7 +254,9 @@ class Viewer:
     def show_live(self, x: np.ndarray, t: float, plans, controller) -> None:
         """Called by ``run_episode`` after every re-plan with its :class:`PlanRecorder`."""
         self.show_state(x)
-        self.show_plan(plans.paths[-1], plans.points[-1], plans.forces[-1])
+        samples = plans.sample_paths[-1] if plans.sample_paths else None
+        weights = plans.sample_weights[-1] if plans.sample_weights else None
+        self.show_plan(plans.paths[-1], plans.points[-1], plans.forces[-1], samples, weights)
         opening = self.scene.split_state(x)[2][0]
         self.show_panel(t, controller.phase, controller.tank.energy, opening)
 
@@ -294,7 +307,9 @@ class Replay:
         viewer._pose_links({n: p[i] for n, p in self._robot.items()}, {n: p[i] for n, p in self._object.items()})
         if ep.plan_time is not None and len(ep.plan_time):
             j = int(np.clip(np.searchsorted(ep.plan_time, ep.time[i], side="right") - 1, 0, len(ep.plan_time) - 1))
-            viewer.show_plan(ep.plan_hand_path[j], ep.contact_points[j], ep.contact_forces[j])
+            samples = None if ep.sample_hand_paths is None else ep.sample_hand_paths[j]
+            weights = None if ep.sample_weights is None else ep.sample_weights[j]
+            viewer.show_plan(ep.plan_hand_path[j], ep.contact_points[j], ep.contact_forces[j], samples, weights)
         tank = None if ep.tank_energy is None else ep.tank_energy[i]
         viewer.show_panel(ep.time[i], ep.phases[int(ep.phase[i])], tank, ep.opening[i])
 
