@@ -220,3 +220,27 @@ def test_view_command_is_registered():
     with pytest.raises(SystemExit) as exit_:
         main(["view", "--help"])
     assert exit_.value.code == 0
+
+
+def test_viewer_shows_the_filters_obstacles_and_the_constraints_near_their_bound():
+    pytest.importorskip("viser")
+    from sabre.viewer import Viewer
+
+    scene = sabre.Scene.load(obj="shelf")
+    controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=2, rollouts=8, variant="IO"))
+    controller.add_obstacle([0.2, -2.0, 0.5], 0.1)
+    viewer = Viewer(scene, port=0)
+    try:
+        x0 = sabre.paper_start_state(scene)  # elbow 0.12 rad from its limit
+        episode = sabre.run_episode(scene, controller, 0.1, seed=2, x0=x0, viewer=viewer, progress=False)
+        np.testing.assert_allclose(episode.obstacles[0, 0], [0.2, -2.0, 0.5, 0.1])
+        assert viewer._shown_obstacles == 1
+        h = sabre.SafetyFilter(scene).constraint_rows(x0)[2]
+        names = sabre.SafetyFilter(scene).row_names
+        expected = [n for n, v in zip(names, h) if np.isfinite(v) and v < 0.05]
+        assert expected, "the paper's start has rows near their bound"
+        timeline = viewer.load_episode(episode)
+        timeline.seek(0.0)
+        assert viewer._active.value.split(", ")[: len(expected[:6])] == expected[:6]
+    finally:
+        viewer.close()

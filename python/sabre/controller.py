@@ -309,7 +309,8 @@ class Episode:
     filter_fallbacks: inner-loop steps where the FILTER-QP fell back to the safe stop.
     With ``run_episode(..., record_plans=True)``, one row per re-plan: plan_time (P,), plan_hand_path
     (P, K + 1, 3) the grasp frame along the nominal plan's rollout, sample_hand_paths (P, S, K + 1, 3)
-    and sample_weights (P, S) along the S heaviest sampled rollouts, contact_points and contact_forces
+    and sample_weights (P, S) along the S heaviest sampled rollouts, obstacles (P, O, 4) the
+    filters' sphere obstacles (centre, radius; NaN rows pad to O), contact_points and contact_forces
     (P, C, 3) the plant's robot–object contacts after the plan's inner loop (NaN rows pad to C).
     """
 
@@ -337,6 +338,7 @@ class Episode:
     plan_hand_path: np.ndarray | None = None
     sample_hand_paths: np.ndarray | None = None
     sample_weights: np.ndarray | None = None
+    obstacles: np.ndarray | None = None
     contact_points: np.ndarray | None = None
     contact_forces: np.ndarray | None = None
 
@@ -436,6 +438,7 @@ class PlanRecorder:
         self.paths: list[np.ndarray] = []
         self.points: list[np.ndarray] = []
         self.forces: list[np.ndarray] = []
+        self.obstacles: list[np.ndarray] = []
         self.sample_paths: list[np.ndarray] = []
         self.sample_weights: list[np.ndarray] = []
         controller.keep_samples = True
@@ -454,6 +457,9 @@ class PlanRecorder:
             best = np.argsort(-weights)[: self.SAMPLES]
             self.sample_paths.append(self.scene.fk_many(states[best, :, : self.scene.nq], self.frame)[..., :3, 3])
             self.sample_weights.append(weights[best])
+        filters = self.controller.filters
+        spheres = filters[0].obstacles if filters else []
+        self.obstacles.append(np.array([[*o.center, o.radius] for o in spheres]).reshape(-1, 4))
         contacts = plant.contacts()
         self.points.append(np.array([c.point for c in contacts]).reshape(-1, 3))
         self.forces.append(np.array([c.force for c in contacts]).reshape(-1, 3))
@@ -461,8 +467,8 @@ class PlanRecorder:
     def arrays(self) -> dict[str, np.ndarray]:
         width = max([1] + [len(p) for p in self.points])
 
-        def padded(rows: list[np.ndarray]) -> np.ndarray:
-            out = np.full((len(rows), width, 3), np.nan)
+        def padded(rows: list[np.ndarray], width: int = width, columns: int = 3) -> np.ndarray:
+            out = np.full((len(rows), width, columns), np.nan)
             for i, r in enumerate(rows):
                 out[i, : len(r)] = r
             return out
@@ -471,6 +477,7 @@ class PlanRecorder:
         out = {}
         if self.sample_paths and len(self.sample_paths) == len(self.times):
             out = {"sample_hand_paths": np.array(self.sample_paths), "sample_weights": np.array(self.sample_weights)}
+        out["obstacles"] = padded(self.obstacles, max([1] + [len(o) for o in self.obstacles]), 4)
         return {**out, "plan_time": np.array(self.times), "plan_hand_path": paths,
                 "contact_points": padded(self.points), "contact_forces": padded(self.forces)}
 

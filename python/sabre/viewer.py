@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import MissingExtraError, UnknownAssetError
+from .safety import SafetyConfig, SafetyFilter
 from .scene import Scene
 
 __all__ = ["Viewer", "VisualShape", "urdf_visuals", "asset_path", "replay"]
@@ -177,6 +178,10 @@ class Viewer:
         self._phase = gui.add_text("phase", "", disabled=True)
         self._tank = gui.add_number("tank energy (J)", 0.0, step=0.001, disabled=True)
         self._opening = gui.add_number("opening", 0.0, step=0.0001, disabled=True)
+        self._active = gui.add_text("near constraints", "", disabled=True,
+                                    hint="safety rows within 5 cm (or 0.05 rad, m²) of their bound at this state")
+        self.safety: SafetyFilter | None = None
+        self._shown_obstacles = 0
         self._lock = threading.Lock()
 
     def _add_links(self, trimesh, prefix: str, urdf: Path, frames: tuple[str, ...]) -> dict[str, object]:
@@ -245,6 +250,30 @@ class Viewer:
                 tips = pts + _FORCE_SCALE * forces[keep]
                 scene.add_line_segments("/contact/forces", np.stack([pts, tips], axis=1), _CONTACT_COLOR, thickness=0.01)
 
+    def show_safety(self, x: np.ndarray, config: SafetyConfig | None = None,
+                    obstacles: np.ndarray | None = None) -> None:
+        """The base box of ``config`` (default: the paper's) on the ground, sphere obstacles (O, 4:
+        centre, radius; NaN rows ignored), and the names of the safety rows near their bound at x."""
+        if self.safety is None or config is not None:
+            self.safety = SafetyFilter(self.scene, config)
+            box = (config or SafetyConfig()).base_box
+            if box is not None:
+                x0, x1, y0, y1 = box
+                corners = np.array([[x0, y0, 0.01], [x1, y0, 0.01], [x1, y1, 0.01], [x0, y1, 0.01]])
+                self.server.scene.add_line_segments("/safety/base_box", np.stack([corners, np.roll(corners, -1, 0)], 1),
+                                                    (200, 120, 0), thickness=0.02)
+        h = np.asarray(self.safety.constraint_rows(x)[2])
+        near = [n for n, v in zip(self.safety.row_names, h) if np.isfinite(v) and v < 0.05]
+        self._active.value = ", ".join(near[:6]) + (f" (+{len(near) - 6})" if len(near) > 6 else "")
+        if obstacles is not None:
+            keep = [o for o in obstacles if np.isfinite(o).all()]
+            for i in range(self._shown_obstacles):
+                self.server.scene.remove_by_name(f"/safety/obstacle{i}")
+            for i, o in enumerate(keep):
+                self.server.scene.add_icosphere(f"/safety/obstacle{i}", radius=float(o[3]), color=(150, 150, 150),
+                                                opacity=0.5, position=o[:3])
+            self._shown_obstacles = len(keep)
+
     def show_panel(self, t: float, phase: str, tank: float | None, opening: float) -> None:
         self._time.value = round(float(t), 3)
         self._phase.value = phase
@@ -259,6 +288,8 @@ class Viewer:
         self.show_plan(plans.paths[-1], plans.points[-1], plans.forces[-1], samples, weights)
         opening = self.scene.split_state(x)[2][0]
         self.show_panel(t, controller.phase, controller.tank.energy, opening)
+        config = controller.config.safety_config if self.safety is None else None
+        self.show_safety(x, config, plans.obstacles[-1] if plans.obstacles else None)
 
     # -- replay ---------------------------------------------------------------------------------
     def load_episode(self, episode) -> "Replay":
@@ -310,6 +341,10 @@ class Replay:
             samples = None if ep.sample_hand_paths is None else ep.sample_hand_paths[j]
             weights = None if ep.sample_weights is None else ep.sample_weights[j]
             viewer.show_plan(ep.plan_hand_path[j], ep.contact_points[j], ep.contact_forces[j], samples, weights)
+        obstacles = None
+        if ep.obstacles is not None and ep.plan_time is not None and len(ep.plan_time):
+            obstacles = ep.obstacles[j]
+        viewer.show_safety(ep.state[i], obstacles=obstacles)
         tank = None if ep.tank_energy is None else ep.tank_energy[i]
         viewer.show_panel(ep.time[i], ep.phases[int(ep.phase[i])], tank, ep.opening[i])
 
