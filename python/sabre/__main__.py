@@ -123,6 +123,14 @@ def episode_command(obj: str, duration: float, start: str, seed: int, replan_rat
     if plot:
         plot_episode(episode, plot)
         print(f"  wrote {plot}")
+    if viewer is not None:
+        print("  run finished: replaying it in the viewer (Ctrl-C to stop)")
+        try:
+            viewer.load_episode(episode).play()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            viewer.close()
     return 0 if episode.success else 1
 
 
