@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.deps-stamp
 export VIRTUAL_ENV := $(CURDIR)/$(VENV)
 
-.PHONY: all venv build demo test test-rust test-python lint lint-rust lint-python bench bench-rust bench-python clean
+.PHONY: all venv build demo test test-setup test-rust test-python lint lint-rust lint-python bench bench-rust bench-python clean
 
 all: build
 
@@ -13,7 +13,8 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet "maturin>=1.5,<2" "numpy>=1.24" "pytest>=7" "matplotlib>=3.7" "tqdm>=4.60" "mujoco>=3.1" "osqp>=0.6" \
-		"ruff>=0.5" "mypy>=1.10"
+		"ruff>=0.5" "mypy>=1.10" \
+		"viser>=1.0" "trimesh>=4" "pycollada>=0.8" "example-robot-data>=4" "playwright>=1.40" "ray>=2.9"
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -28,7 +29,11 @@ demo: build
 test-rust:
 	cargo test --release
 
-test-python: build
+# The browser test drives Debian's chromium through Playwright (never `playwright install`).
+test-setup:
+	command -v chromium >/dev/null || (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium)
+
+test-python: build test-setup
 	$(PY) -m pytest -q tests
 
 test: test-rust test-python

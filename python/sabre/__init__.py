@@ -24,6 +24,7 @@ from .errors import (
     SabreError,
     ShapeError,
     SimulationError,
+    MissingExtraError,
     UnknownAssetError,
     UnknownFrameError,
     UrdfError,
@@ -89,4 +90,5 @@ __all__ = [
     "UrdfError",
     "UnknownFrameError",
     "SimulationError",
+    "MissingExtraError",
 ]

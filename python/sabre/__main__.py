@@ -32,6 +32,7 @@ from . import (
     tasks,
 )
 from .sim import MAX_THREADS
+from .commands import register as register_commands
 
 
 def scripted_demo(obj: str, threads: int | None) -> int:
@@ -82,7 +83,7 @@ def scripted_demo(obj: str, threads: int | None) -> int:
 
 
 def episode_command(obj: str, duration: float, start: str, seed: int, replan_rate: float, plot: str | None,
-                    variant: str = "N", threads: int | None = None) -> int:
+                    variant: str = "N", threads: int | None = None, view: bool = False) -> int:
     """Closed-loop opening with the sampling-based controller in the plant; 0 if it opened, else 1."""
     scene = Scene.load(obj=obj)
     task = tasks.OpenObject()
@@ -90,7 +91,14 @@ def episode_command(obj: str, duration: float, start: str, seed: int, replan_rat
     x0 = paper_start_state(scene) if start == "paper" else scene.default_state()
     print(f"[{obj}] variant {variant}, seed {seed}: up to {duration:.0f} s of simulated time from the "
           f"{'paper' if start == 'paper' else 'default'} start, re-planning at {replan_rate:.0f} Hz")
-    episode = run_episode(scene, controller, duration, seed=seed, x0=x0, replan_rate=replan_rate)
+    viewer = None
+    if view:
+        from .viewer import Viewer
+
+        viewer = Viewer(scene)
+        viewer.look_at(0.5 * (x0[:3] + scene.object_pose[:3, 3]), distance=6.0)
+        print(f"  viewer: http://127.0.0.1:{viewer.port}")
+    episode = run_episode(scene, controller, duration, seed=seed, x0=x0, replan_rate=replan_rate, viewer=viewer)
     when = "—" if episode.time_to_success is None else f"{episode.time_to_success:.1f} s"
     print(f"[{obj}] success: {episode.success}, final opening {episode.opening[-1]:.3f} "
           f"(target {task.target_opening(scene):.3f}, success at {task.open.success_fraction:.0%}), time to open: {when}")
@@ -104,6 +112,14 @@ def episode_command(obj: str, duration: float, start: str, seed: int, replan_rat
     if plot:
         plot_episode(episode, plot)
         print(f"  wrote {plot}")
+    if viewer is not None:
+        print("  run finished: replaying it in the viewer (Ctrl-C to stop)")
+        try:
+            viewer.load_episode(episode).play()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            viewer.close()
     return 0 if episode.success else 1
 
 
@@ -160,12 +176,13 @@ def _episode_options(parser: argparse.ArgumentParser, duration: float, replan_ra
 def main(argv: list[str] | None = None) -> int:
     """Parses ``argv`` (default: the command line) and runs the subcommand; returns the exit code."""
     parser = argparse.ArgumentParser(prog="python -m sabre", description=__doc__, formatter_class=_TopHelpFormatter)
-    sub = parser.add_subparsers(dest="command", required=True, metavar="{demo,episode,scripted}")
+    sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", formatter_class=_HelpFormatter,
                           help="open an articulated object from the paper's starting condition and plot it",
                           description="Closed-loop opening from the paper's start (base at (-3, -3), arm folded), "
                                       "with a figure. Exits 0 whether or not the object opened.")
     _episode_options(demo, duration=60.0, replan_rate=50.0, plot_help="(default: sabre_demo_<object>.png)")
+    demo.add_argument("--view", action="store_true", help="show the run in the browser viewer (needs the viewer extra)")
     ep = sub.add_parser("episode", formatter_class=_HelpFormatter,
                         help="closed-loop opening with the sampling-based controller",
                         description="Closed-loop opening in the 1 kHz plant. Exits 1 if the object did not open.")
@@ -180,10 +197,13 @@ def main(argv: list[str] | None = None) -> int:
     scripted.add_argument("--object", choices=OBJECTS, default="shelf", help="articulated object to open")
     scripted.add_argument("--threads", type=_threads, default=None, metavar="N",
                           help="worker threads of the throughput test (default: every available core)")
+    register_commands(sub)
     args = parser.parse_args(argv)
+    if hasattr(args, "run"):
+        return args.run(args)
     if args.command == "demo":
         plot = args.plot or f"sabre_demo_{args.object}.png"
-        episode_command(args.object, args.duration, "paper", args.seed, args.replan_rate, plot, args.variant, args.threads)
+        episode_command(args.object, args.duration, "paper", args.seed, args.replan_rate, plot, args.variant, args.threads, args.view)
         return 0
     if args.command == "scripted":
         return scripted_demo(args.object, args.threads)

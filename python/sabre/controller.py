@@ -220,6 +220,9 @@ class Controller:
         self.scene = scene
         self.task = task
         self.config = config or ControllerConfig()
+        #: keep the last iteration's rollouts: ``last_samples`` = (states (N, K+1, nx), costs (N,))
+        self.keep_samples = False
+        self.last_samples: tuple[np.ndarray, np.ndarray] | None = None
         c = self.config
         self.model = RolloutModel(scene, c.dt, servo_bandwidth=c.servo_bandwidth, contact_friction=c.contact_friction)
         self.phase = task.initial_phase()
@@ -335,7 +338,8 @@ class Controller:
                 raise ShapeError(f"task.guides: expected (M, {self.config.horizon_steps}, {self.scene.nu}), got {guides.shape}")
             self._planner.set_guides(np.ascontiguousarray(guides[: self.config.rollouts - 2]))
         guide_time = time.perf_counter() - start
-        if not self._cost.python_terms:
+        in_core = not self._cost.python_terms and not self.keep_samples
+        if in_core:
             stats = self._planner.iterate(x, t)
         else:
             inputs = self._planner.sample(t)
@@ -346,6 +350,8 @@ class Controller:
                 costs = costs + term.evaluate(self.scene, batch)
             stats = self._planner.update(costs)
             stats["iteration_time"] = time.perf_counter() - start
+            if self.keep_samples:
+                self.last_samples = (states, np.asarray(costs, dtype=np.float64))
         if self.outer_filter is not None:
             # Algorithm 1: filter the optimised sequence step by step along its rollout; the
             # filtered sequence is the reference and the next round's nominal.
@@ -356,7 +362,8 @@ class Controller:
             stats["sequential_fallbacks"] = seq.fallbacks
             stats["iteration_time"] += stats["sequential_time"]
         stats["guide_time"] = guide_time
-        stats["iteration_time"] += guide_time if not self._cost.python_terms else 0.0
+        # The core times its own iteration; the Python path above already counts the guides.
+        stats["iteration_time"] += guide_time if in_core else 0.0
         stats["phase"] = self.phase
         stats["noise_scale"] = scale
         self._stats = IterationStats(**stats)
@@ -396,6 +403,11 @@ class Episode:
     tank_floor: the tank's floor ε (J). target_opening, success_opening: the task's target opening
     and the opening that counts as success (rad or m), None for a task that is not an
     :class:`~sabre.tasks.OpenObject`.
+    With ``run_episode(..., record_plans=True)``, one row per re-plan: plan_time (P,), plan_hand_path
+    (P, K + 1, 3) the grasp frame along the nominal plan's rollout, sample_hand_paths (P, S, K + 1, 3)
+    and sample_weights (P, S) along the S heaviest sampled rollouts, obstacles (P, O, 4) the
+    filters' sphere obstacles (centre, radius; NaN rows pad to O), contact_points and contact_forces
+    (P, C, 3) the plant's robot–object contacts after the plan's inner loop (NaN rows pad to C).
     """
 
     scene: Scene
@@ -420,6 +432,26 @@ class Episode:
     tau_ext_measured: np.ndarray | None = None
     target_opening: float | None = None
     success_opening: float | None = None
+    plan_time: np.ndarray | None = None
+    plan_hand_path: np.ndarray | None = None
+    sample_hand_paths: np.ndarray | None = None
+    sample_weights: np.ndarray | None = None
+    obstacles: np.ndarray | None = None
+    contact_points: np.ndarray | None = None
+    contact_forces: np.ndarray | None = None
+
+    def save(self, path) -> None:
+        """Writes the episode to an ``.npz`` file that :meth:`load` reads back (built-in scenes only)."""
+        from .episode_io import save_episode
+
+        save_episode(self, path)
+
+    @classmethod
+    def load(cls, path) -> "Episode":
+        """Reads an episode written by :meth:`save`; the scene is rebuilt from its built-in assets."""
+        from .episode_io import load_episode
+
+        return load_episode(path)
 
     @property
     def opening(self) -> np.ndarray:
@@ -495,6 +527,64 @@ class TraceChunks:
         return {k: np.concatenate(v) if v else np.zeros(0) for k, v in self._parts.items()}
 
 
+class PlanRecorder:
+    """Per re-plan: the grasp frame along the nominal plan's rollout and along the ``SAMPLES``
+    heaviest sampled rollouts with their weights (55), and the plant's contacts."""
+
+    SAMPLES = 16
+
+    def __init__(self, scene: Scene, controller: Controller) -> None:
+        self.scene = scene
+        self.controller = controller
+        self.frame = "grasp" if "grasp" in scene.frame_names else scene.frame_names[-1]
+        self.times: list[float] = []
+        self.paths: list[np.ndarray] = []
+        self.points: list[np.ndarray] = []
+        self.forces: list[np.ndarray] = []
+        self.obstacles: list[np.ndarray] = []
+        self.sample_paths: list[np.ndarray] = []
+        self.sample_weights: list[np.ndarray] = []
+        controller.keep_samples = True
+
+    def close(self) -> None:
+        self.controller.keep_samples = False
+
+    def append(self, t: float, x: np.ndarray, plant: Plant) -> None:
+        nominal = np.ascontiguousarray(self.controller.nominal)[None]
+        states = self.controller.model.rollout(x, nominal, threads=1).states[0]
+        self.times.append(float(t))
+        self.paths.append(self.scene.fk_many(states[:, : self.scene.nq], self.frame)[:, :3, 3])
+        if self.controller.last_samples is not None:
+            states, costs = self.controller.last_samples
+            weights = likelihood_weights(costs, "invariant", self.controller.config.h)
+            best = np.argsort(-weights)[: self.SAMPLES]
+            self.sample_paths.append(self.scene.fk_many(states[best, :, : self.scene.nq], self.frame)[..., :3, 3])
+            self.sample_weights.append(weights[best])
+        filters = self.controller.filters
+        spheres = filters[0].obstacles if filters else []
+        self.obstacles.append(np.array([[*o.center, o.radius] for o in spheres]).reshape(-1, 4))
+        contacts = plant.contacts()
+        self.points.append(np.array([c.point for c in contacts]).reshape(-1, 3))
+        self.forces.append(np.array([c.force for c in contacts]).reshape(-1, 3))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        width = max([1] + [len(p) for p in self.points])
+
+        def padded(rows: list[np.ndarray], width: int = width, columns: int = 3) -> np.ndarray:
+            out = np.full((len(rows), width, columns), np.nan)
+            for i, r in enumerate(rows):
+                out[i, : len(r)] = r
+            return out
+
+        paths = np.array(self.paths) if self.paths else np.zeros((0, 0, 3))
+        out = {}
+        if self.sample_paths and len(self.sample_paths) == len(self.times):
+            out = {"sample_hand_paths": np.array(self.sample_paths), "sample_weights": np.array(self.sample_weights)}
+        out["obstacles"] = padded(self.obstacles, max([1] + [len(o) for o in self.obstacles]), 4)
+        return {**out, "plan_time": np.array(self.times), "plan_hand_path": paths,
+                "contact_points": padded(self.points), "contact_forces": padded(self.forces)}
+
+
 def paper_start_state(scene: Scene) -> np.ndarray:
     """The paper's starting condition: base at (−3, −3), arm folded near its joint limits and close
     to self-collision (shoulder back, elbow fully bent), everything at rest, object closed."""
@@ -524,12 +614,18 @@ def run_episode(
     plant: Plant | None = None,
     low_level: LowLevelController | None = None,
     on_replan: Callable[[float, np.ndarray, Plant, Controller], None] | None = None,
+    record_plans: bool = False,
+    viewer=None,
 ) -> Episode:
     """Runs the controller on the plant for ``duration`` seconds of simulated time; returns the traces.
 
     The controller re-plans every 1/``replan_rate`` s (Hz, default 20) of simulated time from the
     plant's state; in between, the inner loop (:meth:`LowLevelController.follow`) interpolates its
     reference, filters it (variants I, IO) and tracks it with the low-level controller (53).
+
+    ``record_plans`` records the nominal plan's hand path and the contacts at every re-plan (see
+    :class:`Episode`); a :class:`sabre.viewer.Viewer` passed as ``viewer`` shows the run live (and
+    implies the recording).
 
     Args:
         seed: the sampler's seed for this episode (default: the controller's configured seed).
@@ -568,6 +664,7 @@ def run_episode(
         except ImportError:
             bar = None
     chunks = TraceChunks("cost", "phase")
+    plans = PlanRecorder(scene, controller) if record_plans or viewer is not None else None
 
     planning_times = []
     success_time = None
@@ -587,6 +684,10 @@ def run_episode(
                 safety=controller.inner_filter, tank=controller.tank,
             )
             chunks.append(trace, cost=stats.nominal_cost, phase=controller.task.phases.index(controller.phase))
+            if plans is not None:
+                plans.append(t, x, plant)
+                if viewer is not None:
+                    viewer.show_live(plant.state, plant.time, plans, controller)
             if bar is not None:
                 bar.update(round(steps_per_plan * plant.dt, 3))
             if success_time is None and controller.task.success(scene, plant.state):
@@ -596,6 +697,8 @@ def run_episode(
     finally:
         # a task's per-phase floor must not outlive the episode, even one that raised
         low_level.gain_inertia_floor = own_floor
+        if plans is not None:
+            plans.close()
         if bar is not None:
             bar.close()
     wall = time.perf_counter() - wall
@@ -622,6 +725,7 @@ def run_episode(
         filter_fallbacks=0 if controller.inner_filter is None else int(controller.inner_filter.stats.fallbacks),
         tank_floor=controller.tank.floor,
         **_opening_targets(scene, controller.task),
+        **({} if plans is None else plans.arrays()),
     )
 
 

@@ -10,6 +10,7 @@ __all__ = [
     "UrdfError",
     "UnknownFrameError",
     "SimulationError",
+    "MissingExtraError",
 ]
 
 
@@ -42,3 +43,7 @@ class UnknownFrameError(SabreError, KeyError):
 
 class SimulationError(SabreError, RuntimeError):
     """The physics engine failed or produced non-finite numbers."""
+
+
+class MissingExtraError(SabreError, ImportError):
+    """An optional feature needs a pip extra that is not installed (the message names it)."""

@@ -1,0 +1,130 @@
+"""Figures (PNG, in the paper's form) and ``summary.md`` tables of the experiments' run records."""
+
+from __future__ import annotations
+
+import datetime
+import platform
+from collections import defaultdict
+
+import numpy as np
+
+from .errors import MissingExtraError
+
+#: the paper's reported numbers, next to which the summary puts sabre's
+PAPER = {
+    "fig11": "hardware stuck door: mean wrench 68 N without the tank (N) and 34 N with it (IO)",
+    "fig12": "α = 1 keeps the tank above its floor smoothly; α = 1000 chatters at the floor",
+    "fig8": "the safety-filtered variants (I, O, IO) have (near) zero cumulative violation; N does not",
+    "fig10": "the filtered controller keeps out of the suddenly appearing obstacle",
+    "fig3": "the invariant mapping (55) keeps the effective sample size independent of the cost scale",
+    "fig4": "the tank energy stays above the floor ε in the worst case",
+    "acceptance": "every object opens from the paper's start",
+}
+
+
+def _group(records: list[dict], key: str) -> dict:
+    groups = defaultdict(list)
+    for r in records:
+        groups[r["config"][key]].append(r)
+    return dict(groups)
+
+
+def _mean_std(runs: list[dict], series: str, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    ys = [np.interp(grid, r["series"][series]["t"], r["series"][series]["y"]) for r in runs]
+    return np.mean(ys, axis=0), np.std(ys, axis=0)
+
+
+def draw(name: str, records: list[dict], path) -> None:
+    """Writes the experiment's figure to ``path``."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError as err:
+        raise MissingExtraError("figures need matplotlib: pip install 'sabre-mpc[experiments]'") from err
+    fig, ax = plt.subplots(figsize=(6.4, 3.8))
+    if name == "fig3":
+        for i, (mapping, runs) in enumerate(_group(records, "mapping").items()):
+            for scale, scaled in _group(runs, "scale").items():
+                w = scaled[0]["series"]["weights"]
+                ess = np.mean([r["metrics"]["effective_samples"] for r in scaled])
+                ax.plot(w["t"], w["y"], color=f"C{i}", ls="-" if scale == 1.0 else "--", marker=".",
+                        label=f"{mapping}, costs ×{scale:g} (ESS {ess:.1f})")
+        ax.set(xlabel="rollout, by increasing cost", ylabel="normalised weight", yscale="symlog", title="Fig. 3: likelihood weight mappings")
+        ax.set_yscale("symlog", linthresh=1e-3)
+    elif name in ("fig4", "fig11", "fig12"):
+        key = {"fig4": "variant", "fig11": "variant", "fig12": "alpha"}[name]
+        series = "wrench" if name == "fig11" else "tank"
+        for value, runs in _group(records, key).items():
+            end = min(r["series"][series]["t"][-1] for r in runs)
+            start = max(r["series"][series]["t"][0] for r in runs)
+            grid = np.linspace(start, end, 300)
+            mean, std = _mean_std(runs, series, grid)
+            label = f"α = {value:g}" if key == "alpha" else str(value)
+            ax.plot(grid, mean, label=label)
+            ax.fill_between(grid, mean - std, mean + std, alpha=0.25)
+        if series == "tank":
+            ax.axhline(2.0, color="k", ls="--", lw=0.8, label="floor ε")
+        ax.axvline(0.0, color="grey", ls=":", lw=0.8)
+        ylabel = "wrist force |f| (N)" if series == "wrench" else "tank energy (J)"
+        title = {"fig4": "Fig. 4: tank energy, worst case", "fig11": "Fig. 11: wrench on the stuck door (mean ± std)",
+                 "fig12": "Fig. 12: tank energy for α = 1 and α = 1000"}[name]
+        ax.set(xlabel="time from the hold (s)", ylabel=ylabel, title=title)
+    elif name == "fig8":
+        groups = _group(records, "variant")
+        classes = sorted({k for r in records for k in r["metrics"] if k.startswith("violation_")})
+        width = 0.8 / max(1, len(groups))
+        for i, (variant, runs) in enumerate(groups.items()):
+            vals = np.array([[r["metrics"][c] for c in classes] for r in runs])
+            ax.bar(np.arange(len(classes)) + i * width, vals.mean(axis=0), width, yerr=vals.std(axis=0), label=variant)
+        ax.set_xticks(np.arange(len(classes)) + 0.4 - width / 2, [c.removeprefix("violation_") for c in classes],
+                      rotation=20, fontsize=8)
+        ax.set(ylabel="cumulative violation Δ_tot", title="Fig. 8: constraint violation per class")
+    elif name == "fig10":
+        for variant, runs in _group(records, "variant").items():
+            for j, r in enumerate(runs):
+                s = r["series"]["hand_xy"]
+                ax.plot(s["t"], s["y"], color=f"C{list(_group(records, 'variant')).index(variant)}",
+                        label=f"{variant} hand" if j == 0 else None)
+        obstacle = records[0]["series"]["obstacle"]
+        ax.add_patch(plt.Circle((obstacle["t"][0], obstacle["y"][0]), 0.08, color="grey", alpha=0.5, label="obstacle (r = 8 cm)"))
+        appeared = [r["metrics"]["appeared_at"] for r in records if np.isfinite(r["metrics"]["appeared_at"])]
+        note = f", appears at {np.mean(appeared):.1f} s" if appeared else ", never reached"
+        ax.set(xlabel="x (m)", ylabel="y (m)", title=f"Fig. 10: hand path with the sudden obstacle{note}", aspect="equal")
+    elif name == "acceptance":
+        groups = _group(records, "obj")
+        for i, (obj, runs) in enumerate(groups.items()):
+            for r in runs:
+                s = r["series"]["opening"]
+                ax.plot(s["t"], s["y"], color=f"C{i}", lw=1,
+                        label=f"{obj} ({np.mean([q['metrics']['success'] for q in runs]):.0%} success)" if r is runs[0] else None)
+        ax.set(xlabel="time (s)", ylabel="opening (rad or m)", title="Acceptance: opening from the paper's start (IO)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def summary(name: str, records: list[dict], *, seeds: int, short: bool) -> str:
+    """Markdown: the command, the machine and date, mean ± std of every metric per configuration,
+    and the paper's reported result."""
+    rows = defaultdict(lambda: defaultdict(list))
+    for r in records:
+        label = ", ".join(f"{k}={v}" for k, v in sorted(r["config"].items()))
+        for k, v in r["metrics"].items():
+            rows[label][k].append(v)
+    metrics = sorted({k for r in records for k in r["metrics"]})
+    lines = [f"# {name}", "",
+             f"`python -m sabre experiment {name} --seeds {seeds}{' --short' if short else ''}` on "
+             f"{datetime.date.today().isoformat()}, {platform.node()} ({platform.machine()}, {platform.python_version()})",
+             "", f"Paper: {PAPER[name]}.", "",
+             "| configuration | " + " | ".join(metrics) + " |", "|---" * (len(metrics) + 1) + "|"]
+    for label, values in rows.items():
+        cells = []
+        for m in metrics:
+            v = np.asarray(values.get(m, []), dtype=float)
+            v = v[np.isfinite(v)]
+            cells.append("—" if v.size == 0 else f"{v.mean():.3g} ± {v.std():.2g}")
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,214 @@
+"""The paper's experiments as one command: runs over seeds (local process pool or Ray), cached by a
+hash of (experiment, configuration, seed), with per-seed CSV, the figure as PNG and ``summary.md``.
+
+Every run is a pure function :func:`run_one` of (experiment, configuration, seed); its result is a
+JSON file ``results/<name>/runs/<hash>.json``, so an interrupted sweep resumes where it stopped.
+``short=True`` shortens every episode (smoke tests); short and full runs never share a cache entry.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InvalidValueError, MissingExtraError
+
+__all__ = ["NAMES", "RunSpec", "run_one", "run_experiments", "specs"]
+
+NAMES: tuple[str, ...] = ("fig3", "fig4", "fig8", "fig10", "fig11", "fig12", "acceptance")
+_SERIES_POINTS = 400
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run: experiment name, configuration (JSON-able dict, sorted keys) and seed."""
+
+    name: str
+    config: tuple
+    seed: int
+
+    @property
+    def options(self) -> dict:
+        return dict(self.config)
+
+    @property
+    def key(self) -> str:
+        text = json.dumps({"name": self.name, "config": self.options, "seed": self.seed}, sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _spec(name: str, seed: int, **config) -> RunSpec:
+    return RunSpec(name, tuple(sorted(config.items())), int(seed))
+
+
+def specs(name: str, seeds: int, short: bool) -> list[RunSpec]:
+    """Every run of one experiment."""
+    out: list[RunSpec] = []
+    for seed in range(seeds):
+        if name == "fig3":
+            out += [_spec(name, seed, mapping=m, parameter=p, scale=k) for m, p in
+                    (("naive", 0.2), ("baseline", 0.2), ("invariant", 10.0)) for k in (1.0, 1000.0)]
+        elif name == "fig4":
+            out.append(_spec(name, seed, variant="IO", driver="scripted", hold=3.0 if short else 5.0))
+        elif name == "fig8":
+            out += [_spec(name, seed, variant=v, duration=8.0 if short else 60.0) for v in ("N", "I", "O", "IO")]
+        elif name == "fig10":
+            out += [_spec(name, seed, variant=v, duration=4.0 if short else 6.0) for v in ("N", "IO")]
+        elif name == "fig11":
+            # short: the scripted pull with the tank starting near its floor, so that it binds within the hold
+            out += [_spec(name, seed, variant=v, driver="scripted" if short else "controller",
+                          hold=3.0 if short else 5.0, release=0.5 if short else 10.0,
+                          tank_initial=2.5 if short else 10.0) for v in ("N", "IO")]
+        elif name == "fig12":
+            out += [_spec(name, seed, alpha=a, driver="scripted" if short else "controller",
+                          hold=1.5 if short else 5.0, tank_initial=2.5) for a in (1.0, 1000.0)]
+        elif name == "acceptance":
+            out += [_spec(name, seed, obj=o, duration=8.0 if short else 60.0)
+                    for o in ("shelf", "microwave", "dishwasher", "drawer")]
+        else:
+            raise InvalidValueError(f"unknown experiment {name!r}; one of {NAMES}")
+    return out
+
+
+def _series(t: np.ndarray, y: np.ndarray) -> dict:
+    idx = np.linspace(0, len(t) - 1, min(len(t), _SERIES_POINTS)).round().astype(int) if len(t) else []
+    return {"t": np.asarray(t)[idx].tolist(), "y": np.asarray(y)[idx].tolist()}
+
+
+def run_one(spec: RunSpec) -> dict:
+    """Runs one experiment configuration at one seed; returns scalar ``metrics`` and plot ``series``."""
+    from . import scenarios
+    from .controller import likelihood_weights
+
+    c, seed = spec.options, spec.seed
+    if spec.name == "fig3":
+        # the same rollouts with costs scaled by `scale`: (55) gives the same weights, exp(−λJ) does not
+        costs = c["scale"] * np.sort(np.random.default_rng(seed).gamma(2.0, 5.0, size=64) + 10.0)
+        w = likelihood_weights(costs, c["mapping"], c["parameter"])
+        ess = float(1.0 / np.sum(w ** 2)) if w.sum() > 0 else 0.0
+        return {"metrics": {"effective_samples": ess, "max_weight": float(w.max())},
+                "series": {"weights": {"t": list(range(len(w))), "y": w.tolist()}}}
+    if spec.name in ("fig4", "fig11", "fig12"):
+        variant = c.get("variant", "IO")
+        r = scenarios.stuck_door(variant, seed, c["hold"], c.get("release", 0.5), alpha=c.get("alpha", 1.0),
+                                 driver=c["driver"], tank_initial=c.get("tank_initial", 10.0))
+        ep = r.episode
+        force = np.linalg.norm(ep.wrench[:, :3], axis=1)
+        return {"metrics": {"mean_wrench_stuck": float(r.mean_wrench_stuck), "tank_min": float(r.tank_min),
+                            "opening_after_release": float(r.opening_after_release),
+                            "power_sign_changes_per_s": float(r.power_sign_changes_per_s),
+                            "hold_start": float(r.hold_start)},
+                "series": {"tank": _series(ep.time - r.hold_start, ep.tank_energy),
+                           "wrench": _series(ep.time - r.hold_start, force)}}
+    if spec.name in ("fig8", "acceptance"):
+        r = scenarios.object_manipulation(c.get("variant", "IO"), c.get("obj", "shelf"), seed, c["duration"])
+        ep = r.episode
+        metrics = {"success": float(r.success), "final_opening": float(ep.opening[-1]),
+                   **{f"violation_{k}": float(v) for k, v in r.violations.items()}}
+        return {"metrics": metrics, "series": {"opening": _series(ep.time, ep.opening)}}
+    if spec.name == "fig10":
+        r = scenarios.obstacle_corridor(c["variant"], seed, c["duration"])
+        ep = r.episode
+        hand = ep.scene.fk_many(ep.state[:, : ep.scene.nq], "grasp")[:, :3, 3]
+        # the scenario's obstacle sits half-way between the start and the target 0.5 m to the side
+        centre = hand[0] + 0.5 * np.array([-0.15, 0.5, 0.0])
+        return {"metrics": {"cartesian_violation": float(r.cartesian_violation), "reached": float(r.reached),
+                            "appeared_at": float("nan") if r.appeared_at is None else float(r.appeared_at)},
+                "series": {"hand_xy": _series(hand[:, 0], hand[:, 1]), "base_xy": _series(ep.state[:, 0], ep.state[:, 1]),
+                           "obstacle": {"t": [float(centre[0])], "y": [float(centre[1])]}}}
+    raise InvalidValueError(f"unknown experiment {spec.name!r}")
+
+
+def _cached(spec: RunSpec, folder: Path) -> dict | None:
+    path = folder / "runs" / f"{spec.key}.json"
+    if path.is_file():
+        return json.loads(path.read_text())
+    return None
+
+
+def _store(spec: RunSpec, folder: Path, result: dict) -> dict:
+    record = {"name": spec.name, "config": spec.options, "seed": spec.seed, **result}
+    path = folder / "runs" / f"{spec.key}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(record))
+    os.replace(tmp, path)  # a run is either fully cached or not at all
+    return record
+
+
+def _execute(todo: list[RunSpec], folder: Path, workers: int | None, ray_address: str | None) -> list[dict]:
+    try:
+        from tqdm import tqdm
+    except ImportError as err:
+        raise MissingExtraError("experiments need tqdm: pip install 'sabre-mpc[experiments]'") from err
+    done = []
+    bar = tqdm(total=len(todo), desc=folder.name, unit="run")
+    if ray_address is not None:
+        try:
+            import ray
+        except ImportError as err:
+            raise MissingExtraError("--ray needs Ray: pip install 'sabre-mpc[experiments]'") from err
+        if not ray.is_initialized():
+            ray.init(address=ray_address, ignore_reinit_error=True, log_to_driver=False)
+        remote = ray.remote(run_one)
+        pending = {remote.remote(s): s for s in todo}
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1)
+            for ref in ready:
+                done.append(_store(pending.pop(ref), folder, ray.get(ref)))
+                bar.update(1)
+    elif workers == 1 or len(todo) <= 1:
+        for s in todo:
+            done.append(_store(s, folder, run_one(s)))
+            bar.update(1)
+    else:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = {pool.submit(run_one, s): s for s in todo}
+            for f in as_completed(futures):
+                done.append(_store(futures[f], folder, f.result()))
+                bar.update(1)
+    bar.close()
+    return done
+
+
+def run_experiments(name: str, *, seeds: int = 2, workers: int | None = None, ray_address: str | None = None,
+                    out: str | os.PathLike[str] = "results", short: bool = False) -> dict[str, list[dict]]:
+    """Runs ``name`` (one of :data:`NAMES` or "all") over ``seeds`` seeds, reusing cached runs, and
+    writes ``<out>/<name>/runs.csv``, ``<name>.png`` and ``summary.md``. Returns the run records."""
+    if int(seeds) < 1:
+        raise InvalidValueError(f"seeds must be at least 1, got {seeds}")
+    names = NAMES if name == "all" else (name,)
+    records = {}
+    for n in names:
+        folder = Path(out) / n
+        runs = specs(n, int(seeds), short)
+        cached = {s.key: _cached(s, folder) for s in runs}
+        todo = [s for s in runs if cached[s.key] is None]
+        fresh = {(r["seed"], json.dumps(r["config"], sort_keys=True)): r for r in _execute(todo, folder, workers, ray_address)}
+        ordered = [cached[s.key] or fresh[(s.seed, json.dumps(s.options, sort_keys=True))] for s in runs]
+        records[n] = ordered
+        _write_csv(folder / "runs.csv", ordered)
+        from .experiment_figures import draw, summary
+
+        draw(n, ordered, folder / f"{n}.png")
+        (folder / "summary.md").write_text(summary(n, ordered, seeds=int(seeds), short=short))
+    return records
+
+
+def _write_csv(path: Path, records: list[dict]) -> None:
+    config_keys = sorted({k for r in records for k in r["config"]})
+    metric_keys = sorted({k for r in records for k in r["metrics"]})
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["seed", *config_keys, *metric_keys])
+        for r in records:
+            writer.writerow([r["seed"], *(r["config"].get(k, "") for k in config_keys),
+                             *(r["metrics"].get(k, "") for k in metric_keys)])
