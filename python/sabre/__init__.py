@@ -21,10 +21,10 @@ from .controller import (
 )
 from .errors import (
     InvalidValueError,
+    MissingExtraError,
     SabreError,
     ShapeError,
     SimulationError,
-    MissingExtraError,
     UnknownAssetError,
     UnknownFrameError,
     UrdfError,

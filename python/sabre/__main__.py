@@ -31,8 +31,8 @@ from . import (
     run_episode,
     tasks,
 )
-from .sim import MAX_THREADS
 from .commands import register as register_commands
+from .sim import MAX_THREADS
 
 
 def scripted_demo(obj: str, threads: int | None) -> int:
@@ -203,7 +203,8 @@ def main(argv: list[str] | None = None) -> int:
         return args.run(args)
     if args.command == "demo":
         plot = args.plot or f"sabre_demo_{args.object}.png"
-        episode_command(args.object, args.duration, "paper", args.seed, args.replan_rate, plot, args.variant, args.threads, args.view)
+        episode_command(args.object, args.duration, "paper", args.seed, args.replan_rate, plot, args.variant, args.threads,
+                        args.view)
         return 0
     if args.command == "scripted":
         return scripted_demo(args.object, args.threads)

@@ -447,7 +447,7 @@ class Episode:
         save_episode(self, path)
 
     @classmethod
-    def load(cls, path) -> "Episode":
+    def load(cls, path) -> Episode:
         """Reads an episode written by :meth:`save`; the scene is rebuilt from its built-in assets."""
         from .episode_io import load_episode
 

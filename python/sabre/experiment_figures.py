@@ -51,7 +51,8 @@ def draw(name: str, records: list[dict], path) -> None:
                 ess = np.mean([r["metrics"]["effective_samples"] for r in scaled])
                 ax.plot(w["t"], w["y"], color=f"C{i}", ls="-" if scale == 1.0 else "--", marker=".",
                         label=f"{mapping}, costs ×{scale:g} (ESS {ess:.1f})")
-        ax.set(xlabel="rollout, by increasing cost", ylabel="normalised weight", yscale="symlog", title="Fig. 3: likelihood weight mappings")
+        ax.set(xlabel="rollout, by increasing cost", ylabel="normalised weight", yscale="symlog",
+               title="Fig. 3: likelihood weight mappings")
         ax.set_yscale("symlog", linthresh=1e-3)
     elif name in ("fig4", "fig11", "fig12"):
         key = {"fig4": "variant", "fig11": "variant", "fig12": "alpha"}[name]

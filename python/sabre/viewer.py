@@ -292,7 +292,7 @@ class Viewer:
         self.show_safety(x, config, plans.obstacles[-1] if plans.obstacles else None)
 
     # -- replay ---------------------------------------------------------------------------------
-    def load_episode(self, episode) -> "Replay":
+    def load_episode(self, episode) -> Replay:
         """Adds a timeline (slider and play checkbox) for ``episode`` and shows its first frame."""
         return Replay(self, episode)
 

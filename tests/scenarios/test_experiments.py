@@ -12,7 +12,7 @@ import pytest
 
 import sabre
 from sabre import experiments
-from sabre.experiments import NAMES, RunSpec, run_experiments, run_one, specs
+from sabre.experiments import NAMES, run_experiments, run_one, specs
 
 
 def test_run_key_is_a_function_of_experiment_config_and_seed():
