@@ -262,7 +262,7 @@ class Viewer:
                 corners = np.array([[x0, y0, 0.01], [x1, y0, 0.01], [x1, y1, 0.01], [x0, y1, 0.01]])
                 self.server.scene.add_line_segments("/safety/base_box", np.stack([corners, np.roll(corners, -1, 0)], 1),
                                                     (200, 120, 0), thickness=0.02)
-        h = np.asarray(self.safety.constraint_rows(x)[2])
+        h = np.asarray(self.safety.constraint_rows(x).h)
         near = [n for n, v in zip(self.safety.row_names, h) if np.isfinite(v) and v < 0.05]
         self._active.value = ", ".join(near[:6]) + (f" (+{len(near) - 6})" if len(near) > 6 else "")
         if obstacles is not None:

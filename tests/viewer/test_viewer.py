@@ -237,7 +237,7 @@ def test_viewer_shows_the_filters_obstacles_and_the_constraints_near_their_bound
         episode = sabre.run_episode(scene, controller, 0.1, seed=2, x0=x0, viewer=viewer, progress=False)
         np.testing.assert_allclose(episode.obstacles[0, 0], [0.2, -2.0, 0.5, 0.1])
         assert viewer._shown_obstacles == 1
-        h = sabre.SafetyFilter(scene).constraint_rows(x0)[2]
+        h = sabre.SafetyFilter(scene).constraint_rows(x0).h
         names = sabre.SafetyFilter(scene).row_names
         expected = [n for n, v in zip(names, h) if np.isfinite(v) and v < 0.05]
         assert expected, "the paper's start has rows near their bound"
