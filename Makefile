@@ -39,7 +39,7 @@ test-python: build test-setup
 test: test-rust test-python
 
 # `make -k lint` reports every tool's findings instead of stopping at the first.
-lint-rust:
+lint-rust: venv
 	cargo fmt --check
 	cargo clippy --all-targets -- -D warnings
 	cargo clippy --all-targets --features python -- -D warnings
