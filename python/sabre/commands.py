@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 
 
-def register(sub) -> None:
+def register(sub: argparse._SubParsersAction) -> None:
     """Adds the ``view`` and ``experiment`` subcommands to an argparse subparsers object; each sets
     ``run`` (args -> exit code)."""
     view = sub.add_parser("view", help="replay a recorded episode (.npz from Episode.save) in the browser viewer")

@@ -8,9 +8,11 @@ low-level controller (53), the outer loop re-plans at ``replan_rate`` in simulat
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,6 +25,9 @@ from .safety import CLASSES, EnergyTank, SafetyConfig, SafetyFilter
 from .scene import Scene
 from .sim import MAX_THREADS, Plant, RolloutModel
 from .tasks import OpenObject, Task
+
+if TYPE_CHECKING:
+    from .viewer import Viewer
 
 __all__ = [
     "ControllerConfig",
@@ -440,14 +445,14 @@ class Episode:
     contact_points: np.ndarray | None = None
     contact_forces: np.ndarray | None = None
 
-    def save(self, path) -> None:
+    def save(self, path: str | os.PathLike[str]) -> None:
         """Writes the episode to an ``.npz`` file that :meth:`load` reads back (built-in scenes only)."""
         from .episode_io import save_episode
 
         save_episode(self, path)
 
     @classmethod
-    def load(cls, path) -> Episode:
+    def load(cls, path: str | os.PathLike[str]) -> Episode:
         """Reads an episode written by :meth:`save`; the scene is rebuilt from its built-in assets."""
         from .episode_io import load_episode
 
@@ -615,7 +620,7 @@ def run_episode(
     low_level: LowLevelController | None = None,
     on_replan: Callable[[float, np.ndarray, Plant, Controller], None] | None = None,
     record_plans: bool = False,
-    viewer=None,
+    viewer: Viewer | None = None,
 ) -> Episode:
     """Runs the controller on the plant for ``duration`` seconds of simulated time; returns the traces.
 
@@ -703,6 +708,7 @@ def run_episode(
             bar.close()
     wall = time.perf_counter() - wall
     data = chunks.arrays()
+    targets = _opening_targets(scene, controller.task)
     return Episode(
         scene=scene,
         time=data["time"],
@@ -724,16 +730,18 @@ def run_episode(
         variant=controller.config.variant,
         filter_fallbacks=0 if controller.inner_filter is None else int(controller.inner_filter.stats.fallbacks),
         tank_floor=controller.tank.floor,
-        **_opening_targets(scene, controller.task),
+        target_opening=targets[0],
+        success_opening=targets[1],
         **({} if plans is None else plans.arrays()),
     )
 
 
-def _opening_targets(scene: Scene, task: Task) -> dict[str, float | None]:
+def _opening_targets(scene: Scene, task: Task) -> tuple[float | None, float | None]:
+    """(target opening, opening that counts as success) of an OpenObject task, else (None, None)."""
     if not isinstance(task, OpenObject):
-        return {"target_opening": None, "success_opening": None}
+        return None, None
     target = task.target_opening(scene)
-    return {"target_opening": target, "success_opening": task.open.success_fraction * target}
+    return target, task.open.success_fraction * target
 
 
 def likelihood_weights(costs: Sequence[float] | np.ndarray, mapping: str = "invariant", parameter: float = 10.0) -> np.ndarray:

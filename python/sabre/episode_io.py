@@ -5,16 +5,21 @@ from __future__ import annotations
 import json
 import os
 from dataclasses import fields
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import InvalidValueError, UnknownAssetError
 from .scene import OBJECTS, ROBOTS, Scene
 
+if TYPE_CHECKING:
+    from .controller import Episode
+
 __all__ = ["save_episode", "load_episode", "pose_to_xyz_rpy"]
 
 _FORMAT = "sabre-episode/1"
-_SCALARS = ("phases", "success", "time_to_success", "wall_time", "variant", "filter_fallbacks", "tank_floor")
+_SCALARS = ("phases", "success", "time_to_success", "wall_time", "variant", "filter_fallbacks", "tank_floor",
+            "target_opening", "success_opening")
 
 
 def pose_to_xyz_rpy(pose: np.ndarray) -> np.ndarray:
@@ -26,7 +31,7 @@ def pose_to_xyz_rpy(pose: np.ndarray) -> np.ndarray:
     return np.concatenate([np.asarray(pose, dtype=np.float64)[:3, 3], [roll, pitch, yaw]])
 
 
-def save_episode(episode, path: str | os.PathLike[str]) -> None:
+def save_episode(episode: Episode, path: str | os.PathLike[str]) -> None:
     """Writes ``episode`` to ``path`` (``.npz``); only scenes built by :meth:`Scene.load` can be saved."""
     scene = episode.scene
     if scene.robot_name not in ROBOTS or scene.object_name not in OBJECTS:
@@ -39,10 +44,11 @@ def save_episode(episode, path: str | os.PathLike[str]) -> None:
         header[name] = list(value) if isinstance(value, tuple) else value
     arrays = {f.name: np.asarray(getattr(episode, f.name)) for f in fields(episode)
               if f.name != "scene" and f.name not in _SCALARS and getattr(episode, f.name) is not None}
-    np.savez_compressed(path, header=np.array(json.dumps(header)), **arrays)
+    arrays["header"] = np.array(json.dumps(header))
+    np.savez_compressed(path, **arrays)  # type: ignore[arg-type]  # numpy's stub types **kwds as bool
 
 
-def load_episode(path: str | os.PathLike[str]):
+def load_episode(path: str | os.PathLike[str]) -> Episode:
     """Reads an episode written by :func:`save_episode`."""
     from .controller import Episode
 
@@ -54,6 +60,6 @@ def load_episode(path: str | os.PathLike[str]):
             raise InvalidValueError(f"{path}: unsupported episode format {header.get('format')!r}")
         arrays = {name: data[name] for name in data.files if name != "header"}
     scene = Scene.load(header["robot"], header["object"], obj_pose=header["object_pose"])
-    scalars = {name: header[name] for name in _SCALARS}
+    scalars = {name: header.get(name) for name in _SCALARS}
     scalars["phases"] = tuple(scalars["phases"])
     return Episode(scene=scene, **scalars, **arrays)

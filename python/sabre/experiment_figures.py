@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime
+import os
 import platform
 from collections import defaultdict
 
@@ -34,7 +35,7 @@ def _mean_std(runs: list[dict], series: str, grid: np.ndarray) -> tuple[np.ndarr
     return np.mean(ys, axis=0), np.std(ys, axis=0)
 
 
-def draw(name: str, records: list[dict], path) -> None:
+def draw(name: str, records: list[dict], path: str | os.PathLike[str]) -> None:
     """Writes the experiment's figure to ``path``."""
     try:
         import matplotlib
@@ -110,7 +111,7 @@ def draw(name: str, records: list[dict], path) -> None:
 def summary(name: str, records: list[dict], *, seeds: int, short: bool) -> str:
     """Markdown: the command, the machine and date, mean ± std of every metric per configuration,
     and the paper's reported result."""
-    rows = defaultdict(lambda: defaultdict(list))
+    rows: defaultdict[str, defaultdict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
     for r in records:
         label = ", ".join(f"{k}={v}" for k, v in sorted(r["config"].items()))
         for k, v in r["metrics"].items():

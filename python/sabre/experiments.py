@@ -44,7 +44,7 @@ class RunSpec:
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def _spec(name: str, seed: int, **config) -> RunSpec:
+def _spec(name: str, seed: int, **config: object) -> RunSpec:
     return RunSpec(name, tuple(sorted(config.items())), int(seed))
 
 
@@ -97,30 +97,31 @@ def run_one(spec: RunSpec) -> dict:
                 "series": {"weights": {"t": list(range(len(w))), "y": w.tolist()}}}
     if spec.name in ("fig4", "fig11", "fig12"):
         variant = c.get("variant", "IO")
-        r = scenarios.stuck_door(variant, seed, c["hold"], c.get("release", 0.5), alpha=c.get("alpha", 1.0),
-                                 driver=c["driver"], tank_initial=c.get("tank_initial", 10.0))
-        ep = r.episode
+        door = scenarios.stuck_door(variant, seed, c["hold"], c.get("release", 0.5), alpha=c.get("alpha", 1.0),
+                                    driver=c["driver"], tank_initial=c.get("tank_initial", 10.0))
+        ep = door.episode
         force = np.linalg.norm(ep.wrench[:, :3], axis=1)
-        return {"metrics": {"mean_wrench_stuck": float(r.mean_wrench_stuck), "tank_min": float(r.tank_min),
-                            "opening_after_release": float(r.opening_after_release),
-                            "power_sign_changes_per_s": float(r.power_sign_changes_per_s),
-                            "hold_start": float(r.hold_start)},
-                "series": {"tank": _series(ep.time - r.hold_start, ep.tank_energy),
-                           "wrench": _series(ep.time - r.hold_start, force)}}
+        return {"metrics": {"mean_wrench_stuck": float(door.mean_wrench_stuck), "tank_min": float(door.tank_min),
+                            "opening_after_release": float(door.opening_after_release),
+                            "power_sign_changes_per_s": float(door.power_sign_changes_per_s),
+                            "hold_start": float(door.hold_start)},
+                "series": {"tank": _series(ep.time - door.hold_start, door.tank_energy),
+                           "wrench": _series(ep.time - door.hold_start, force)}}
     if spec.name in ("fig8", "acceptance"):
-        r = scenarios.object_manipulation(c.get("variant", "IO"), c.get("obj", "shelf"), seed, c["duration"])
-        ep = r.episode
-        metrics = {"success": float(r.success), "final_opening": float(ep.opening[-1]),
-                   **{f"violation_{k}": float(v) for k, v in r.violations.items()}}
+        manipulation = scenarios.object_manipulation(c.get("variant", "IO"), c.get("obj", "shelf"), seed, c["duration"])
+        ep = manipulation.episode
+        metrics = {"success": float(manipulation.success), "final_opening": float(ep.opening[-1]),
+                   **{f"violation_{k}": float(v) for k, v in manipulation.violations.items()}}
         return {"metrics": metrics, "series": {"opening": _series(ep.time, ep.opening)}}
     if spec.name == "fig10":
-        r = scenarios.obstacle_corridor(c["variant"], seed, c["duration"])
-        ep = r.episode
+        corridor = scenarios.obstacle_corridor(c["variant"], seed, c["duration"])
+        ep = corridor.episode
         hand = ep.scene.fk_many(ep.state[:, : ep.scene.nq], "grasp")[:, :3, 3]
         # the scenario's obstacle sits half-way between the start and the target 0.5 m to the side
         centre = hand[0] + 0.5 * np.array([-0.15, 0.5, 0.0])
-        return {"metrics": {"cartesian_violation": float(r.cartesian_violation), "reached": float(r.reached),
-                            "appeared_at": float("nan") if r.appeared_at is None else float(r.appeared_at)},
+        appeared = corridor.appeared_at
+        return {"metrics": {"cartesian_violation": float(corridor.cartesian_violation), "reached": float(corridor.reached),
+                            "appeared_at": float("nan") if appeared is None else float(appeared)},
                 "series": {"hand_xy": _series(hand[:, 0], hand[:, 1]), "base_xy": _series(ep.state[:, 0], ep.state[:, 1]),
                            "obstacle": {"t": [float(centre[0])], "y": [float(centre[1])]}}}
     raise InvalidValueError(f"unknown experiment {spec.name!r}")

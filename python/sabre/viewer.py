@@ -9,18 +9,23 @@ Needs the ``viewer`` extra: ``pip install 'sabre-mpc[viewer]'``.
 
 from __future__ import annotations
 
+import os
 import sys
 import threading
 import time
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .errors import MissingExtraError, UnknownAssetError
+from .errors import MissingExtraError, UnknownAssetError, UrdfError
 from .safety import SafetyConfig, SafetyFilter
 from .scene import Scene
+
+if TYPE_CHECKING:
+    from .controller import Controller, Episode, PlanRecorder
 
 __all__ = ["Viewer", "VisualShape", "urdf_visuals", "asset_path", "replay"]
 
@@ -51,7 +56,7 @@ def panda_mesh_folder() -> Path | None:
     return None
 
 
-def _panda_meshes(trimesh, folder: Path, link: str) -> list:
+def _panda_meshes(trimesh: Any, folder: Path, link: str) -> list:
     """The coloured parts of one Panda link's visual mesh, in the link frame (the robot's arm links
     follow the Franka description's frames, so the meshes need no offset)."""
     scene = trimesh.load(folder / f"link{link.removeprefix('panda_link')}.dae", force="scene")
@@ -85,7 +90,15 @@ class VisualShape:
     rgba: tuple[float, float, float, float]
 
 
-def _origin(element) -> np.ndarray:
+def _attribute(element: ET.Element, name: str) -> str:
+    """An attribute the URDF must have; a missing one is a :class:`UrdfError` naming the element."""
+    value = element.get(name)
+    if value is None:
+        raise UrdfError(f"<{element.tag}> needs the attribute '{name}'")
+    return value
+
+
+def _origin(element: ET.Element | None) -> np.ndarray:
     pose = np.eye(4)
     if element is None:
         return pose
@@ -110,12 +123,13 @@ def urdf_visuals(path: str | Path) -> list[VisualShape]:
             if geometry is None or len(geometry) == 0:
                 continue
             g = geometry[0]
+            size: tuple[float, ...]
             if g.tag == "box":
-                size = tuple(float(v) for v in g.get("size").split())
+                size = tuple(float(v) for v in _attribute(g, "size").split())
             elif g.tag in ("cylinder", "capsule"):
-                size = (float(g.get("radius")), float(g.get("length")))
+                size = (float(_attribute(g, "radius")), float(_attribute(g, "length")))
             elif g.tag == "sphere":
-                size = (float(g.get("radius")),)
+                size = (float(_attribute(g, "radius")),)
             else:
                 continue
             rgba = _DEFAULT_RGBA
@@ -124,12 +138,13 @@ def urdf_visuals(path: str | Path) -> list[VisualShape]:
                 color = material.find("color")
                 color = color if color is not None else named.get(material.get("name"))
                 if color is not None:
-                    rgba = tuple(float(v) for v in color.get("rgba").split())
-            shapes.append(VisualShape(link.get("name"), g.tag, size, _origin(visual.find("origin")), rgba))
+                    r, g_, b, a = (float(v) for v in _attribute(color, "rgba").split())
+                    rgba = (r, g_, b, a)
+            shapes.append(VisualShape(_attribute(link, "name"), g.tag, size, _origin(visual.find("origin")), rgba))
     return shapes
 
 
-def _mesh(trimesh, shape: VisualShape):
+def _mesh(trimesh: Any, shape: VisualShape) -> Any:
     if shape.kind == "box":
         mesh = trimesh.creation.box(extents=shape.size)
     elif shape.kind == "cylinder":
@@ -184,7 +199,7 @@ class Viewer:
         self._shown_obstacles = 0
         self._lock = threading.Lock()
 
-    def _add_links(self, trimesh, prefix: str, urdf: Path, frames: tuple[str, ...]) -> dict[str, object]:
+    def _add_links(self, trimesh: Any, prefix: str, urdf: Path, frames: tuple[str, ...]) -> dict[str, Any]:
         handles = {}
         shapes = [s for s in urdf_visuals(urdf) if s.link in frames]
         meshed = set()
@@ -280,7 +295,7 @@ class Viewer:
         self._tank.value = round(float(tank), 3) if tank is not None else 0.0
         self._opening.value = round(float(opening), 4)
 
-    def show_live(self, x: np.ndarray, t: float, plans, controller) -> None:
+    def show_live(self, x: np.ndarray, t: float, plans: PlanRecorder, controller: Controller) -> None:
         """Called by ``run_episode`` after every re-plan with its :class:`PlanRecorder`."""
         self.show_state(x)
         samples = plans.sample_paths[-1] if plans.sample_paths else None
@@ -292,7 +307,7 @@ class Viewer:
         self.show_safety(x, config, plans.obstacles[-1] if plans.obstacles else None)
 
     # -- replay ---------------------------------------------------------------------------------
-    def load_episode(self, episode) -> Replay:
+    def load_episode(self, episode: Episode) -> Replay:
         """Adds a timeline (slider and play checkbox) for ``episode`` and shows its first frame."""
         return Replay(self, episode)
 
@@ -303,7 +318,7 @@ class Viewer:
 class Replay:
     """The timeline of one episode in a :class:`Viewer`; :meth:`seek` shows the frame at a time."""
 
-    def __init__(self, viewer: Viewer, episode) -> None:
+    def __init__(self, viewer: Viewer, episode: Episode) -> None:
         self.viewer = viewer
         self.episode = episode
         scene = viewer.scene
@@ -336,13 +351,17 @@ class Replay:
         ep, viewer = self.episode, self.viewer
         i = self.index(t)
         viewer._pose_links({n: p[i] for n, p in self._robot.items()}, {n: p[i] for n, p in self._object.items()})
-        if ep.plan_time is not None and len(ep.plan_time):
+        recorded = ep.plan_time is not None and len(ep.plan_time) > 0
+        j = 0
+        if ep.plan_time is not None and recorded:
             j = int(np.clip(np.searchsorted(ep.plan_time, ep.time[i], side="right") - 1, 0, len(ep.plan_time) - 1))
+        if recorded and ep.plan_hand_path is not None:
+            assert ep.contact_points is not None and ep.contact_forces is not None  # recorded with the plans
             samples = None if ep.sample_hand_paths is None else ep.sample_hand_paths[j]
             weights = None if ep.sample_weights is None else ep.sample_weights[j]
             viewer.show_plan(ep.plan_hand_path[j], ep.contact_points[j], ep.contact_forces[j], samples, weights)
         obstacles = None
-        if ep.obstacles is not None and ep.plan_time is not None and len(ep.plan_time):
+        if ep.obstacles is not None and recorded:
             obstacles = ep.obstacles[j]
         viewer.show_safety(ep.state[i], obstacles=obstacles)
         tank = None if ep.tank_energy is None else ep.tank_energy[i]
@@ -358,7 +377,7 @@ class Replay:
                 self.seek(t if t <= duration else 0.0)
 
 
-def replay(episode, *, host: str = "127.0.0.1", port: int = 8080, speed: float = 1.0) -> None:
+def replay(episode: Episode | str | os.PathLike[str], *, host: str = "127.0.0.1", port: int = 8080, speed: float = 1.0) -> None:
     """Serves ``episode`` (an Episode or an ``.npz`` path) with a timeline until interrupted."""
     from .controller import Episode
 
