@@ -138,7 +138,12 @@ def main(argv: list[str] | None = None) -> int:
     ep.add_argument("--replan-rate", type=float, default=100.0)
     ep.add_argument("--plot", default=None, help="write a PNG of opening, wrench and base path")
     ep.add_argument("--variant", choices=VARIANTS, default="N")
+    from .ros.cli import add_commands as add_ros_commands
+
+    add_ros_commands(sub)
     args = parser.parse_args(argv)
+    if hasattr(args, "handler"):
+        return args.handler(args)
     if args.command == "demo":
         plot = args.plot or f"sabre_demo_{args.object}.png"
         episode_command(args.object, 60.0, "paper", args.seed, 50.0, plot, args.variant, args.threads)
