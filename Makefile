@@ -13,6 +13,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet "maturin>=1.5,<2" "numpy>=1.24" "pytest>=7" "matplotlib>=3.7" "tqdm>=4.60" "mujoco>=3.1" "osqp>=0.6"
+	$(PY) -m pip install --quiet "ros-rclpy>=9.1" "ros-rmw-fastrtps-cpp>=9.3" "ros-sensor-msgs>=5.5" "ros-geometry-msgs>=5.5" "ros-std-msgs>=5.5" "ros-diagnostic-msgs>=5.5" "ros-rosgraph-msgs>=2.3"
 	touch $(STAMP)
 
 venv: $(STAMP)

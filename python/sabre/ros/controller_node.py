@@ -96,6 +96,7 @@ class ControllerNode:
         self.stats: dict[str, Any] = {"ticks": 0, "rejected": 0, "zero_commands": 0, "stale_events": 0, "plan_stale": 0,
                                       "wrench_stale": 0, "stale_zero_age": [], "compute": []}
         self._running = True
+        self._planner_started: float | None = None
 
         self._JointState = JointState
         self._Float64MultiArray = Float64MultiArray
@@ -199,6 +200,7 @@ class ControllerNode:
                 return
             self.node.get_logger().info("first state received: planning")
             self.cascade.start(x, t)
+            self._planner_started = time.monotonic()
             self._last_t = t
             self._last_recv = received
             self.publish_zero(msg.header.stamp)
@@ -264,19 +266,24 @@ class ControllerNode:
             age = time.monotonic() - self._last_recv
             if self.cascade.ticks and not self._stale and age > self.state_timeout:
                 with self._lock:
-                    if time.monotonic() - self._last_recv > self.state_timeout:
+                    age = time.monotonic() - self._last_recv
+                    if age > self.state_timeout:
+                        self.stats["stale_events"] += 1
+                        self.stats["stale_zero_age"].append(age)
+                        self._publish_command(np.zeros(self.scene.nu), 0.0, self.node.get_clock().now().to_msg())
+                        self.stats["zero_commands"] += 1
                         self._stale = True
-                        self._fresh.clear()
-                self.stats["stale_events"] += 1
-                self.stats["stale_zero_age"].append(time.monotonic() - self._last_recv)
-                self.node.get_logger().warn(f"state older than {self.state_timeout} s: zero command")
-                self.publish_zero()
+                if self._stale:
+                    self.node.get_logger().warn(f"state older than {self.state_timeout} s: zero command")
             wait = self.state_timeout - age if not self._stale else period * 10
             time.sleep(min(max(wait, period), 0.05))
 
     def _planner_rate(self) -> float:
-        t = self._last_t or 0.0
-        return self.cascade.iterations / t if t > 0 else 0.0
+        """Planning iterations per second of wall time since the planner started."""
+        if self._planner_started is None:
+            return 0.0
+        elapsed = time.monotonic() - self._planner_started
+        return self.cascade.iterations / elapsed if elapsed > 0 else 0.0
 
     def summary(self) -> dict[str, Any]:
         compute = self.stats["compute"]
@@ -305,6 +312,7 @@ class ControllerNode:
             "iteration_time": f"{stats.get('iteration_time', math.nan):.5f}",
             "planner_rate": f"{s['planner_rate_hz']:.2f}", "ticks": str(s["ticks"]), "rejected": str(s["rejected"]),
             "stale_events": str(s["stale_events"]), "state_stale": str(self._stale).lower(),
+            "stale_zero_age_ms": json.dumps(s["stale_zero_age_ms"]),
             "estimator_hooked": "n/a" if self.estimator is None else str(self.estimator.hooked).lower(),
         }
         status = DiagnosticStatus(name="sabre/controller", hardware_id=self.scene.robot_name,
