@@ -198,9 +198,14 @@ def main(argv: list[str] | None = None) -> int:
     scripted.add_argument("--threads", type=_threads, default=None, metavar="N",
                           help="worker threads of the throughput test (default: every available core)")
     register_commands(sub)
+    from .ros.cli import add_commands as add_ros_commands
+
+    add_ros_commands(sub)
     args = parser.parse_args(argv)
     if hasattr(args, "run"):
         return args.run(args)
+    if hasattr(args, "handler"):
+        return args.handler(args)
     if args.command == "demo":
         plot = args.plot or f"sabre_demo_{args.object}.png"
         episode_command(args.object, args.duration, "paper", args.seed, args.replan_rate, plot, args.variant, args.threads,

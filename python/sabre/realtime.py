@@ -134,9 +134,19 @@ class RealtimeCascade:
         a = s - i
         return (1.0 - a) * nominal[i] + a * nominal[j]
 
-    def tick(self, x: Sequence[float] | np.ndarray, tau_ext: Sequence[float] | np.ndarray, t: float) -> TickResult:
+    @property
+    def plan_start(self) -> float | None:
+        """Time (s) of the first step of the plan the inner loop reads (None before start)."""
+        with self._lock:
+            plan = self._plan
+        return None if plan is None else plan[1]
+
+    def tick(self, x: Sequence[float] | np.ndarray, tau_ext: Sequence[float] | np.ndarray, t: float,
+             dt: float | None = None) -> TickResult:
         """One inner-loop step from the measured state x (nx,) and external torques τ_ext (nq,)
         at time t: reference → FILTER-QP with the tank (variants I, IO) → tank → low-level torque.
+        The tank integrates over ``dt`` (s): the measured time since the previous state, e.g.
+        the difference of two message stamps (default: ``inner_dt``).
         The tank integrates this τ_ext against the returned command, the same pair the passivity
         row constrained, so the floor holds step by step. τ_ext should be a band-limited estimate
         (a momentum observer, a filtered wrist sensor; in simulation :attr:`Plant.measured_tau_ext`):
@@ -158,7 +168,8 @@ class RealtimeCascade:
         if f is not None:
             r = f.filter(x, u_ref, tau_ext, tank.energy)
             u, status = np.asarray(r.u), r.status
-        energy = tank.step(tau_ext, u, self.inner_dt)
+        step = self.inner_dt if dt is None else as_positive("dt", dt)
+        energy = tank.step(tau_ext, u, step)
         torque = None
         if self.low_level is not None:
             with self._lock:

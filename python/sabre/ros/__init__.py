@@ -1,0 +1,41 @@
+"""The ROS 2 hardware bridge: a controller node around :class:`sabre.RealtimeCascade`, a simulated
+robot node around the 1 kHz :class:`sabre.Plant`, the object-state estimator and the launcher of
+both (``python -m sabre control | sim-robot | ros-demo``); see docs/ros2.md.
+
+Needs the optional extra ``sabre-mpc[ros]`` (ROS 2 from pip wheels, no system ROS). ``import
+sabre`` works without it; the node modules raise :class:`sabre.SabreError` naming the extra. The
+estimator and the message conversions are plain NumPy and import without ROS.
+"""
+
+from __future__ import annotations
+
+import os
+
+from ..errors import SabreError
+
+__all__ = ["RosUnavailableError", "require_ros", "ROS_EXTRA"]
+
+ROS_EXTRA = "sabre-mpc[ros]"
+
+
+class RosUnavailableError(SabreError, ImportError):
+    """The ROS 2 Python packages (rclpy and the message packages) are not installed."""
+
+
+def require_ros():
+    """Imports and returns ``rclpy`` after choosing the DDS implementation the extra installs
+    (Fast DDS, unless ``RMW_IMPLEMENTATION`` is already set); raises :class:`RosUnavailableError`
+    naming the extra when the wheels are missing."""
+    os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+    try:
+        import rclpy  # noqa: F401
+        import diagnostic_msgs.msg  # noqa: F401
+        import geometry_msgs.msg  # noqa: F401
+        import rosgraph_msgs.msg  # noqa: F401
+        import sensor_msgs.msg  # noqa: F401
+        import std_msgs.msg  # noqa: F401
+    except ImportError as exc:
+        raise RosUnavailableError(
+            f"the ROS 2 bridge needs the optional extra: pip install '{ROS_EXTRA}' "
+            f"(ROS 2 from pip wheels; missing: {exc.name or exc})") from exc
+    return rclpy
