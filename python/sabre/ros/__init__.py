@@ -28,9 +28,9 @@ def require_ros():
     naming the extra when the wheels are missing."""
     os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
     try:
-        import rclpy  # noqa: F401
         import diagnostic_msgs.msg  # noqa: F401
         import geometry_msgs.msg  # noqa: F401
+        import rclpy
         import rosgraph_msgs.msg  # noqa: F401
         import sensor_msgs.msg  # noqa: F401
         import std_msgs.msg  # noqa: F401

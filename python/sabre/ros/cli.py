@@ -41,7 +41,7 @@ def _ros_demo(args: argparse.Namespace) -> int:
     return 0 if run.sim.get("success") else 1
 
 
-def add_commands(subparsers) -> None:
+def add_commands(subparsers: argparse._SubParsersAction) -> None:
     """Registers ``control``, ``sim-robot`` and ``ros-demo``. Node options given here win over
     ``--ros-args --params-file``; everything after ``--ros-args`` goes to ROS."""
     ctrl = subparsers.add_parser("control", help="ROS 2 controller node (needs the extra sabre-mpc[ros])")

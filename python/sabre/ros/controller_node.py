@@ -13,12 +13,12 @@ from typing import Any
 
 import numpy as np
 
-from . import require_ros
+from .. import tasks
 from ..controller import Controller, ControllerConfig
 from ..errors import SabreError
 from ..realtime import RealtimeCascade
 from ..scene import Scene
-from .. import tasks
+from . import require_ros
 from .conversions import JointMap, LowPass, MessageError, tau_ext_from_wrench, world_to_base
 from .estimator import ObjectStateEstimator
 from .params import CONTROLLER_PARAMETERS, declare
@@ -28,7 +28,7 @@ __all__ = ["ControllerNode", "run_controller"]
 BASE_JOINTS = ("base_x", "base_y", "base_yaw")
 
 
-def stamp_seconds(stamp) -> float:
+def stamp_seconds(stamp: Any) -> float:
     return stamp.sec + 1e-9 * stamp.nanosec
 
 
@@ -92,7 +92,7 @@ class ControllerNode:
         self._last_status = "none"
         self._last_tank = float(self.controller.tank.energy)
         self._min_tank = self._last_tank
-        self._obstacles: list[tuple[int, tuple[float, ...]]] = []
+        self._obstacles: list[tuple[int | None, tuple[float, ...]]] = []
         self.stats: dict[str, Any] = {"ticks": 0, "rejected": 0, "zero_commands": 0, "stale_events": 0, "plan_stale": 0,
                                       "wrench_stale": 0, "stale_zero_age": [], "compute": []}
         self._running = True
@@ -123,7 +123,7 @@ class ControllerNode:
             f"object state from {p['object_state_topic'] or 'the hand-pose estimator'}")
 
     # Inputs ----------------------------------------------------------------------------------
-    def _on_wrench(self, msg) -> None:
+    def _on_wrench(self, msg: Any) -> None:
         w = msg.wrench
         v = np.array([w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z])
         if not np.all(np.isfinite(v)):
@@ -133,7 +133,7 @@ class ControllerNode:
         self._wrench = v
         self._wrench_recv = time.monotonic()
 
-    def _on_object(self, msg) -> None:
+    def _on_object(self, msg: Any) -> None:
         try:
             o = self.object_joints.values(msg.name, msg.position, "position")
             od = self.object_joints.values(msg.name, msg.velocity, "velocity", required=False)
@@ -143,7 +143,7 @@ class ControllerNode:
             return
         self._object = (o, od)
 
-    def _on_obstacles(self, msg) -> None:
+    def _on_obstacles(self, msg: Any) -> None:
         """The full obstacle set as rows (x, y, z, radius); obstacles are added, moved or removed
         to match (the radius of an existing obstacle is fixed: a new radius re-adds it)."""
         data = np.asarray(msg.data, dtype=np.float64)
@@ -152,15 +152,16 @@ class ControllerNode:
             return
         rows = [tuple(r) for r in data.reshape(-1, 4)]
         with self._lock:
-            kept = []
+            kept: list[tuple[int | None, tuple[float, ...]]] = []
             for i, row in enumerate(rows):
                 if i < len(self._obstacles) and self._obstacles[i][1][3] == row[3]:
                     oid = self._obstacles[i][0]
                     if oid is not None:
                         self.controller.move_obstacle(oid, row[:3])
                 else:
-                    if i < len(self._obstacles) and self._obstacles[i][0] is not None:
-                        self.controller.remove_obstacle(self._obstacles[i][0])
+                    previous = self._obstacles[i][0] if i < len(self._obstacles) else None
+                    if previous is not None:
+                        self.controller.remove_obstacle(previous)
                     oid = self.controller.add_obstacle(row[:3], row[3])
                 kept.append((oid, row))
             for oid, _ in self._obstacles[len(rows):]:
@@ -168,13 +169,13 @@ class ControllerNode:
                     self.controller.remove_obstacle(oid)
             self._obstacles = kept
 
-    def _on_joint_state(self, msg) -> None:
+    def _on_joint_state(self, msg: Any) -> None:
         received = time.monotonic()
         try:
             q = self.joints.values(msg.name, msg.position, "position")
             dq = self.joints.values(msg.name, msg.velocity, "velocity")
             stamp = stamp_seconds(msg.header.stamp)
-            if self._last_t is not None and stamp - self._t_origin <= self._last_t:
+            if self._last_t is not None and self._t_origin is not None and stamp - self._t_origin <= self._last_t:
                 raise MessageError(f"joint state stamp {stamp:.6f} is not after the previous one")
         except MessageError as exc:
             self.node.get_logger().error(f"joint state rejected: {exc}; sending zero", throttle_duration_sec=1.0)
@@ -205,12 +206,14 @@ class ControllerNode:
             self._last_recv = received
             self.publish_zero(msg.header.stamp)
             return
-        dt = min(t - self._last_t, self.max_tick_dt)
+        previous = t if self._last_t is None else self._last_t
+        dt = min(t - previous, self.max_tick_dt)
         self._last_t = t
         wrench_fresh = self._wrench is not None and received - self._wrench_recv <= self.wrench_timeout
         if not wrench_fresh:
             self.stats["wrench_stale"] += 1
-        raw = tau_ext_from_wrench(self.scene, q, self._wrench) if wrench_fresh else np.zeros(self.scene.nq)
+        fresh = self._wrench if wrench_fresh else None
+        raw = np.zeros(self.scene.nq) if fresh is None else tau_ext_from_wrench(self.scene, q, fresh)
         tau_ext = self._tau_filter.update(raw, dt)
         plan_start = self.cascade.plan_start
         if plan_start is not None and t - plan_start > self.horizon:
@@ -238,7 +241,7 @@ class ControllerNode:
         self.stats["compute"].append(time.monotonic() - received)
 
     # Outputs ---------------------------------------------------------------------------------
-    def _publish_command(self, u: np.ndarray, yaw: float, stamp) -> None:
+    def _publish_command(self, u: np.ndarray, yaw: float, stamp: Any) -> None:
         self._arm_msg.data = [float(v) for v in u[self.arm_index]]
         self.arm_pub.publish(self._arm_msg)
         tw = self._Twist()
@@ -250,7 +253,7 @@ class ControllerNode:
         self._echo.velocity = [float(v) for v in u]
         self.echo_pub.publish(self._echo)
 
-    def publish_zero(self, stamp=None) -> None:
+    def publish_zero(self, stamp: Any = None) -> None:
         """Zero arm velocities and a zero twist (and the zero echo)."""
         if stamp is None:
             stamp = self.node.get_clock().now().to_msg()
@@ -287,7 +290,7 @@ class ControllerNode:
 
     def summary(self) -> dict[str, Any]:
         compute = self.stats["compute"]
-        fallbacks = self.controller.inner_filter.stats["fallbacks"] if self.controller.inner_filter is not None else 0
+        fallbacks = self.controller.inner_filter.stats.fallbacks if self.controller.inner_filter is not None else 0
         return {
             "node": "controller", "ticks": self.stats["ticks"], "rejected": self.stats["rejected"],
             "zero_commands": self.stats["zero_commands"], "stale_events": self.stats["stale_events"],
@@ -309,7 +312,7 @@ class ControllerNode:
             "phase": s["phase"], "tank_energy": f"{s['tank_energy']:.4f}", "tank_floor": f"{s['tank_floor']:.4f}",
             "plan_age": "nan" if plan_start is None or self._last_t is None else f"{self._last_t - plan_start:.4f}",
             "filter_status": self._last_status, "filter_fallbacks": str(s["filter_fallbacks"]),
-            "iteration_time": f"{stats.get('iteration_time', math.nan):.5f}",
+            "iteration_time": f"{math.nan if stats is None else stats.iteration_time:.5f}",
             "planner_rate": f"{s['planner_rate_hz']:.2f}", "ticks": str(s["ticks"]), "rejected": str(s["rejected"]),
             "stale_events": str(s["stale_events"]), "state_stale": str(self._stale).lower(),
             "stale_zero_age_ms": json.dumps(s["stale_zero_age_ms"]),

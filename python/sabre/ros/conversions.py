@@ -4,7 +4,7 @@ mapping, world ↔ base frame base rates, τ_ext from the wrist wrench, and a fi
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -60,18 +60,19 @@ class JointMap:
             raise MessageError(f"joint state {field}: {arr.size} values for {len(names)} names")
         out = arr[idx]
         if not np.all(np.isfinite(out)):
-            raise MessageError(f"joint state {field}: non-finite value for {[self.wanted[i] for i in np.flatnonzero(~np.isfinite(out))]}")
+            bad = [self.wanted[i] for i in np.flatnonzero(~np.isfinite(out))]
+            raise MessageError(f"joint state {field}: non-finite value for {bad}")
         return out
 
 
-def world_to_base(rates_world: Sequence[float], yaw: float) -> tuple[float, float, float]:
+def world_to_base(rates_world: Sequence[float] | np.ndarray, yaw: float) -> tuple[float, float, float]:
     """(vx, vy, ωz) in the base frame from the planned world-frame base rates (ẋ, ẏ, ψ̇) at yaw ψ."""
     vx, vy, wz = (float(v) for v in rates_world)
     c, s = math.cos(yaw), math.sin(yaw)
     return c * vx + s * vy, -s * vx + c * vy, wz
 
 
-def base_to_world(twist_base: Sequence[float], yaw: float) -> tuple[float, float, float]:
+def base_to_world(twist_base: Sequence[float] | np.ndarray, yaw: float) -> tuple[float, float, float]:
     """(ẋ, ẏ, ψ̇) in the world frame from a base-frame twist (vx, vy, ωz) at yaw ψ."""
     vx, vy, wz = (float(v) for v in twist_base)
     c, s = math.cos(yaw), math.sin(yaw)

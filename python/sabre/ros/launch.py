@@ -45,10 +45,10 @@ class Domain:
             self._file.close()
             self._file = None
 
-    def __enter__(self) -> "Domain":
+    def __enter__(self) -> Domain:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.release()
 
 
@@ -159,7 +159,8 @@ def format_run(run: BridgeRun) -> str:
         f"[{s['object']}] success: {s['success']}, time to open: {when}, final opening {s['opening']:.3f}",
         f"  mean wrench in contact {s['mean_wrench']:.1f} N; tank {c['tank_energy']:.2f} J (min {c['tank_min']:.2f}, "
         f"floor {c['tank_floor']:.2f}), filter fallbacks {c['filter_fallbacks']}",
-        f"  state-to-command latency p50 {s['latency_p50_ms']:.3f} ms, p99 {s['latency_p99_ms']:.3f} ms, max {s['latency_max_ms']:.2f} ms",
+        f"  state-to-command latency p50 {s['latency_p50_ms']:.3f} ms, p99 {s['latency_p99_ms']:.3f} ms, "
+        f"max {s['latency_max_ms']:.2f} ms",
         f"  states {s['states_published']} for {s['ticks']} plant ticks, commands back {s['echoes']} "
         f"({100 * s['delivered_fraction']:.2f} %), dropped {dropped}, late (> {s['period_ms']:.0f} ms) {s['late_echoes']}, "
         f"rejected {c['rejected']}",

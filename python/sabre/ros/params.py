@@ -66,7 +66,7 @@ SIM_ROBOT_PARAMETERS: dict[str, Any] = {
 }
 
 
-def declare(node, defaults: dict[str, Any], overrides: dict[str, Any] | None = None) -> dict[str, Any]:
+def declare(node: Any, defaults: dict[str, Any], overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     """Declares ``defaults`` as ROS parameters of ``node`` (a ``--params-file`` overrides them),
     applies ``overrides`` (command-line flags, which win), and returns the values."""
     from rclpy.parameter import Parameter

@@ -14,12 +14,13 @@ from typing import Any
 
 import numpy as np
 
-from . import require_ros
+from .. import tasks
+from ..control import LowLevelController
 from ..controller import paper_start_state
 from ..errors import SabreError
 from ..scene import Scene
-from ..sim import LowLevelController, Plant
-from .. import tasks
+from ..sim import Plant
+from . import require_ros
 from .controller_node import BASE_JOINTS, percentile_ms, stamp_seconds
 from .conversions import base_to_world
 from .params import SIM_ROBOT_PARAMETERS, declare
@@ -35,11 +36,11 @@ class SimRobotNode:
 
     def __init__(self, overrides: dict[str, Any] | None = None, node_name: str = "sabre_sim_robot") -> None:
         rclpy = require_ros()
+        from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import Twist, WrenchStamped
         from rosgraph_msgs.msg import Clock
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Bool, Float64MultiArray
-        from diagnostic_msgs.msg import DiagnosticArray
 
         self._rclpy = rclpy
         self.node = rclpy.create_node(node_name)
@@ -106,13 +107,14 @@ class SimRobotNode:
         self.node.create_timer(1.0 / float(p["status_rate"]), self._publish_status)
         self._thread = threading.Thread(target=self._loop, name="sabre-sim-robot", daemon=True)
         self.done = threading.Event()
+        self.error: Exception | None = None
 
     def start(self) -> None:
         self._start_wall = time.monotonic()
         self._thread.start()
 
     # Commands --------------------------------------------------------------------------------
-    def _on_arm(self, msg) -> None:
+    def _on_arm(self, msg: Any) -> None:
         v = np.asarray(msg.data, dtype=np.float64)
         if v.shape != self._arm_cmd.shape or not np.all(np.isfinite(v)):
             self.stats["rejected_commands"] += 1
@@ -123,7 +125,7 @@ class SimRobotNode:
         self._arm_recv = time.monotonic()
         self.stats["arm_commands"] += 1
 
-    def _on_twist(self, msg) -> None:
+    def _on_twist(self, msg: Any) -> None:
         v = np.array([msg.linear.x, msg.linear.y, msg.angular.z])
         if not np.all(np.isfinite(v)):
             self.stats["rejected_commands"] += 1
@@ -132,17 +134,17 @@ class SimRobotNode:
         self._base_recv = time.monotonic()
         self.stats["base_commands"] += 1
 
-    def _on_echo(self, msg) -> None:
+    def _on_echo(self, msg: Any) -> None:
         latency = time.time() - stamp_seconds(msg.header.stamp)
         self.stats["echoes"] += 1
         self.stats["latency"].append(latency)
         if latency > self.period:
             self.stats["late_echoes"] += 1
 
-    def _on_hold(self, msg) -> None:
+    def _on_hold(self, msg: Any) -> None:
         self._hold_request = bool(msg.data)
 
-    def _on_set_obstacles(self, msg) -> None:
+    def _on_set_obstacles(self, msg: Any) -> None:
         self._obstacles.data = list(msg.data)
         self.obstacle_pub.publish(self._obstacles)
 
@@ -171,7 +173,6 @@ class SimRobotNode:
         settle = float(p["settle_time"])
         start = self._start_wall
         k = 0
-        no = 2 * self._nq
         try:
             while self._running:
                 now = time.monotonic()
@@ -187,7 +188,7 @@ class SimRobotNode:
                     self._apply_faults()
                     x = self.plant.state
                     u = self._reference(start + (k + 1) * self.period, x[2])
-                    self.plant.track(self.low, u, 1)
+                    self.low.track(self.plant, u, 1)
                     k += 1
                     self.stats["ticks"] += 1
                 if due:
@@ -200,7 +201,8 @@ class SimRobotNode:
                     self.stats["contact_force"].append(f)
                 if self.stats["success_time"] is None and self.task.success(self.scene, x):
                     self.stats["success_time"] = self.plant.time
-                if stop_on_success and self.stats["success_time"] is not None and self.plant.time > self.stats["success_time"] + settle:
+                opened_at = self.stats["success_time"]
+                if stop_on_success and opened_at is not None and self.plant.time > opened_at + settle:
                     break
                 if duration > 0 and now - start > duration:
                     break
@@ -221,7 +223,8 @@ class SimRobotNode:
             if self.stats["hold_started"] is None and o >= self._hold_at:
                 self.plant.hold_object(True)
                 self.stats["hold_started"] = self.plant.time
-            elif self.stats["hold_started"] is not None and self.plant.time - self.stats["hold_started"] >= float(self.params["hold_duration"]):
+            elif (self.stats["hold_started"] is not None
+                  and self.plant.time - self.stats["hold_started"] >= float(self.params["hold_duration"])):
                 self.plant.hold_object(False)
                 self.stats["hold_ended"] = self.plant.time
                 self._hold_done = True
@@ -241,7 +244,8 @@ class SimRobotNode:
         o.position = [float(v) for v in x[2 * nq : 2 * nq + self.scene.no]]
         o.velocity = [float(v) for v in x[2 * nq + self.scene.no :]]
         self.obj_pub.publish(o)
-        self._clock.clock.sec, self._clock.clock.nanosec = int(self.plant.time), int(round((self.plant.time % 1.0) * 1e9)) % 1_000_000_000
+        seconds = int(self.plant.time)
+        self._clock.clock.sec, self._clock.clock.nanosec = seconds, int(round((self.plant.time % 1.0) * 1e9)) % 1_000_000_000
         self.clock_pub.publish(self._clock)
         js = self._js
         js.header.stamp = stamp

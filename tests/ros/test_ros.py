@@ -60,7 +60,7 @@ def test_tau_ext_from_the_wrist_wrench_equals_the_plants_contact_torques():
     pull[0] = -0.1
     compared = 0
     for _ in range(300):
-        plant.track(low, pull, 1)
+        low.track(plant, pull, 1)
         if plant.contact and np.linalg.norm(plant.tau_ext) > 1.0:
             q = plant.state[: scene.nq]
             assert np.allclose(tau_ext_from_wrench(scene, q, plant.wrench), plant.tau_ext, rtol=1e-9, atol=1e-9)
@@ -80,7 +80,7 @@ def test_estimator_tracks_the_plants_articulation_during_hook_and_pull(obj):
     per = int(round(motion.dt / plant.dt))
     rows = []
     for u in motion.U:
-        plant.track(low, u, per)
+        low.track(plant, u, per)
         x = plant.state
         e = estimator.update(x[:nq], plant.time, float(np.linalg.norm(plant.wrench[:3])))
         rows.append((x[2 * nq], e.position[0], x[2 * nq + 1], e.velocity[0], e.hooked))
@@ -245,7 +245,7 @@ def test_malformed_joint_states_get_a_logged_rejection_and_a_zero_command_and_fr
         ("lengths differ", x[:nq], x[nq : 2 * nq - 2], names),
     ):
         stamp = send(position, velocity, joint_names)
-        reply = probe.wait_for(lambda: answers(stamp), f"the answer to the {label} state")
+        reply = probe.wait_for(lambda stamp=stamp: answers(stamp), f"the answer to the {label} state")
         assert np.all(np.asarray(reply[0].velocity) == 0.0), label
     assert ctrl.process.poll() is None
     assert ctrl.output().count("joint state rejected") >= 1
