@@ -3,22 +3,23 @@ robot node around the 1 kHz :class:`sabre.Plant`, the object-state estimator and
 both (``python -m sabre control | sim-robot | ros-demo``); see docs/ros2.md.
 
 Needs the optional extra ``sabre-mpc[ros]`` (ROS 2 from pip wheels, no system ROS). ``import
-sabre`` works without it; the node modules raise :class:`sabre.SabreError` naming the extra. The
-estimator and the message conversions are plain NumPy and import without ROS.
+sabre`` works without it; the node modules raise :class:`RosUnavailableError` (a
+:class:`sabre.MissingExtraError`) naming the extra. The estimator and the message conversions are
+plain NumPy and import without ROS.
 """
 
 from __future__ import annotations
 
 import os
 
-from ..errors import SabreError
+from ..errors import MissingExtraError
 
 __all__ = ["RosUnavailableError", "require_ros", "ROS_EXTRA"]
 
 ROS_EXTRA = "sabre-mpc[ros]"
 
 
-class RosUnavailableError(SabreError, ImportError):
+class RosUnavailableError(MissingExtraError):
     """The ROS 2 Python packages (rclpy and the message packages) are not installed."""
 
 
