@@ -1,9 +1,13 @@
 """Command line of sabre: robust sampling-based control for mobile manipulators opening doors,
 drawers and dishwashers.
 
-  python -m sabre demo      closed-loop opening from the paper's start, with a figure
-  python -m sabre episode   the same, exit code 1 if the object did not open
-  python -m sabre scripted  open-loop hook-and-pull check of the rollout model and the plant
+  python -m sabre demo        closed-loop opening from the paper's start, with a figure (--view: in the browser)
+  python -m sabre episode     the same, exit code 1 if the object did not open
+  python -m sabre scripted    open-loop hook-and-pull check of the rollout model and the plant
+  python -m sabre view        replay a saved episode (.npz) in the browser viewer
+  python -m sabre experiment  the paper's experiments over seeds: CSV, figure, summary
+  python -m sabre ros-demo    the ROS 2 controller node and a simulated robot as two processes
+  python -m sabre control     the ROS 2 controller node alone (sim-robot: the simulated robot)
 
 Run `python -m sabre <command> --help` for the options of each."""
 
