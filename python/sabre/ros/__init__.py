@@ -10,11 +10,16 @@ plain NumPy and import without ROS.
 
 from __future__ import annotations
 
+import json
 import os
+import signal
+import threading
+from collections.abc import Callable
+from typing import Any
 
 from ..errors import MissingExtraError
 
-__all__ = ["RosUnavailableError", "require_ros", "ROS_EXTRA"]
+__all__ = ["RosUnavailableError", "require_ros", "spin_node", "ROS_EXTRA"]
 
 ROS_EXTRA = "sabre-mpc[ros]"
 
@@ -40,3 +45,24 @@ def require_ros():
             f"the ROS 2 bridge needs the optional extra: pip install '{ROS_EXTRA}' "
             f"(ROS 2 from pip wheels; missing: {exc.name or exc})") from exc
     return rclpy
+
+
+def spin_node(node: Any, shutdown: Callable[[], dict[str, Any]], done: threading.Event | None = None) -> None:
+    """Spins ``node.node`` (built after ``rclpy.init``) until SIGINT or
+    SIGTERM, ``done`` or rclpy's shutdown; then calls ``shutdown`` and prints its summary as one
+    line ``SABRE_SUMMARY {json}`` (what the launcher and the tests read), and tears ROS down."""
+    rclpy = require_ros()
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    executor = rclpy.executors.SingleThreadedExecutor()
+    executor.add_node(node.node)
+    try:
+        while not stop.is_set() and not (done is not None and done.is_set()) and rclpy.ok():
+            executor.spin_once(timeout_sec=0.05)
+    finally:
+        summary = shutdown()
+        print("SABRE_SUMMARY " + json.dumps(summary), flush=True)
+        executor.shutdown()
+        node.node.destroy_node()
+        rclpy.try_shutdown()

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import math
-import signal
 import threading
 import time
 from typing import Any
@@ -18,7 +17,7 @@ from ..controller import Controller, ControllerConfig
 from ..errors import SabreError
 from ..realtime import RealtimeCascade
 from ..scene import Scene
-from . import require_ros
+from . import require_ros, spin_node
 from .conversions import JointMap, LowPass, MessageError, tau_ext_from_wrench, world_to_base
 from .estimator import ObjectStateEstimator
 from .params import CONTROLLER_PARAMETERS, declare
@@ -339,19 +338,6 @@ def run_controller(overrides: dict[str, Any] | None = None, ros_args: list[str] 
     (``SABRE_SUMMARY {...}``) on exit."""
     rclpy = require_ros()
     rclpy.init(args=["sabre_controller"] + (ros_args or []), signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
     node = ControllerNode(overrides)
-    executor = rclpy.executors.SingleThreadedExecutor()
-    executor.add_node(node.node)
-    try:
-        while not stop.is_set() and rclpy.ok():
-            executor.spin_once(timeout_sec=0.05)
-    finally:
-        summary = node.shutdown()
-        print("SABRE_SUMMARY " + json.dumps(summary), flush=True)
-        executor.shutdown()
-        node.node.destroy_node()
-        rclpy.try_shutdown()
+    spin_node(node, node.shutdown)
     return 0

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import math
-import signal
 import threading
 import time
 from typing import Any
@@ -20,7 +19,7 @@ from ..controller import paper_start_state
 from ..errors import SabreError
 from ..scene import Scene
 from ..sim import Plant
-from . import require_ros
+from . import require_ros, spin_node
 from .controller_node import BASE_JOINTS, percentile_ms, stamp_seconds
 from .conversions import base_to_world
 from .params import SIM_ROBOT_PARAMETERS, declare
@@ -307,23 +306,9 @@ def run_sim_robot(overrides: dict[str, Any] | None = None, ros_args: list[str] |
     prints a one-line JSON summary (``SABRE_SUMMARY {...}``) on exit."""
     rclpy = require_ros()
     rclpy.init(args=["sabre_sim_robot"] + (ros_args or []), signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
     node = SimRobotNode(overrides)
-    node.error = None
-    executor = rclpy.executors.SingleThreadedExecutor()
-    executor.add_node(node.node)
     node.start()
-    try:
-        while not stop.is_set() and not node.done.is_set() and rclpy.ok():
-            executor.spin_once(timeout_sec=0.05)
-    finally:
-        summary = node.shutdown()
-        print("SABRE_SUMMARY " + json.dumps(summary), flush=True)
-        executor.shutdown()
-        node.node.destroy_node()
-        rclpy.try_shutdown()
+    spin_node(node, node.shutdown, node.done)
     if node.error is not None:
         raise node.error
     return 0
