@@ -23,6 +23,9 @@ pub enum SabreError {
     /// The physics engine failed or produced non-finite numbers.
     #[error("simulation failed: {0}")]
     Simulation(String),
+    /// The embedding's watcher interrupted a long call (for Python: Ctrl-C).
+    #[error("interrupted")]
+    Interrupted,
 }
 
 pub type Result<T> = std::result::Result<T, SabreError>;
@@ -58,6 +61,22 @@ pub fn ensure_finite(what: &str, values: &[f64]) -> Result<()> {
         Some(i) => Err(SabreError::invalid(
             what,
             format!("entry {i} is {} (values must be finite)", values[i]),
+        )),
+    }
+}
+
+/// The largest magnitude a joint coordinate may have (m or rad): beyond it the kinematics lose
+/// every significant digit (sin and cos of 1e16 rad are noise) and overflow to NaN near 1e155.
+pub const MAX_COORDINATE: f64 = 1e6;
+
+/// Checks that every coordinate is finite and within ±[`MAX_COORDINATE`].
+pub fn ensure_coordinates(what: &str, values: &[f64]) -> Result<()> {
+    ensure_finite(what, values)?;
+    match values.iter().position(|v| v.abs() > MAX_COORDINATE) {
+        None => Ok(()),
+        Some(i) => Err(SabreError::invalid(
+            what,
+            format!("entry {i} is {:e}, outside the model's range ±{MAX_COORDINATE:e}", values[i]),
         )),
     }
 }

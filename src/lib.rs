@@ -5,6 +5,7 @@
 pub mod control;
 pub mod cost;
 pub mod error;
+pub mod interrupt;
 pub mod model;
 pub mod mppi;
 pub mod safety;

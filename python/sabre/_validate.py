@@ -14,16 +14,21 @@ def _shape_text(shape: Sequence[int | None]) -> str:
     return "(" + ", ".join("·" if s is None else str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
 
 
+def as_array(name: str, value: Any) -> np.ndarray:
+    """`value` as a NumPy array; ragged nested lists and the like raise :class:`ShapeError`."""
+    try:
+        return np.asarray(value)
+    except Exception as exc:
+        raise ShapeError(f"{name}: cannot be read as an array ({exc})") from None
+
+
 def as_float_array(name: str, value: Any, shape: Sequence[int | None]) -> np.ndarray:
     """Returns `value` as a C-contiguous float64 array of `shape` (None = any size), all finite.
 
     Raises :class:`ShapeError` for a wrong shape or a non-numeric dtype and
     :class:`InvalidValueError` for NaN or infinite entries.
     """
-    try:
-        array = np.asarray(value)
-    except Exception as exc:  # ragged nested lists and the like
-        raise ShapeError(f"{name}: cannot be read as an array ({exc})") from None
+    array = as_array(name, value)
     if array.dtype.kind not in "fiu":
         raise ShapeError(f"{name}: expected a real numeric array, got dtype {array.dtype}")
     if array.ndim != len(shape) or any(e is not None and g != e for g, e in zip(array.shape, shape)):
@@ -33,6 +38,19 @@ def as_float_array(name: str, value: Any, shape: Sequence[int | None]) -> np.nda
         bad = tuple(int(i) for i in np.argwhere(~np.isfinite(array))[0])
         raise InvalidValueError(f"{name}: entry {bad} is {array[bad]}; values must be finite")
     return array
+
+
+def as_finite(name: str, value: Any) -> float:
+    """A finite float (bools, None, strings and complex numbers are refused)."""
+    if isinstance(value, (bool, str, bytes)) or value is None:
+        raise InvalidValueError(f"{name}: expected a number, got {value!r}")
+    try:
+        number = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise InvalidValueError(f"{name}: expected a real number, got {value!r}") from None
+    if not np.isfinite(number):
+        raise InvalidValueError(f"{name}: must be finite, got {number}")
+    return number
 
 
 def as_positive(name: str, value: Any) -> float:
@@ -57,11 +75,16 @@ def as_non_negative(name: str, value: Any) -> float:
     return number
 
 
+#: The largest integer the core takes (a 64-bit seed, index or count).
+MAX_INTEGER = 2**64 - 1
+
+
 def as_count(name: str, value: Any, minimum: int = 1, maximum: int | None = None) -> int:
-    """An integer within [minimum, maximum] (bools are refused)."""
+    """An integer within [minimum, maximum] (bools are refused; maximum at most :data:`MAX_INTEGER`)."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or int(value) < minimum:
         raise InvalidValueError(f"{name}: expected an integer >= {minimum}, got {value!r}")
-    if maximum is not None and int(value) > maximum:
+    maximum = MAX_INTEGER if maximum is None else min(maximum, MAX_INTEGER)
+    if int(value) > maximum:
         raise InvalidValueError(f"{name}: expected an integer <= {maximum}, got {value!r}")
     return int(value)
 

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import _core
-from ._validate import as_count, as_float_array, as_positive, core_config
+from ._validate import as_count, as_finite, as_float_array, as_positive, core_config
 from .control import LowLevelController, Trace
 from .costs import Batch, CompiledCost
 from .errors import InvalidValueError, ShapeError
@@ -266,8 +266,9 @@ class Controller:
         return self._compiled[phase]
 
     def reset(self, seed: int | None = None, t0: float = 0.0) -> None:
-        """Forgets the policy and restarts the random stream (default: the configured seed)."""
-        self._planner.reset(self.config.seed if seed is None else as_count("seed", seed, 0), float(t0))
+        """Forgets the policy, the filters' remembered active sets and the tank's energy, and restarts
+        the random stream (default: the configured seed): an episode re-run after reset repeats exactly."""
+        self._planner.reset(self.config.seed if seed is None else as_count("seed", seed, 0), as_finite("t0", t0))
         self.phase = self.task.initial_phase()
         self._cost = self._compile(self.phase)
         self._planner.set_cost(self._cost.core)
@@ -276,6 +277,7 @@ class Controller:
         for f in (self.outer_filter, self.inner_filter):
             if f is not None:
                 f.reset_stats()
+                f.forget_active_set()
 
     @property
     def filters(self) -> tuple[SafetyFilter, ...]:
@@ -658,7 +660,7 @@ def run_episode(
     own_floor = low_level.gain_inertia_floor
     controller.reset(seed, 0.0)
     steps_per_plan = max(1, int(round(1.0 / (replan_rate * plant.dt))))
-    n_plans = int(np.ceil(duration / (steps_per_plan * plant.dt)))
+    total_steps = max(1, int(round(duration / plant.dt)))
     show = duration > 10.0 if progress is None else progress
     bar = None
     if show:
@@ -675,7 +677,10 @@ def run_episode(
     success_time = None
     wall = time.perf_counter()
     try:
-        for _ in range(n_plans):
+        done = 0
+        while done < total_steps:
+            steps = min(steps_per_plan, total_steps - done)  # the last plan is cut at the duration
+            done += steps
             x = plant.state
             t = plant.time
             if on_replan is not None and on_replan(t, x, plant, controller) is True:
@@ -685,7 +690,7 @@ def run_episode(
             floor = controller.task.gain_inertia_floor(controller.phase)
             low_level.gain_inertia_floor = own_floor if floor is None else floor
             trace = low_level.follow(
-                plant, controller.nominal, controller.nominal_t0, controller.config.dt, steps_per_plan, record_every,
+                plant, controller.nominal, controller.nominal_t0, controller.config.dt, steps, record_every,
                 safety=controller.inner_filter, tank=controller.tank,
             )
             chunks.append(trace, cost=stats.nominal_cost, phase=controller.task.phases.index(controller.phase))
@@ -694,7 +699,7 @@ def run_episode(
                 if viewer is not None:
                     viewer.show_live(plant.state, plant.time, plans, controller)
             if bar is not None:
-                bar.update(round(steps_per_plan * plant.dt, 3))
+                bar.update(round(steps * plant.dt, 3))
             if success_time is None and controller.task.success(scene, plant.state):
                 success_time = plant.time
             if stop_on_success and success_time is not None and plant.time >= success_time + settle_time:

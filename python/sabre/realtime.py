@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validate import as_float_array, as_positive
+from ._validate import as_finite, as_float_array, as_non_negative, as_positive
 from .control import LowLevelController
 from .controller import Controller
 from .errors import InvalidValueError
@@ -48,7 +48,7 @@ class RealtimeCascade:
         self.controller = controller
         self.low_level = low_level
         self.inner_dt = as_positive("inner_dt", inner_dt)
-        self.min_replan_period = float(min_replan_period)
+        self.min_replan_period = as_non_negative("min_replan_period", min_replan_period)
         self._lock = threading.Lock()
         self._latest: tuple[np.ndarray, float] | None = None
         self._plan: tuple[np.ndarray, float, float] | None = None  # (nominal, t0, dt)
@@ -58,6 +58,7 @@ class RealtimeCascade:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._error: BaseException | None = None
+        self._stopped = False
         self.iterations = 0
         self.ticks = 0
 
@@ -74,6 +75,7 @@ class RealtimeCascade:
         self._latest = (x0, float(t0))
         self._plan_once()
         self._stop.clear()
+        self._stopped = False
         self._thread = threading.Thread(target=self._run, name="sabre-outer-loop", daemon=True)
         self._thread.start()
         return self
@@ -108,6 +110,7 @@ class RealtimeCascade:
         if self._thread is not None:
             self._thread.join()
             self._thread = None
+            self._stopped = True
 
     def __enter__(self) -> RealtimeCascade:
         return self
@@ -154,10 +157,12 @@ class RealtimeCascade:
         The state also becomes the outer loop's next starting point."""
         if self._error is not None:
             raise self._error
+        if self._stopped:
+            raise InvalidValueError("the cascade was stopped: its plan is frozen; start() it again")
         scene = self.controller.scene
         x = as_float_array("x", x, (scene.nx,))
         tau_ext = as_float_array("tau_ext", tau_ext, (scene.nq,))
-        t = float(t)
+        t = as_finite("t", t)
         with self._lock:
             self._latest = (x, t)
         u_ref = self.reference(t)

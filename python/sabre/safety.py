@@ -15,7 +15,7 @@ from types import MappingProxyType
 import numpy as np
 
 from . import _core
-from ._validate import as_count, as_float_array, as_non_negative, as_positive, core_config, readonly
+from ._validate import as_count, as_finite, as_float_array, as_non_negative, as_positive, core_config, readonly
 from .errors import InvalidValueError
 from .scene import Scene
 from .sim import RolloutModel
@@ -448,9 +448,9 @@ class EnergyTank:
     ) -> None:
         config = core_config(
             _core.EnergyTankConfig,
-            initial=float(initial),
-            floor=float(floor),
-            ceiling=None if ceiling is None else float(ceiling),
+            initial=as_finite("initial", initial),
+            floor=as_finite("floor", floor),
+            ceiling=None if ceiling is None else as_finite("ceiling", ceiling),
             record_history=bool(record_history),
         )
         self._core = _core.EnergyTank(config)

@@ -8,7 +8,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from . import _core
-from ._validate import as_float_array, readonly
+from ._validate import as_array, as_float_array, readonly
 from .errors import ShapeError, UrdfError
 
 __all__ = ["Scene", "ROBOTS", "OBJECTS"]
@@ -214,7 +214,7 @@ class Scene:
     def _poses_many(
         name: str, values: np.ndarray, n: int, batched: Callable[[np.ndarray, str], np.ndarray], frame: str
     ) -> np.ndarray:
-        values = np.asarray(values)
+        values = as_array(name, values)
         if values.ndim < 1 or values.shape[-1] != n:
             raise ShapeError(f"{name}: expected shape (..., {n}), got {values.shape}")
         flat = as_float_array(name, values.reshape(-1, n), (None, n))

@@ -248,7 +248,9 @@ pub fn follow_reference_safe(
     let mut u = vec![0.0; nq];
     let mut status = FilterStatus::Solved;
     let plant_dt = plant.dt();
+    let mut poll = crate::interrupt::Poll::new();
     for step in 0..steps {
+        poll.check()?;
         crate::mppi::interpolate(reference, nq, (plant.time() - t0) / dt, &mut u_ref);
         match safety.as_mut() {
             Some(InnerSafety {

@@ -1,6 +1,6 @@
 //! Cost terms of the sampling-based controller (paper Sec. IV-A, eqs. 29–36), evaluated per rollout step.
 
-use nalgebra::{Isometry3, Matrix3, Point3, Vector6};
+use nalgebra::{Isometry3, Matrix3, Point3, Vector3, Vector6};
 
 use crate::error::{Result, SabreError};
 use crate::model::scene::Scene;
@@ -128,7 +128,7 @@ pub fn moving_object_points(scene: &Scene, spacing: f64) -> Vec<(usize, Point3<f
             let half = c.shape.half_extents();
             // Vertices of a grid over the bounding box: corners and edges, where a box first meets
             // the footprint, are always among the points.
-            let cells = half.map(|h| ((2.0 * h / spacing).ceil() as usize).max(1));
+            let cells = grid_cells(half, spacing).map(|c| c as usize);
             for i in 0..=cells.x {
                 for j in 0..=cells.y {
                     for k in 0..=cells.z {
@@ -142,6 +142,29 @@ pub fn moving_object_points(scene: &Scene, spacing: f64) -> Vec<(usize, Point3<f
     }
     out
 }
+
+/// Cells per axis of the sampling grid over a primitive with these half extents.
+fn grid_cells(half: Vector3<f64>, spacing: f64) -> Vector3<f64> {
+    half.map(|h| (2.0 * h / spacing).ceil().max(1.0))
+}
+
+/// How many points [`moving_object_points`] would return, as a float so that it cannot overflow.
+pub fn moving_object_point_count(scene: &Scene, spacing: f64) -> f64 {
+    let tree = &scene.object;
+    let mut count = 0.0;
+    for (link, l) in tree.links.iter().enumerate() {
+        if tree.ancestor_active_joints(link).is_empty() {
+            continue;
+        }
+        for c in &l.collisions {
+            count += grid_cells(c.shape.half_extents(), spacing).map(|n| n + 1.0).product();
+        }
+    }
+    count
+}
+
+/// The most points a [`Term::BaseClearance`] samples: each is tested in every step of every rollout.
+pub const MAX_CLEARANCE_POINTS: usize = 100_000;
 
 /// (radius, bottom, top) of the vertical cylinder about a robot link's origin that bounds its
 /// collision primitives, heights relative to the link origin; None if it has none.
@@ -187,6 +210,13 @@ pub fn base_clearance(
         return Err(SabreError::invalid(
             "base clearance spacing",
             format!("must be positive, got {spacing}"),
+        ));
+    }
+    let count = moving_object_point_count(scene, spacing);
+    if count > MAX_CLEARANCE_POINTS as f64 {
+        return Err(SabreError::invalid(
+            "base clearance spacing",
+            format!("{spacing} m samples {count:.3e} points on the object's moving parts (limit {MAX_CLEARANCE_POINTS}); use a larger spacing"),
         ));
     }
     let (radius, bottom, top) = match footprint {

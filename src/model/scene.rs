@@ -5,7 +5,7 @@ use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion
 use super::dynamics::{joint_space_terms, DynamicsWorkspace};
 use super::kinematics::{Frames, JointKind, JointLimits, KinematicTree};
 use super::urdf::{parse_urdf, ParsedUrdf};
-use crate::error::{ensure_finite, ensure_len, Result, SabreError};
+use crate::error::{ensure_coordinates, ensure_finite, ensure_len, Result, SabreError};
 
 /// Built-in robots, compiled into the library so that installed wheels need no data files.
 pub const BUILTIN_ROBOTS: &[(&str, &str)] = &[("royalpanda", include_str!("../../assets/robots/royalpanda.urdf"))];
@@ -232,12 +232,12 @@ impl Scene {
 
     fn check_q(&self, q: &[f64]) -> Result<()> {
         ensure_len("q", q, self.nq())?;
-        ensure_finite("q", q)
+        ensure_coordinates("q", q)
     }
 
     fn check_o(&self, o: &[f64]) -> Result<()> {
         ensure_len("o", o, self.no())?;
-        ensure_finite("o", o)
+        ensure_coordinates("o", o)
     }
 
     /// World pose of a robot link or frame.
@@ -299,7 +299,7 @@ impl Scene {
     /// Validates a full state vector.
     pub fn check_state(&self, x: &[f64]) -> Result<()> {
         ensure_len("x", x, self.nx())?;
-        ensure_finite("x", x)
+        ensure_coordinates("x", x)
     }
 
     /// True if the object's single movable joint is a hinge.
@@ -328,7 +328,7 @@ fn poses_many(
             format!("{} elements", values.len()),
         ));
     }
-    ensure_finite(name, values)?;
+    ensure_coordinates(name, values)?;
     let link = tree.require_link(frame)?;
     let mut frames = Frames::default();
     Ok(values

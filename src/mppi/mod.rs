@@ -14,7 +14,7 @@ use rand_distr::{Distribution, StandardNormal};
 
 use crate::cost::Cost;
 use crate::error::{ensure_finite, Result, SabreError};
-use crate::sim::{RolloutBatch, RolloutModel};
+use crate::sim::{RolloutBatch, RolloutModel, MAX_BATCH_ELEMENTS};
 pub use guide::{servo_guide, ServoGuideConfig};
 pub use smoothing::SavitzkyGolay;
 pub use weights::{effective_sample_size, weights, LikelihoodMapping};
@@ -153,6 +153,9 @@ fn shift(seq: &mut [f64], nu: usize, steps: f64, scratch: &mut Vec<f64>) {
     seq.copy_from_slice(scratch);
 }
 
+/// The longest horizon in steps: the Savitzky–Golay smoother holds a K × K matrix.
+pub const MAX_HORIZON_STEPS: usize = 10_000;
+
 impl Mppi {
     pub fn new(model: Arc<RolloutModel>, config: MppiConfig) -> Result<Self> {
         let scene = model.scene().clone();
@@ -190,7 +193,34 @@ impl Mppi {
         if !(0.0..=1.0).contains(&config.keep_fraction) {
             return Err(SabreError::invalid("keep_fraction", "must be within [0, 1]"));
         }
-        let k = (config.horizon / dt).round() as usize;
+        // The horizon and batch come from the caller: check the sizes they imply before allocating,
+        // so that an absurd configuration is an error and not an allocation failure that aborts.
+        let steps = (config.horizon / dt).round();
+        let n = config.rollouts;
+        let nx = scene.nx();
+        let k = steps as usize;
+        if steps > MAX_HORIZON_STEPS as f64 {
+            return Err(SabreError::invalid(
+                "horizon",
+                format!(
+                    "{} s at dt {dt:e} s is {steps:e} steps; at most {MAX_HORIZON_STEPS} (the smoother is K × K)",
+                    config.horizon
+                ),
+            ));
+        }
+        let fits = n
+            .checked_mul(k + 1)
+                .and_then(|v| v.checked_mul(nx.max(nu).max(6)))
+                .is_some_and(|v| v <= MAX_BATCH_ELEMENTS);
+        if !fits {
+            return Err(SabreError::invalid(
+                "rollouts × horizon",
+                format!(
+                    "{n} rollouts of {k} steps ({} s at dt {dt:e} s) exceed the batch limit of {MAX_BATCH_ELEMENTS} values",
+                    config.horizon
+                ),
+            ));
+        }
         let limits = scene.robot_limits();
         let mut bound: Vec<f64> = limits.iter().map(|l| l.velocity).collect();
         if let Some(limit) = &config.input_limit {
@@ -210,7 +240,6 @@ impl Mppi {
         }
         let smoother =
             (config.smoothing_window > 1).then(|| SavitzkyGolay::new(k, config.smoothing_window, config.smoothing_order));
-        let n = config.rollouts;
         Ok(Self {
             lower: bound.iter().map(|b| -b).collect(),
             upper: bound,

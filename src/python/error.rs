@@ -1,5 +1,6 @@
 //! The error boundary of the bindings: core errors as `sabre.errors` exceptions, panics caught.
 
+use std::cell::RefCell;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
 use pyo3::prelude::*;
@@ -24,6 +25,9 @@ impl From<SabreError> for PyErr {
             SabreError::Urdf { .. } => UrdfError::new_err(message),
             SabreError::UnknownFrame { .. } => UnknownFrameError::new_err(message),
             SabreError::Simulation(_) => SimulationError::new_err(message),
+            SabreError::Interrupted => PENDING_SIGNAL
+                .with(|p| p.borrow_mut().take())
+                .unwrap_or_else(|| pyo3::exceptions::PyKeyboardInterrupt::new_err("interrupted")),
         }
     }
 }
@@ -51,4 +55,45 @@ fn settle<T>(outcome: std::thread::Result<crate::Result<T>>) -> PyResult<T> {
             Err(SabreError::Simulation(format!("internal error: {detail}")).into())
         }
     }
+}
+
+thread_local! {
+    /// The exception a signal handler raised while a core call ran (e.g. KeyboardInterrupt),
+    /// re-raised when the call returns `SabreError::Interrupted`.
+    static PENDING_SIGNAL: RefCell<Option<PyErr>> = const { RefCell::new(None) };
+}
+
+/// Lets Ctrl-C interrupt long core calls made from Python's main thread: the core polls this
+/// watcher, which runs Python's signal handlers (re-acquiring the GIL for that moment).
+struct SignalWatcher {
+    main: std::thread::ThreadId,
+}
+
+impl crate::interrupt::Watcher for SignalWatcher {
+    fn watches_current_thread(&self) -> bool {
+        std::thread::current().id() == self.main
+    }
+
+    fn interrupted(&self) -> bool {
+        Python::attach(|py| match py.check_signals() {
+            Ok(()) => false,
+            Err(e) => {
+                PENDING_SIGNAL.with(|p| *p.borrow_mut() = Some(e));
+                true
+            }
+        })
+    }
+}
+
+/// Installs the [`SignalWatcher`] if the module is imported on Python's main thread.
+pub(crate) fn watch_signals(py: Python<'_>) -> PyResult<()> {
+    let threading = py.import("threading")?;
+    let main = threading.call_method0("main_thread")?.getattr("ident")?;
+    let current = threading.call_method0("get_ident")?;
+    if main.eq(current)? {
+        crate::interrupt::install(Box::new(SignalWatcher {
+            main: std::thread::current().id(),
+        }));
+    }
+    Ok(())
 }

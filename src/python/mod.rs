@@ -25,6 +25,7 @@ fn default_threads() -> usize {
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    error::watch_signals(m.py())?;
     m.add_class::<scene::PyScene>()?;
     m.add_class::<sim::PyRolloutConfig>()?;
     m.add_class::<sim::PyRolloutModel>()?;

@@ -236,7 +236,9 @@ impl PyPlant {
         run_detached(py, || {
             let mut plant = lock(plant);
             let mut controller = lock(controller);
+            let mut poll = crate::interrupt::Poll::new();
             for _ in 0..steps {
+                poll.check()?;
                 let tau = controller.torque(plant.state(), &u_ref)?;
                 plant.step(&tau)?;
             }

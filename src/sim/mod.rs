@@ -9,5 +9,5 @@ pub mod world;
 
 pub use evaluator::{StepEvaluator, StepView};
 pub use plant::{Plant, PlantConfig, DEFAULT_TAU_EXT_CUTOFF};
-pub use rollout::{default_threads, RolloutBatch, RolloutConfig, RolloutModel};
+pub use rollout::{default_threads, RolloutBatch, RolloutConfig, RolloutModel, MAX_BATCH_ELEMENTS};
 pub use world::{EngineClock, Interaction, SimWorld};

@@ -4,6 +4,7 @@ use std::sync::Arc;
 
 use super::world::{ContactReport, Interaction, RobotColliders, RobotDrive, SimWorld, WorldConfig};
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
+use crate::model::kinematics::JointLimits;
 use crate::model::scene::Scene;
 
 /// Default bandwidth of the plant's external-torque measurement (Hz), see [`PlantConfig::tau_ext_cutoff`].
@@ -51,10 +52,34 @@ pub struct Plant {
     applied_torque: Vec<f64>,
     time: f64,
     object_held: bool,
+    /// (name, limits, divergence speed bound) of every robot joint, then every object joint.
+    joints: Vec<(String, JointLimits, f64)>,
 }
+
+/// The longest plant step (s): the plant stands in for a 1 kHz robot, and its stiff joint limits and
+/// contacts are integrated stably only up to about this step.
+pub const MAX_PLANT_DT: f64 = 0.005;
+
+/// How far (m or rad) a reset state may lie outside a joint's limits: the limit's correction from
+/// further out is an impulse large enough to make the integration diverge.
+pub const RESET_LIMIT_TOLERANCE: f64 = 0.05;
+
+/// A joint moving faster than this multiple of its velocity limit (or, for the object's joints,
+/// than [`MAX_OBJECT_SPEED`]) means the integration diverged: no torque within the effort limits
+/// produces it.
+pub const DIVERGENCE_VELOCITY_FACTOR: f64 = 20.0;
+
+/// The fastest (rad/s or m/s) an object joint may move before the plant calls it diverged.
+pub const MAX_OBJECT_SPEED: f64 = 100.0;
 
 impl Plant {
     pub fn new(scene: Arc<Scene>, config: PlantConfig) -> Result<Self> {
+        if !(config.dt.is_finite() && config.dt > 0.0 && config.dt <= MAX_PLANT_DT) {
+            return Err(SabreError::invalid(
+                "dt",
+                format!("the plant steps at most {MAX_PLANT_DT} s (a 1 kHz robot: 0.001), got {}", config.dt),
+            ));
+        }
         if !(config.contact_friction.is_finite() && config.contact_friction >= 0.0) {
             return Err(SabreError::invalid("contact_friction", "must be finite and non-negative"));
         }
@@ -78,7 +103,14 @@ impl Plant {
         let template = SimWorld::new(scene.clone(), &world_config)?;
         let world = template.clone();
         let nq = scene.nq();
+        let robot = scene.robot.active_joint_names().into_iter().zip(scene.robot_limits());
+        let object = scene.object.active_joint_names().into_iter().zip(scene.object_limits());
+        let joints = robot
+            .map(|(n, l)| (n, l, DIVERGENCE_VELOCITY_FACTOR * l.velocity))
+            .chain(object.map(|(n, l)| (n, l, MAX_OBJECT_SPEED)))
+            .collect();
         let mut plant = Self {
+            joints,
             x: scene.default_state(),
             interaction: Interaction {
                 contact: false,
@@ -110,6 +142,7 @@ impl Plant {
     /// Puts the plant at state x0 with time zero, no contact history and the object released.
     pub fn reset(&mut self, x0: &[f64]) -> Result<()> {
         self.scene.check_state(x0)?;
+        self.check_within_limits(x0)?;
         self.world.restore_from(&self.template);
         self.world.set_state(x0);
         self.x.copy_from_slice(x0);
@@ -138,6 +171,10 @@ impl Plant {
                 self.time
             )));
         }
+        if let Some(error) = self.divergence(&x) {
+            self.x = x;
+            return Err(error);
+        }
         self.interaction.clone_from(self.world.interaction());
         match self.measurement_blend {
             Some(blend) => {
@@ -150,6 +187,50 @@ impl Plant {
         self.x = x;
         self.time += self.world.dt();
         Ok(())
+    }
+
+    /// Refuses a state whose joints lie beyond their position limits by more than
+    /// [`RESET_LIMIT_TOLERANCE`] or move faster than the divergence bound.
+    fn check_within_limits(&self, x: &[f64]) -> Result<()> {
+        let (nq, no) = (self.scene.nq(), self.scene.no());
+        for (i, (name, limits, speed_bound)) in self.joints.iter().enumerate() {
+            let position = if i < nq { x[i] } else { x[2 * nq + (i - nq)] };
+            let speed = if i < nq { x[nq + i] } else { x[2 * nq + no + (i - nq)] };
+            if position < limits.lower - RESET_LIMIT_TOLERANCE || position > limits.upper + RESET_LIMIT_TOLERANCE {
+                return Err(SabreError::invalid(
+                    "x",
+                    format!(
+                        "joint '{name}' at {position} is outside its limits [{}, {}] (by more than {RESET_LIMIT_TOLERANCE})",
+                        limits.lower, limits.upper
+                    ),
+                ));
+            }
+            if speed.abs() > *speed_bound {
+                return Err(SabreError::invalid(
+                    "x",
+                    format!("joint '{name}' moves at {speed}, beyond the plant's range ±{speed_bound}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+
+    /// The first joint whose speed shows that the integration diverged, as an error naming it.
+    fn divergence(&self, x: &[f64]) -> Option<SabreError> {
+        let (nq, no) = (self.scene.nq(), self.scene.no());
+        for (i, (name, _, bound)) in self.joints.iter().enumerate() {
+            let speed = if i < nq { x[nq + i] } else { x[2 * nq + no + (i - nq)] };
+            if !(speed.abs() <= *bound) {
+                return Some(SabreError::Simulation(format!(
+                    "the plant diverged at t = {:.3} s: joint '{name}' moves at {speed:.3e} (bound {bound}); \
+                     the step ({} s) is too long or the state left the model's range; reset the plant",
+                    self.time,
+                    self.world.dt()
+                )));
+            }
+        }
+        None
     }
 
     pub fn state(&self) -> &[f64] {

@@ -1,6 +1,5 @@
 //! The reduced-order rollout model and its data-parallel batch rollouts (rayon, one world per worker).
 
-use std::collections::HashMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -9,6 +8,7 @@ use rayon::prelude::*;
 use super::evaluator::StepEvaluator;
 use super::world::{RobotColliders, RobotDrive, SimWorld, WorldConfig};
 use crate::error::{ensure_finite, Result, SabreError};
+use crate::interrupt::Cancel;
 use crate::model::scene::Scene;
 
 /// Settings of the rollout model.
@@ -93,13 +93,21 @@ pub struct RolloutModel {
     worlds: Mutex<Vec<SimWorld>>,
 }
 
-/// Thread pools by size, built once: rayon pools are costly to create and a rollout is short.
+/// How many worker pools (of different sizes) stay alive: a process that asks for many thread
+/// counts keeps the most recent ones and lets the others' threads exit.
+pub const MAX_CACHED_POOLS: usize = 2;
+
+/// Thread pools by size, most recently used last: rayon pools are costly to create and a rollout
+/// is short, so they are reused; at most [`MAX_CACHED_POOLS`] are kept.
 fn pool(threads: usize) -> Result<Arc<rayon::ThreadPool>> {
-    static POOLS: OnceLock<Mutex<HashMap<usize, Arc<rayon::ThreadPool>>>> = OnceLock::new();
-    let pools = POOLS.get_or_init(|| Mutex::new(HashMap::new()));
+    static POOLS: OnceLock<Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>>> = OnceLock::new();
+    let pools = POOLS.get_or_init(|| Mutex::new(Vec::new()));
     let mut pools = pools.lock().unwrap_or_else(|e| e.into_inner());
-    if let Some(p) = pools.get(&threads) {
-        return Ok(p.clone());
+    if let Some(i) = pools.iter().position(|(n, _)| *n == threads) {
+        let entry = pools.remove(i);
+        let p = entry.1.clone();
+        pools.push(entry);
+        return Ok(p);
     }
     let p = Arc::new(
         rayon::ThreadPoolBuilder::new()
@@ -108,14 +116,17 @@ fn pool(threads: usize) -> Result<Arc<rayon::ThreadPool>> {
             .build()
             .map_err(|e| SabreError::Simulation(format!("cannot start {threads} worker threads: {e}")))?,
     );
-    pools.insert(threads, p.clone());
+    pools.push((threads, p.clone()));
+    if pools.len() > MAX_CACHED_POOLS {
+        pools.remove(0);
+    }
     Ok(p)
 }
 
 /// Upper bound on the values in one output array of a batch (2^28 doubles = 2 GiB).
 pub const MAX_BATCH_ELEMENTS: usize = 1 << 28;
 
-/// Upper bound on worker threads; pools are cached per size, so this also bounds idle threads.
+/// Upper bound on worker threads per pool.
 pub const MAX_THREADS: usize = 256;
 
 /// Default worker count: every core the process may use.
@@ -226,6 +237,7 @@ impl RolloutModel {
         u: &[f64],
         cost: Option<&dyn StepEvaluator>,
         out: RolloutSlices,
+        cancel: &Cancel,
     ) -> Option<usize> {
         let nx = self.scene.nx();
         let nq = self.scene.nq();
@@ -235,6 +247,9 @@ impl RolloutModel {
         out.states[..nx].copy_from_slice(x0);
         *out.cost = 0.0;
         for step in 0..k {
+            if cancel.is_set() {
+                return Some(step);
+            }
             let u_step = &u[step * nq..(step + 1) * nq];
             let x = &mut out.states[(step + 1) * nx..(step + 2) * nx];
             world.step_once(u_step, x);
@@ -331,6 +346,7 @@ impl RolloutModel {
         if let Some(cost) = cost {
             cost.validate(&self.scene)?;
         }
+        let cancel = Cancel::default();
         let work = |i: usize,
                     states: &mut [f64],
                     tau: &mut [f64],
@@ -350,7 +366,7 @@ impl RolloutModel {
             };
             // A panic inside the physics engine must not cross into the caller: that rollout is
             // marked failed from its first step and its world, possibly inconsistent, is dropped.
-            let failed_at = match catch_unwind(AssertUnwindSafe(|| self.rollout_one(&mut world, x0, u_i, cost, slices))) {
+            let failed_at = match catch_unwind(AssertUnwindSafe(|| self.rollout_one(&mut world, x0, u_i, cost, slices, &cancel))) {
                 Ok(result) => {
                     let after = world.engine_clock();
                     *engine_steps = after.steps - clock.steps;
@@ -381,7 +397,8 @@ impl RolloutModel {
                 .enumerate()
                 .for_each(|(i, (((((s, t), w), c), f), e))| work(i, s, t, w, c, f, e));
         };
-        pool(threads)?.install(run);
+        let pool = pool(threads)?;
+        crate::interrupt::run_watched(&cancel, || pool.install(run))?;
         Ok(batch)
     }
 }

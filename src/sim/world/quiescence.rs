@@ -80,9 +80,11 @@ impl SimWorld {
                 // g is the torque that holds the object still; gravity itself pushes with −g.
                 let push = -g[i];
                 let held_by_friction = push.abs() <= self.layout.object_friction[i];
-                let on_lower = o[i] <= limits[i].lower + 1e-6 && push <= 0.0;
-                let on_upper = o[i] >= limits[i].upper - 1e-6 && push >= 0.0;
-                if !(held_by_friction || on_lower || on_upper) {
+                let on_lower = (o[i] - limits[i].lower).abs() <= 1e-6 && push <= 0.0;
+                let on_upper = (o[i] - limits[i].upper).abs() <= 1e-6 && push >= 0.0;
+                // Beyond a limit the limit itself moves the object back, whatever holds it.
+                let outside = o[i] < limits[i].lower - 1e-6 || o[i] > limits[i].upper + 1e-6;
+                if outside || !(held_by_friction || on_lower || on_upper) {
                     quiet = false;
                 }
             }
@@ -181,6 +183,15 @@ mod tests {
             state([-0.5, 0.0], [0.0, 0.0], 0.2, 0.1),
             [0.0, 0.0]
         ));
+    }
+
+    #[test]
+    fn object_beyond_its_limit_runs_the_engine() {
+        // Held by friction and far from the robot, but outside its travel: the limit moves it back.
+        let scene = probe_and_drawer();
+        let upper = scene.object_limits()[0].upper;
+        assert!(engine_ran(&scene, state([-0.5, 0.0], [0.0, 0.0], upper + 0.3, 0.0), [0.0, 0.0]));
+        assert!(engine_ran(&scene, state([-0.5, 0.0], [0.0, 0.0], -0.3, 0.0), [0.0, 0.0]));
     }
 
     #[test]

@@ -1,0 +1,214 @@
+"""Inputs that used to crash, hang, diverge silently or escape the exception hierarchy: each now gets
+a clear SabreError (or a documented behaviour), checked against what the input means."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+import pytest
+
+import sabre
+from sabre import costs
+from sabre.errors import InvalidValueError, SabreError, ShapeError, SimulationError
+
+HANG_GUARD = 120  # s: only stops a hung child; nothing asserts on time
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return sabre.Scene.load("royalpanda", "shelf")
+
+
+def small_config(**fields):
+    return sabre.ControllerConfig(**{"rollouts": 8, "horizon": 0.15, "threads": 1, **fields})
+
+
+# Sizes a configuration implies are checked before anything is allocated --------------------------
+@pytest.mark.parametrize(
+    "fields, named",
+    [
+        ({"horizon": 1000.0}, "horizon"),
+        ({"rollouts": 10**8}, "rollouts"),
+        ({"dt": 1e-6}, "horizon"),
+        ({"dt": 1e-300}, "horizon"),
+        ({"rollouts": 2**62}, "rollouts"),
+    ],
+)
+def test_a_configuration_too_large_to_allocate_is_refused_by_name(scene, fields, named):
+    with pytest.raises(InvalidValueError, match=named):
+        sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(**fields))
+
+
+def test_a_base_clearance_sampling_too_fine_is_refused_when_compiled(scene):
+    with pytest.raises(InvalidValueError, match="spacing"):
+        costs.Cost([costs.BaseClearance(spacing=1e-4)]).compile(scene)
+    # a fine but sane spacing still compiles
+    costs.Cost([costs.BaseClearance(spacing=0.05)]).compile(scene)
+
+
+# The plant refuses what is outside the model's range ---------------------------------------------
+@pytest.mark.parametrize("index, value, joint", [(0, 10.5, "base_x"), (3, 5.0, "panda_joint1")])
+def test_a_plant_state_beyond_a_joint_limit_is_refused_naming_the_joint(scene, index, value, joint):
+    plant = sabre.Plant(scene)
+    x = scene.default_state()
+    x[index] = value
+    with pytest.raises(InvalidValueError, match=joint):
+        plant.reset(x)
+
+
+def test_a_plant_state_at_the_reset_tolerance_stays_bounded(scene):
+    # 0.04 rad beyond panda_joint1's limit (within the tolerance): the limit pushes it back without
+    # the integration blowing up.
+    plant = sabre.Plant(scene)
+    low_level = sabre.LowLevelController(scene)
+    x = scene.default_state()
+    x[3] = scene.q_upper[3] + 0.04
+    plant.reset(x)
+    hold = x[: scene.nq].copy()
+    for _ in range(300):
+        plant.step(low_level.torque(plant.state, np.zeros(scene.nq)))
+    assert np.all(np.isfinite(plant.state))
+    assert abs(plant.state[scene.nq + 3]) < 5.0  # rad/s: well inside a Panda joint's range
+    assert plant.state[3] <= hold[3] + 1e-6  # the limit did not let it go further out
+
+
+@pytest.mark.parametrize("dt", [0.5, 0.02])
+def test_a_plant_step_longer_than_the_stable_range_is_refused(scene, dt):
+    with pytest.raises(InvalidValueError, match="dt"):
+        sabre.Plant(scene, dt=dt)
+
+
+def test_coordinates_beyond_the_model_range_are_refused_not_nan(scene):
+    q = scene.default_state()[: scene.nq]
+    q[3] = 1e155
+    for call in (lambda: scene.fk(q, "grasp"), lambda: scene.jacobian(q, "grasp"), lambda: scene.mass_matrix(q),
+                 lambda: scene.fk_many(q[None, :], "grasp")):
+        with pytest.raises(InvalidValueError, match="range"):
+            call()
+
+
+# Interrupts and time -----------------------------------------------------------------------------
+INTERRUPTIBLE = textwrap.dedent(
+    """
+    import sys, numpy as np, sabre
+    scene = sabre.Scene.load("royalpanda", "shelf")
+    x0 = scene.default_state()
+    what = sys.argv[1]
+    print("ready", flush=True)
+    try:
+        if what == "follow":
+            plant = sabre.Plant(scene); plant.reset(x0)
+            sabre.LowLevelController(scene).follow(plant, np.zeros((5, scene.nq)), 0.0, 0.015, 10**12, 10**9)
+        elif what == "rollout":
+            sabre.RolloutModel(scene, dt=0.015).rollout(x0, np.zeros((4000, 2000, scene.nq)), threads=1)
+        elif what == "episode":
+            c = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(rollouts=8, horizon=0.15))
+            sabre.run_episode(scene, c, duration=10**6, replan_rate=1e-6, x0=x0, progress=False)
+    except KeyboardInterrupt:
+        print("interrupted", flush=True)
+        sys.exit(3)
+    print("finished", flush=True)
+    """
+)
+
+
+@pytest.mark.parametrize("what", ["follow", "rollout", "episode"])
+def test_ctrl_c_interrupts_a_long_core_call(what):
+    child = subprocess.Popen([sys.executable, "-c", INTERRUPTIBLE, what], stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout.readline().strip() == "ready"
+        time.sleep(1.0)  # the call must be inside Rust when the signal arrives
+        child.send_signal(signal.SIGINT)
+        out, _ = child.communicate(timeout=HANG_GUARD)
+    finally:
+        child.kill()
+    assert child.returncode == 3, out
+    assert "interrupted" in out
+
+
+def test_run_episode_simulates_the_duration_asked_for_not_a_whole_plan(scene):
+    controller = sabre.Controller(scene, sabre.tasks.OpenObject(), small_config())
+    episode = sabre.run_episode(scene, controller, duration=0.05, replan_rate=1.0, x0=scene.default_state(),
+                                record_every=1, progress=False)
+    assert episode.time[-1] == pytest.approx(0.05, abs=1e-9)
+
+
+# Determinism and state ---------------------------------------------------------------------------
+def test_a_reset_controller_filters_exactly_like_a_fresh_one(scene):
+    # The filter remembers the previous call's active set and tries it first; after reset() the next
+    # command must not depend on what was filtered before it (bit-identical to a fresh controller).
+    config = small_config(variant="IO")
+    used, fresh = (sabre.Controller(scene, sabre.tasks.OpenObject(), config) for _ in range(2))
+    x = sabre.paper_start_state(scene)  # base outside its box, arm near its limits: rows bind
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        before, after = rng.uniform(-1.0, 1.0, (2, scene.nq))
+        x_next = x.copy()
+        x_next[: scene.nq] += rng.uniform(-0.01, 0.01, scene.nq)
+        used.inner_filter.filter(x, before)
+        used.reset()
+        fresh.reset()
+        np.testing.assert_array_equal(used.inner_filter.filter(x_next, after).u, fresh.inner_filter.filter(x_next, after).u)
+
+
+# Every error a SabreError ------------------------------------------------------------------------
+def test_realtime_cascade_refuses_bad_timing_and_ticks_after_stop(scene):
+    controller = sabre.Controller(scene, sabre.tasks.OpenObject(), small_config())
+    with pytest.raises(InvalidValueError, match="min_replan_period"):
+        sabre.RealtimeCascade(controller, min_replan_period=float("inf"))
+    cascade = sabre.RealtimeCascade(controller, min_replan_period=0.01)
+    x0 = scene.default_state()
+    cascade.start(x0)
+    tau = np.zeros(scene.nq)
+    with pytest.raises(InvalidValueError, match="t"):
+        cascade.tick(x0, tau, float("nan"))
+    cascade.tick(x0, tau, 0.001)
+    cascade.stop()
+    with pytest.raises(InvalidValueError, match="stopped"):
+        cascade.tick(x0, tau, 0.002)
+
+
+@pytest.mark.parametrize(
+    "call, error",
+    [
+        (lambda s: s.fk_many([s.default_state()[: s.nq], [0.0, 1.0]], "grasp"), ShapeError),
+        (lambda s: sabre.ControllerConfig(seed=2**64), InvalidValueError),
+        (lambda s: sabre.EnergyTank(initial=None), InvalidValueError),
+        (lambda s: sabre.EnergyTank(initial=10.0, floor="1"), InvalidValueError),
+        (lambda s: sabre.EnergyTank(initial=1j), InvalidValueError),
+        (lambda s: sabre.SafetyFilter(s, sabre.SafetyConfig()).move_obstacle(2**64, [0.0, 0.0, 1.0]), InvalidValueError),
+    ],
+    ids=["ragged fk_many", "seed 2**64", "tank None", "tank floor str", "tank complex", "obstacle id 2**64"],
+)
+def test_bad_values_raise_sabre_errors(scene, call, error):
+    with pytest.raises(error) as raised:
+        call(scene)
+    assert isinstance(raised.value, SabreError)
+
+
+# Resources ---------------------------------------------------------------------------------------
+def _threads() -> int:
+    return len(os.listdir("/proc/self/task"))
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="counts threads through /proc")
+def test_rollouts_with_many_thread_counts_keep_a_bounded_number_of_threads(scene):
+    model = sabre.RolloutModel(scene, dt=0.015)
+    x0 = scene.default_state()
+    U = np.zeros((4, 2, scene.nq))
+    model.rollout(x0, U, threads=1)
+    for threads in range(1, 33):
+        model.rollout(x0, U, threads=threads)
+    time.sleep(0.5)  # evicted pools' threads exit asynchronously
+    # at most the two most recent pools (32 + 31 workers) beyond the interpreter's own threads
+    assert _threads() <= 32 + 31 + 8
+
+
+def test_simulation_errors_are_sabre_errors():
+    assert issubclass(SimulationError, SabreError)
