@@ -40,6 +40,18 @@ def as_float_array(name: str, value: Any, shape: Sequence[int | None]) -> np.nda
     return array
 
 
+def as_pose(name: str, value: Any, tolerance: float = 1e-6) -> np.ndarray:
+    """A (4, 4) homogeneous transform: bottom row [0, 0, 0, 1] and a proper rotation (RᵀR = I,
+    det R = +1) within ``tolerance``; raises :class:`InvalidValueError` naming what is wrong."""
+    pose = as_float_array(name, value, (4, 4))
+    if not np.allclose(pose[3], [0.0, 0.0, 0.0, 1.0], rtol=0.0, atol=tolerance):
+        raise InvalidValueError(f"{name}: the bottom row of a pose must be [0, 0, 0, 1], got {pose[3].tolist()}")
+    rotation = pose[:3, :3]
+    if not np.allclose(rotation.T @ rotation, np.eye(3), rtol=0.0, atol=tolerance) or np.linalg.det(rotation) < 0.0:
+        raise InvalidValueError(f"{name}: the upper-left 3 × 3 block must be a rotation (orthonormal, det +1)")
+    return pose
+
+
 def as_finite(name: str, value: Any) -> float:
     """A finite float (bools, None, strings and complex numbers are refused)."""
     if isinstance(value, (bool, str, bytes)) or value is None:

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import _core
-from ._validate import as_count, as_finite, as_float_array, as_positive, core_config
+from ._validate import as_array, as_count, as_finite, as_float_array, as_positive, core_config
 from .control import LowLevelController, Trace
 from .costs import Batch, CompiledCost
 from .errors import InvalidValueError, ShapeError
@@ -230,8 +230,11 @@ class Controller:
         self.last_samples: tuple[np.ndarray, np.ndarray] | None = None
         c = self.config
         self.model = RolloutModel(scene, c.dt, servo_bandwidth=c.servo_bandwidth, contact_friction=c.contact_friction)
+        task.check(scene)
         self.phase = task.initial_phase()
         self._compiled: dict[str, CompiledCost] = {}
+        for phase in task.phases:  # a phase the scene cannot serve fails here, not mid-episode
+            self._compile(phase)
         self._cost = self._compile(self.phase)
         planner_config = core_config(
             _core.MppiConfig,
@@ -749,11 +752,22 @@ def _opening_targets(scene: Scene, task: Task) -> tuple[float | None, float | No
     return target, task.open.success_fraction * target
 
 
+def _real_costs(costs: Sequence[float] | np.ndarray) -> np.ndarray:
+    """A flat float64 cost vector (NaN and ±inf allowed: they weigh zero); complex or non-numeric refused."""
+    array = as_array("costs", costs).reshape(-1)
+    if array.dtype.kind not in "fiu":
+        raise ShapeError(f"costs: expected real numbers, got dtype {array.dtype}")
+    return array.astype(np.float64)
+
+
 def likelihood_weights(costs: Sequence[float] | np.ndarray, mapping: str = "invariant", parameter: float = 10.0) -> np.ndarray:
     """Normalised sample weights of a cost vector (paper Fig. 3).
 
     mapping: "naive" exp(−λJ), "baseline" exp(−λ(J − J_min)), or "invariant" (55)
-    exp(−h (J − J_min)/(J_max − J_min)); `parameter` is λ or h. Non-finite costs weigh zero.
+    exp(−h (J − J_min)/(J_max − J_min)); `parameter` is λ or h (positive). Non-finite costs weigh
+    zero; where a mapping underflows or overflows for every cost (the naive one at large costs, the
+    point of Fig. 3) all weights are zero, which the sampler treats as "keep the nominal".
     """
-    costs = np.asarray(costs, dtype=np.float64).reshape(-1)
-    return np.asarray(_core.likelihood_weights(costs.tolist(), str(mapping), float(parameter)), dtype=np.float64)
+    costs = _real_costs(costs)
+    weights = _core.likelihood_weights(costs.tolist(), str(mapping), as_positive("parameter", parameter))
+    return np.asarray(weights, dtype=np.float64)

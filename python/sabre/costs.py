@@ -20,13 +20,14 @@ returns one cost per rollout, added to the Rust costs::
 from __future__ import annotations
 
 import abc
+import warnings
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from . import _core
-from ._validate import as_float_array, as_non_negative
+from ._validate import as_array, as_float_array, as_non_negative, as_pose
 from .errors import InvalidValueError
 from .scene import Scene
 
@@ -70,6 +71,13 @@ class Term(abc.ABC):
         return Cost([other]) + self if isinstance(other, Term) else other + self
 
 
+def _ordered_bounds(lower: np.ndarray, upper: np.ndarray) -> None:
+    if lower.shape != upper.shape:
+        raise InvalidValueError(f"lower and upper must have the same length, got {lower.shape} and {upper.shape}")
+    if np.any(lower > upper):
+        raise InvalidValueError(f"bounds inverted: lower {lower.tolist()} exceeds upper {upper.tolist()}")
+
+
 def _weight(name: str, value: float) -> float:
     return as_non_negative(name, value)
 
@@ -96,8 +104,11 @@ class TargetPose(Term):
     lead: float = 0.0
     lead_limit: float = float("inf")
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "target", as_pose("target", self.target))
+
     def spec(self, scene: Scene) -> dict:
-        target = as_float_array("target", self.target, (4, 4))
+        target = self.target
         if not np.isfinite(self.lead) or np.isnan(self.lead_limit):
             raise InvalidValueError("lead must be finite and lead_limit a number")
         if self.lead != 0.0 and self.object_frame is None:
@@ -137,6 +148,10 @@ class JointLimits(Term):
     weight_slope: float = 100.0
     lower: Sequence[float] | None = None
     upper: Sequence[float] | None = None
+
+    def __post_init__(self) -> None:
+        if self.lower is not None and self.upper is not None:
+            _ordered_bounds(as_float_array("lower", self.lower, (None,)), as_float_array("upper", self.upper, (None,)))
 
     def spec(self, scene: Scene) -> dict:
         lower = scene.q_lower if self.lower is None else as_float_array("lower", self.lower, (scene.nq,))
@@ -247,6 +262,9 @@ class BaseBox(Term):
     weight: float = 100.0
     weight_slope: float = 100.0
 
+    def __post_init__(self) -> None:
+        _ordered_bounds(as_float_array("lower", self.lower, (2,)), as_float_array("upper", self.upper, (2,)))
+
     def spec(self, scene: Scene) -> dict:
         return {
             "kind": "base_box",
@@ -265,6 +283,12 @@ class Obstacles(Term):
     radii: Sequence[float] = ()
     weight: float = 100.0
     weight_slope: float = 100.0
+
+    def __post_init__(self) -> None:
+        radii = as_float_array("radii", as_array("radii", self.radii).reshape(-1), (None,))
+        as_float_array("centers", as_array("centers", self.centers).reshape(-1, 3), (len(radii), 3))
+        if np.any(radii < 0.0):
+            raise InvalidValueError(f"radii: an obstacle's radius must be non-negative, got {radii.tolist()}")
 
     def spec(self, scene: Scene) -> dict:
         radii = as_float_array("radii", np.asarray(self.radii, dtype=float).reshape(-1), (None,))
@@ -354,12 +378,23 @@ class PythonTerm(Term):
 
     def evaluate(self, scene: Scene, batch: Batch) -> np.ndarray:
         n = batch.states.shape[0]
-        values = np.asarray(self.function(batch), dtype=np.float64)
+        name = getattr(self.function, "__name__", "?")
+        raw = as_array(f"PythonTerm {name}", self.function(batch))
+        if raw.dtype.kind not in "fiu":
+            # complex costs have no order: never drop the imaginary part silently
+            raise InvalidValueError(f"PythonTerm {name}: returned dtype {raw.dtype}, expected real numbers")
+        values = raw.astype(np.float64)
         if values.shape != (n,):
-            name = getattr(self.function, "__name__", "?")
             raise InvalidValueError(f"PythonTerm {name}: returned shape {values.shape}, expected ({n},)")
-        # NaN or inf simply removes that rollout from the weighted average.
-        return np.where(np.isnan(values), np.inf, values)
+        nan = np.isnan(values)
+        if nan.any():
+            warnings.warn(
+                f"PythonTerm {name}: {int(nan.sum())} of {n} costs are NaN; those rollouts weigh zero",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+        # NaN or inf removes that rollout from the weighted average.
+        return np.where(nan, np.inf, values)
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,6 @@ Every constraint is a zeroing barrier h(q) ≥ 0 turned into a row affine in the
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -298,10 +297,7 @@ class SafetyFilter:
         if tau_ext is None or tank_energy is None:
             return None, None
         tau = _vector("tau_ext", tau_ext, self.scene.nq)
-        energy = float(tank_energy)
-        if not math.isfinite(energy):
-            raise InvalidValueError(f"tank_energy: must be finite, got {energy}")
-        return tau, energy
+        return tau, as_finite("tank_energy", tank_energy)
 
     def filter(
         self,

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, ClassVar
 import numpy as np
 
 from . import costs
-from ._validate import as_float_array, as_non_negative, as_positive
+from ._validate import as_float_array, as_non_negative, as_pose, as_positive
 from .errors import InvalidValueError
 from .guides import servo_guide
 from .scene import Scene
@@ -75,6 +75,10 @@ class Task:
         """The cost the controller minimises during `phase`."""
         return costs.Cost()
 
+    def check(self, scene: Scene) -> None:
+        """Raises a SabreError if this task cannot run on ``scene`` (called when a controller is
+        built, before the first update; the controller also compiles every phase's cost then)."""
+
     def next_phase(self, scene: Scene, x: np.ndarray, t: float, phase: str) -> str:
         """The phase to use from state x at time t (called before every planning iteration)."""
         return phase
@@ -126,7 +130,7 @@ class Reach(Task):
     phases: ClassVar[tuple[str, ...]] = ("reach",)
 
     def __post_init__(self) -> None:
-        self.target_pose = as_float_array("target_pose", self.target_pose, (4, 4))
+        self.target_pose = as_pose("target_pose", self.target_pose)
 
     def cost(self, scene: Scene, phase: str) -> costs.Cost:
         pose = costs.TargetPose(self.target_pose, self.frame, None, self.pose_weight, self.pose_weight)
@@ -455,6 +459,17 @@ class OpenObject(Task):
     def lead(self, scene: Scene) -> float:
         """How far ahead (rad or m) of the opening the open-phase pose target sits."""
         return float(self.open.lead)
+
+    def check(self, scene: Scene) -> None:
+        """The object must have one movable joint and the opening must lie within its travel; an
+        approach posture must have one entry per robot joint."""
+        if scene.no != 1:
+            raise InvalidValueError(f"OpenObject needs an object with one movable joint, {scene.object_name!r} has {scene.no}")
+        lower, upper = float(scene.o_lower[0]), float(scene.o_upper[0])
+        if self.opening is not None and not lower < self.opening <= upper:
+            raise InvalidValueError(f"opening {self.opening} is outside the object's travel ({lower}, {upper}]")
+        if self.approach.posture is not None and len(self.approach.posture) != scene.nq:
+            raise InvalidValueError(f"approach.posture has {len(self.approach.posture)} entries, the robot has {scene.nq} joints")
 
     def target_opening(self, scene: Scene) -> float:
         """The opening to reach (rad or m): ``opening``, or 75 % of the range."""

@@ -29,9 +29,10 @@ pub fn weights(costs: &[f64], mapping: LikelihoodMapping, out: &mut Vec<f64>) {
             LikelihoodMapping::Naive { lambda } => (-lambda * c).exp(),
             LikelihoodMapping::Baseline { lambda } => (-lambda * (c - min)).exp(),
             LikelihoodMapping::Invariant { h } => {
-                let span = max - min;
+                // Halved, the span of two finite costs cannot overflow (1e308 − (−1e308) would).
+                let span = 0.5 * max - 0.5 * min;
                 if span > 0.0 {
-                    (-h * (c - min) / span).exp()
+                    (-h * ((0.5 * c - 0.5 * min) / span)).exp()
                 } else {
                     1.0
                 }

@@ -324,6 +324,9 @@ impl PyPlanner {
 /// "invariant" (55)).
 #[pyfunction]
 pub fn likelihood_weights(costs: Vec<f64>, mapping: &str, parameter: f64) -> PyResult<Vec<f64>> {
+    if !(parameter.is_finite() && parameter > 0.0) {
+        return Err(SabreError::invalid("parameter", format!("λ or h must be positive and finite, got {parameter}")).into());
+    }
     let mapping = match mapping {
         "naive" => LikelihoodMapping::Naive { lambda: parameter },
         "baseline" => LikelihoodMapping::Baseline { lambda: parameter },

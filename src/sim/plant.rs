@@ -54,6 +54,8 @@ pub struct Plant {
     object_held: bool,
     /// (name, limits, divergence speed bound) of every robot joint, then every object joint.
     joints: Vec<(String, JointLimits, f64)>,
+    /// The speed bounds of `joints`, in their order.
+    speed_bounds: Vec<f64>,
 }
 
 /// The longest plant step (s): the plant stands in for a 1 kHz robot, and its stiff joint limits and
@@ -63,14 +65,6 @@ pub const MAX_PLANT_DT: f64 = 0.005;
 /// How far (m or rad) a reset state may lie outside a joint's limits: the limit's correction from
 /// further out is an impulse large enough to make the integration diverge.
 pub const RESET_LIMIT_TOLERANCE: f64 = 0.05;
-
-/// A joint moving faster than this multiple of its velocity limit (or, for the object's joints,
-/// than [`MAX_OBJECT_SPEED`]) means the integration diverged: no torque within the effort limits
-/// produces it.
-pub const DIVERGENCE_VELOCITY_FACTOR: f64 = 20.0;
-
-/// The fastest (rad/s or m/s) an object joint may move before the plant calls it diverged.
-pub const MAX_OBJECT_SPEED: f64 = 100.0;
 
 impl Plant {
     pub fn new(scene: Arc<Scene>, config: PlantConfig) -> Result<Self> {
@@ -103,14 +97,11 @@ impl Plant {
         let template = SimWorld::new(scene.clone(), &world_config)?;
         let world = template.clone();
         let nq = scene.nq();
-        let robot = scene.robot.active_joint_names().into_iter().zip(scene.robot_limits());
-        let object = scene.object.active_joint_names().into_iter().zip(scene.object_limits());
-        let joints = robot
-            .map(|(n, l)| (n, l, DIVERGENCE_VELOCITY_FACTOR * l.velocity))
-            .chain(object.map(|(n, l)| (n, l, MAX_OBJECT_SPEED)))
-            .collect();
+        let joints = super::joint_speed_bounds(&scene);
+        let speed_bounds = joints.iter().map(|j| j.2).collect();
         let mut plant = Self {
             joints,
+            speed_bounds,
             x: scene.default_state(),
             interaction: Interaction {
                 contact: false,
@@ -219,18 +210,15 @@ impl Plant {
     /// The first joint whose speed shows that the integration diverged, as an error naming it.
     fn divergence(&self, x: &[f64]) -> Option<SabreError> {
         let (nq, no) = (self.scene.nq(), self.scene.no());
-        for (i, (name, _, bound)) in self.joints.iter().enumerate() {
-            let speed = if i < nq { x[nq + i] } else { x[2 * nq + no + (i - nq)] };
-            if !(speed.abs() <= *bound) {
-                return Some(SabreError::Simulation(format!(
-                    "the plant diverged at t = {:.3} s: joint '{name}' moves at {speed:.3e} (bound {bound}); \
-                     the step ({} s) is too long or the state left the model's range; reset the plant",
-                    self.time,
-                    self.world.dt()
-                )));
-            }
-        }
-        None
+        let i = super::diverged_joint(x, nq, no, &self.speed_bounds)?;
+        let (name, _, bound) = &self.joints[i];
+        let speed = if i < nq { x[nq + i] } else { x[2 * nq + no + (i - nq)] };
+        Some(SabreError::Simulation(format!(
+            "the plant diverged at t = {:.3} s: joint '{name}' moves at {speed:.3e} (bound {bound}); \
+             the step ({} s) is too long or the state left the model's range; reset the plant",
+            self.time,
+            self.world.dt()
+        )))
     }
 
     pub fn state(&self) -> &[f64] {
@@ -280,5 +268,39 @@ impl Plant {
             &self.x[2 * nq + no..],
             &crate::model::GRAVITY,
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::test_scene::{probe_and_drawer, state};
+
+    #[test]
+    fn a_reset_beyond_a_joint_limit_is_refused_and_within_the_tolerance_accepted() {
+        let scene = probe_and_drawer();
+        let mut plant = Plant::new(scene.clone(), PlantConfig::default()).unwrap();
+        let upper = scene.robot_limits()[0].upper;
+        assert!(plant.reset(&state([upper + 2.0 * RESET_LIMIT_TOLERANCE, 0.0], [0.0, 0.0], 0.0, 0.0)).is_err());
+        assert!(plant.reset(&state([upper + 0.5 * RESET_LIMIT_TOLERANCE, 0.0], [0.0, 0.0], 0.0, 0.0)).is_ok());
+    }
+
+    #[test]
+    fn a_step_that_leaves_the_joints_moving_beyond_their_bound_is_a_simulation_error_naming_the_joint() {
+        let scene = probe_and_drawer();
+        let mut plant = Plant::new(scene.clone(), PlantConfig::default()).unwrap();
+        // Past reset's checks: the world itself is put in motion far beyond the second joint's
+        // bound (a revolute joint, 1 rad of travel per step: no limit stops it within the step).
+        let bound = crate::sim::DIVERGENCE_VELOCITY_FACTOR * scene.robot_limits()[1].velocity;
+        let x = state([-0.5, 0.0], [0.0, 25.0 * bound], 0.0, 0.0);
+        plant.world.set_state(&x);
+        let names = scene.robot.active_joint_names();
+        match plant.step(&[0.0, 0.0]) {
+            Err(SabreError::Simulation(message)) => {
+                assert!(message.contains("diverged"), "{message}");
+                assert!(names.iter().any(|n| message.contains(&format!("'{n}'"))), "{message}");
+            }
+            other => panic!("expected a simulation error, got {other:?}"),
+        }
     }
 }

@@ -91,6 +91,8 @@ pub struct RolloutModel {
     template: SimWorld,
     /// Worlds handed to workers; each is restored from `template` before every rollout.
     worlds: Mutex<Vec<SimWorld>>,
+    /// Per joint (robot, then object) the speed beyond which a rollout has diverged.
+    speed_bounds: Vec<f64>,
 }
 
 /// How many worker pools (of different sizes) stay alive: a process that asks for many thread
@@ -173,6 +175,7 @@ impl RolloutModel {
         };
         let template = SimWorld::new(scene.clone(), &world_config)?;
         Ok(Self {
+            speed_bounds: super::joint_speed_bounds(&scene).into_iter().map(|j| j.2).collect(),
             scene,
             config,
             template,
@@ -255,7 +258,9 @@ impl RolloutModel {
             world.step_once(u_step, x);
             #[cfg(test)]
             tests::inject_failure(u_step, x);
-            if x.iter().any(|v| !v.is_finite()) {
+            // Non-finite numbers, or a joint faster than anything the actuators or the object can
+            // do: the integration diverged and the rest of this rollout means nothing.
+            if x.iter().any(|v| !v.is_finite()) || super::diverged_joint(x, nq, self.scene.no(), &self.speed_bounds).is_some() {
                 return Some(step);
             }
             if let Some(cost) = cost {

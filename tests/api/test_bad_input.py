@@ -176,6 +176,8 @@ def test_real_numeric_dtypes_are_accepted(objs, target, dtype):
     call, _, good, _ = TARGETS[target]
     value = good(objs)
     if np.issubdtype(dtype, np.unsignedinteger):
+        if target == "Plant.reset(x0)":
+            pytest.skip("panda_joint4's whole range is negative: no unsigned state lies within the joint limits")
         value = np.abs(value)
     call(objs, np.asarray(value).astype(dtype))  # must not raise
     call(objs, np.asarray(value).astype(dtype).tolist())  # plain lists too

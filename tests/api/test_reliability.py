@@ -212,3 +212,87 @@ def test_rollouts_with_many_thread_counts_keep_a_bounded_number_of_threads(scene
 
 def test_simulation_errors_are_sabre_errors():
     assert issubclass(SimulationError, SabreError)
+
+
+# Validated at construction ------------------------------------------------------------------------
+def _pose(**change):
+    pose = np.eye(4)
+    for key, value in change.items():
+        pose[tuple(int(c) for c in key[1:])] = value
+    return pose
+
+
+@pytest.mark.parametrize(
+    "pose, says",
+    [(_pose(m30=0.1), "bottom row"), (_pose(m33=2.0), "bottom row"), (_pose(m00=2.0), "rotation"),
+     (np.diag([1.0, 1.0, -1.0, 1.0]), "rotation")],
+    ids=["shear row", "scaled w", "scaled axis", "reflection"],
+)
+def test_a_pose_that_is_not_a_rigid_transform_is_refused_when_the_term_is_made(pose, says):
+    with pytest.raises(InvalidValueError, match=says):
+        costs.TargetPose(pose)
+    with pytest.raises(InvalidValueError, match=says):
+        sabre.tasks.Reach(target_pose=pose)
+
+
+def test_a_rotated_translated_pose_is_accepted():
+    c, s = np.cos(0.3), np.sin(0.3)
+    pose = np.array([[c, -s, 0.0, 1.0], [s, c, 0.0, 2.0], [0.0, 0.0, 1.0, 0.5], [0.0, 0.0, 0.0, 1.0]])
+    np.testing.assert_array_equal(costs.TargetPose(pose).target, pose)
+
+
+@pytest.mark.parametrize(
+    "make",
+    [lambda: costs.JointLimits(lower=[0.0, 1.0], upper=[1.0, 0.5]), lambda: costs.BaseBox(lower=(1.0, -1.0), upper=(0.0, 1.0)),
+     lambda: costs.Obstacles(centers=[[0.0, 0.0, 1.0]], radii=[-0.1])],
+    ids=["joint limits inverted", "base box inverted", "negative radius"],
+)
+def test_inverted_bounds_and_negative_radii_are_refused_when_the_term_is_made(make):
+    with pytest.raises(InvalidValueError):
+        make()
+
+
+def _batch_term(values):
+    return costs.PythonTerm(lambda batch: values(batch.states.shape[0]))
+
+
+def _iterate_with(scene, term):
+    task = sabre.tasks.Reach(target_pose=scene.fk(scene.default_state()[: scene.nq], "grasp"), extra=costs.Cost([term]))
+    controller = sabre.Controller(scene, task, small_config())
+    return controller.update(scene.default_state(), 0.0)
+
+
+def test_complex_costs_from_a_python_term_are_refused_not_truncated(scene):
+    with pytest.raises(InvalidValueError, match="dtype"):
+        _iterate_with(scene, _batch_term(lambda n: np.ones(n) + 1j))
+
+
+def test_nan_costs_from_a_python_term_warn_and_weigh_zero(scene):
+    with pytest.warns(RuntimeWarning, match="NaN"):
+        _iterate_with(scene, _batch_term(lambda n: np.where(np.arange(n) == 3, np.nan, 1.0)))
+
+
+def test_open_object_fields_that_cannot_work_on_the_scene_fail_when_the_controller_is_built(scene):
+    for task in (sabre.tasks.OpenObject(opening=5.0), sabre.tasks.OpenObject(approach=sabre.tasks.ApproachConfig(posture=(0.0, 1.0)))):
+        with pytest.raises(InvalidValueError):
+            sabre.Controller(scene, task, small_config())
+
+
+@pytest.mark.parametrize("mapping", ["naive", "baseline", "invariant"])
+@pytest.mark.parametrize("parameter", [-5.0, 0.0, float("nan"), float("inf")])
+def test_likelihood_weights_refuse_a_parameter_that_is_not_positive(mapping, parameter):
+    with pytest.raises(InvalidValueError):
+        sabre.likelihood_weights([1.0, 2.0, 3.0], mapping, parameter)
+
+
+def test_invariant_weights_of_costs_whose_span_overflows_match_the_scaled_problem():
+    # (55) is invariant to the cost scale: costs spanning ±1e308 weigh like the same costs / 1e308.
+    huge = np.array([1e308, 0.0, -1e308, 5e307])
+    np.testing.assert_allclose(
+        sabre.likelihood_weights(huge, "invariant", 10.0), sabre.likelihood_weights(huge / 1e308, "invariant", 10.0), rtol=1e-12
+    )
+
+
+def test_complex_costs_are_refused_by_likelihood_weights():
+    with pytest.raises(ShapeError):
+        sabre.likelihood_weights(np.array([1.0 + 1j, 2.0]), "invariant", 10.0)
