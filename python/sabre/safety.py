@@ -211,6 +211,8 @@ class FilterStats:
         max_solve_time: longest call (s).
         total_iterations: interior-point iterations summed over the calls.
         interior_point_calls: calls that ran Clarabel (the others took an exact shortcut).
+        hard_limit_holds: calls whose command the hard-limit guard changed: a joint at or beyond
+            its URDF limit was commanded further out and that component was zeroed.
     """
 
     calls: int
@@ -219,6 +221,7 @@ class FilterStats:
     max_solve_time: float
     total_iterations: int
     interior_point_calls: int
+    hard_limit_holds: int
 
 
 @dataclass(frozen=True)

@@ -150,7 +150,9 @@ class Plant:
     """The stand-in for the real robot: full rigid-body dynamics of robot and object in Rapier.
 
     Joint-torque input (clamped to the effort limits), gravity, every collider of robot and object,
-    a wrist force-torque reading from contact forces, and fault injection (:meth:`hold_object`).
+    a wrist force-torque reading from contact forces, and fault injection (:meth:`hold_object`,
+    :meth:`push`). ``dt`` is at most 0.005 s (the robot's 1 kHz loop: 0.001); a step whose joints end
+    faster than the divergence bound raises :class:`SimulationError` naming the joint.
 
     ``tau_ext_cutoff`` (Hz, or None) is the bandwidth of the external-torque measurement
     (:attr:`measured_tau_ext`) that the inner loop's passivity row and energy tank read: a
@@ -190,7 +192,9 @@ class Plant:
         """Puts the plant at x0 (nx,) (default: the scene's default state), time 0, object released.
 
         Raises:
-            ShapeError: x0 is not (nx,). InvalidValueError: non-finite x0.
+            ShapeError: x0 is not (nx,). InvalidValueError: non-finite x0, a joint more than 0.05
+            (rad or m) beyond its limits, or a joint faster than the plant's divergence bound
+            (20 × its velocity limit; 100 rad/s or m/s for the object).
         """
         x0 = self.scene.default_state() if x0 is None else as_float_array("x0", x0, (self.scene.nx,))
         self._core.reset(x0)
@@ -257,6 +261,12 @@ class Plant:
     def hold_object(self, flag: bool) -> None:
         """Fault injection: ``True`` holds the object's joint where it is (stuck door); ``False`` releases it."""
         self._core.hold_object(bool(flag))
+
+    def push(self, dv: Sequence[float] | np.ndarray) -> None:
+        """Fault injection: an impulsive push adding ``dv`` (nq + no,: robot joints, then object
+        joints; rad/s or m/s) to the joint velocities now, keeping time and contacts. Raises
+        InvalidValueError if the resulting speeds leave the plant's range."""
+        self._core.push(as_float_array("dv", dv, (self.scene.nq + self.scene.no,)).tolist())
 
     def object_energy(self) -> float:
         """Kinetic plus gravitational potential energy of the object (J), from its URDF inertials."""

@@ -15,7 +15,7 @@ import numpy as np
 
 from . import costs
 from ._validate import as_float_array, as_non_negative, as_pose, as_positive
-from .errors import InvalidValueError
+from .errors import InvalidValueError, UnknownFrameError
 from .guides import servo_guide
 from .scene import Scene
 from .sim import RolloutModel
@@ -463,8 +463,15 @@ class OpenObject(Task):
     def check(self, scene: Scene) -> None:
         """The object must have one movable joint and the opening must lie within its travel; an
         approach posture must have one entry per robot joint."""
+        swapped = " (are the robot and object files swapped?)" if scene.nq <= 1 < scene.no else ""
         if scene.no != 1:
-            raise InvalidValueError(f"OpenObject needs an object with one movable joint, {scene.object_name!r} has {scene.no}")
+            raise InvalidValueError(
+                f"OpenObject needs an object with one movable joint; {scene.object_name!r} has {scene.no}: "
+                f"{list(scene.object_joint_names)}{swapped}"
+            )
+        for frame, names, owner in (("grasp", scene.frame_names, "robot"), ("handle_frame", scene.object_frame_names, "object")):
+            if frame not in names:
+                raise UnknownFrameError(f"OpenObject needs the {owner} frame {frame!r}; the {owner} has: {', '.join(names)}")
         lower, upper = float(scene.o_lower[0]), float(scene.o_upper[0])
         if self.opening is not None and not lower < self.opening <= upper:
             raise InvalidValueError(f"opening {self.opening} is outside the object's travel ({lower}, {upper}]")

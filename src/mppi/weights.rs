@@ -29,10 +29,13 @@ pub fn weights(costs: &[f64], mapping: LikelihoodMapping, out: &mut Vec<f64>) {
             LikelihoodMapping::Naive { lambda } => (-lambda * c).exp(),
             LikelihoodMapping::Baseline { lambda } => (-lambda * (c - min)).exp(),
             LikelihoodMapping::Invariant { h } => {
-                // Halved, the span of two finite costs cannot overflow (1e308 − (−1e308) would).
-                let span = 0.5 * max - 0.5 * min;
-                if span > 0.0 {
-                    (-h * ((0.5 * c - 0.5 * min) / span)).exp()
+                let span = max - min;
+                if span > 0.0 && span.is_finite() {
+                    (-h * (c - min) / span).exp()
+                } else if span > 0.0 {
+                    // Costs so far apart that their span overflows (1e308 − (−1e308)): halved, it
+                    // cannot, and (55) only sees the ratio.
+                    (-h * ((0.5 * c - 0.5 * min) / (0.5 * max - 0.5 * min))).exp()
                 } else {
                     1.0
                 }

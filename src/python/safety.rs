@@ -295,6 +295,7 @@ impl PySafetyFilter {
         d.set_item("max_solve_time", s.max_time)?;
         d.set_item("total_iterations", s.total_iterations)?;
         d.set_item("interior_point_calls", s.interior_point_calls)?;
+        d.set_item("hard_limit_holds", s.hard_limit_holds)?;
         Ok(d)
     }
     fn reset_stats(&self) {

@@ -429,4 +429,7 @@ impl PyPlant {
     fn object_energy(&self) -> PyResult<f64> {
         self.with(|p| Ok(p.object_energy()))
     }
+    fn push(&self, dv: Vec<f64>) -> PyResult<()> {
+        self.with(|p| p.push(&dv))
+    }
 }

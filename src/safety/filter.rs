@@ -107,6 +107,9 @@ pub struct FilterStats {
     pub total_iterations: u64,
     /// Calls that ran Clarabel.
     pub interior_point_calls: u64,
+    /// Calls whose command the hard-limit guard changed (a joint at or beyond its URDF limit was
+    /// commanded further out).
+    pub hard_limit_holds: u64,
 }
 
 impl FilterStats {
@@ -145,6 +148,8 @@ pub struct SafetyFilter {
     obstacles: Vec<Option<Obstacle>>,
     next_obstacle_id: u64,
     velocity_limits: Vec<f64>,
+    /// Hard position limits (lower, upper) of every robot joint, from the URDF.
+    position_limits: Vec<(f64, f64)>,
     /// Every row in its own slot with its own sparsity.
     full: SlotQp,
     /// Dense slots for the rows that survive screening (only sizes below the full row count).
@@ -199,6 +204,7 @@ impl SafetyFilter {
             obstacles,
             next_obstacle_id: 0,
             velocity_limits,
+            position_limits: limits.iter().map(|l| (l.lower, l.upper)).collect(),
             full,
             reduced,
             candidates: Vec::with_capacity(r),
@@ -519,6 +525,7 @@ impl SafetyFilter {
                 self.active_set.forget();
             }
         }
+        self.hold_hard_limits(&x[..nq]);
         let out = &mut self.output;
         out.barrier.copy_from_slice(&self.rows.barrier);
         out.active.clear();
@@ -552,6 +559,49 @@ impl SafetyFilter {
         s.max_time = s.max_time.max(elapsed);
         s.total_iterations += u64::from(out.iterations);
         Ok(&self.output)
+    }
+
+    /// The hard-limit guard: the joint-limit rows are ZBFs with slack, so a command that saturates
+    /// many inputs may still move a joint that is already at or beyond its URDF limit further out
+    /// (Remark 1 bounds the violation by the slack the penalty allows, it does not forbid it).
+    /// Such a component is set to zero. If that lowers τ_extᵀu below both the passivity row's bound
+    /// and what the QP's command achieved, the whole command is scaled toward the safe stop u = 0
+    /// until it achieves that again (zeroed components stay zero, inward ones stay inward).
+    /// The reported slacks are those of the final command.
+    fn hold_hard_limits(&mut self, q: &[f64]) {
+        let nq = q.len();
+        let out = &mut self.output;
+        let before = out.u.clone();
+        let mut changed = false;
+        for (j, (&(lower, upper), &qj)) in self.position_limits.iter().zip(q).enumerate() {
+            if (qj >= upper && out.u[j] > 0.0) || (qj <= lower && out.u[j] < 0.0) {
+                out.u[j] = 0.0;
+                changed = true;
+            }
+        }
+        if !changed {
+            return;
+        }
+        let dot = |a: &[f64], u: &[f64]| a.iter().zip(u).map(|(a, u)| a * u).sum::<f64>();
+        for ri in 0..self.rows.len() {
+            if !self.rows.live[ri] || self.rows.rows[ri].class != ConstraintClass::Passivity {
+                continue;
+            }
+            let a = &self.rows.coef[ri * nq..(ri + 1) * nq];
+            let wanted = self.rows.bound[ri].min(dot(a, &before));
+            let achieved = dot(a, &out.u);
+            if achieved < wanted && wanted <= 0.0 {
+                let scale = (wanted / achieved).clamp(0.0, 1.0);
+                out.u.iter_mut().for_each(|u| *u *= scale);
+            }
+        }
+        for ri in 0..self.rows.len() {
+            if self.rows.live[ri] {
+                let a = &self.rows.coef[ri * nq..(ri + 1) * nq];
+                out.slack[ri] = (self.rows.bound[ri] - dot(a, &out.u)).max(0.0);
+            }
+        }
+        self.stats.hard_limit_holds += 1;
     }
 
     /// The ZBF rows at x: (∂h/∂q per row, R × nq row-major; bounds b, R; barrier values h, R), so

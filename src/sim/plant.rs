@@ -221,6 +221,23 @@ impl Plant {
         )))
     }
 
+    /// Fault injection: an impulsive push that adds `dv` (nq + no: robot joints, then object
+    /// joints) to the joint velocities now, keeping time and contact history. The resulting speeds
+    /// must stay within the divergence bound.
+    pub fn push(&mut self, dv: &[f64]) -> Result<()> {
+        let (nq, no) = (self.scene.nq(), self.scene.no());
+        ensure_len("dv", dv, nq + no)?;
+        ensure_finite("dv", dv)?;
+        let mut x = self.x.clone();
+        for (i, d) in dv.iter().enumerate() {
+            x[if i < nq { nq + i } else { 2 * nq + no + (i - nq) }] += d;
+        }
+        self.check_within_limits(&x)?;
+        self.world.set_state(&x);
+        self.x = x;
+        Ok(())
+    }
+
     pub fn state(&self) -> &[f64] {
         &self.x
     }

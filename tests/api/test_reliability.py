@@ -9,6 +9,7 @@ import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -296,3 +297,15 @@ def test_invariant_weights_of_costs_whose_span_overflows_match_the_scaled_proble
 def test_complex_costs_are_refused_by_likelihood_weights():
     with pytest.raises(ShapeError):
         sabre.likelihood_weights(np.array([1.0 + 1j, 2.0]), "invariant", 10.0)
+
+
+def test_open_object_on_a_scene_without_its_frames_or_with_swapped_files_fails_when_the_controller_is_built():
+    assets = Path(__file__).resolve().parents[2] / "assets"
+    robot_urdf = (assets / "robots" / "royalpanda.urdf").read_text()
+    shelf_urdf = (assets / "objects" / "shelf.urdf").read_text()
+    swapped = sabre.Scene.from_urdf_strings(shelf_urdf, robot_urdf)
+    with pytest.raises(InvalidValueError, match="swapped"):
+        sabre.Controller(swapped, sabre.tasks.OpenObject(), small_config())
+    no_handle = sabre.Scene.from_urdf_strings(robot_urdf, shelf_urdf.replace("handle_frame", "knob"))
+    with pytest.raises(sabre.errors.UnknownFrameError, match="handle_frame.*knob"):
+        sabre.Controller(no_handle, sabre.tasks.OpenObject(), small_config())

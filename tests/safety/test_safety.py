@@ -267,3 +267,34 @@ def test_obstacles_and_bad_input(scene):
         sabre.SafetyFilter("shelf")
     with pytest.raises(ShapeError):
         f.filter_sequence(x, np.zeros((5, 3)), sabre.RolloutModel(scene))
+
+
+@pytest.mark.parametrize("with_passivity", [False, True], ids=["outer", "inner_with_tank"])
+def test_no_command_moves_a_joint_further_beyond_its_hard_limit(with_passivity):
+    """Joints 0–0.05 rad beyond a URDF limit, every input saturated: the joint-limit rows are soft
+    (ZBF with slack, Remark 1), yet the command never drives such a joint further out."""
+    scene = sabre.Scene.load("royalpanda", "shelf")
+    f = sabre.SafetyFilter(scene, sabre.SafetyConfig())
+    rng = np.random.default_rng(0)
+    nq = scene.nq
+    arm = np.arange(3, nq)
+    for _ in range(300):
+        x = scene.default_state()
+        q = x[:nq]
+        beyond = rng.random(arm.size) < 0.5
+        upper_side = rng.random(arm.size) < 0.5
+        depth = rng.uniform(0.0, 0.05, arm.size)
+        q[arm] = np.where(beyond, np.where(upper_side, scene.q_upper[arm] + depth, scene.q_lower[arm] - depth), q[arm])
+        u_ref = rng.choice([-1.0, 1.0], nq) * scene.dq_limit * rng.uniform(1.0, 3.0, nq)
+        if with_passivity:
+            r = f.filter(x, u_ref, tau_ext=rng.normal(0.0, 5.0, nq), tank_energy=rng.uniform(0.5, 10.0))
+        else:
+            r = f.filter(x, u_ref)
+        u = np.asarray(r.u)
+        out_up = q >= scene.q_upper
+        out_down = q <= scene.q_lower
+        assert np.all(u[out_up] <= 1e-12), (q[out_up] - scene.q_upper[out_up], u[out_up])
+        assert np.all(u[out_down] >= -1e-12), (scene.q_lower[out_down] - q[out_down], u[out_down])
+        assert np.all(np.abs(u) <= scene.dq_limit + 1e-12)
+    # the guard acted: without it the QP's command moved some joint further out
+    assert f.stats.hard_limit_holds > 0

@@ -1,0 +1,45 @@
+"""A steady in-contact planning loop to profile with `perf` (the breakdown in docs/design.md).
+
+    perf record -F 1999 -g -o /tmp/contact.perf -- .venv/bin/python benches/profile_contact.py --iterations 300
+    perf report -i /tmp/contact.perf --no-children --sort symbol --percent-limit 0.5
+
+Repeats `Controller.update` from the hooked shelf state in the open phase (N = 40, K = 67,
+2 threads), the iteration that benches/compare_planning.py times against `mujoco.rollout`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import sabre
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from compare_planning import hooked_state
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--iterations", type=int, default=300)
+    parser.add_argument("--object", default="shelf", choices=sabre.OBJECTS)
+    args = parser.parse_args(argv)
+    scene = sabre.Scene.load(obj=args.object)
+    controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=0, threads=2))
+    controller.set_phase("open")
+    x = hooked_state(scene)
+    started = time.perf_counter()
+    engine = rollout = 0.0
+    for i in range(args.iterations):
+        controller.update(x, 0.01 * (i + 1))
+        engine += controller.stats.engine_time
+        rollout += controller.stats.rollout_time
+    wall = time.perf_counter() - started
+    print(f"{args.iterations} in-contact iterations: {1e3 * wall / args.iterations:.2f} ms each; "
+          f"Rapier pipeline {100 * engine / (2 * rollout):.0f} % of the workers' rollout time")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
