@@ -13,13 +13,14 @@ from __future__ import annotations
 import json
 import os
 import signal
+import sys
 import threading
 from collections.abc import Callable
 from typing import Any
 
 from ..errors import MissingExtraError
 
-__all__ = ["RosUnavailableError", "require_ros", "spin_node", "ROS_EXTRA"]
+__all__ = ["RosUnavailableError", "require_ros", "spin_node", "realtime_thread", "ROS_EXTRA"]
 
 ROS_EXTRA = "sabre-mpc[ros]"
 
@@ -47,11 +48,41 @@ def require_ros():
     return rclpy
 
 
-def spin_node(node: Any, shutdown: Callable[[], dict[str, Any]], done: threading.Event | None = None) -> None:
-    """Spins ``node.node`` (built after ``rclpy.init``) until SIGINT or
+#: Seconds between the interpreter's GIL hand-overs in a bridge process (see :func:`spin_node`).
+GIL_SWITCH_INTERVAL = 1e-4
+
+
+def realtime_thread(priority: int) -> bool:
+    """Puts the calling thread under SCHED_FIFO at ``priority`` (1–99), as a robot's control loop
+    runs, so that the 1 kHz path preempts the planner's threads on a machine with few cores.
+    Threads it starts afterwards (the planner, its workers) keep the normal policy
+    (SCHED_RESET_ON_FORK). Returns False, changing nothing, where the OS does not permit it
+    (no CAP_SYS_NICE or rtprio limit) or for ``priority <= 0``."""
+    fifo = getattr(os, "SCHED_FIFO", None)
+    if priority <= 0 or fifo is None:
+        return False
+    try:
+        os.sched_setscheduler(0, fifo | getattr(os, "SCHED_RESET_ON_FORK", 0), os.sched_param(min(int(priority), 99)))
+    except OSError:
+        return False
+    return True
+
+
+def spin_node(node: Any, shutdown: Callable[[], dict[str, Any]], done: threading.Event | None = None,
+              priority: int = 0) -> None:
+    """Spins ``node.node`` (built after ``rclpy.init``), at real-time ``priority`` if permitted
+    (:func:`realtime_thread`; 0: normal), until SIGINT or
     SIGTERM, ``done`` or rclpy's shutdown; then calls ``shutdown`` and prints its summary as one
     line ``SABRE_SUMMARY {json}`` (what the launcher and the tests read), and tears ROS down."""
     rclpy = require_ros()
+    # The 1 kHz callbacks share the GIL with a planner thread (the controller) or the plant loop
+    # (the simulated robot); Python hands the GIL over only every switch interval (5 ms by
+    # default), which would delay a waiting callback by up to that much.
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL)
+    if priority > 0 and not realtime_thread(priority):
+        node.node.get_logger().warn(
+            f"real-time priority {priority} not permitted (needs CAP_SYS_NICE or an rtprio limit): "
+            "the 1 kHz callbacks compete with the planner for the cores")
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())

@@ -339,5 +339,5 @@ def run_controller(overrides: dict[str, Any] | None = None, ros_args: list[str] 
     rclpy = require_ros()
     rclpy.init(args=["sabre_controller"] + (ros_args or []), signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     node = ControllerNode(overrides)
-    spin_node(node, node.shutdown)
+    spin_node(node, node.shutdown, priority=int(node.params["realtime_priority"]))
     return 0

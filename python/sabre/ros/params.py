@@ -38,6 +38,7 @@ CONTROLLER_PARAMETERS: dict[str, Any] = {
     "tau_ext_cutoff": 10.0,  # Hz, low-pass of the wrench-derived τ_ext the tank reads
     "max_tick_dt": 0.02,  # s: the tank integrates at most this long per state
     "min_replan_period": 0.0,  # s: 0 plans as fast as the machine allows
+    "realtime_priority": 0,  # SCHED_FIFO priority of the state callbacks (0: normal scheduling)
 }
 
 #: Simulated robot node (``python -m sabre sim-robot``).
@@ -63,6 +64,7 @@ SIM_ROBOT_PARAMETERS: dict[str, Any] = {
     "settle_time": 0.5,  # s after success before stopping
     "hold_at_opening": 0.0,  # fraction of the opening range at which the object is held, 0: never
     "hold_duration": 5.0,  # s
+    "realtime_priority": 80,  # SCHED_FIFO priority of the plant loop; its command callbacks run 10 below (0: normal)
 }
 
 
