@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -25,6 +26,23 @@ def _pose(obj_pose: Sequence[float] | np.ndarray | None) -> list[float] | None:
     return as_float_array("obj_pose", obj_pose, (6,)).tolist()
 
 
+@dataclass(frozen=True)
+class CollisionShape:
+    """One collision primitive of a link.
+
+    Attributes:
+        link: the link it belongs to. kind: "box", "sphere", "cylinder" or "capsule".
+        size: box half extents (x, y, z); sphere (radius,); cylinder and capsule (radius, half
+            length along the primitive's z), in m.
+        pose: (4, 4) pose of the primitive in the link frame.
+    """
+
+    link: str
+    kind: str
+    size: tuple[float, ...]
+    pose: np.ndarray
+
+
 class Scene:
     """A robot and an articulated object.
 
@@ -35,7 +53,7 @@ class Scene:
     Build one with :meth:`load` (built-in assets) or :meth:`from_urdf` (your own files).
     """
 
-    __slots__ = ("_core",)
+    __slots__ = ("_core", "__weakref__")
 
     def __init__(self, core: _core.Scene) -> None:
         if not isinstance(core, _core.Scene):
@@ -112,6 +130,14 @@ class Scene:
     @property
     def object_frame_names(self) -> tuple[str, ...]:
         return tuple(self._core.object_frame_names)
+
+    @property
+    def object_collisions(self) -> tuple[CollisionShape, ...]:
+        """The object's collision primitives, each with its link and pose in that link's frame."""
+        return tuple(
+            CollisionShape(link=link, kind=kind, size=tuple(size), pose=readonly(np.asarray(pose, dtype=float).reshape(4, 4)))
+            for link, kind, size, pose in self._core.object_collisions()
+        )
 
     # -- limits ---------------------------------------------------------------------------------
     def _robot_limits(self, i: int) -> np.ndarray:

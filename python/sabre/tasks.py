@@ -7,6 +7,7 @@ iteration for anything else (logging, moving a target, ...).
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, ClassVar
@@ -17,6 +18,7 @@ from . import costs
 from ._validate import as_float_array, as_non_negative, as_pose, as_positive
 from .errors import InvalidValueError, UnknownFrameError
 from .guides import servo_guide
+from .handles import handle_offset
 from .scene import Scene
 from .sim import RolloutModel
 
@@ -28,6 +30,10 @@ __all__ = [
     "NoiseConfig", "GuideConfig", "GraspError", "PocketError",
 ]
 
+
+
+#: Handle frames per scene and handle name: inferred once, forgotten with the scene.
+_HANDLES: weakref.WeakKeyDictionary[Scene, dict[str, tuple[str, np.ndarray]]] = weakref.WeakKeyDictionary()
 
 @dataclass(frozen=True)
 class SafetyWeights:
@@ -406,7 +412,12 @@ class OpenObject(Task):
     cost (30) while approaching and releasing; ``safety`` the terms every phase carries; ``extra``
     is added to every phase's cost. Success: opening ≥ ``open.success_fraction`` of the target.
 
-    Example: ``OpenObject(hook=HookConfig(backout=None))`` never restarts a backed-out hook.
+    ``handle`` names the object frame or link to grasp: a frame without collision geometry (the
+    shipped objects' ``handle_frame``) is used as the handle frame as it is; a link with geometry
+    (anyone else's object) gets its handle frame inferred by :func:`sabre.handles.infer_handle_frame`.
+
+    Example: ``OpenObject(hook=HookConfig(backout=None))`` never restarts a backed-out hook;
+    ``OpenObject(handle="door_knob_link")`` opens an object whose handle is that link.
 
     Raises:
         InvalidValueError: a non-finite opening, a non-positive horizon, a negative contact weight.
@@ -424,8 +435,26 @@ class OpenObject(Task):
     guide: GuideConfig = field(default_factory=GuideConfig)
     safety: SafetyWeights = field(default_factory=SafetyWeights)
     extra: costs.Cost = field(default_factory=costs.Cost)
+    handle: str = "handle_frame"
 
     phases = ("approach", "insert", "hook", "open", "release")
+
+    def _handle(self, scene: Scene) -> tuple[str, np.ndarray]:
+        """(object frame, offset) of the handle frame on ``scene`` (see :mod:`sabre.handles`), computed once per scene."""
+        per_scene = _HANDLES.setdefault(scene, {})
+        if self.handle not in per_scene:
+            per_scene[self.handle] = handle_offset(scene, self.handle)
+        return per_scene[self.handle]
+
+    def handle_pose(self, scene: Scene, o: Sequence[float] | np.ndarray) -> np.ndarray:
+        """(4, 4) world pose of the handle frame at object configuration o (no,)."""
+        frame, offset = self._handle(scene)
+        return scene.object_fk(o, frame) @ offset
+
+    def handle_poses(self, scene: Scene, o: np.ndarray) -> np.ndarray:
+        """(M, 4, 4) world poses of the handle frame at object configurations o (M, no)."""
+        frame, offset = self._handle(scene)
+        return scene.object_fk_many(o, frame) @ offset
 
     def __post_init__(self) -> None:
         for name, kind in (("approach", ApproachConfig), ("hook", HookConfig), ("open", OpenConfig),
@@ -469,9 +498,9 @@ class OpenObject(Task):
                 f"OpenObject needs an object with one movable joint; {scene.object_name!r} has {scene.no}: "
                 f"{list(scene.object_joint_names)}{swapped}"
             )
-        for frame, names, owner in (("grasp", scene.frame_names, "robot"), ("handle_frame", scene.object_frame_names, "object")):
-            if frame not in names:
-                raise UnknownFrameError(f"OpenObject needs the {owner} frame {frame!r}; the {owner} has: {', '.join(names)}")
+        if "grasp" not in scene.frame_names:
+            raise UnknownFrameError(f"OpenObject needs the robot frame 'grasp'; the robot has: {', '.join(scene.frame_names)}")
+        self._handle(scene)  # the handle exists and its frame can be inferred
         lower, upper = float(scene.o_lower[0]), float(scene.o_upper[0])
         if self.opening is not None and not lower < self.opening <= upper:
             raise InvalidValueError(f"opening {self.opening} is outside the object's travel ({lower}, {upper}]")
@@ -488,7 +517,7 @@ class OpenObject(Task):
         """Distance (m) the handle moves per unit of opening (rad or m) at opening o."""
         h = 1e-4 * (scene.o_upper[0] - scene.o_lower[0])
         lo, hi = np.clip([o - h, o + h], scene.o_lower[0], scene.o_upper[0])
-        moved = scene.object_fk([hi], "handle_frame")[:3, 3] - scene.object_fk([lo], "handle_frame")[:3, 3]
+        moved = self.handle_pose(scene, [hi])[:3, 3] - self.handle_pose(scene, [lo])[:3, 3]
         return float(np.linalg.norm(moved) / max(hi - lo, 1e-12))
 
     def object_setpoint(self, scene: Scene) -> float:
@@ -514,7 +543,7 @@ class OpenObject(Task):
         """Pose of the grasp target in the handle frame for `phase`."""
         offsets = {"approach": self.approach.pregrasp_offset, "insert": self.approach.insert_offset, "hook": self.hook.offset}
         xyz = offsets.get(phase, self.open.offset)
-        closed = scene.object_fk(scene.o_lower, "handle_frame")
+        closed = self.handle_pose(scene, scene.o_lower)
         # Tilt about whichever handle axis (x or y) is horizontal, so that z points downward.
         axis = 0 if abs(closed[2, 0]) < abs(closed[2, 1]) else 1
         angle = self.approach.pitch
@@ -542,7 +571,8 @@ class OpenObject(Task):
         if phase in ("approach", "insert", "hook"):
             return (
                 costs.TargetPose(
-                    self.grasp_offset(scene, phase), "grasp", "handle_frame", self.approach.weight, self.approach.weight
+                    self._handle(scene)[1] @ self.grasp_offset(scene, phase), "grasp", self._handle(scene)[0],
+                    self.approach.weight, self.approach.weight
                 )
                 + (costs.Contact(self.contact_weight) + self.posture_term(scene) if phase == "approach" else costs.Cost())
                 # Also before the hook holds: a door that can open by itself (a dishwasher past its
@@ -552,7 +582,8 @@ class OpenObject(Task):
                 + self.extra
             )
         return (
-            costs.TargetPose(self.grasp_offset(scene, phase), "grasp", "handle_frame", weights=tuple(self.open.pose_weights),
+            costs.TargetPose(self._handle(scene)[1] @ self.grasp_offset(scene, phase), "grasp", self._handle(scene)[0],
+                             weights=tuple(self.open.pose_weights),
                              lead=self.lead(scene), lead_limit=self.target_opening(scene))
             + costs.ObjectState([self.object_setpoint(scene)], self.open.object_weight)
             + self.safety.terms(scene)
@@ -562,7 +593,7 @@ class OpenObject(Task):
     def approach_error(self, scene: Scene, x: np.ndarray, phase: str = "insert") -> GraspError:
         """Distance (m) and angle (rad) of the grasp frame from the target of `phase` at state x (nx,)."""
         nq, no = scene.nq, scene.no
-        target = scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame") @ self.grasp_offset(scene, phase)
+        target = self.handle_pose(scene, x[2 * nq : 2 * nq + no]) @ self.grasp_offset(scene, phase)
         pose = scene.fk(x[:nq], "grasp")
         dp = float(np.linalg.norm(pose[:3, 3] - target[:3, 3]))
         cos = (np.trace(target[:3, :3].T @ pose[:3, :3]) - 1.0) / 2.0
@@ -586,7 +617,7 @@ class OpenObject(Task):
         """The handle's pose (4, 4) and the grasp frame's offset (3,) from the target of `phase`,
         in world axes."""
         nq, no = scene.nq, scene.no
-        handle = scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame")
+        handle = self.handle_pose(scene, x[2 * nq : 2 * nq + no])
         target = handle @ self.grasp_offset(scene, phase)
         return handle, scene.fk(x[:nq], "grasp")[:3, 3] - target[:3, 3]
 
@@ -594,7 +625,7 @@ class OpenObject(Task):
         """Sideways offset (m) of the grasp frame from its open-phase target, along the handle
         frame's y axis: how far the bar has moved toward leaving the finger's pocket."""
         nq, no = scene.nq, scene.no
-        handle = scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame")
+        handle = self.handle_pose(scene, x[2 * nq : 2 * nq + no])
         grasp = np.linalg.solve(handle, scene.fk(x[:nq], "grasp"))
         return float(grasp[1, 3] - self.open.offset[1])
 
@@ -626,7 +657,7 @@ class OpenObject(Task):
         if not scene.object_is_revolute:
             return back
         o = float(x[2 * nq])
-        p0, p1, p2 = scene.object_fk_many(np.array([[o - 0.1], [o], [o + 0.1]]), "handle_frame")[:, :3, 3]
+        p0, p1, p2 = self.handle_poses(scene, np.array([[o - 0.1], [o], [o + 0.1]]))[:, :3, 3]
         a, b = p0 - p1, p2 - p1
         normal = np.cross(a, b)
         nn = float(normal @ normal)
@@ -703,7 +734,7 @@ class OpenObject(Task):
         if phase != "open":
             if self.guide.speed <= 0.0:
                 return None
-            target = scene.object_fk(o, "handle_frame") @ offset
+            target = self.handle_pose(scene, o) @ offset
             speed = self.guide.speed if phase == "approach" else self.guide.fine_speed
             targets = np.broadcast_to(target, (steps + 1, 4, 4))
             return servo_guide(scene, q, targets, dt, gain=self.guide.gain, max_linear=speed, max_angular=4.0 * speed)[None]
@@ -719,7 +750,7 @@ class OpenObject(Task):
         for speed in speeds:
             rate = speed / max(travel, 1e-6)
             openings = np.minimum(o[0] + rate * dt * np.arange(steps + 1), max(end, o[0]))
-            targets = scene.object_fk_many(openings[:, None], "handle_frame") @ offset
+            targets = self.handle_poses(scene, openings[:, None]) @ offset
             out.append(servo_guide(scene, q, targets, dt, gain=self.guide.gain, max_linear=2.0 * speed + 0.05, max_angular=2.0))
         return np.stack(out)
 
@@ -763,8 +794,8 @@ class OpenObject(Task):
     def handle_from_closed(self, scene: Scene, x: np.ndarray) -> float:
         """Distance (m) of the handle from where it is with the object closed."""
         nq, no = scene.nq, scene.no
-        closed = scene.object_fk(np.asarray(scene.o_lower, dtype=np.float64), "handle_frame")[:3, 3]
-        return float(np.linalg.norm(scene.object_fk(x[2 * nq : 2 * nq + no], "handle_frame")[:3, 3] - closed))
+        closed = self.handle_pose(scene, scene.o_lower)[:3, 3]
+        return float(np.linalg.norm(self.handle_pose(scene, x[2 * nq : 2 * nq + no])[:3, 3] - closed))
 
     def running_ahead(self, scene: Scene, x: np.ndarray) -> bool:
         """Whether the object opens by itself faster than ``release.runaway_speed`` (m/s at the handle), as

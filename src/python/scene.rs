@@ -132,6 +132,28 @@ impl PyScene {
             .map(|&l| self.inner.robot.links[l].name.clone())
             .collect()
     }
+    /// The object's collision primitives as (link, kind, size, pose in the link frame as a row-major
+    /// 4 × 4): kind "box" (size = half extents x, y, z), "sphere" (radius), "cylinder" and "capsule"
+    /// (radius, half length along the primitive's z).
+    fn object_collisions(&self) -> Vec<(String, String, Vec<f64>, Vec<f64>)> {
+        use crate::model::kinematics::Shape;
+        let tree = &self.inner.object;
+        let mut out = Vec::new();
+        for link in &tree.links {
+            for c in &link.collisions {
+                let (kind, size) = match c.shape {
+                    Shape::Box { half_extents } => ("box", vec![half_extents.x, half_extents.y, half_extents.z]),
+                    Shape::Sphere { radius } => ("sphere", vec![radius]),
+                    Shape::Cylinder { radius, half_length } => ("cylinder", vec![radius, half_length]),
+                    Shape::Capsule { radius, half_length } => ("capsule", vec![radius, half_length]),
+                };
+                let m = c.origin.to_homogeneous();
+                let pose = (0..4).flat_map(|r| (0..4).map(move |col| m[(r, col)])).collect();
+                out.push((link.name.clone(), kind.to_string(), size, pose));
+            }
+        }
+        out
+    }
     /// Self-collision spheres as (name, link, centre xyz, radius) and the checked pairs (by name).
     fn self_collision(&self) -> (Vec<SphereRow>, Vec<(String, String)>) {
         let s = &self.inner;

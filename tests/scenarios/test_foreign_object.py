@@ -1,0 +1,76 @@
+"""An object written to another project's conventions: its own link and joint names, a `world` root
+with a fixed joint, no `handle_frame`. Naming the handle link is enough: the inferred handle frame is
+the one the shipped object declares, and the controller opens it."""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import sabre
+from sabre import tasks
+from sabre.handles import infer_handle_frame
+
+ASSETS = Path(__file__).resolve().parents[2] / "assets"
+RENAMES = {"cabinet": "carcass_link", "door": "leaf", "drawer": "tray", "handle": "pull_bar", "articulation": "hinge",
+           "handle_joint": "bar_mount"}
+
+
+def foreign_urdf(obj: str) -> str:
+    """The shipped object as a CAD export would write it: renamed, world-rooted, no handle frame."""
+    root = ET.fromstring((ASSETS / "objects" / f"{obj}.urdf").read_text())
+    for element in list(root):
+        if element.get("name") in ("handle_frame", "handle_frame_joint"):
+            root.remove(element)
+    for element in root.iter():
+        for key in ("name", "link"):
+            if element.tag in ("link", "joint", "parent", "child") and element.get(key) in RENAMES:
+                element.set(key, RENAMES[element.get(key)])
+    root.insert(0, ET.fromstring('<link name="world"/>'))
+    root.insert(1, ET.fromstring('<joint name="world_to_carcass" type="fixed"><parent link="world"/>'
+                                 '<child link="carcass_link"/><origin xyz="0 0 0"/></joint>'))
+    return ET.tostring(root, encoding="unicode")
+
+
+def foreign_scene(obj: str) -> sabre.Scene:
+    robot = (ASSETS / "robots" / "royalpanda.urdf").read_text()
+    shipped = sabre.Scene.load("royalpanda", obj)
+    pose = shipped.object_pose
+    yaw = float(np.arctan2(pose[1, 0], pose[0, 0]))
+    return sabre.Scene.from_urdf_strings(robot, foreign_urdf(obj), [pose[0, 3], pose[1, 3], pose[2, 3], 0.0, 0.0, yaw])
+
+
+@pytest.mark.parametrize("obj", sabre.OBJECTS)
+def test_the_inferred_handle_frame_is_the_one_the_shipped_object_declares(obj):
+    shipped, foreign = sabre.Scene.load("royalpanda", obj), foreign_scene(obj)
+    assert "handle_frame" not in foreign.object_frame_names
+    task = tasks.OpenObject(handle="pull_bar")
+    for o in np.linspace(shipped.o_lower[0], shipped.o_upper[0], 4):
+        np.testing.assert_allclose(task.handle_pose(foreign, [o]), shipped.object_fk([o], "handle_frame"), atol=1e-9)
+    # and in the handle link's own frame, on the shipped object itself
+    lo = np.asarray(shipped.o_lower, dtype=float)
+    declared = np.linalg.inv(shipped.object_fk(lo, "handle")) @ shipped.object_fk(lo, "handle_frame")
+    np.testing.assert_allclose(infer_handle_frame(shipped, "handle"), declared, atol=1e-12)
+
+
+def test_a_missing_handle_is_named_with_the_candidates_when_the_controller_is_built():
+    foreign = foreign_scene("shelf")
+    with pytest.raises(sabre.errors.UnknownFrameError, match="pull_bar"):
+        sabre.Controller(foreign, tasks.OpenObject(), sabre.ControllerConfig(rollouts=8, horizon=0.15))
+    with pytest.raises(sabre.errors.UnknownFrameError, match="pull_bar"):
+        sabre.Controller(foreign, tasks.OpenObject(handle="knob"), sabre.ControllerConfig(rollouts=8, horizon=0.15))
+
+
+def test_the_controller_opens_a_foreign_shelf_by_its_handle_link():
+    shipped, foreign = sabre.Scene.load("royalpanda", "shelf"), foreign_scene("shelf")
+    motion = sabre.hook_and_pull(shipped)  # the same robot in front of the same handle
+    x0 = foreign.default_state()
+    x0[: foreign.nq] = motion.planned_states[int(np.flatnonzero(motion.phases == 0)[-1]) + 1]
+    task = tasks.OpenObject(handle="pull_bar")
+    controller = sabre.Controller(foreign, task, sabre.ControllerConfig(variant="N", seed=0, threads=1))
+    episode = sabre.run_episode(foreign, controller, 15.0, seed=0, x0=x0, progress=False)
+    assert episode.success
+    assert episode.opening.max() >= 0.9 * task.target_opening(foreign)
