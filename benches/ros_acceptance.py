@@ -78,13 +78,15 @@ def main(argv: list[str] | None = None) -> int:
         k = sum(r["opened"] for r in runs)
         ratio = f"{statistics.median(ratios):.2f}×, {max(ratios):.2f}×" if ratios else "—"
         lines.append(
-            f"| {obj} | {variant} | {k}/{len(runs)} | {ratio} | {max(r['p50'] for r in runs):.2f} / {max(r['p99'] for r in runs):.2f} "
+            f"| {obj} | {variant} | {k}/{len(runs)} | {ratio} "
+            f"| {max(r['p50'] for r in runs):.2f} / {max(r['p99'] for r in runs):.2f} "
             f"| {100 * min(r['delivered'] for r in runs):.2f} % | {max(r['late_ticks'] for r in runs)} "
             f"| {statistics.median(r['planner_hz'] for r in runs):.0f} |"
         )
     if stuck is not None:
-        lines += ["", f"Stuck door through the bridge (shelf, IO, held {args.hold:g} s at 30 % of the range): tank minimum "
-                  f"{stuck.get('tank_min', float('nan')):.3f} J, floor {stuck.get('tank_floor', float('nan')):.3f} J, "
+        lines += ["", f"Stuck door through the bridge (shelf, IO, held {args.hold:g} s at 30 % of the range): "
+                  f"tank minimum {stuck.get('tank_min', float('nan')):.3f} J, "
+                  f"floor {stuck.get('tank_floor', float('nan')):.3f} J, "
                   f"filter fallbacks {stuck.get('filter_fallbacks')}."]
     command = "python benches/ros_acceptance.py " + " ".join(sys.argv[1:] if argv is None else argv)
     report = "\n".join([f"Command: `{command}`; wall time {time.perf_counter() - started:.0f} s.", ""] + lines) + "\n"

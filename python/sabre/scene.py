@@ -53,7 +53,7 @@ class Scene:
     Build one with :meth:`load` (built-in assets) or :meth:`from_urdf` (your own files).
     """
 
-    __slots__ = ("_core", "__weakref__")
+    __slots__ = ("__weakref__", "_core")
 
     def __init__(self, core: _core.Scene) -> None:
         if not isinstance(core, _core.Scene):

@@ -210,8 +210,8 @@ impl Mppi {
         }
         let fits = n
             .checked_mul(k + 1)
-                .and_then(|v| v.checked_mul(nx.max(nu).max(6)))
-                .is_some_and(|v| v <= MAX_BATCH_ELEMENTS);
+            .and_then(|v| v.checked_mul(nx.max(nu).max(6)))
+            .is_some_and(|v| v <= MAX_BATCH_ELEMENTS);
         if !fits {
             return Err(SabreError::invalid(
                 "rollouts × horizon",

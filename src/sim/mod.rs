@@ -34,5 +34,6 @@ pub fn joint_speed_bounds(scene: &crate::model::scene::Scene) -> Vec<(String, cr
 /// beyond its bound, if any.
 pub fn diverged_joint(x: &[f64], nq: usize, no: usize, bounds: &[f64]) -> Option<usize> {
     let speeds = x[nq..2 * nq].iter().chain(&x[2 * nq + no..2 * (nq + no)]);
-    speeds.zip(bounds).position(|(v, b)| !(v.abs() <= *b))
+    // NaN speeds count as diverged too.
+    speeds.zip(bounds).position(|(v, b)| v.abs() > *b || v.is_nan())
 }

@@ -71,7 +71,10 @@ impl Plant {
         if !(config.dt.is_finite() && config.dt > 0.0 && config.dt <= MAX_PLANT_DT) {
             return Err(SabreError::invalid(
                 "dt",
-                format!("the plant steps at most {MAX_PLANT_DT} s (a 1 kHz robot: 0.001), got {}", config.dt),
+                format!(
+                    "the plant steps at most {MAX_PLANT_DT} s (a 1 kHz robot: 0.001), got {}",
+                    config.dt
+                ),
             ));
         }
         if !(config.contact_friction.is_finite() && config.contact_friction >= 0.0) {
@@ -206,7 +209,6 @@ impl Plant {
         Ok(())
     }
 
-
     /// The first joint whose speed shows that the integration diverged, as an error naming it.
     fn divergence(&self, x: &[f64]) -> Option<SabreError> {
         let (nq, no) = (self.scene.nq(), self.scene.no());
@@ -298,8 +300,12 @@ mod tests {
         let scene = probe_and_drawer();
         let mut plant = Plant::new(scene.clone(), PlantConfig::default()).unwrap();
         let upper = scene.robot_limits()[0].upper;
-        assert!(plant.reset(&state([upper + 2.0 * RESET_LIMIT_TOLERANCE, 0.0], [0.0, 0.0], 0.0, 0.0)).is_err());
-        assert!(plant.reset(&state([upper + 0.5 * RESET_LIMIT_TOLERANCE, 0.0], [0.0, 0.0], 0.0, 0.0)).is_ok());
+        assert!(plant
+            .reset(&state([upper + 2.0 * RESET_LIMIT_TOLERANCE, 0.0], [0.0, 0.0], 0.0, 0.0))
+            .is_err());
+        assert!(plant
+            .reset(&state([upper + 0.5 * RESET_LIMIT_TOLERANCE, 0.0], [0.0, 0.0], 0.0, 0.0))
+            .is_ok());
     }
 
     #[test]

@@ -102,7 +102,8 @@ pub const MAX_CACHED_POOLS: usize = 2;
 /// Thread pools by size, most recently used last: rayon pools are costly to create and a rollout
 /// is short, so they are reused; at most [`MAX_CACHED_POOLS`] are kept.
 fn pool(threads: usize) -> Result<Arc<rayon::ThreadPool>> {
-    static POOLS: OnceLock<Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>>> = OnceLock::new();
+    type Pools = Vec<(usize, Arc<rayon::ThreadPool>)>;
+    static POOLS: OnceLock<Mutex<Pools>> = OnceLock::new();
     let pools = POOLS.get_or_init(|| Mutex::new(Vec::new()));
     let mut pools = pools.lock().unwrap_or_else(|e| e.into_inner());
     if let Some(i) = pools.iter().position(|(n, _)| *n == threads) {
@@ -371,7 +372,9 @@ impl RolloutModel {
             };
             // A panic inside the physics engine must not cross into the caller: that rollout is
             // marked failed from its first step and its world, possibly inconsistent, is dropped.
-            let failed_at = match catch_unwind(AssertUnwindSafe(|| self.rollout_one(&mut world, x0, u_i, cost, slices, &cancel))) {
+            let failed_at = match catch_unwind(AssertUnwindSafe(|| {
+                self.rollout_one(&mut world, x0, u_i, cost, slices, &cancel)
+            })) {
                 Ok(result) => {
                     let after = world.engine_clock();
                     *engine_steps = after.steps - clock.steps;

@@ -309,7 +309,7 @@ def test_open_object_on_a_scene_without_its_frames_or_with_swapped_files_fails_w
     with pytest.raises(InvalidValueError, match="swapped"):
         sabre.Controller(swapped, sabre.tasks.OpenObject(), small_config())
     no_handle = sabre.Scene.from_urdf_strings(robot_urdf, shelf_urdf.replace("handle_frame", "knob"))
-    with pytest.raises(sabre.errors.UnknownFrameError, match="handle_frame.*knob"):
+    with pytest.raises(sabre.errors.UnknownFrameError, match=r"handle_frame.*knob"):
         sabre.Controller(no_handle, sabre.tasks.OpenObject(), small_config())
 
 

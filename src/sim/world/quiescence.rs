@@ -190,7 +190,11 @@ mod tests {
         // Held by friction and far from the robot, but outside its travel: the limit moves it back.
         let scene = probe_and_drawer();
         let upper = scene.object_limits()[0].upper;
-        assert!(engine_ran(&scene, state([-0.5, 0.0], [0.0, 0.0], upper + 0.3, 0.0), [0.0, 0.0]));
+        assert!(engine_ran(
+            &scene,
+            state([-0.5, 0.0], [0.0, 0.0], upper + 0.3, 0.0),
+            [0.0, 0.0]
+        ));
         assert!(engine_ran(&scene, state([-0.5, 0.0], [0.0, 0.0], -0.3, 0.0), [0.0, 0.0]));
     }
 
