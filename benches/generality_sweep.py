@@ -59,13 +59,24 @@ class ObjectSpec:
 
 
 def random_spec(rng: np.random.Generator, index: int) -> ObjectSpec:
+    def scale() -> float:  # ×0.5–×2, uniform in log
+        return float(np.exp(rng.uniform(np.log(0.5), np.log(2.0))))
+
     kind = "door" if rng.random() < 0.6 else "drawer"
     return ObjectSpec(
-        index=index, kind=kind, width=float(rng.uniform(0.25, 0.6)), handle_height=float(rng.uniform(0.6, 1.1)),
-        hinge_left=bool(rng.random() < 0.5), vertical_bar=bool(rng.random() < (0.7 if kind == "door" else 0.3)),
-        bar_shape="box" if rng.random() < 0.5 else "cylinder", damping_scale=float(np.exp(rng.uniform(np.log(0.5), np.log(2.0)))),
-        friction_scale=float(np.exp(rng.uniform(np.log(0.5), np.log(2.0)))), mass_scale=float(np.exp(rng.uniform(np.log(0.5), np.log(2.0)))),
-        distance=float(rng.uniform(2.0, 4.0)), bearing=float(rng.uniform(-0.5, 0.5)), facing=float(rng.uniform(-np.pi / 3, np.pi / 3)),
+        index=index,
+        kind=kind,
+        width=float(rng.uniform(0.25, 0.6)),
+        handle_height=float(rng.uniform(0.6, 1.1)),
+        hinge_left=bool(rng.random() < 0.5),
+        vertical_bar=bool(rng.random() < (0.7 if kind == "door" else 0.3)),
+        bar_shape="box" if rng.random() < 0.5 else "cylinder",
+        damping_scale=scale(),
+        friction_scale=scale(),
+        mass_scale=scale(),
+        distance=float(rng.uniform(2.0, 4.0)),
+        bearing=float(rng.uniform(-0.5, 0.5)),
+        facing=float(rng.uniform(-np.pi / 3, np.pi / 3)),
     )
 
 
@@ -198,19 +209,19 @@ def main(argv: list[str] | None = None) -> int:
             print(f"object {spec.index} ({spec.kind}, w {spec.width:.2f}, h {spec.handle_height:.2f}, "
                   f"{'vertical' if spec.vertical_bar else 'horizontal'} {spec.bar_shape}) {variant}: {outcome}"
                   + (f" at {when:.1f} s" if when is not None else ""), file=sys.stderr, flush=True)
+    failures = ("could not reach", "could not hook", "slipped", "stalled at a joint limit", "tank spent", "stalled")
+    command = (f"python benches/generality_sweep.py --objects {args.objects} --first {args.first} "
+               f"--duration {args.duration:g} --variants {' '.join(args.variants)} --seed {args.seed}")
     lines = [
-        f"Command: `python benches/generality_sweep.py --objects {args.objects} --first {args.first} --duration {args.duration:g} "
-        f"--variants {' '.join(args.variants)} --seed {args.seed}`; wall time {time.perf_counter() - started:.0f} s.",
+        f"Command: `{command}`; wall time {time.perf_counter() - started:.0f} s.",
         "",
-        "| variant | opened | " + " | ".join(c for c in ("could not reach", "could not hook", "slipped", "stalled at a joint limit",
-                                                        "tank spent", "stalled")) + " |",
+        "| variant | opened | " + " | ".join(failures) + " |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for variant, counts in outcomes.items():
         total = sum(counts.values())
-        lines.append(f"| {variant} | {counts['opened']}/{total} ({100 * counts['opened'] / max(total, 1):.0f} %) | "
-                     + " | ".join(str(counts[c]) for c in ("could not reach", "could not hook", "slipped", "stalled at a joint limit",
-                                                           "tank spent", "stalled")) + " |")
+        opened = f"{counts['opened']}/{total} ({100 * counts['opened'] / max(total, 1):.0f} %)"
+        lines.append(f"| {variant} | {opened} | " + " | ".join(str(counts[c]) for c in failures) + " |")
     report = "\n".join(lines) + "\n"
     print(report)
     if args.out is not None:

@@ -13,7 +13,7 @@ import pytest
 import sabre
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benches"))
-import generality_sweep as sweep  # noqa: E402
+import generality_sweep as sweep
 
 _RNG = np.random.default_rng(0)  # the sweep's default generator seed
 SPECS = [sweep.random_spec(_RNG, i) for i in range(40)]
