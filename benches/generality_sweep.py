@@ -182,7 +182,10 @@ def classify(episode: sabre.Episode, scene: sabre.Scene) -> str:
 def run_one(spec: ObjectSpec, variant: str, duration: float, seed: int = 0) -> tuple[str, float | None]:
     scene = scene_of(spec)
     task = sabre.tasks.OpenObject(handle=spec.handle_link)
-    controller = sabre.Controller(scene, task, sabre.ControllerConfig(variant=variant, seed=seed))
+    # The filter's base box (the paper's experiments: ±2 m) must hold the robot's way to an object
+    # 2–4 m away: ±5 m here.
+    safety = sabre.SafetyConfig(base_box=(-5.0, 5.0, -5.0, 5.0))
+    controller = sabre.Controller(scene, task, sabre.ControllerConfig(variant=variant, seed=seed, safety=safety))
     episode = sabre.run_episode(scene, controller, duration, seed=seed, x0=scene.default_state(), progress=False)
     return classify(episode, scene), episode.time_to_success
 
