@@ -4,7 +4,7 @@
 
 Each generated object is a URDF with its own link and joint names, a `world` root with a fixed joint,
 and no `handle_frame`, varying: handle height 0.6–1.1 m, door or drawer width 0.25–0.6 m, hinge left
-or right, vertical or horizontal bar, box or cylinder bar, revolute door or prismatic drawer,
+or right, vertical or horizontal bar, a box, cylinder or mesh (STL) bar, revolute door or prismatic drawer,
 friction and damping ×0.5–×2, moving mass ×0.5–×2, and where it stands: 2–4 m from the robot, its
 front within ±60° of facing it. `OpenObject(handle=<bar link>)` opens each from the default robot
 state; success is 90 % of the target opening within the simulated duration. Failures are classified:
@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 import time
 from collections import Counter
 from dataclasses import dataclass
@@ -39,7 +40,7 @@ class ObjectSpec:
     handle_height: float
     hinge_left: bool
     vertical_bar: bool
-    bar_shape: str  # "box" or "cylinder"
+    bar_shape: str  # "box", "cylinder" or "mesh" (an STL of the box bar)
     damping_scale: float
     friction_scale: float
     mass_scale: float
@@ -70,7 +71,7 @@ def random_spec(rng: np.random.Generator, index: int) -> ObjectSpec:
         handle_height=float(rng.uniform(0.6, 1.1)),
         hinge_left=bool(rng.random() < 0.5),
         vertical_bar=bool(rng.random() < (0.7 if kind == "door" else 0.3)),
-        bar_shape="box" if rng.random() < 0.5 else "cylinder",
+        bar_shape=("box", "cylinder", "mesh")[min(2, int(3 * rng.random()))],
         damping_scale=scale(),
         friction_scale=scale(),
         mass_scale=scale(),
@@ -92,6 +93,17 @@ def _inertial(mass: float, xyz: tuple[float, float, float], size: tuple[float, f
     ixx, iyy, izz = mass / 12 * (b * b + c * c), mass / 12 * (a * a + c * c), mass / 12 * (a * a + b * b)
     return (f'<inertial><origin xyz="{xyz[0]:.4f} {xyz[1]:.4f} {xyz[2]:.4f}"/><mass value="{mass:.4f}"/>'
             f'<inertia ixx="{ixx:.6g}" ixy="0" ixz="0" iyy="{iyy:.6g}" iyz="0" izz="{izz:.6g}"/></inertial>')
+
+
+def _bar_stl(size: tuple[float, float, float]) -> str:
+    """An STL file of a box bar (written once per size into the temp directory), as CAD exports ship."""
+    import trimesh
+
+    path = Path(tempfile.gettempdir()) / "sabre-generated" / f"bar_{size[0]:.3f}_{size[1]:.3f}_{size[2]:.3f}.stl"
+    if not path.is_file():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        trimesh.creation.box(extents=size).export(path)
+    return str(path)
 
 
 def object_urdf(spec: ObjectSpec) -> str:
@@ -133,6 +145,10 @@ def object_urdf(spec: ObjectSpec) -> str:
         bar_size, standoffs, rpy = (0.01, length, 0.01), [(0.033, 0.08, 0.0), (0.033, -0.08, 0.0)], "1.5707963 0 0"
     if spec.bar_shape == "box":
         bar = _box("bar", (0.0, 0.0, 0.0), bar_size)
+    elif spec.bar_shape == "mesh":
+        path = _bar_stl(bar_size)
+        bar = (f'<collision name="bar"><geometry><mesh filename="{path}"/></geometry></collision>'
+               f'<visual name="bar"><geometry><mesh filename="{path}"/></geometry></visual>')
     else:
         bar = (f'<collision name="bar"><origin xyz="0 0 0" rpy="{rpy}"/><geometry><cylinder radius="0.006" length="{length}"/>'
                f'</geometry></collision><visual name="bar"><origin xyz="0 0 0" rpy="{rpy}"/><geometry>'

@@ -636,15 +636,15 @@ fn malformed_xml_is_a_urdf_error() {
 }
 
 #[test]
-fn mesh_geometry_is_a_urdf_error() {
+fn a_mesh_that_cannot_be_found_is_a_urdf_error_naming_it() {
     let robot = ROBOT_OK.replace(r#"<box size="0.1 0.1 0.2"/>"#, r#"<mesh filename="package://bot/arm.stl"/>"#);
     assert_ne!(robot, ROBOT_OK);
-    expect_urdf_error("mesh in robot", &robot, OBJECT_OK, "mesh");
+    expect_urdf_error("mesh in robot", &robot, OBJECT_OK, "mesh 'package://bot/arm.stl' not found");
     let object = OBJECT_OK.replace(
         r#"<box size="0.02 0.3 0.5"/>"#,
         r#"<mesh filename="door.dae" scale="1 1 1"/>"#,
     );
-    expect_urdf_error("mesh in object", ROBOT_OK, &object, "mesh");
+    expect_urdf_error("mesh in object", ROBOT_OK, &object, "mesh 'door.dae' not found");
 }
 
 #[test]

@@ -6,7 +6,7 @@ y = z × x. The shipped objects carry it as a ``handle_frame`` link; for anyone 
 inferred from the link named as the handle:
 
 - the bar is the handle link's longest collision primitive (a box's longest dimension, a
-  cylinder's or capsule's axis), its centre the frame's origin;
+  cylinder's or capsule's axis, a mesh hull's principal axis), its centre the frame's origin;
 - the panel is the collision box of the object's moving links nearest to the bar (the handle link's
   own shapes excluded), and z its thinnest axis, pointing from the bar toward the panel and made
   orthogonal to the bar;
@@ -37,13 +37,28 @@ def _bar(shapes: list[CollisionShape]) -> tuple[np.ndarray, np.ndarray]:
             return 2.0 * s.size[1]
         if s.kind == "capsule":
             return 2.0 * (s.size[1] + s.size[0])
+        if s.kind == "mesh":
+            return float(np.ptp(s.points @ _principal_axis(s.points))) if len(s.points) else 2.0 * max(s.size)
         return 2.0 * s.size[0]
 
     bar = max(shapes, key=length)
     if bar.kind == "sphere":
         raise InvalidValueError(f"handle link {bar.link!r}: its longest collision shape is a sphere, which has no bar axis")
+    if bar.kind == "mesh":
+        local = _principal_axis(bar.points)
+        centre_local = bar.points.mean(axis=0) if len(bar.points) else np.zeros(3)
+        along = bar.points @ local
+        centre_local = centre_local + (0.5 * (along.min() + along.max()) - centre_local @ local) * local
+        return bar.pose[:3, :3] @ centre_local + bar.pose[:3, 3], bar.pose[:3, :3] @ local
     axis = bar.pose[:3, 2] if bar.kind in ("cylinder", "capsule") else bar.pose[:3, int(np.argmax(bar.size))]
     return bar.pose[:3, 3].copy(), axis / np.linalg.norm(axis)
+
+
+def _principal_axis(points: np.ndarray) -> np.ndarray:
+    """Unit direction of the largest spread of ``points`` (M, 3)."""
+    centred = points - points.mean(axis=0)
+    _, _, vt = np.linalg.svd(centred, full_matrices=False)
+    return vt[0]
 
 
 def _box_distance(point: np.ndarray, pose: np.ndarray, half: np.ndarray) -> float:

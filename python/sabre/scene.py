@@ -31,16 +31,18 @@ class CollisionShape:
     """One collision primitive of a link.
 
     Attributes:
-        link: the link it belongs to. kind: "box", "sphere", "cylinder" or "capsule".
+        link: the link it belongs to. kind: "box", "sphere", "cylinder", "capsule" or "mesh".
         size: box half extents (x, y, z); sphere (radius,); cylinder and capsule (radius, half
-            length along the primitive's z), in m.
-        pose: (4, 4) pose of the primitive in the link frame.
+            length along the primitive's z); mesh: half extents of its hull's bounding box; in m.
+        pose: (4, 4) pose of the primitive in the link frame (a mesh's: its bounding box's centre).
+        points: (M, 3) a mesh's convex-hull vertices in that pose's frame; (0, 3) otherwise.
     """
 
     link: str
     kind: str
     size: tuple[float, ...]
     pose: np.ndarray
+    points: np.ndarray
 
 
 class Scene:
@@ -77,7 +79,9 @@ class Scene:
         obj_path: str | os.PathLike[str],
         obj_pose: Sequence[float] | None = None,
     ) -> Scene:
-        """A scene from a robot URDF and an object URDF on disk (primitives only, see README)."""
+        """A scene from a robot URDF and an object URDF on disk. Collision geometry: boxes, spheres,
+        cylinders, capsules, and STL or OBJ meshes as their convex hulls (docs/objects.md says where
+        mesh files are looked for)."""
         for label, path in (("robot", robot_path), ("object", obj_path)):
             if not os.path.isfile(path):
                 raise UrdfError(f"URDF {path}: {label} file does not exist")
@@ -135,8 +139,9 @@ class Scene:
     def object_collisions(self) -> tuple[CollisionShape, ...]:
         """The object's collision primitives, each with its link and pose in that link's frame."""
         return tuple(
-            CollisionShape(link=link, kind=kind, size=tuple(size), pose=readonly(np.asarray(pose, dtype=float).reshape(4, 4)))
-            for link, kind, size, pose in self._core.object_collisions()
+            CollisionShape(link=link, kind=kind, size=tuple(size), pose=readonly(np.asarray(pose, dtype=float).reshape(4, 4)),
+                           points=readonly(np.asarray(points, dtype=float).reshape(-1, 3)))
+            for link, kind, size, pose, points in self._core.object_collisions()
         )
 
     # -- limits ---------------------------------------------------------------------------------

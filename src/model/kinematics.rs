@@ -44,12 +44,27 @@ pub struct Joint {
 }
 
 /// A collision primitive; dimensions are half-sizes, long axes along local z as in URDF.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum Shape {
-    Box { half_extents: Vector3<f64> },
-    Sphere { radius: f64 },
-    Cylinder { radius: f64, half_length: f64 },
-    Capsule { radius: f64, half_length: f64 },
+    Box {
+        half_extents: Vector3<f64>,
+    },
+    Sphere {
+        radius: f64,
+    },
+    Cylinder {
+        radius: f64,
+        half_length: f64,
+    },
+    Capsule {
+        radius: f64,
+        half_length: f64,
+    },
+    /// A mesh's convex hull: its vertices, centred on their bounding box (whose half extents are kept).
+    Hull {
+        points: std::sync::Arc<[nalgebra::Point3<f64>]>,
+        half_extents: Vector3<f64>,
+    },
 }
 
 impl Shape {
@@ -60,6 +75,7 @@ impl Shape {
             Shape::Sphere { radius } => Vector3::repeat(radius),
             Shape::Cylinder { radius, half_length } => Vector3::new(radius, radius, half_length),
             Shape::Capsule { radius, half_length } => Vector3::new(radius, radius, half_length + radius),
+            Shape::Hull { half_extents, .. } => half_extents,
         }
     }
 }

@@ -2,6 +2,7 @@
 
 pub mod dynamics;
 pub mod kinematics;
+pub mod mesh;
 pub mod scene;
 pub mod urdf;
 

@@ -1,5 +1,7 @@
 //! URDF (via urdf-rs) to kinematic trees, plus sabre's `<sabre>` extension block (via roxmltree).
 
+use std::path::Path;
+
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 
 use super::kinematics::{Collision, Inertial, Joint, JointKind, JointLimits, KinematicTree, Link, Shape};
@@ -96,7 +98,40 @@ fn check_depth(source: &str, doc: &roxmltree::Document) -> Result<()> {
     Ok(())
 }
 
-fn convert_shape(source: &str, link: &str, geometry: &urdf_rs::Geometry) -> Result<Shape> {
+/// The shape of a URDF geometry and where its centre lies in the geometry's frame (non-zero only for
+/// meshes, whose hull is centred on its bounding box).
+fn convert_shape(source: &str, link: &str, geometry: &urdf_rs::Geometry) -> Result<(Shape, Vector3<f64>)> {
+    if let urdf_rs::Geometry::Mesh { filename, scale } = geometry {
+        let scale = scale.as_ref().map_or([1.0; 3], |s| [s[0], s[1], s[2]]);
+        if scale.iter().any(|s| !(s.is_finite() && *s != 0.0)) {
+            return Err(SabreError::urdf(
+                source,
+                format!("link '{link}': mesh scale must be finite and non-zero, got {scale:?}"),
+            ));
+        }
+        let urdf_dir = Path::new(source).is_file().then(|| Path::new(source).parent()).flatten();
+        let path =
+            super::mesh::resolve(filename, urdf_dir).map_err(|e| SabreError::urdf(source, format!("link '{link}': {e}")))?;
+        let hull = super::mesh::load_hull(&path, scale).map_err(|e| SabreError::urdf(source, format!("link '{link}': {e}")))?;
+        let (mut lo, mut hi) = (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY));
+        for p in &hull {
+            lo = lo.inf(&p.coords);
+            hi = hi.sup(&p.coords);
+        }
+        let centre = (lo + hi) / 2.0;
+        let points: Vec<_> = hull.iter().map(|p| p - centre).collect();
+        return Ok((
+            Shape::Hull {
+                points: points.into(),
+                half_extents: (hi - lo) / 2.0,
+            },
+            centre,
+        ));
+    }
+    Ok((convert_primitive(source, link, geometry)?, Vector3::zeros()))
+}
+
+fn convert_primitive(source: &str, link: &str, geometry: &urdf_rs::Geometry) -> Result<Shape> {
     let positive = |what: &str, v: f64| -> Result<f64> {
         if v.is_finite() && v > 0.0 {
             Ok(v)
@@ -126,12 +161,7 @@ fn convert_shape(source: &str, link: &str, geometry: &urdf_rs::Geometry) -> Resu
             radius: positive("capsule radius", *radius)?,
             half_length: positive("capsule length", *length)? / 2.0,
         },
-        urdf_rs::Geometry::Mesh { filename, .. } => {
-            return Err(SabreError::urdf(
-                source,
-                format!("link '{link}' uses mesh '{filename}': sabre simulates primitives only (box, sphere, cylinder, capsule)"),
-            ))
-        }
+        urdf_rs::Geometry::Mesh { .. } => unreachable!("meshes are converted by convert_shape"),
     })
 }
 
@@ -177,10 +207,12 @@ fn convert_link(source: &str, link: &urdf_rs::Link) -> Result<Link> {
                 c.origin.rpy[2],
             ],
         )?;
+        let (shape, centre) = convert_shape(source, &link.name, &c.geometry)?;
+        let origin = origin_pose(&c.origin);
         collisions.push(Collision {
             name: c.name.clone(),
-            shape: convert_shape(source, &link.name, &c.geometry)?,
-            origin: origin_pose(&c.origin),
+            shape,
+            origin: origin * nalgebra::Translation3::from(centre),
         });
     }
     Ok(Link {

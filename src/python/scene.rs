@@ -134,22 +134,29 @@ impl PyScene {
     }
     /// The object's collision primitives as (link, kind, size, pose in the link frame as a row-major
     /// 4 × 4): kind "box" (size = half extents x, y, z), "sphere" (radius), "cylinder" and "capsule"
-    /// (radius, half length along the primitive's z).
-    fn object_collisions(&self) -> Vec<(String, String, Vec<f64>, Vec<f64>)> {
+    /// (radius, half length along the primitive's z), "mesh" (a mesh's convex hull: half extents of
+    /// its bounding box, which the pose centres), and for meshes the hull's vertices (else empty).
+    #[allow(clippy::type_complexity)]
+    fn object_collisions(&self) -> Vec<(String, String, Vec<f64>, Vec<f64>, Vec<[f64; 3]>)> {
         use crate::model::kinematics::Shape;
         let tree = &self.inner.object;
         let mut out = Vec::new();
         for link in &tree.links {
             for c in &link.collisions {
-                let (kind, size) = match c.shape {
+                let (kind, size) = match &c.shape {
                     Shape::Box { half_extents } => ("box", vec![half_extents.x, half_extents.y, half_extents.z]),
-                    Shape::Sphere { radius } => ("sphere", vec![radius]),
-                    Shape::Cylinder { radius, half_length } => ("cylinder", vec![radius, half_length]),
-                    Shape::Capsule { radius, half_length } => ("capsule", vec![radius, half_length]),
+                    Shape::Sphere { radius } => ("sphere", vec![*radius]),
+                    Shape::Cylinder { radius, half_length } => ("cylinder", vec![*radius, *half_length]),
+                    Shape::Capsule { radius, half_length } => ("capsule", vec![*radius, *half_length]),
+                    Shape::Hull { half_extents, .. } => ("mesh", vec![half_extents.x, half_extents.y, half_extents.z]),
                 };
                 let m = c.origin.to_homogeneous();
                 let pose = (0..4).flat_map(|r| (0..4).map(move |col| m[(r, col)])).collect();
-                out.push((link.name.clone(), kind.to_string(), size, pose));
+                let points = match &c.shape {
+                    Shape::Hull { points, .. } => points.iter().map(|p| [p.x, p.y, p.z]).collect(),
+                    _ => Vec::new(),
+                };
+                out.push((link.name.clone(), kind.to_string(), size, pose, points));
             }
         }
         out

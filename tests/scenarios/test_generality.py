@@ -22,7 +22,7 @@ SPECS = [sweep.random_spec(_RNG, i) for i in range(40)]
 def test_the_sweep_covers_the_ranges_the_issue_asks_for():
     assert {s.kind for s in SPECS} == {"door", "drawer"}
     assert {s.vertical_bar for s in SPECS} == {True, False} and {s.hinge_left for s in SPECS} == {True, False}
-    assert {s.bar_shape for s in SPECS} == {"box", "cylinder"}
+    assert {s.bar_shape for s in SPECS} == {"box", "cylinder", "mesh"}
     widths, heights = [s.width for s in SPECS], [s.handle_height for s in SPECS]
     assert 0.25 <= min(widths) and max(widths) <= 0.6 and 0.6 <= min(heights) and max(heights) <= 1.1
     assert all(2.0 <= s.distance <= 4.0 and abs(s.facing) <= np.pi / 3 for s in SPECS)

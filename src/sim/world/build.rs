@@ -80,6 +80,17 @@ fn collider_for(shape: &Shape) -> (ColliderBuilder, Isometry3<f64>) {
             Isometry3::rotation(Vector3::x() * std::f64::consts::FRAC_PI_2),
         ),
         Shape::Capsule { radius, half_length } => (ColliderBuilder::capsule_z(half_length, radius), Isometry3::identity()),
+        Shape::Hull {
+            ref points,
+            half_extents,
+        } => {
+            let vertices: Vec<Vector> = points.iter().map(|p| Vector::new(p.x, p.y, p.z)).collect();
+            // The URDF loader only keeps hulls with volume; a box of the same extents is the fallback
+            // should parry still refuse one.
+            let builder = ColliderBuilder::convex_hull(&vertices)
+                .unwrap_or_else(|| ColliderBuilder::cuboid(half_extents.x, half_extents.y, half_extents.z));
+            (builder, Isometry3::identity())
+        }
     }
 }
 
@@ -387,7 +398,7 @@ impl SimWorld {
             .links
             .iter()
             .enumerate()
-            .flat_map(|(link, l)| l.collisions.iter().map(move |c| (link, c.origin, c.shape)))
+            .flat_map(|(link, l)| l.collisions.iter().map(move |c| (link, c.origin, c.shape.clone())))
             .collect();
         let object_friction = scene
             .object

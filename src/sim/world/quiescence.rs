@@ -13,6 +13,7 @@ fn bounding_radius(shape: &Shape) -> f64 {
         Shape::Sphere { radius } => radius,
         Shape::Cylinder { radius, half_length } => (radius * radius + half_length * half_length).sqrt(),
         Shape::Capsule { radius, half_length } => radius + half_length,
+        Shape::Hull { half_extents, .. } => half_extents.norm(),
     }
 }
 

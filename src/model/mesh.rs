@@ -1,0 +1,178 @@
+//! Mesh collision geometry: URDF `<mesh>` files (STL, OBJ) found on a search path and reduced to
+//! their convex hull, which is cached on disk.
+//!
+//! A filename resolves as: an absolute path; `package://<pkg>/<rest>` under each directory of
+//! `SABRE_PACKAGE_PATH` and `ROS_PACKAGE_PATH` (as `<dir>/<pkg>/<rest>`) and of
+//! `AMENT_PREFIX_PATH` (as `<prefix>/share/<pkg>/<rest>`); a relative path against the URDF
+//! file's directory, then each directory of `SABRE_MESH_PATH`, then the working directory.
+//! `file://` prefixes are dropped. Hulls are cached in `$SABRE_CACHE_DIR`, else
+//! `$XDG_CACHE_HOME/sabre/hulls`, else `~/.cache/sabre/hulls`, keyed by the file's bytes and scale.
+
+use std::hash::{Hash, Hasher};
+use std::path::{Path, PathBuf};
+
+use nalgebra::Point3;
+
+/// Most vertices a mesh file may have: beyond it a collision hull is not what the file is for.
+pub const MAX_MESH_VERTICES: usize = 2_000_000;
+
+fn split_paths(var: &str) -> Vec<PathBuf> {
+    std::env::var_os(var)
+        .map(|v| std::env::split_paths(&v).collect())
+        .unwrap_or_default()
+}
+
+/// The file a URDF mesh `filename` names, or a message listing where it was looked for.
+pub fn resolve(filename: &str, urdf_dir: Option<&Path>) -> std::result::Result<PathBuf, String> {
+    let name = filename.strip_prefix("file://").unwrap_or(filename);
+    let mut tried = Vec::new();
+    if let Some(rest) = name.strip_prefix("package://") {
+        let (package, relative) = rest
+            .split_once('/')
+            .ok_or_else(|| format!("'{filename}' names no file in its package"))?;
+        let roots = split_paths("SABRE_PACKAGE_PATH")
+            .into_iter()
+            .chain(split_paths("ROS_PACKAGE_PATH"));
+        let shares = split_paths("AMENT_PREFIX_PATH").into_iter().map(|p| p.join("share"));
+        for dir in roots.chain(shares) {
+            tried.push(dir.join(package).join(relative));
+        }
+    } else if Path::new(name).is_absolute() {
+        tried.push(PathBuf::from(name));
+    } else {
+        let dirs = urdf_dir
+            .map(Path::to_path_buf)
+            .into_iter()
+            .chain(split_paths("SABRE_MESH_PATH"));
+        for dir in dirs.chain(std::env::current_dir().ok()) {
+            tried.push(dir.join(name));
+        }
+    }
+    tried.iter().find(|p| p.is_file()).cloned().ok_or_else(|| {
+        let places: Vec<String> = tried.iter().map(|p| p.display().to_string()).collect();
+        format!(
+            "mesh '{filename}' not found (looked in: {}; set SABRE_MESH_PATH or SABRE_PACKAGE_PATH)",
+            if places.is_empty() {
+                "nowhere: no package path is set".to_string()
+            } else {
+                places.join(", ")
+            }
+        )
+    })
+}
+
+fn read_vertices(path: &Path, bytes: &[u8]) -> std::result::Result<Vec<[f64; 3]>, String> {
+    let extension = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    match extension.as_str() {
+        "stl" => {
+            let mesh = stl_io::read_stl(&mut std::io::Cursor::new(bytes)).map_err(|e| format!("cannot read STL: {e}"))?;
+            Ok(mesh
+                .vertices
+                .iter()
+                .map(|v| [f64::from(v[0]), f64::from(v[1]), f64::from(v[2])])
+                .collect())
+        }
+        "obj" => {
+            let options = tobj::LoadOptions {
+                triangulate: false,
+                single_index: false,
+                ..Default::default()
+            };
+            let (models, _) = tobj::load_obj_buf(&mut std::io::Cursor::new(bytes), &options, |_| {
+                Ok((Vec::new(), Default::default()))
+            })
+            .map_err(|e| format!("cannot read OBJ: {e}"))?;
+            Ok(models
+                .iter()
+                .flat_map(|m| {
+                    m.mesh
+                        .positions
+                        .chunks_exact(3)
+                        .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
+                })
+                .collect())
+        }
+        other => Err(format!("mesh format '.{other}' is not supported (STL and OBJ are)")),
+    }
+}
+
+fn cache_dir() -> Option<PathBuf> {
+    if let Some(dir) = std::env::var_os("SABRE_CACHE_DIR") {
+        return Some(PathBuf::from(dir));
+    }
+    let base = std::env::var_os("XDG_CACHE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))?;
+    Some(base.join("sabre").join("hulls"))
+}
+
+fn cache_file(bytes: &[u8], scale: &[f64; 3]) -> Option<PathBuf> {
+    let mut hasher = std::collections::hash_map::DefaultHasher::new();
+    bytes.hash(&mut hasher);
+    scale.iter().for_each(|s| s.to_bits().hash(&mut hasher));
+    env!("CARGO_PKG_VERSION").hash(&mut hasher);
+    Some(cache_dir()?.join(format!("{:016x}.hull", hasher.finish())))
+}
+
+fn read_cache(path: &Path) -> Option<Vec<Point3<f64>>> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let points: Option<Vec<Point3<f64>>> = text
+        .lines()
+        .map(|line| {
+            let v: Vec<f64> = line.split_whitespace().filter_map(|t| t.parse().ok()).collect();
+            (v.len() == 3 && v.iter().all(|x| x.is_finite())).then(|| Point3::new(v[0], v[1], v[2]))
+        })
+        .collect();
+    points.filter(|p| p.len() >= 4)
+}
+
+/// The convex hull's vertices of the mesh at `path`, scaled per axis (from the cache when the same
+/// file and scale were hulled before).
+pub fn load_hull(path: &Path, scale: [f64; 3]) -> std::result::Result<Vec<Point3<f64>>, String> {
+    let bytes = std::fs::read(path).map_err(|e| format!("cannot read mesh {}: {e}", path.display()))?;
+    let cached = cache_file(&bytes, &scale);
+    if let Some(points) = cached.as_deref().and_then(read_cache) {
+        return Ok(points);
+    }
+    let vertices = read_vertices(path, &bytes)?;
+    if vertices.len() > MAX_MESH_VERTICES {
+        return Err(format!(
+            "mesh {} has {} vertices (at most {MAX_MESH_VERTICES})",
+            path.display(),
+            vertices.len()
+        ));
+    }
+    let points: Vec<_> = vertices
+        .iter()
+        .map(|v| rapier3d_f64::parry::math::Vector::new(v[0] * scale[0], v[1] * scale[1], v[2] * scale[2]))
+        .collect();
+    if points.len() < 4
+        || points
+            .iter()
+            .any(|p| !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()))
+    {
+        return Err(format!(
+            "mesh {} has fewer than 4 vertices or non-finite ones",
+            path.display()
+        ));
+    }
+    let (hull, faces) = rapier3d_f64::parry::transformation::convex_hull(&points);
+    let volume: f64 = faces
+        .iter()
+        .map(|f| {
+            let [a, b, c] = f.map(|i| hull[i as usize]);
+            a.dot(b.cross(c)) / 6.0
+        })
+        .sum();
+    let extent = hull.iter().map(|p| p.length()).fold(0.0, f64::max);
+    if hull.len() < 4 || volume.abs() <= 1e-9 * extent.powi(3) {
+        return Err(format!("mesh {} is flat: its convex hull has no volume", path.display()));
+    }
+    let hull: Vec<Point3<f64>> = hull.iter().map(|p| Point3::new(p.x, p.y, p.z)).collect();
+    if let Some(file) = cached {
+        let text: String = hull.iter().map(|p| format!("{:e} {:e} {:e}\n", p.x, p.y, p.z)).collect();
+        // A cache that cannot be written is only slower: the hull is returned either way.
+        let _ = std::fs::create_dir_all(file.parent().unwrap_or(Path::new("."))).and_then(|()| std::fs::write(&file, text));
+    }
+    Ok(hull)
+}
