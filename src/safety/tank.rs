@@ -79,7 +79,18 @@ impl EnergyTank {
         if !(dt.is_finite() && dt > 0.0) {
             return Err(SabreError::invalid("dt", format!("must be finite and positive, got {dt}")));
         }
-        self.energy += dt * Self::power(tau_ext, u);
+        let energy = self.energy + dt * Self::power(tau_ext, u);
+        if !energy.is_finite() {
+            // τ_ext, u and dt are each finite, but their product overflows: no physical exchange.
+            return Err(SabreError::invalid(
+                "tank step",
+                format!(
+                    "the energy exchanged over dt = {dt:e} s overflows (τ_extᵀu = {:e}); the tank is unchanged",
+                    Self::power(tau_ext, u)
+                ),
+            ));
+        }
+        self.energy = energy;
         if let Some(c) = self.ceiling {
             self.energy = self.energy.min(c);
         }

@@ -329,3 +329,14 @@ def test_plant_push_adds_to_the_joint_velocities_and_keeps_time(scene):
     np.testing.assert_array_equal(after[: scene.nq], before[: scene.nq])
     with pytest.raises(InvalidValueError, match="moves at"):
         plant.push(np.full(scene.nq + scene.no, 1e3))
+
+
+def test_a_tank_step_whose_energy_overflows_is_refused_and_leaves_the_tank_unchanged():
+    # found by the fuzz test: each input finite, their product not
+    tank = sabre.EnergyTank(initial=0.0, floor=0.0)
+    tau = np.zeros(10)
+    tau[0] = 1e200
+    with pytest.raises(InvalidValueError, match="overflows"):
+        tank.step(tau, np.ones(10), 1e200)
+    assert tank.energy == 0.0
+    assert tank.step(tau, np.ones(10), 1e-200) == pytest.approx(1.0)
