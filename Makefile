@@ -14,7 +14,7 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet "maturin>=1.5,<2" "numpy>=1.24" "pytest>=7" "matplotlib>=3.7" "tqdm>=4.60" "mujoco>=3.1" "osqp>=0.6" \
 		"ruff>=0.5" "mypy>=1.10" \
-		"viser>=1.0" "trimesh>=4" "pycollada>=0.8" "example-robot-data>=4" "playwright>=1.40" "ray>=2.9" "hypothesis>=6.100"
+		"viser>=1.0" "trimesh>=4" "pycollada>=0.8" "example-robot-data>=4" "playwright>=1.40" "ray>=2.9" "hypothesis>=6.100" "pin>=3"
 	$(PY) -m pip install --quiet "ros-rclpy>=9.1" "ros-rmw-fastrtps-cpp>=9.3" "ros-sensor-msgs>=5.5" "ros-geometry-msgs>=5.5" "ros-std-msgs>=5.5" "ros-diagnostic-msgs>=5.5" "ros-rosgraph-msgs>=2.3"
 	touch $(STAMP)
 
@@ -30,9 +30,10 @@ demo: build
 test-rust:
 	cargo test --release
 
-# The browser test drives Debian's chromium through Playwright (never `playwright install`).
+# The browser test drives Debian's chromium through Playwright (never `playwright install`);
+# urdfdom's check_urdf checks that the shipped URDFs are standard.
 test-setup:
-	command -v chromium >/dev/null || (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium)
+	(command -v chromium && command -v check_urdf) >/dev/null || (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium liburdfdom-tools)
 
 test-python: build test-setup
 	$(PY) -m pytest -q tests

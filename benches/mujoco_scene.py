@@ -12,7 +12,8 @@ skipped; the rollout contact links, the object placement and the home mass matri
 * Masses and inertias: the URDF ``<inertial>`` of every link (``fullinertia``, rotated into the
   link frame when the inertial origin has an rpy); the compiler combines fused links.
 * Collision geometry: only the links in ``scene.rollout_contact_links`` (panda_link5, panda_link6,
-  panda_link7, panda_hand, hook_finger) get collision geoms (URDF box / capsule / cylinder / sphere;
+  panda_link7, panda_hand, hook_finger) get collision geoms (URDF box / capsule / cylinder / sphere,
+  a cylinder closed by spheres on its caps as one capsule, as sabre reads it;
   URDF cylinders and capsules run along local z as in MuJoCo; URDF capsule ``length`` is the
   cylinder part, i.e. MuJoCo half-length = length / 2). Other robot links have no geoms at all,
   and no visual geoms are generated anywhere.
@@ -179,13 +180,44 @@ def _inertial_xml(link: ET.Element, indent: str) -> str:
     return f'{indent}<inertial pos="{_fmt(xyz)}" mass="{mass:.12g}" fullinertia="{_fmt(six)}"/>\n'
 
 
+def _capsule_caps(collisions: list[ET.Element]) -> dict[int, set[int]]:
+    """For each cylinder closed by two spheres of its radius on its end caps (standard URDF's way of
+    writing a capsule, read back as one capsule by sabre too), the indices of those spheres."""
+    fused: dict[int, set[int]] = {}
+    for i, col in enumerate(collisions):
+        shape = col.find("geometry")[0]
+        if shape.tag != "cylinder":
+            continue
+        xyz, rpy = _origin(col)
+        radius, half = float(shape.get("radius")), float(shape.get("length")) / 2.0
+        axis = _rpy_matrix(rpy)[:, 2]
+        caps = set()
+        for cap in (np.asarray(xyz) + half * axis, np.asarray(xyz) - half * axis):
+            for k, other in enumerate(collisions):
+                s = other.find("geometry")[0]
+                if (s.tag == "sphere" and abs(float(s.get("radius")) - radius) <= 1e-9
+                        and np.linalg.norm(np.asarray(_origin(other)[0]) - cap) <= 1e-6):
+                    caps.add(k)
+                    break
+        if len(caps) == 2:
+            fused[i] = caps
+    return fused
+
+
 def _collision_geoms_xml(link: ET.Element, indent: str, contype: int, conaffinity: int) -> str:
     out = []
-    for k, col in enumerate(link.findall("collision")):
+    collisions = link.findall("collision")
+    capsules = _capsule_caps(collisions)
+    caps = set().union(*capsules.values())
+    for k, col in enumerate(collisions):
+        if k in caps:
+            continue
         xyz, rpy = _origin(col)
         geom = col.find("geometry")
         shape = geom[0]
-        if shape.tag == "box":
+        if k in capsules:
+            gtype, size = "capsule", [float(shape.get("radius")), float(shape.get("length")) / 2.0]
+        elif shape.tag == "box":
             gtype, size = "box", _floats(shape.get("size"), ()) / 2.0
         elif shape.tag == "sphere":
             gtype, size = "sphere", [float(shape.get("radius"))]

@@ -215,12 +215,48 @@ fn convert_link(source: &str, link: &urdf_rs::Link) -> Result<Link> {
             origin: origin * nalgebra::Translation3::from(centre),
         });
     }
+    fuse_capsules(&mut collisions);
     Ok(Link {
         name: link.name.clone(),
         parent_joint: None,
         inertial,
         collisions,
     })
+}
+
+/// Standard URDF has no capsule, so tools write one as a cylinder with a sphere of its radius centred
+/// on each end cap. The union is exactly the capsule's solid; reading it back as one capsule keeps the
+/// contact path on parry's capsule queries instead of a cylinder's GJK and two extra colliders.
+fn fuse_capsules(collisions: &mut Vec<Collision>) {
+    const POSITION_TOLERANCE: f64 = 1e-6;
+    let mut i = 0;
+    while i < collisions.len() {
+        let (radius, half_length) = match collisions[i].shape {
+            Shape::Cylinder { radius, half_length } => (radius, half_length),
+            _ => {
+                i += 1;
+                continue;
+            }
+        };
+        let cap = |sign: f64| collisions[i].origin * nalgebra::Point3::new(0.0, 0.0, sign * half_length);
+        let (top, bottom) = (cap(1.0), cap(-1.0));
+        let sphere_at = |centre: &nalgebra::Point3<f64>| {
+            collisions.iter().position(|c| {
+                matches!(c.shape, Shape::Sphere { radius: r } if (r - radius).abs() <= 1e-9 * radius.max(1.0))
+                    && (c.origin.translation.vector - centre.coords).norm() <= POSITION_TOLERANCE
+            })
+        };
+        if let (Some(a), Some(b)) = (sphere_at(&top), sphere_at(&bottom)) {
+            if a != b {
+                collisions[i].shape = Shape::Capsule { radius, half_length };
+                let (first, second) = (a.max(b), a.min(b));
+                collisions.remove(first);
+                collisions.remove(second);
+                i -= [first, second].iter().filter(|&&k| k < i).count();
+            }
+        }
+        i += 1;
+    }
 }
 
 fn convert_joint(source: &str, joint: &urdf_rs::Joint, link_id: &dyn Fn(&str) -> Option<usize>) -> Result<Joint> {
@@ -472,6 +508,72 @@ mod tests {
             Err(SabreError::Urdf { detail, .. }) => detail,
             other => panic!("expected a URDF error, got {other:?}"),
         }
+    }
+
+    fn link_collisions(body: &str) -> Vec<Collision> {
+        let text = format!(
+            r#"<robot name="r"><link name="a">{body}</link><link name="b"/>
+            <joint name="j" type="revolute"><parent link="a"/><child link="b"/>
+            <limit lower="-1" upper="1" effort="1" velocity="1"/></joint></robot>"#
+        );
+        let parsed = parse_urdf("robot", &text).unwrap();
+        parsed.tree.links[parsed.tree.link_id("a").unwrap()].collisions.clone()
+    }
+
+    #[test]
+    fn a_cylinder_with_spheres_on_both_caps_reads_as_the_capsule() {
+        let capsule = link_collisions(
+            r#"<collision name="c"><origin xyz="0.1 0.2 0.3" rpy="0.3 1.2 -0.4"/>
+               <geometry><capsule radius="0.05" length="0.2"/></geometry></collision>"#,
+        );
+        // Cap centres by hand: origin + R(rpy) (0, 0, ±0.1), R's third column (cy sp cr + sy sr, sy sp cr − cy sr, cp cr).
+        let (r, p, y) = (0.3f64, 1.2f64, -0.4f64);
+        let z = [
+            y.cos() * p.sin() * r.cos() + y.sin() * r.sin(),
+            y.sin() * p.sin() * r.cos() - y.cos() * r.sin(),
+            p.cos() * r.cos(),
+        ];
+        let cap = |s: f64| format!("{} {} {}", 0.1 + s * 0.1 * z[0], 0.2 + s * 0.1 * z[1], 0.3 + s * 0.1 * z[2]);
+        let written = link_collisions(&format!(
+            r#"<collision><origin xyz="{}" rpy="0 0 0"/><geometry><sphere radius="0.05"/></geometry></collision>
+               <collision name="c"><origin xyz="0.1 0.2 0.3" rpy="0.3 1.2 -0.4"/>
+               <geometry><cylinder radius="0.05" length="0.2"/></geometry></collision>
+               <collision><origin xyz="{}" rpy="0 0 0"/><geometry><sphere radius="0.05"/></geometry></collision>"#,
+            cap(1.0),
+            cap(-1.0)
+        ));
+        assert_eq!(written.len(), 1, "{written:?}");
+        assert_eq!(written[0].shape, capsule[0].shape);
+        assert_eq!(written[0].name.as_deref(), Some("c"));
+        assert!((written[0].origin.to_homogeneous() - capsule[0].origin.to_homogeneous()).norm() < 1e-15);
+    }
+
+    #[test]
+    fn spheres_that_do_not_close_the_cylinder_stay_separate() {
+        let other_radius = link_collisions(
+            r#"<collision><geometry><cylinder radius="0.05" length="0.2"/></geometry></collision>
+               <collision><origin xyz="0 0 0.1"/><geometry><sphere radius="0.06"/></geometry></collision>
+               <collision><origin xyz="0 0 -0.1"/><geometry><sphere radius="0.05"/></geometry></collision>"#,
+        );
+        assert_eq!(other_radius.len(), 3);
+        let one_cap = link_collisions(
+            r#"<collision><geometry><cylinder radius="0.05" length="0.2"/></geometry></collision>
+               <collision><origin xyz="0 0 0.1"/><geometry><sphere radius="0.05"/></geometry></collision>
+               <collision><origin xyz="0 0.01 -0.1"/><geometry><sphere radius="0.05"/></geometry></collision>"#,
+        );
+        assert_eq!(one_cap.len(), 3);
+        assert!(matches!(one_cap[0].shape, Shape::Cylinder { .. }));
+    }
+
+    #[test]
+    fn the_shipped_robot_is_standard_urdf_and_keeps_its_capsules() {
+        assert!(!ROBOT.contains("<capsule"), "standard URDF has no <capsule>");
+        let robot = parse_urdf("robot", ROBOT).unwrap().tree;
+        let arm: Vec<&Collision> = (0..=7)
+            .flat_map(|k| &robot.links[robot.link_id(&format!("panda_link{k}")).unwrap()].collisions)
+            .collect();
+        assert_eq!(arm.len(), 9);
+        assert!(arm.iter().all(|c| matches!(c.shape, Shape::Capsule { .. })), "{arm:?}");
     }
 
     #[test]
