@@ -49,10 +49,20 @@ class Scene:
     def load(robot: str, obj: str, obj_pose: list[float] | None = None) -> Scene: ...
     @staticmethod
     def from_urdf(
-        robot_path: str | os.PathLike[str], obj_path: str | os.PathLike[str], obj_pose: list[float] | None = None
+        robot_path: str | os.PathLike[str],
+        obj_path: str | os.PathLike[str],
+        obj_pose: list[float] | None = None,
+        joint: str | None = None,
+        hold: list[tuple[str, float]] | None = None,
     ) -> Scene: ...
     @staticmethod
-    def from_urdf_strings(robot_urdf: str, obj_urdf: str, obj_pose: list[float] | None = None) -> Scene: ...
+    def from_urdf_strings(
+        robot_urdf: str,
+        obj_urdf: str,
+        obj_pose: list[float] | None = None,
+        joint: str | None = None,
+        hold: list[tuple[str, float]] | None = None,
+    ) -> Scene: ...
     @property
     def nq(self) -> int: ...
     @property

@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from . import _core
-from ._validate import as_array, as_float_array, readonly
-from .errors import ShapeError, UrdfError
+from ._validate import as_array, as_finite, as_float_array, readonly
+from .errors import InvalidValueError, ShapeError, UrdfError
 
 __all__ = ["Scene", "ROBOTS", "OBJECTS"]
 
@@ -24,6 +24,16 @@ def _pose(obj_pose: Sequence[float] | np.ndarray | None) -> list[float] | None:
     if obj_pose is None:
         return None
     return as_float_array("obj_pose", obj_pose, (6,)).tolist()
+
+
+def _selection(joint: str | None, hold: Mapping[str, float] | None) -> tuple[str | None, list[tuple[str, float]] | None]:
+    if joint is not None and not isinstance(joint, str):
+        raise InvalidValueError(f"joint must be a joint name, got {type(joint).__name__}")
+    if hold is None:
+        return joint, None
+    if not isinstance(hold, Mapping):
+        raise InvalidValueError(f"hold must map joint names to positions, got {type(hold).__name__}")
+    return joint, [(str(name), as_finite(f"hold[{name!r}]", value)) for name, value in hold.items()]
 
 
 @dataclass(frozen=True)
@@ -78,19 +88,35 @@ class Scene:
         robot_path: str | os.PathLike[str],
         obj_path: str | os.PathLike[str],
         obj_pose: Sequence[float] | None = None,
+        *,
+        joint: str | None = None,
+        hold: Mapping[str, float] | None = None,
     ) -> Scene:
         """A scene from a robot URDF and an object URDF on disk. Collision geometry: boxes, spheres,
         cylinders, capsules, and STL or OBJ meshes as their convex hulls (docs/objects.md says where
-        mesh files are looked for)."""
+        mesh files are looked for).
+
+        An object with several movable joints (a cabinet with two doors) is opened one joint at a
+        time: ``joint`` names the one that stays movable, and every other movable joint is fixed at
+        its value in ``hold`` (rad or m; default 0 within its limits, i.e. closed).
+        """
         for label, path in (("robot", robot_path), ("object", obj_path)):
             if not os.path.isfile(path):
                 raise UrdfError(f"URDF {path}: {label} file does not exist")
-        return cls(_core.Scene.from_urdf(os.fspath(robot_path), os.fspath(obj_path), _pose(obj_pose)))
+        return cls(_core.Scene.from_urdf(os.fspath(robot_path), os.fspath(obj_path), _pose(obj_pose), *_selection(joint, hold)))
 
     @classmethod
-    def from_urdf_strings(cls, robot_urdf: str, obj_urdf: str, obj_pose: Sequence[float] | None = None) -> Scene:
-        """A scene from URDF text."""
-        return cls(_core.Scene.from_urdf_strings(robot_urdf, obj_urdf, _pose(obj_pose)))
+    def from_urdf_strings(
+        cls,
+        robot_urdf: str,
+        obj_urdf: str,
+        obj_pose: Sequence[float] | None = None,
+        *,
+        joint: str | None = None,
+        hold: Mapping[str, float] | None = None,
+    ) -> Scene:
+        """A scene from URDF text; ``joint`` and ``hold`` as in :meth:`from_urdf`."""
+        return cls(_core.Scene.from_urdf_strings(robot_urdf, obj_urdf, _pose(obj_pose), *_selection(joint, hold)))
 
     # -- sizes and names ----------------------------------------------------------------------
     @property

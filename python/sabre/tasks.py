@@ -496,7 +496,8 @@ class OpenObject(Task):
         if scene.no != 1:
             raise InvalidValueError(
                 f"OpenObject needs an object with one movable joint; {scene.object_name!r} has {scene.no}: "
-                f"{list(scene.object_joint_names)}{swapped}"
+                f"{list(scene.object_joint_names)}{swapped}; pick the one to open with "
+                f"Scene.from_urdf(..., joint=<name>), which holds the others"
             )
         if "grasp" not in scene.frame_names:
             raise UnknownFrameError(f"OpenObject needs the robot frame 'grasp'; the robot has: {', '.join(scene.frame_names)}")

@@ -221,6 +221,61 @@ impl KinematicTree {
         })
     }
 
+    /// The same tree with one movable joint, `keep`: every other movable joint becomes fixed at its
+    /// value in `held` (default 0 clamped into its limits, the closed position of a door or drawer).
+    /// A cabinet with two doors is opened one door at a time this way.
+    pub fn with_single_joint(&self, keep: &str, held: &[(String, f64)], source: &str) -> Result<Self> {
+        let movable = self.active_joint_names();
+        if !movable.iter().any(|n| n == keep) {
+            return Err(SabreError::urdf(
+                source,
+                format!("no movable joint '{keep}'; the movable joints are: {}", movable.join(", ")),
+            ));
+        }
+        for (name, value) in held {
+            if name == keep || !movable.contains(name) {
+                let others: Vec<&str> = movable.iter().filter(|n| *n != keep).map(String::as_str).collect();
+                return Err(SabreError::urdf(
+                    source,
+                    format!("cannot hold '{name}': the joints to hold are: {}", others.join(", ")),
+                ));
+            }
+            let limits = self.joints[self.joints.iter().position(|j| &j.name == name).expect("movable")].limits;
+            if !(value.is_finite() && limits.lower <= *value && *value <= limits.upper) {
+                return Err(SabreError::urdf(
+                    source,
+                    format!(
+                        "joint '{name}' held at {value}, outside its limits [{}, {}]",
+                        limits.lower, limits.upper
+                    ),
+                ));
+            }
+        }
+        let mut links = self.links.clone();
+        for link in &mut links {
+            link.parent_joint = None;
+        }
+        let joints = self
+            .joints
+            .iter()
+            .map(|joint| {
+                if joint.kind == JointKind::Fixed || joint.name == keep {
+                    return joint.clone();
+                }
+                let value = held
+                    .iter()
+                    .find(|(n, _)| n == &joint.name)
+                    .map_or(0.0_f64.clamp(joint.limits.lower, joint.limits.upper), |(_, v)| *v);
+                Joint {
+                    kind: JointKind::Fixed,
+                    origin: joint.origin * Self::joint_motion(joint, value),
+                    ..joint.clone()
+                }
+            })
+            .collect();
+        Self::new(self.name.clone(), links, joints, source)
+    }
+
     /// Number of generalized coordinates.
     pub fn nq(&self) -> usize {
         self.active_joints.len()

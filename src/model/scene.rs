@@ -168,6 +168,24 @@ impl Scene {
         })
     }
 
+    /// The scene with one movable object joint: `joint` (required when the object has several) is
+    /// kept and every other movable joint is fixed at its `hold` value (default 0 within its limits).
+    pub fn with_object_joint(mut self, joint: Option<&str>, hold: &[(String, f64)]) -> Result<Self> {
+        match joint {
+            Some(keep) => {
+                self.object = self.object.with_single_joint(keep, hold, &self.object_source)?;
+            }
+            None if !hold.is_empty() => {
+                return Err(SabreError::urdf(
+                    &self.object_source,
+                    "`hold` needs `joint`: the one joint that stays movable",
+                ));
+            }
+            None => {}
+        }
+        Ok(self)
+    }
+
     pub fn nq(&self) -> usize {
         self.robot.nq()
     }
@@ -347,6 +365,55 @@ mod tests {
 
     fn scene() -> Scene {
         Scene::load("royalpanda", "shelf", None).expect("built-in scene loads")
+    }
+
+    const DOUBLE_CABINET: &str = include_str!("../../assets/objects/examples/double_cabinet.urdf");
+
+    #[test]
+    fn one_joint_of_a_two_door_cabinet_stays_movable_and_the_other_is_held() {
+        let robot = BUILTIN_ROBOTS[0].1;
+        let both = Scene::from_urdf_strings(robot, DOUBLE_CABINET, None).unwrap();
+        assert_eq!(both.object.active_joint_names(), ["left_hinge", "right_hinge"]);
+        let held = vec![("right_hinge".to_string(), 0.5)];
+        let left = Scene::from_urdf_strings(robot, DOUBLE_CABINET, None)
+            .unwrap()
+            .with_object_joint(Some("left_hinge"), &held)
+            .unwrap();
+        assert_eq!(left.no(), 1);
+        assert_eq!(left.object.active_joint_names(), ["left_hinge"]);
+        for o in [0.0, 0.7, 1.5] {
+            for frame in ["left_pull", "right_pull", "right_door"] {
+                let reduced = left.object_fk(&[o], frame).unwrap();
+                let full = both.object_fk(&[o, 0.5], frame).unwrap();
+                assert!(
+                    (reduced.to_homogeneous() - full.to_homogeneous()).norm() < 1e-12,
+                    "{frame} at {o}"
+                );
+            }
+        }
+        // Without a value the other door is held closed (0 lies within its limits).
+        let closed = Scene::from_urdf_strings(robot, DOUBLE_CABINET, None)
+            .unwrap()
+            .with_object_joint(Some("right_hinge"), &[])
+            .unwrap();
+        let full = both.object_fk(&[0.0, 0.3], "left_pull").unwrap();
+        assert!((closed.object_fk(&[0.3], "left_pull").unwrap().to_homogeneous() - full.to_homogeneous()).norm() < 1e-12);
+    }
+
+    #[test]
+    fn a_bad_joint_choice_names_the_candidates() {
+        let robot = BUILTIN_ROBOTS[0].1;
+        let build = |joint: Option<&str>, hold: &[(String, f64)]| {
+            Scene::from_urdf_strings(robot, DOUBLE_CABINET, None)
+                .unwrap()
+                .with_object_joint(joint, hold)
+                .unwrap_err()
+                .to_string()
+        };
+        assert!(build(Some("door"), &[]).contains("left_hinge, right_hinge"));
+        assert!(build(Some("left_hinge"), &[("left_hinge".into(), 0.1)]).contains("right_hinge"));
+        assert!(build(Some("left_hinge"), &[("right_hinge".into(), 2.0)]).contains("outside its limits"));
+        assert!(build(None, &[("right_hinge".into(), 0.1)]).contains("needs `joint`"));
     }
 
     #[test]

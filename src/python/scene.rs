@@ -36,16 +36,37 @@ impl PyScene {
         run(|| Scene::load(robot, obj, obj_pose.as_deref())).map(Self::wrap)
     }
 
+    /// `joint` keeps one movable object joint; the others are fixed at `hold` (default 0 within limits).
     #[staticmethod]
-    #[pyo3(signature = (robot_path, obj_path, obj_pose=None))]
-    fn from_urdf(robot_path: PathBuf, obj_path: PathBuf, obj_pose: Option<Vec<f64>>) -> PyResult<Self> {
-        run(|| Scene::from_urdf_files(&robot_path, &obj_path, obj_pose.as_deref())).map(Self::wrap)
+    #[pyo3(signature = (robot_path, obj_path, obj_pose=None, joint=None, hold=None))]
+    fn from_urdf(
+        robot_path: PathBuf,
+        obj_path: PathBuf,
+        obj_pose: Option<Vec<f64>>,
+        joint: Option<String>,
+        hold: Option<Vec<(String, f64)>>,
+    ) -> PyResult<Self> {
+        run(|| {
+            Scene::from_urdf_files(&robot_path, &obj_path, obj_pose.as_deref())?
+                .with_object_joint(joint.as_deref(), &hold.unwrap_or_default())
+        })
+        .map(Self::wrap)
     }
 
     #[staticmethod]
-    #[pyo3(signature = (robot_urdf, obj_urdf, obj_pose=None))]
-    fn from_urdf_strings(robot_urdf: &str, obj_urdf: &str, obj_pose: Option<Vec<f64>>) -> PyResult<Self> {
-        run(|| Scene::from_urdf_strings(robot_urdf, obj_urdf, obj_pose.as_deref())).map(Self::wrap)
+    #[pyo3(signature = (robot_urdf, obj_urdf, obj_pose=None, joint=None, hold=None))]
+    fn from_urdf_strings(
+        robot_urdf: &str,
+        obj_urdf: &str,
+        obj_pose: Option<Vec<f64>>,
+        joint: Option<String>,
+        hold: Option<Vec<(String, f64)>>,
+    ) -> PyResult<Self> {
+        run(|| {
+            Scene::from_urdf_strings(robot_urdf, obj_urdf, obj_pose.as_deref())?
+                .with_object_joint(joint.as_deref(), &hold.unwrap_or_default())
+        })
+        .map(Self::wrap)
     }
 
     #[getter]

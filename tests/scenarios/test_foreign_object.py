@@ -74,3 +74,47 @@ def test_the_controller_opens_a_foreign_shelf_by_its_handle_link():
     episode = sabre.run_episode(foreign, controller, 15.0, seed=0, x0=x0, progress=False)
     assert episode.success
     assert episode.opening.max() >= 0.9 * task.target_opening(foreign)
+
+
+DOUBLE = ASSETS / "objects" / "examples" / "double_cabinet.urdf"
+# The left pull sits 0.045 m left of the cabinet's centre, the shelf's handle 0.1175 m right of its
+# own: this placement puts the left pull where the shelf's handle stands in its default scene.
+DOUBLE_POSE = [1.0, -0.1625, 0.0, 0.0, 0.0, 0.0]
+
+
+def test_a_two_door_cabinet_needs_the_joint_to_open_and_lists_both():
+    both = sabre.Scene.from_urdf(ASSETS / "robots" / "royalpanda.urdf", DOUBLE, DOUBLE_POSE)
+    assert both.object_joint_names == ("left_hinge", "right_hinge")
+    with pytest.raises(sabre.SabreError, match=r"joint=.*") as error:
+        sabre.Controller(both, tasks.OpenObject(handle="left_pull"), sabre.ControllerConfig(rollouts=8, horizon=0.15))
+    assert "left_hinge" in str(error.value) and "right_hinge" in str(error.value)
+    with pytest.raises(sabre.errors.UrdfError, match="left_hinge, right_hinge"):
+        sabre.Scene.from_urdf(ASSETS / "robots" / "royalpanda.urdf", DOUBLE, joint="hinge")
+    with pytest.raises(sabre.errors.UrdfError, match="outside its limits"):
+        sabre.Scene.from_urdf(ASSETS / "robots" / "royalpanda.urdf", DOUBLE, joint="left_hinge", hold={"right_hinge": -0.5})
+    with pytest.raises(sabre.errors.InvalidValueError, match="finite"):
+        sabre.Scene.from_urdf(ASSETS / "robots" / "royalpanda.urdf", DOUBLE, joint="left_hinge", hold={"right_hinge": np.nan})
+
+
+def test_the_held_door_stays_where_it_was_held_while_the_other_opens():
+    both = sabre.Scene.from_urdf(ASSETS / "robots" / "royalpanda.urdf", DOUBLE, DOUBLE_POSE)
+    left = sabre.Scene.from_urdf(ASSETS / "robots" / "royalpanda.urdf", DOUBLE, DOUBLE_POSE, joint="left_hinge",
+                                 hold={"right_hinge": 0.4})
+    for o in (0.0, 0.8, 1.5):
+        for frame in ("left_pull", "right_pull"):
+            np.testing.assert_allclose(left.object_fk([o], frame), both.object_fk([o, 0.4], frame), atol=1e-12)
+
+
+def test_the_controller_opens_the_left_door_of_a_two_door_cabinet_and_leaves_the_right_shut():
+    shipped = sabre.Scene.load("royalpanda", "shelf")
+    scene = sabre.Scene.from_urdf(ASSETS / "robots" / "royalpanda.urdf", DOUBLE, DOUBLE_POSE, joint="left_hinge")
+    task = tasks.OpenObject(handle="left_pull")
+    # The left pull stands where the shelf's handle does: the shelf's scripted pre-grasp fits it.
+    np.testing.assert_allclose(task.handle_pose(scene, [0.0])[:3, 3], shipped.object_fk([0.0], "handle_frame")[:3, 3], atol=1e-9)
+    motion = sabre.hook_and_pull(shipped)
+    x0 = scene.default_state()
+    x0[: scene.nq] = motion.planned_states[int(np.flatnonzero(motion.phases == 0)[-1]) + 1]
+    controller = sabre.Controller(scene, task, sabre.ControllerConfig(variant="N", seed=0, threads=1))
+    episode = sabre.run_episode(scene, controller, 15.0, seed=0, x0=x0, progress=False)
+    assert episode.success
+    assert episode.opening.max() >= 0.9 * task.target_opening(scene)
