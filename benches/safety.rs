@@ -140,6 +140,7 @@ fn inner_tick(c: &mut Criterion) {
                 Some(InnerSafety {
                     filter: Some(&mut f),
                     tank: Some(&mut tank),
+                    predicted_dissipation: None,
                 }),
             )
             .expect("tick")

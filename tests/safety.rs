@@ -652,6 +652,7 @@ fn inner_loop_filters_every_step_and_keeps_the_tank() {
         Some(InnerSafety {
             filter: Some(&mut filter),
             tank: Some(&mut tank),
+            predicted_dissipation: None,
         }),
     )
     .unwrap();

@@ -41,6 +41,7 @@ from .safety import (
     SafetyConfig,
     SafetyFilter,
     SequenceResult,
+    TankRefill,
 )
 from .scene import OBJECTS, ROBOTS, Scene
 from .scripted import ScriptedMotion, hook_and_pull
@@ -69,6 +70,7 @@ __all__ = [
     "QPMatrices",
     "Obstacle",
     "EnergyTank",
+    "TankRefill",
     "default_threads",
     "costs",
     "tasks",

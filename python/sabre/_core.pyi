@@ -31,6 +31,7 @@ __all__ = [
     "SafetyFilter",
     "FilterResult",
     "EnergyTankConfig",
+    "TankRefillConfig",
     "EnergyTank",
     "default_threads",
     "likelihood_weights",
@@ -205,6 +206,14 @@ class EnergyTankConfig:
     def __new__(cls) -> EnergyTankConfig: ...
 
 @final
+class TankRefillConfig:
+    max_rate: float
+    tolerance: float
+    relative_tolerance: float
+    time_constant: float
+    def __new__(cls) -> TankRefillConfig: ...
+
+@final
 class RolloutModel:
     def __new__(cls, scene: Scene, config: RolloutConfig) -> RolloutModel: ...
     @property
@@ -252,6 +261,7 @@ class Plant:
         record_every: int = 1,
         safety: SafetyFilter | None = None,
         tank: EnergyTank | None = None,
+        predicted_dissipation: npt.NDArray[np.float64] | None = None,
     ) -> dict: ...
     def track(self, controller: LowLevelController, u_ref: npt.NDArray[np.float64], steps: int) -> None: ...
     @property
@@ -386,6 +396,12 @@ class SafetyFilter:
 class EnergyTank:
     def __new__(cls, config: EnergyTankConfig) -> EnergyTank: ...
     def step(self, tau_ext: npt.NDArray[np.float64], u: npt.NDArray[np.float64], dt: float) -> float: ...
+    def set_refill(self, config: TankRefillConfig | None = None) -> None: ...
+    def refill(self, predicted: float, measured: float, dt: float) -> float: ...
+    @property
+    def refilled(self) -> float: ...
+    @property
+    def refill_enabled(self) -> bool: ...
     def reset(self) -> None: ...
     @property
     def energy(self) -> float: ...

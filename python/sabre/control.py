@@ -100,6 +100,7 @@ class LowLevelController:
         *,
         safety: SafetyFilter | None = None,
         tank: EnergyTank | None = None,
+        predicted_dissipation: np.ndarray | None = None,
     ) -> Trace:
         """The inner loop for ``steps`` plant steps: the reference sequence (K, nq) of joint
         velocities, sampled every ``dt`` seconds from time ``t0`` (s), is interpolated at the plant's
@@ -108,8 +109,10 @@ class LowLevelController:
         With ``safety`` each step's command goes through the FILTER-QP (41) first; with ``tank`` too,
         its passivity row (56) uses the plant's last measured τ_ext and the tank's energy, and the
         tank integrates the filtered command against the newly measured τ_ext after the step (49).
-        A tank without a filter only keeps the books. Records every ``record_every``-th step
-        (default: every step).
+        A tank without a filter only keeps the books. ``predicted_dissipation`` (K,), on the
+        reference's time grid, is the plan's predicted port dissipation −τ_extᵀu (W) that a tank with a refill
+        (:class:`~sabre.TankRefill`) is refilled by while the measurement agrees. Records every
+        ``record_every``-th step (default: every step).
 
         Raises:
             TypeError: plant, safety or tank of the wrong type.
@@ -139,6 +142,7 @@ class LowLevelController:
             as_count("record_every", record_every, 1),
             None if safety is None else safety._core,
             None if tank is None else tank._core,
+            None if predicted_dissipation is None else as_float_array("predicted_dissipation", predicted_dissipation, (None,)),
         )
         status = d.get("filter_status")
         return Trace(

@@ -21,7 +21,7 @@ from ._validate import as_array, as_count, as_finite, as_float_array, as_positiv
 from .control import LowLevelController, Trace
 from .costs import Batch, CompiledCost
 from .errors import InvalidValueError, ShapeError
-from .safety import CLASSES, EnergyTank, SafetyConfig, SafetyFilter
+from .safety import CLASSES, EnergyTank, SafetyConfig, SafetyFilter, TankRefill
 from .scene import Scene
 from .sim import MAX_THREADS, Plant, RolloutModel
 from .tasks import OpenObject, Task
@@ -95,6 +95,9 @@ class ControllerConfig:
     safety: SafetyConfig | None = None
     #: energy tank: S(0) (J); its floor ε is ``safety.tank_floor``.
     tank_initial: float = _TANK.initial
+    #: refill of the inner loop's tank (variants I, IO) by the plan's predicted dissipation while the
+    #: plant agrees with the prediction (:class:`~sabre.TankRefill`); None: the paper's fixed budget.
+    tank_refill: TankRefill | None = field(default_factory=TankRefill)
 
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
@@ -102,6 +105,8 @@ class ControllerConfig:
         if self.safety is not None and not isinstance(self.safety, SafetyConfig):
             raise InvalidValueError(f"safety must be a sabre.SafetyConfig, got {type(self.safety).__name__}")
         as_positive("tank_initial", self.tank_initial)
+        if self.tank_refill is not None and not isinstance(self.tank_refill, TankRefill):
+            raise InvalidValueError(f"tank_refill must be a sabre.TankRefill or None, got {type(self.tank_refill).__name__}")
         as_count("rollouts", self.rollouts, 3)
         as_positive("horizon", self.horizon)
         as_positive("dt", self.dt)
@@ -261,7 +266,8 @@ class Controller:
         #: FILTER-QP of the 1 kHz inner loop with the passivity row (variants I, IO), else None.
         self.inner_filter = SafetyFilter(scene, safety) if c.inner_filter else None
         #: The energy tank of the inner loop; without the inner filter it only keeps the books.
-        self.tank = EnergyTank(c.tank_initial, safety.tank_floor)
+        self.tank = EnergyTank(c.tank_initial, safety.tank_floor, refill=c.tank_refill if c.inner_filter else None)
+        self._predicted_dissipation: np.ndarray | None = None
 
     def _compile(self, phase: str) -> CompiledCost:
         if phase not in self._compiled:
@@ -277,6 +283,7 @@ class Controller:
         self._planner.set_cost(self._cost.core)
         self.phase_history = [(float(t0), self.phase)]
         self.tank.reset()
+        self._predicted_dissipation = None
         for f in (self.outer_filter, self.inner_filter):
             if f is not None:
                 f.reset_stats()
@@ -371,6 +378,10 @@ class Controller:
             stats["sequential_time"] = time.perf_counter() - start
             stats["sequential_fallbacks"] = seq.fallbacks
             stats["iteration_time"] += stats["sequential_time"]
+        if self.tank.refill_config is not None:
+            start = time.perf_counter()
+            self._predicted_dissipation = self._predict_dissipation(x)
+            stats["iteration_time"] += time.perf_counter() - start
         stats["guide_time"] = guide_time
         # The core times its own iteration; the Python path above already counts the guides.
         stats["iteration_time"] += guide_time if in_core else 0.0
@@ -378,6 +389,19 @@ class Controller:
         stats["noise_scale"] = scale
         self._stats = IterationStats(**stats)
         return self._stats
+
+    def _predict_dissipation(self, x: np.ndarray) -> np.ndarray:
+        """−τ_extᵀu (W) at each step of the current plan's rollout from x (K,), for the tank's refill."""
+        nominal = self.nominal
+        result = self.model.rollout(x, nominal[None], threads=1)
+        return -np.einsum("kj,kj->k", result.tau_ext[0], nominal)
+
+    @property
+    def predicted_dissipation(self) -> np.ndarray | None:
+        """(K,) the port dissipation −τ_extᵀu (W) the rollout model predicts along the current plan, on
+        the grid of :attr:`nominal` (row k at ``nominal_t0 + k·dt``); None without a tank refill or
+        before the first :meth:`update`."""
+        return self._predicted_dissipation
 
     def reference(self, t: float) -> np.ndarray:
         """(nu,) commanded joint velocity at time t."""
@@ -695,6 +719,7 @@ def run_episode(
             trace = low_level.follow(
                 plant, controller.nominal, controller.nominal_t0, controller.config.dt, steps, record_every,
                 safety=controller.inner_filter, tank=controller.tank,
+                predicted_dissipation=controller.predicted_dissipation,
             )
             chunks.append(trace, cost=stats.nominal_cost, phase=controller.task.phases.index(controller.phase))
             if plans is not None:

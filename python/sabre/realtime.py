@@ -51,7 +51,9 @@ class RealtimeCascade:
         self.min_replan_period = as_non_negative("min_replan_period", min_replan_period)
         self._lock = threading.Lock()
         self._latest: tuple[np.ndarray, float] | None = None
-        self._plan: tuple[np.ndarray, float, float] | None = None  # (nominal, t0, dt)
+        # (nominal, t0, dt) and the plan's predicted port dissipation for the tank's refill
+        self._plan: tuple[np.ndarray, float, float] | None = None
+        self._predicted: np.ndarray | None = None
         # the task's low-level gain inertia floor for the planned phase (None: the controller's own)
         self._floor: float | None = None
         self._own_floor = 0.0 if low_level is None else low_level.gain_inertia_floor
@@ -87,9 +89,11 @@ class RealtimeCascade:
         x, t = latest
         self.controller.update(x, t)
         plan = (np.array(self.controller.nominal), float(self.controller.nominal_t0), float(self.controller.config.dt))
+        predicted = self.controller.predicted_dissipation
         floor = self.controller.task.gain_inertia_floor(self.controller.phase)
         with self._lock:
             self._plan = plan
+            self._predicted = None if predicted is None else np.array(predicted)
             self._floor = floor
         self.iterations += 1
 
@@ -147,7 +151,8 @@ class RealtimeCascade:
     def tick(self, x: Sequence[float] | np.ndarray, tau_ext: Sequence[float] | np.ndarray, t: float,
              dt: float | None = None) -> TickResult:
         """One inner-loop step from the measured state x (nx,) and external torques τ_ext (nq,)
-        at time t: reference → FILTER-QP with the tank (variants I, IO) → tank → low-level torque.
+        at time t: reference → FILTER-QP with the tank (variants I, IO) → tank (refilled as in
+        :class:`~sabre.TankRefill` when the controller's tank has a refill) → low-level torque.
         The tank integrates over ``dt`` (s): the measured time since the previous state, e.g.
         the difference of two message stamps (default: ``inner_dt``).
         The tank integrates this τ_ext against the returned command, the same pair the passivity
@@ -174,6 +179,13 @@ class RealtimeCascade:
             r = f.filter(x, u_ref, tau_ext, tank.energy)
             u, status = np.asarray(r.u), r.status
         step = self.inner_dt if dt is None else as_positive("dt", dt)
+        with self._lock:
+            predicted, plan = self._predicted, self._plan
+        if predicted is not None and plan is not None and tank.refill_config is not None:
+            s = float(np.clip((t - plan[1]) / plan[2], 0.0, len(predicted) - 1))
+            i = int(np.floor(s))
+            now = (1.0 - (s - i)) * predicted[i] + (s - i) * predicted[min(i + 1, len(predicted) - 1)]
+            tank.refill(float(now), -float(tau_ext @ u_ref), step)
         energy = tank.step(tau_ext, u, step)
         torque = None
         if self.low_level is not None:

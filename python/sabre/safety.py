@@ -21,7 +21,7 @@ from .sim import RolloutModel
 
 __all__ = [
     "CLASSES", "SafetyConfig", "SafetyFilter", "FilterResult", "SequenceResult", "FilterStats", "ConstraintRows",
-    "QPMatrices", "EnergyTank", "Obstacle",
+    "QPMatrices", "EnergyTank", "TankRefill", "Obstacle",
 ]
 
 # The core's defaults, the one source of every default below.
@@ -29,6 +29,7 @@ _SAFETY = _core.SafetyConfig()
 _x_min, _x_max, _y_min, _y_max = _SAFETY.base_box
 _DEFAULT_BASE_BOX = (_x_min, _x_max, _y_min, _y_max)
 _TANK = _core.EnergyTankConfig()
+_REFILL = _core.TankRefillConfig()
 
 #: Constraint classes, in the order the core uses.
 CLASSES: tuple[str, ...] = tuple(_core.SafetyConfig.classes())
@@ -427,6 +428,36 @@ class SafetyFilter:
         return f"SafetyFilter({self.scene!r}, rows={len(self.row_names)})"
 
 
+@dataclass(frozen=True)
+class TankRefill:
+    """Refill of the energy tank by the energy the current plan is predicted to need (beyond the paper).
+
+    A fixed S(0) runs out on a long task: opening the shelf costs about 4 J per radian, and every
+    contact before the open phase spends more. With a refill, while the plant does what the rollout
+    model predicted, the inner loop adds the port dissipation −τ_extᵀu (49) that the model predicts
+    along the rollout of the current plan to the tank, at most ``max_rate`` (W) and never above
+    S(0). Both the measured −τ̂ᵀu of the step's reference and the predicted value pass a first-order
+    low-pass of ``time_constant`` (s) and must agree within ``tolerance`` (W) +
+    ``relative_tolerance``·|predicted|: a stall the model did not predict (a held door: the model
+    lets it move, the plant's wrench grows) stops the refill, and the passivity row (56) bounds the
+    wrench as in the paper.
+    """
+
+    max_rate: float = _REFILL.max_rate
+    tolerance: float = _REFILL.tolerance
+    relative_tolerance: float = _REFILL.relative_tolerance
+    time_constant: float = _REFILL.time_constant
+
+    def __post_init__(self) -> None:
+        for name in ("max_rate", "tolerance", "relative_tolerance"):
+            as_non_negative(name, getattr(self, name))
+        as_positive("time_constant", self.time_constant)
+
+    def _core_config(self) -> _core.TankRefillConfig:
+        return core_config(_core.TankRefillConfig, max_rate=float(self.max_rate), tolerance=float(self.tolerance),
+                           relative_tolerance=float(self.relative_tolerance), time_constant=float(self.time_constant))
+
+
 class EnergyTank:
     """The virtual energy tank (paper Sec. III-C, IV-C): S(0) = ``initial``, floor ε = ``floor``.
 
@@ -434,7 +465,8 @@ class EnergyTank:
     torque on the robot, so the power the robot pushes into the environment, −τ_extᵀu, drains the
     tank, and work done on the robot refills it (up to ``ceiling``, if given). The energy is never
     clamped at the floor; keeping it there is the passivity row's job. ``history`` holds S(0) and
-    every step's energy when ``record_history``.
+    every step's energy when ``record_history``. With ``refill`` (:class:`TankRefill`) the inner
+    loop also refills it while the plant follows the plan's prediction.
     """
 
     def __init__(
@@ -444,6 +476,7 @@ class EnergyTank:
         *,
         ceiling: float | None = _TANK.ceiling,
         record_history: bool = _TANK.record_history,
+        refill: TankRefill | None = None,
     ) -> None:
         config = core_config(
             _core.EnergyTankConfig,
@@ -452,7 +485,27 @@ class EnergyTank:
             ceiling=None if ceiling is None else as_finite("ceiling", ceiling),
             record_history=bool(record_history),
         )
+        if refill is not None and not isinstance(refill, TankRefill):
+            raise InvalidValueError(f"refill must be a sabre.TankRefill or None, got {type(refill).__name__}")
         self._core = _core.EnergyTank(config)
+        self._refill = refill
+        if refill is not None:
+            self._core.set_refill(refill._core_config())
+
+    @property
+    def refill_config(self) -> TankRefill | None:
+        """The refill's settings, or None without a refill."""
+        return self._refill
+
+    def refill(self, predicted: float, measured: float, dt: float) -> float:
+        """One refill step (see :class:`TankRefill`) from the predicted and measured port dissipation
+        −τ_extᵀu (W) over dt (s); returns the energy added (J), 0 without a refill."""
+        return self._core.refill(as_finite("predicted", predicted), as_finite("measured", measured), as_positive("dt", dt))
+
+    @property
+    def refilled(self) -> float:
+        """Energy (J) the refill added since the last reset."""
+        return self._core.refilled
 
     def step(self, tau_ext: Sequence[float] | np.ndarray, u: Sequence[float] | np.ndarray, dt: float) -> float:
         """Integrates Ṡ = τ_extᵀu (49) over dt (s) with τ_ext (nq,) in N·m and u (nq,) the command; returns S (J)."""

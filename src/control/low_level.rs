@@ -184,10 +184,16 @@ pub struct TrackTrace {
 /// filter returned, S ← S + dt τ̂_kᵀ u_k, as a controller on a real robot must (it cannot know
 /// the next reading). Then a row met without slack gives S_{k+1} − ε ≥ (1 − α dt)(S_k − ε): the
 /// floor holds by construction in discrete time, and any dip below it is slack the filter used.
+///
+/// With `predicted_dissipation` (K values on the reference's time grid: the port power −τ_extᵀu
+/// the rollout model predicts along the plan) a tank with a refill configured is refilled each
+/// step while the measured −τ̂ᵀu of the step's reference agrees with it (see
+/// [`crate::safety::RefillConfig`]).
 #[derive(Default)]
 pub struct InnerSafety<'a> {
     pub filter: Option<&'a mut SafetyFilter>,
     pub tank: Option<&'a mut EnergyTank>,
+    pub predicted_dissipation: Option<&'a [f64]>,
 }
 
 /// The inner loop: for `steps` plant steps, interpolate the reference sequence (K × nq starting at
@@ -256,6 +262,7 @@ pub fn follow_reference_safe(
             Some(InnerSafety {
                 filter: Some(filter),
                 tank,
+                ..
             }) => {
                 let passivity = tank.as_ref().map(|t| (plant.measured_tau_ext(), t.energy()));
                 let out = filter.filter(plant.state(), &u_ref, passivity)?;
@@ -264,8 +271,18 @@ pub fn follow_reference_safe(
             }
             _ => u.copy_from_slice(&u_ref),
         }
-        if let Some(tank) = safety.as_mut().and_then(|s| s.tank.as_deref_mut()) {
-            tank.step(plant.measured_tau_ext(), &u, plant_dt)?;
+        if let Some(s) = safety.as_mut() {
+            if let Some(tank) = s.tank.as_deref_mut() {
+                if let Some(predicted) = s.predicted_dissipation.filter(|p| !p.is_empty()) {
+                    let mut now = [0.0];
+                    crate::mppi::interpolate(predicted, 1, (plant.time() - t0) / dt, &mut now);
+                    // Against the reference, not the filtered command: the test is whether the world
+                    // pushes back as the model predicted, whatever the passivity row let through.
+                    let measured = -EnergyTank::power(plant.measured_tau_ext(), &u_ref);
+                    tank.refill(now[0], measured, plant_dt)?;
+                }
+                tank.step(plant.measured_tau_ext(), &u, plant_dt)?;
+            }
         }
         let tau = controller.torque(plant.state(), &u)?;
         plant.step(&tau)?;

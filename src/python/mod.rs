@@ -43,6 +43,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<safety::PyFilterResult>()?;
     m.add_class::<safety::PyEnergyTankConfig>()?;
     m.add_class::<safety::PyEnergyTank>()?;
+    m.add_class::<safety::PyTankRefillConfig>()?;
     m.add_function(wrap_pyfunction!(default_threads, m)?)?;
     m.add_function(wrap_pyfunction!(mppi::likelihood_weights, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

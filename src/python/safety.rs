@@ -12,7 +12,7 @@ use super::error::{run, run_detached};
 use super::scene::PyScene;
 use super::sim::PyRolloutModel;
 use crate::error::SabreError;
-use crate::safety::{ConstraintClass, EnergyTank, FilterOutput, PerClass, SafetyConfig, SafetyFilter};
+use crate::safety::{ConstraintClass, EnergyTank, FilterOutput, PerClass, RefillConfig, SafetyConfig, SafetyFilter};
 
 /// Settings of the safety filter; `SafetyConfig()` holds the core's defaults. Per-class lists
 /// follow the core's class order: joint_limits, self_collision, arm_reach, base_box, obstacles,
@@ -123,6 +123,45 @@ impl PyEnergyTankConfig {
             floor: SafetyConfig::default().tank_floor,
             ceiling: None,
             record_history: true,
+        }
+    }
+}
+
+/// Settings of the tank's refill (beyond the paper); `TankRefillConfig()` holds the defaults.
+#[pyclass(name = "TankRefillConfig", module = "sabre._core", get_all, set_all)]
+#[derive(Clone)]
+pub struct PyTankRefillConfig {
+    /// Most power (W) the refill adds.
+    max_rate: f64,
+    /// Absolute agreement band (W) between measured and predicted dissipation.
+    tolerance: f64,
+    /// Agreement band relative to the predicted dissipation.
+    relative_tolerance: f64,
+    /// Time constant (s) of the low-pass on both dissipations.
+    time_constant: f64,
+}
+
+#[pymethods]
+impl PyTankRefillConfig {
+    #[new]
+    fn new() -> Self {
+        let d = RefillConfig::default();
+        Self {
+            max_rate: d.max_rate,
+            tolerance: d.tolerance,
+            relative_tolerance: d.relative_tolerance,
+            time_constant: d.time_constant,
+        }
+    }
+}
+
+impl From<&PyTankRefillConfig> for RefillConfig {
+    fn from(c: &PyTankRefillConfig) -> Self {
+        Self {
+            max_rate: c.max_rate,
+            tolerance: c.tolerance,
+            relative_tolerance: c.relative_tolerance,
+            time_constant: c.time_constant,
         }
     }
 }
@@ -371,6 +410,23 @@ impl PyEnergyTank {
         let tau = run(|| view("tau_ext", &tau_ext, &[-1]))?;
         let u = run(|| view("u", &u, &[-1]))?;
         run(|| lock(&self.inner).step(tau, u, dt))
+    }
+    /// Turns the refill on with `config`, or off with None.
+    #[pyo3(signature = (config=None))]
+    fn set_refill(&self, config: Option<&PyTankRefillConfig>) -> PyResult<()> {
+        run(|| lock(&self.inner).set_refill(config.map(RefillConfig::from)))
+    }
+    /// One refill step from the predicted and measured dissipation (W); returns the energy added.
+    fn refill(&self, predicted: f64, measured: f64, dt: f64) -> PyResult<f64> {
+        run(|| lock(&self.inner).refill(predicted, measured, dt))
+    }
+    #[getter]
+    fn refilled(&self) -> f64 {
+        lock(&self.inner).refilled()
+    }
+    #[getter]
+    fn refill_enabled(&self) -> bool {
+        lock(&self.inner).refill_config().is_some()
     }
     fn reset(&self) {
         lock(&self.inner).reset();

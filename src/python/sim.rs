@@ -302,7 +302,8 @@ impl PyPlant {
     /// row (56), the tank (49), or both); returns the trace as a dict: time, state, reference,
     /// wrench, tau_ext, tau_ext_measured, contact, and with a filter filtered (M, nq) and
     /// filter_status (list of str), with a tank tank_energy (M,).
-    #[pyo3(signature = (controller, reference, t0, dt, steps, record_every=1, safety=None, tank=None))]
+    /// `predicted_dissipation` (K,), on the reference's time grid, feeds a tank's refill.
+    #[pyo3(signature = (controller, reference, t0, dt, steps, record_every=1, safety=None, tank=None, predicted_dissipation=None))]
     #[allow(clippy::too_many_arguments)]
     fn follow_safe<'py>(
         &self,
@@ -315,9 +316,14 @@ impl PyPlant {
         record_every: usize,
         safety: Option<&PySafetyFilter>,
         tank: Option<&PyEnergyTank>,
+        predicted_dissipation: Option<PyReadonlyArrayDyn<'py, f64>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let (nx, nq) = self.with(|p| Ok((p.scene().nx(), p.scene().nq())))?;
         let reference = run(|| view("reference", &reference, &[-1, nq as isize]))?;
+        let predicted = match &predicted_dissipation {
+            Some(p) => Some(run(|| view("predicted_dissipation", p, &[-1]))?),
+            None => None,
+        };
         let plant = &self.inner;
         let controller = &controller.inner;
         let (has_filter, has_tank) = (safety.is_some(), tank.is_some());
@@ -330,6 +336,7 @@ impl PyPlant {
             let stage = InnerSafety {
                 filter: filter.as_deref_mut(),
                 tank: tank.as_deref_mut(),
+                predicted_dissipation: predicted,
             };
             let mut trace = TrackTrace::default();
             follow_reference_safe(

@@ -16,4 +16,4 @@ pub use config::{ConstraintClass, PerClass, SafetyConfig, MAX_OBSTACLE_SLOTS};
 pub use constraints::Obstacle;
 pub use filter::{FilterOutput, FilterStats, FilterStatus, QpMatrices, SafetyFilter, SolveMethod};
 pub use sequential::SequenceOutput;
-pub use tank::EnergyTank;
+pub use tank::{EnergyTank, RefillConfig};

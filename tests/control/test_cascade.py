@@ -182,3 +182,27 @@ def test_episode_knows_the_opening_target_and_plots_it(scene, tmp_path):
     path = tmp_path / "episode.png"
     sabre.plot_episode(episode, path)
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_realtime_tick_refills_the_tank_only_while_the_measured_power_matches_the_plan(scene):
+    """The cascade's tick refills like the simulated inner loop: τ_ext chosen so that −τ_extᵀu_ref
+    equals the plan's predicted port power refills the tank; ten times that power does not."""
+    refilled = {}
+    for factor in (1.0, 10.0):
+        controller = sabre.Controller(scene, sabre.tasks.OpenObject(),
+                                      sabre.ControllerConfig(variant="IO", rollouts=8, horizon=0.3, seed=0, threads=1))
+        x = scene.default_state()
+        with sabre.RealtimeCascade(controller, min_replan_period=10.0) as rt:
+            rt.start(x)
+            while rt.iterations == 0:
+                rt.tick(x, np.zeros(scene.nq), 0.0)
+            # The plan's own prediction is zero (no contact from here): give it a pull to compare with.
+            rt._predicted = np.full_like(rt._predicted, 1.0)
+            controller.tank.step(np.full(scene.nq, -1.0) / scene.nq, np.ones(scene.nq), 3.0)  # spend 3 J
+            for k in range(200):
+                u_ref = rt.reference(0.001 * k)
+                tau = -factor * u_ref / max(float(u_ref @ u_ref), 1e-12)  # −τᵀu_ref = factor W
+                rt.tick(x, tau, 0.001 * k, dt=0.001)
+        refilled[factor] = controller.tank.refilled
+    assert refilled[1.0] > 0.1
+    assert refilled[10.0] < 0.01
