@@ -193,6 +193,9 @@ class SafetyConfig:
     tolerance: float
     active_tolerance: float
     screening: bool
+    task_weight: float
+    sequential_task_weight: float
+    task_frame: str
     def __new__(cls) -> SafetyConfig: ...
     @staticmethod
     def classes() -> list[str]: ...

@@ -75,6 +75,14 @@ class SafetyConfig:
     slots (fixed QP structure). ``max_iterations``, ``tolerance``: Clarabel's bounds.
     ``screening``: take the exact shortcuts (projected command, remembered active set, rows that
     cannot bind left out); off, every call runs Clarabel on the full QP. Same solution either way.
+    ``task_weight``, ``sequential_task_weight`` (λ in 1/m², beyond the paper): the QP measures
+    the change of the command in the metric M = (I + λJ_wᵀJ_w) / (1 + λσ²_max(J_w)), J_w the
+    Jacobian of ``task_frame`` with its angular rows scaled by ℓ = 0.1 m, so that a constraint is
+    met by moving what keeps the hand on its path (the base, the elbow) before the hand itself,
+    and no correction costs more than in the paper's ‖ũ − u‖² (41), which λ = 0 gives.
+    ``task_weight`` applies to :meth:`SafetyFilter.filter` (default 0: the paper's, in the 1 kHz
+    loop), ``sequential_task_weight`` to :meth:`SafetyFilter.filter_sequence`, whose output
+    becomes the plan (default 100: a plan pushed off the handle's path loses the handle).
     """
 
     gamma: Mapping[str, float] = field(default_factory=dict)
@@ -88,6 +96,9 @@ class SafetyConfig:
     max_iterations: int = _SAFETY.max_iterations
     tolerance: float = _SAFETY.tolerance
     screening: bool = _SAFETY.screening
+    task_weight: float = _SAFETY.task_weight
+    sequential_task_weight: float = _SAFETY.sequential_task_weight
+    task_frame: str = _SAFETY.task_frame
 
     def __post_init__(self) -> None:
         kinematic = CLASSES[:-1]
@@ -128,6 +139,10 @@ class SafetyConfig:
             raise InvalidValueError(f"tolerance: must be below 1, got {tolerance}")
         if not isinstance(self.screening, (bool, np.bool_)):
             raise InvalidValueError(f"screening: expected a bool, got {self.screening!r}")
+        object.__setattr__(self, "task_weight", as_non_negative("task_weight", self.task_weight))
+        object.__setattr__(self, "sequential_task_weight", as_non_negative("sequential_task_weight", self.sequential_task_weight))
+        if not isinstance(self.task_frame, str):
+            raise InvalidValueError(f"task_frame: expected a frame name, got {self.task_frame!r}")
 
     def _core_config(self) -> _core.SafetyConfig:
         """The settings as the core's config object; without a base box its class is disabled
@@ -142,6 +157,9 @@ class SafetyConfig:
             "max_iterations": self.max_iterations,
             "tolerance": self.tolerance,
             "screening": bool(self.screening),
+            "task_weight": self.task_weight,
+            "sequential_task_weight": self.sequential_task_weight,
+            "task_frame": self.task_frame,
         }
         if self.base_box is not None:
             fields["base_box"] = list(self.base_box)

@@ -42,6 +42,12 @@ pub struct PySafetyConfig {
     active_tolerance: f64,
     /// Take the exact shortcuts (projection, remembered active set, rows that cannot bind left out).
     screening: bool,
+    /// Weight λ (1/m²) of the task frame's velocity in the metric of `filter`; 0: the paper's ‖ũ − u‖².
+    task_weight: f64,
+    /// λ of the Sequential FILTER-QP (`filter_sequence`).
+    sequential_task_weight: f64,
+    /// The robot frame whose velocity the task metric protects.
+    task_frame: String,
 }
 
 fn per_class<T: Copy>(name: &str, values: &[T]) -> crate::Result<PerClass<T>> {
@@ -65,6 +71,9 @@ impl PySafetyConfig {
             tolerance: self.tolerance,
             active_tolerance: self.active_tolerance,
             screening: self.screening,
+            task_weight: self.task_weight,
+            sequential_task_weight: self.sequential_task_weight,
+            task_frame: self.task_frame.clone(),
         })
     }
 }
@@ -86,6 +95,9 @@ impl PySafetyConfig {
             tolerance: c.tolerance,
             active_tolerance: c.active_tolerance,
             screening: c.screening,
+            task_weight: c.task_weight,
+            sequential_task_weight: c.sequential_task_weight,
+            task_frame: c.task_frame,
         }
     }
 

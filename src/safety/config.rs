@@ -96,7 +96,21 @@ pub struct SafetyConfig {
     /// Take the exact shortcuts of `safety::filter` (projection, remembered active set, rows that
     /// cannot bind left out); off, every call runs Clarabel on the full QP. Same solution either way.
     pub screening: bool,
+    /// Weight λ (1/m²) of the `task_frame`'s velocity in the metric of a single FILTER-QP call
+    /// (beyond the paper): the objective is ½‖ũ − u‖²_M with M = (I + λJ_wᵀJ_w) / (1 + λσ²_max(J_w)),
+    /// J_w = [J_v; ℓJ_ω] the frame's Jacobian, ℓ = [`TASK_ANGULAR_LENGTH`]. A correction that keeps
+    /// the hand on its path (move the base, fold the elbow) is then cheaper than one that moves the
+    /// hand, and none costs more than in the paper's ‖ũ − u‖² (0, the default for `filter`).
+    pub task_weight: f64,
+    /// λ of the Sequential FILTER-QP (Algorithm 1): the filtered sequence becomes the plan, and a
+    /// plan corrected by moving the hand off its path loses the handle.
+    pub sequential_task_weight: f64,
+    /// The robot frame whose velocity `task_weight` protects.
+    pub task_frame: String,
 }
+
+/// ℓ (m): a hand turning at 1 rad/s weighs like a hand moving at ℓ m/s in the task metric.
+pub const TASK_ANGULAR_LENGTH: f64 = 0.1;
 
 impl Default for SafetyConfig {
     /// γ = 10/s for every kinematic class: a joint approaches its limit no faster than 10 × its
@@ -123,6 +137,9 @@ impl Default for SafetyConfig {
             tolerance: 1e-8,
             active_tolerance: 1e-6,
             screening: true,
+            task_weight: 0.0,
+            sequential_task_weight: 100.0,
+            task_frame: "grasp".to_string(),
         }
     }
 }
@@ -168,6 +185,14 @@ impl SafetyConfig {
         }
         if self.max_iterations == 0 {
             return bad("max_iterations".into(), "must be at least 1".into());
+        }
+        for (name, w) in [
+            ("task_weight", self.task_weight),
+            ("sequential_task_weight", self.sequential_task_weight),
+        ] {
+            if !(w.is_finite() && w >= 0.0) {
+                return bad(name.into(), format!("must be finite and non-negative, got {w}"));
+            }
         }
         for (name, v) in [("tolerance", self.tolerance), ("active_tolerance", self.active_tolerance)] {
             if !(v.is_finite() && v > 0.0 && v < 1.0) {

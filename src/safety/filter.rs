@@ -21,7 +21,7 @@ use std::time::Instant;
 use clarabel::solver::SolverStatus;
 
 use super::active_set::ActiveSet;
-use super::config::{ConstraintClass, SafetyConfig};
+use super::config::{ConstraintClass, SafetyConfig, TASK_ANGULAR_LENGTH};
 use super::constraints::{Obstacle, Rows};
 use super::qp::{SlotQp, EMPTY};
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
@@ -158,8 +158,72 @@ pub struct SafetyFilter {
     candidates: Vec<usize>,
     assignment: Vec<usize>,
     active_set: ActiveSet,
+    /// The task metric of this call, when either task weight is set.
+    metric: Option<TaskMetric>,
+    /// Whether the current call is a step of the Sequential FILTER-QP.
+    pub(crate) in_sequence: bool,
     output: FilterOutput,
     stats: FilterStats,
+}
+
+/// The QP's metric on ũ that protects a frame's velocity (`SafetyConfig::task_weight`).
+struct TaskMetric {
+    link: usize,
+    /// λ of single calls and of calls inside a sequence.
+    weight: f64,
+    sequential_weight: f64,
+    /// Whether M ≠ I in this call.
+    active: bool,
+    m: Vec<f64>,
+    /// A lower bound on M's smallest eigenvalue: 1 / (1 + λ σ²_max).
+    smallest: f64,
+}
+
+impl TaskMetric {
+    /// M = (I + λ J_wᵀJ_w) / (1 + λ σ²_max(J_w)) with J_w = [J_v; ℓ J_ω]: divided by its largest
+    /// eigenvalue, so that no correction costs more than in the paper's ‖ũ − u‖² and the slacks
+    /// never become the cheaper way out; the directions that leave the frame still cost least.
+    fn update(&mut self, scene: &Scene, q: &[f64], in_sequence: bool) {
+        let nq = q.len();
+        let weight = if in_sequence { self.sequential_weight } else { self.weight };
+        self.active = weight > 0.0;
+        if !self.active {
+            self.m.fill(0.0);
+            (0..nq).for_each(|a| self.m[a * nq + a] = 1.0);
+            self.smallest = 1.0;
+            return;
+        }
+        let mut j = scene.robot.frame_jacobian(&nalgebra::Isometry3::identity(), q, self.link);
+        for r in 3..6 {
+            for c in 0..nq {
+                j[(r, c)] *= TASK_ANGULAR_LENGTH;
+            }
+        }
+        let jjt = &j * j.transpose();
+        let sigma2 = nalgebra::SymmetricEigen::new(jjt).eigenvalues.max().max(0.0);
+        let scale = 1.0 / (1.0 + weight * sigma2);
+        self.smallest = scale;
+        for a in 0..nq {
+            for b in a..nq {
+                let jj: f64 = (0..6).map(|r| j[(r, a)] * j[(r, b)]).sum();
+                let v = scale * (weight * jj + if a == b { 1.0 } else { 0.0 });
+                self.m[a * nq + b] = v;
+                self.m[b * nq + a] = v;
+            }
+        }
+    }
+
+    /// ½ (u − v)ᵀ M (u − v).
+    fn half_norm2(&self, u: &[f64], v: &[f64]) -> f64 {
+        let nq = u.len();
+        let mut s = 0.0;
+        for a in 0..nq {
+            for b in 0..nq {
+                s += (u[a] - v[a]) * self.m[a * nq + b] * (u[b] - v[b]);
+            }
+        }
+        0.5 * s
+    }
 }
 
 impl SafetyFilter {
@@ -177,15 +241,46 @@ impl SafetyFilter {
                 ),
             ));
         }
+        let metric = if config.task_weight > 0.0 || config.sequential_task_weight > 0.0 {
+            let link = scene.robot.link_id(&config.task_frame).ok_or_else(|| {
+                SabreError::invalid(
+                    "task_frame",
+                    format!(
+                        "the robot has no frame '{}' for the task metric (set task_weight = 0 or name one of: {})",
+                        config.task_frame,
+                        scene.robot.link_names().join(", ")
+                    ),
+                )
+            })?;
+            Some(TaskMetric {
+                link,
+                weight: config.task_weight,
+                sequential_weight: config.sequential_task_weight,
+                active: false,
+                m: vec![0.0; nq * nq],
+                smallest: 1.0,
+            })
+        } else {
+            None
+        };
+        let weighted = metric.is_some();
         let rows = Rows::new(scene.clone(), &config);
         let r = rows.len();
         let row_penalty: Vec<f64> = rows.rows.iter().map(|row| config.penalty.get(row.class)).collect();
         let full_cols = rows.rows.iter().map(|row| row.cols.clone()).collect();
-        let full = SlotQp::new(nq, full_cols, &row_penalty, &velocity_limits, false, &config)?;
+        let full = SlotQp::new(nq, full_cols, &row_penalty, &velocity_limits, false, weighted, &config)?;
         let mut reduced = Vec::new();
         for &size in REDUCED_SIZES.iter().filter(|&&size| size < r) {
             let dense = vec![(0..nq).collect::<Vec<_>>(); size];
-            reduced.push(SlotQp::new(nq, dense, &vec![1.0; size], &velocity_limits, true, &config)?);
+            reduced.push(SlotQp::new(
+                nq,
+                dense,
+                &vec![1.0; size],
+                &velocity_limits,
+                true,
+                weighted,
+                &config,
+            )?);
         }
         let output = FilterOutput {
             u: vec![0.0; nq],
@@ -210,6 +305,8 @@ impl SafetyFilter {
             candidates: Vec::with_capacity(r),
             assignment: Vec::with_capacity(r),
             active_set: ActiveSet::new(nq),
+            metric,
+            in_sequence: false,
             output,
             stats: FilterStats::default(),
             config,
@@ -351,10 +448,12 @@ impl SafetyFilter {
     /// b_r ≤ max(−Σ_j |a_rj| v_j, a_r·u_ref − ρ‖a_r‖) is met by every optimum and cannot bind.
     fn screen(&mut self, u_ref: &[f64]) -> bool {
         let nq = self.scene.nq();
-        let mut cost = 0.0;
-        for (u, r) in self.output.u.iter().zip(u_ref) {
-            cost += 0.5 * (u - r) * (u - r);
-        }
+        // With a task metric the cost is measured in M, whose smallest eigenvalue μ ≤ 1 bounds
+        // ‖u − u_ref‖ ≤ ‖u − u_ref‖_M / √μ: the ball below grows by 1/√μ.
+        let mut cost = match self.metric.as_ref().filter(|m| m.active) {
+            Some(m) => m.half_norm2(&self.output.u, u_ref),
+            None => self.output.u.iter().zip(u_ref).map(|(u, r)| 0.5 * (u - r) * (u - r)).sum(),
+        };
         let mut projection_feasible = true;
         for r in 0..self.rows.len() {
             if self.rows.live[r] {
@@ -366,7 +465,7 @@ impl SafetyFilter {
                 }
             }
         }
-        let radius = (2.0 * cost).sqrt();
+        let radius = (2.0 * cost / self.metric.as_ref().map_or(1.0, |m| m.smallest)).sqrt();
         self.candidates.clear();
         for r in 0..self.rows.len() {
             if !self.rows.live[r] {
@@ -410,7 +509,15 @@ impl SafetyFilter {
                 &mut self.full
             }
         };
-        qp.load(&self.assignment, &self.rows.coef, &self.rows.bound, &self.row_penalty, u_ref)?;
+        let metric = self.metric.as_ref().map(|m| m.m.as_slice());
+        qp.load(
+            &self.assignment,
+            &self.rows.coef,
+            &self.rows.bound,
+            &self.row_penalty,
+            u_ref,
+            metric,
+        )?;
         let (status, iterations) = qp.solve();
         Ok((pick, status, iterations))
     }
@@ -427,11 +534,20 @@ impl SafetyFilter {
         let nq = self.scene.nq();
         let r = self.rows.len();
         self.rows.evaluate(&x[..nq], &self.obstacles, passivity);
+        let in_sequence = self.in_sequence;
+        if let Some(m) = &mut self.metric {
+            m.update(&self.scene, &x[..nq], in_sequence);
+        }
+        let weighted = self.metric.as_ref().is_some_and(|m| m.active);
+        let mut clipped = false;
         for ((u, r), v) in self.output.u.iter_mut().zip(u_ref).zip(&self.velocity_limits) {
             *u = r.clamp(-v, *v);
+            clipped |= *u != *r;
         }
         self.output.slack.fill(0.0);
-        let projection_feasible = self.screen(u_ref);
+        // Clipping to the box is the closest command in the Euclidean metric only; with a task
+        // metric it is the QP's solution only if nothing was clipped.
+        let projection_feasible = self.screen(u_ref) && !(clipped && weighted);
         // Multipliers and bound distances above this count as active when remembering a solution.
         const REMEMBER: f64 = 1e-6;
         if self.config.screening && projection_feasible {
@@ -451,9 +567,7 @@ impl SafetyFilter {
                 &self.velocity_limits,
                 REMEMBER,
             );
-        } else if let Some(k) = self
-            .config
-            .screening
+        } else if let Some(k) = (self.config.screening && !weighted)
             .then(|| {
                 self.active_set.try_solve(
                     &self.rows,
@@ -620,10 +734,21 @@ impl SafetyFilter {
         self.check_inputs(x, Some(u_ref), passivity)?;
         let nq = self.scene.nq();
         self.rows.evaluate(&x[..nq], &self.obstacles, passivity);
+        let in_sequence = self.in_sequence;
+        if let Some(m) = &mut self.metric {
+            m.update(&self.scene, &x[..nq], in_sequence);
+        }
         self.assignment.clear();
         self.assignment.extend(0..self.rows.len());
-        self.full
-            .load(&self.assignment, &self.rows.coef, &self.rows.bound, &self.row_penalty, u_ref)?;
+        let metric = self.metric.as_ref().map(|m| m.m.as_slice());
+        self.full.load(
+            &self.assignment,
+            &self.rows.coef,
+            &self.rows.bound,
+            &self.row_penalty,
+            u_ref,
+            metric,
+        )?;
         let (n, m, p, q, a, b) = self.full.dense();
         Ok(QpMatrices {
             n,

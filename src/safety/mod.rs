@@ -12,7 +12,7 @@ mod qp;
 pub mod sequential;
 pub mod tank;
 
-pub use config::{ConstraintClass, PerClass, SafetyConfig, MAX_OBSTACLE_SLOTS};
+pub use config::{ConstraintClass, PerClass, SafetyConfig, MAX_OBSTACLE_SLOTS, TASK_ANGULAR_LENGTH};
 pub use constraints::Obstacle;
 pub use filter::{FilterOutput, FilterStats, FilterStatus, QpMatrices, SafetyFilter, SolveMethod};
 pub use sequential::SequenceOutput;

@@ -1,7 +1,7 @@
 //! One Clarabel instance of the FILTER-QP with a fixed sparsity pattern: row slots whose values are rewritten in place.
 //!
 //! Variables x = [ũ (nq); δ (S)], one slack per row slot. Objective ½‖ũ − u_ref‖² + ½ Σ Γ_s δ_s²
-//! (the paper's objective halved). Clarabel's form is A x + s = b, s ≥ 0, so a soft row
+//! (the paper's objective halved), or ½‖ũ − u_ref‖²_M with a task metric M (see `SafetyConfig::task_weight`). Clarabel's form is A x + s = b, s ≥ 0, so a soft row
 //! a·ũ + δ ≥ b_r is stored as −a·ũ − δ ≤ −b_r, and the input limits as ũ_j ≤ v_j, −ũ_j ≤ v_j.
 //! δ ≥ 0 needs no row: a negative slack only tightens its row and costs more, so the optimum never
 //! takes one. An empty slot holds 0·ũ − δ ≤ 1 (met by δ = 0) with unit penalty.
@@ -24,21 +24,29 @@ pub(crate) struct SlotQp {
     a_values: Vec<f64>,
     b_values: Vec<f64>,
     q_values: Vec<f64>,
+    /// P in CSC (upper triangle): the ũ block (diagonal, or dense with a task metric), then Γ per slot.
+    p_colptr: Vec<usize>,
+    p_rowval: Vec<usize>,
     p_values: Vec<f64>,
-    /// Whether P changes between calls (slots that hold different rows, with different Γ).
+    /// Whether P changes between calls (slots that hold different rows with different Γ, or a metric
+    /// that depends on the state).
     variable_penalty: bool,
+    /// Whether the ũ block of P is a dense metric M (upper triangle stored) instead of I.
+    weighted: bool,
 }
 
 pub(crate) const EMPTY: usize = usize::MAX;
 
 impl SlotQp {
-    /// A QP with one slot per entry of `slot_cols`; `penalties` are the slots' initial Γ.
+    /// A QP with one slot per entry of `slot_cols`; `penalties` are the slots' initial Γ. With
+    /// `weighted` the ũ block of P is a dense metric M given to every [`SlotQp::load`].
     pub fn new(
         nq: usize,
         slot_cols: Vec<Vec<usize>>,
         penalties: &[f64],
         velocity_limits: &[f64],
         variable_penalty: bool,
+        weighted: bool,
         config: &SafetyConfig,
     ) -> Result<Self> {
         let slots = slot_cols.len();
@@ -77,8 +85,22 @@ impl SlotQp {
         b_values[slots..slots + nq].copy_from_slice(velocity_limits);
         b_values[slots + nq..].copy_from_slice(velocity_limits);
         let q_values = vec![0.0; n];
-        let p_values: Vec<f64> = std::iter::repeat_n(1.0, nq).chain(penalties.iter().copied()).collect();
-        let p = CscMatrix::new(n, n, (0..=n).collect(), (0..n).collect(), p_values.clone());
+        let mut p_colptr = vec![0];
+        let mut p_rowval = Vec::new();
+        let mut p_values = Vec::new();
+        for j in 0..nq {
+            for i in (if weighted { 0 } else { j })..=j {
+                p_rowval.push(i);
+                p_values.push(if i == j { 1.0 } else { 0.0 });
+            }
+            p_colptr.push(p_rowval.len());
+        }
+        for (s, &penalty) in penalties.iter().enumerate() {
+            p_rowval.push(nq + s);
+            p_values.push(penalty);
+            p_colptr.push(p_rowval.len());
+        }
+        let p = CscMatrix::new(n, n, p_colptr.clone(), p_rowval.clone(), p_values.clone());
         let a = CscMatrix::new(m, n, colptr.clone(), rowval.clone(), a_values.clone());
         let settings = DefaultSettingsBuilder::default()
             .verbose(false)
@@ -117,8 +139,11 @@ impl SlotQp {
             a_values,
             b_values,
             q_values,
+            p_colptr,
+            p_rowval,
             p_values,
-            variable_penalty,
+            variable_penalty: variable_penalty || weighted,
+            weighted,
         })
     }
 
@@ -127,9 +152,20 @@ impl SlotQp {
     }
 
     /// Writes the problem: slot s holds row `assignment[s]` (or is empty) with gradient row
-    /// `coef[r*nq..]`, bound `bound[r]` and penalty `penalty[r]`.
-    pub fn load(&mut self, assignment: &[usize], coef: &[f64], bound: &[f64], penalty: &[f64], u_ref: &[f64]) -> Result<()> {
+    /// `coef[r*nq..]`, bound `bound[r]` and penalty `penalty[r]`; `metric` (nq × nq, row-major,
+    /// symmetric) is the ũ block of P for a weighted QP and must be None otherwise.
+    pub fn load(
+        &mut self,
+        assignment: &[usize],
+        coef: &[f64],
+        bound: &[f64],
+        penalty: &[f64],
+        u_ref: &[f64],
+        metric: Option<&[f64]>,
+    ) -> Result<()> {
         let nq = self.nq;
+        debug_assert_eq!(metric.is_some(), self.weighted);
+        let slack_p = |s: usize, colptr: &[usize]| colptr[nq + s];
         for (s, &r) in assignment.iter().enumerate() {
             let cols = &self.slot_cols[s];
             if r == EMPTY {
@@ -137,18 +173,30 @@ impl SlotQp {
                     self.a_values[k] = 0.0;
                 }
                 self.b_values[s] = 1.0;
-                self.p_values[nq + s] = 1.0;
+                self.p_values[slack_p(s, &self.p_colptr)] = 1.0;
             } else {
                 let a = &coef[r * nq..(r + 1) * nq];
                 for (k, &c) in cols.iter().enumerate() {
                     self.a_values[self.a_index[s][k]] = -a[c];
                 }
                 self.b_values[s] = -bound[r];
-                self.p_values[nq + s] = penalty[r];
+                self.p_values[slack_p(s, &self.p_colptr)] = penalty[r];
             }
         }
-        for (q, u) in self.q_values.iter_mut().zip(u_ref) {
-            *q = -u;
+        match metric {
+            Some(m) => {
+                for j in 0..nq {
+                    for k in self.p_colptr[j]..self.p_colptr[j + 1] {
+                        self.p_values[k] = m[self.p_rowval[k] * nq + j];
+                    }
+                    self.q_values[j] = -(0..nq).map(|i| m[j * nq + i] * u_ref[i]).sum::<f64>();
+                }
+            }
+            None => {
+                for (q, u) in self.q_values.iter_mut().zip(u_ref) {
+                    *q = -u;
+                }
+            }
         }
         let update = |e: clarabel::solver::DataUpdateError| SabreError::Simulation(format!("safety QP update failed: {e}"));
         if self.variable_penalty {
@@ -175,8 +223,12 @@ impl SlotQp {
         let n = self.colptr.len() - 1;
         let m = self.b_values.len();
         let mut p = vec![0.0; n * n];
-        for (i, d) in self.p_values.iter().enumerate() {
-            p[i * n + i] = *d;
+        for col in 0..n {
+            for k in self.p_colptr[col]..self.p_colptr[col + 1] {
+                let row = self.p_rowval[k];
+                p[row * n + col] = self.p_values[k];
+                p[col * n + row] = self.p_values[k];
+            }
         }
         let mut a = vec![0.0; m * n];
         for col in 0..n {

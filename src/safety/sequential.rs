@@ -58,6 +58,14 @@ impl SafetyFilter {
         out.status.clear();
         out.max_slack.clear();
         out.fallbacks = 0;
+        self.in_sequence = true;
+        let result = self.run_sequence(world, u, out);
+        self.in_sequence = false;
+        result
+    }
+
+    fn run_sequence(&mut self, world: &mut SimWorld, u: &[f64], out: &mut SequenceOutput) -> Result<()> {
+        let (nq, nx, k) = (self.scene().nq(), self.scene().nx(), out.k);
         for step in 0..k {
             let (done, rest) = out.states.split_at_mut((step + 1) * nx);
             let x = &done[step * nx..];

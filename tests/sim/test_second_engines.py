@@ -54,6 +54,39 @@ def test_filter_qp_agrees_with_osqp_within_1e_4_on_every_case(scene, osqp_cases,
     assert binding_rows > 50
 
 
+@pytest.mark.filterwarnings("ignore::PendingDeprecationWarning")
+@pytest.mark.parametrize("screening", [True, False], ids=["screened", "full_qp"])
+def test_task_metric_filter_agrees_with_osqp(scene, osqp_cases, screening):
+    """The FILTER-QP in the task metric (SafetyConfig.task_weight): Clarabel behind SafetyFilter.filter
+    and OSQP on the exported QP, whose P now has a dense command block, agree within 1e-3 rad/s
+    (the metric's small eigenvalues make both solvers' answers less sharp than the paper's QP)."""
+    import osqp
+    import scipy.sparse as sp
+
+    config = sabre.SafetyConfig(screening=screening, task_weight=100.0)
+    f = sabre.SafetyFilter(scene, config)
+    exporter = sabre.SafetyFilter(scene, config)
+    for obstacle in compare_osqp.make_filter(scene, True).obstacles:
+        f.add_obstacle(obstacle.center, obstacle.radius)
+        exporter.add_obstacle(obstacle.center, obstacle.radius)
+    worst, changed = 0.0, 0
+    with compare_osqp.c_stdout_silenced():
+        for name, inputs in osqp_cases.items():
+            for x, u, tau, s in inputs[:40]:
+                qp = exporter.qp_matrices(x, u, tau_ext=tau, tank_energy=s)
+                assert not np.allclose(qp.P[: qp.nu, : qp.nu], np.diag(np.diag(qp.P[: qp.nu, : qp.nu])))
+                solver = osqp.OSQP()
+                solver.setup(sp.csc_matrix(np.triu(qp.P)), qp.q, sp.csc_matrix(qp.A), np.full(len(qp.b), -np.inf), qp.b,
+                             eps_abs=1e-9, eps_rel=1e-9, polishing=True, verbose=False, max_iter=200000)
+                ref = solver.solve()
+                assert ref.info.status == "solved", f"OSQP: {ref.info.status} in case {name}"
+                r = f.filter(x, u, tau_ext=tau, tank_energy=s)
+                worst = max(worst, float(np.max(np.abs(ref.x[: qp.nu] - r.u))))
+                changed += int(np.max(np.abs(r.u - u)) > 1e-6)
+    assert worst < 1e-3, worst
+    assert changed > 30
+
+
 def scripted_pull(obj: str):
     """sabre's state at the start of the scripted pull (hook on the handle) and the pull's commands."""
     scene = sabre.Scene.load("royalpanda", obj)
