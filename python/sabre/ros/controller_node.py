@@ -304,6 +304,9 @@ class ControllerNode:
     def _publish_status(self) -> None:
         from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
+        # Read the flag before the counters: the watchdog books the stale event before it raises
+        # the flag, so a status that says stale always carries that event.
+        stale = self._stale
         s = self.summary()
         stats = self.controller.stats
         plan_start = self.cascade.plan_start
@@ -313,13 +316,13 @@ class ControllerNode:
             "filter_status": self._last_status, "filter_fallbacks": str(s["filter_fallbacks"]),
             "iteration_time": f"{math.nan if stats is None else stats.iteration_time:.5f}",
             "planner_rate": f"{s['planner_rate_hz']:.2f}", "ticks": str(s["ticks"]), "rejected": str(s["rejected"]),
-            "stale_events": str(s["stale_events"]), "state_stale": str(self._stale).lower(),
+            "stale_events": str(s["stale_events"]), "state_stale": str(stale).lower(),
             "stale_zero_age_ms": json.dumps(s["stale_zero_age_ms"]),
             "estimator_hooked": "n/a" if self.estimator is None else str(self.estimator.hooked).lower(),
         }
         status = DiagnosticStatus(name="sabre/controller", hardware_id=self.scene.robot_name,
-                                  level=DiagnosticStatus.WARN if self._stale else DiagnosticStatus.OK,
-                                  message="state stale: commanding zero" if self._stale else "running",
+                                  level=DiagnosticStatus.WARN if stale else DiagnosticStatus.OK,
+                                  message="state stale: commanding zero" if stale else "running",
                                   values=[KeyValue(key=k, value=v) for k, v in values.items()])
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.node.get_clock().now().to_msg()
