@@ -166,6 +166,25 @@ pub struct SafetyFilter {
     stats: FilterStats,
 }
 
+/// Writes the rows of `assignment` and the metric into a QP.
+fn load(
+    qp: &mut SlotQp,
+    assignment: &[usize],
+    rows: &Rows,
+    penalty: &[f64],
+    u_ref: &[f64],
+    metric: Option<&TaskMetric>,
+) -> Result<()> {
+    qp.load(
+        assignment,
+        &rows.coef,
+        &rows.bound,
+        penalty,
+        u_ref,
+        metric.map(|m| m.m.as_slice()),
+    )
+}
+
 /// The QP's metric on ũ that protects a frame's velocity (`SafetyConfig::task_weight`).
 struct TaskMetric {
     link: usize,
@@ -439,6 +458,15 @@ impl SafetyFilter {
         Ok(())
     }
 
+    /// The rows at q and, with a task metric, the metric of this call.
+    fn evaluate(&mut self, q: &[f64], passivity: Option<(&[f64], f64)>) {
+        self.rows.evaluate(q, &self.obstacles, passivity);
+        let in_sequence = self.in_sequence;
+        if let Some(m) = &mut self.metric {
+            m.update(&self.scene, q, in_sequence);
+        }
+    }
+
     /// Finds the rows that can bind (`candidates`) and whether the box projection of u_ref,
     /// already in `output.u`, meets every row.
     ///
@@ -509,14 +537,13 @@ impl SafetyFilter {
                 &mut self.full
             }
         };
-        let metric = self.metric.as_ref().map(|m| m.m.as_slice());
-        qp.load(
+        load(
+            qp,
             &self.assignment,
-            &self.rows.coef,
-            &self.rows.bound,
+            &self.rows,
             &self.row_penalty,
             u_ref,
-            metric,
+            self.metric.as_ref(),
         )?;
         let (status, iterations) = qp.solve();
         Ok((pick, status, iterations))
@@ -533,11 +560,7 @@ impl SafetyFilter {
         self.check_inputs(x, Some(u_ref), passivity)?;
         let nq = self.scene.nq();
         let r = self.rows.len();
-        self.rows.evaluate(&x[..nq], &self.obstacles, passivity);
-        let in_sequence = self.in_sequence;
-        if let Some(m) = &mut self.metric {
-            m.update(&self.scene, &x[..nq], in_sequence);
-        }
+        self.evaluate(&x[..nq], passivity);
         let weighted = self.metric.as_ref().is_some_and(|m| m.active);
         let mut clipped = false;
         for ((u, r), v) in self.output.u.iter_mut().zip(u_ref).zip(&self.velocity_limits) {
@@ -733,21 +756,16 @@ impl SafetyFilter {
     pub fn qp_matrices(&mut self, x: &[f64], u_ref: &[f64], passivity: Option<(&[f64], f64)>) -> Result<QpMatrices> {
         self.check_inputs(x, Some(u_ref), passivity)?;
         let nq = self.scene.nq();
-        self.rows.evaluate(&x[..nq], &self.obstacles, passivity);
-        let in_sequence = self.in_sequence;
-        if let Some(m) = &mut self.metric {
-            m.update(&self.scene, &x[..nq], in_sequence);
-        }
+        self.evaluate(&x[..nq], passivity);
         self.assignment.clear();
         self.assignment.extend(0..self.rows.len());
-        let metric = self.metric.as_ref().map(|m| m.m.as_slice());
-        self.full.load(
+        load(
+            &mut self.full,
             &self.assignment,
-            &self.rows.coef,
-            &self.rows.bound,
+            &self.rows,
             &self.row_penalty,
             u_ref,
-            metric,
+            self.metric.as_ref(),
         )?;
         let (n, m, p, q, a, b) = self.full.dense();
         Ok(QpMatrices {
