@@ -38,6 +38,15 @@ class TickResult:
     status: str
 
 
+def _interpolate(sequence: np.ndarray, t0: float, dt: float, t: float) -> np.ndarray:
+    """Row k of ``sequence`` applies at t0 + k·dt: linear in between, held at both ends."""
+    s = float(np.clip((float(t) - t0) / dt, 0.0, len(sequence) - 1))
+    i = int(np.floor(s))
+    j = min(i + 1, len(sequence) - 1)
+    a = s - i
+    return (1.0 - a) * sequence[i] + a * sequence[j]
+
+
 class RealtimeCascade:
     """Runs `controller` as a real-time cascade. Use as a context manager or call start/stop."""
 
@@ -135,11 +144,7 @@ class RealtimeCascade:
         if plan is None:
             raise InvalidValueError("no plan yet: call start() first")
         nominal, t0, dt = plan
-        s = np.clip((float(t) - t0) / dt, 0.0, len(nominal) - 1)
-        i = int(np.floor(s))
-        j = min(i + 1, len(nominal) - 1)
-        a = s - i
-        return (1.0 - a) * nominal[i] + a * nominal[j]
+        return _interpolate(nominal, t0, dt, t)
 
     @property
     def plan_start(self) -> float | None:
@@ -182,10 +187,7 @@ class RealtimeCascade:
         with self._lock:
             predicted, plan = self._predicted, self._plan
         if predicted is not None and plan is not None and tank.refill_config is not None:
-            s = float(np.clip((t - plan[1]) / plan[2], 0.0, len(predicted) - 1))
-            i = int(np.floor(s))
-            now = (1.0 - (s - i)) * predicted[i] + (s - i) * predicted[min(i + 1, len(predicted) - 1)]
-            tank.refill(float(now), -float(tau_ext @ u_ref), step)
+            tank.refill(float(_interpolate(predicted, plan[1], plan[2], t)), -float(tau_ext @ u_ref), step)
         energy = tank.step(tau_ext, u, step)
         torque = None
         if self.low_level is not None:

@@ -205,11 +205,14 @@ impl TaskMetric {
     fn update(&mut self, scene: &Scene, q: &[f64], in_sequence: bool) {
         let nq = q.len();
         let weight = if in_sequence { self.sequential_weight } else { self.weight };
-        self.active = weight > 0.0;
+        let was_active = std::mem::replace(&mut self.active, weight > 0.0);
         if !self.active {
-            self.m.fill(0.0);
-            (0..nq).for_each(|a| self.m[a * nq + a] = 1.0);
-            self.smallest = 1.0;
+            // The 1 kHz filter's calls land here: write the identity only when leaving a sequence.
+            if was_active {
+                self.m.fill(0.0);
+                (0..nq).for_each(|a| self.m[a * nq + a] = 1.0);
+                self.smallest = 1.0;
+            }
             return;
         }
         let mut j = scene.robot.frame_jacobian(&nalgebra::Isometry3::identity(), q, self.link);
@@ -276,7 +279,7 @@ impl SafetyFilter {
                 weight: config.task_weight,
                 sequential_weight: config.sequential_task_weight,
                 active: false,
-                m: vec![0.0; nq * nq],
+                m: (0..nq * nq).map(|k| if k % (nq + 1) == 0 { 1.0 } else { 0.0 }).collect(),
                 smallest: 1.0,
             })
         } else {

@@ -3,6 +3,7 @@ Pinocchio, a second rigid-body engine, agrees with sabre's kinematics and dynami
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import shutil
 import subprocess
@@ -49,7 +50,8 @@ json.dump(out, sys.stdout)
 
 
 def pinocchio(path: Path, frame: str, q: np.ndarray) -> tuple[dict, str]:
-    pytest.importorskip("pinocchio", reason="Pinocchio (pip: pin) is a test dependency: make test installs it")
+    if importlib.util.find_spec("pinocchio") is None:
+        pytest.fail("Pinocchio (pip: pin) is a test dependency: make test installs it")
     run = subprocess.run([sys.executable, "-c", PINOCCHIO], input=json.dumps({"path": str(path), "frame": frame, "q": q.tolist()}),
                          capture_output=True, text=True, timeout=120, check=False)
     assert run.returncode == 0, run.stderr
@@ -60,7 +62,7 @@ def pinocchio(path: Path, frame: str, q: np.ndarray) -> tuple[dict, str]:
 def test_urdfdom_check_urdf_reports_no_error(path: Path) -> None:
     check_urdf = shutil.which("check_urdf")
     if check_urdf is None:
-        pytest.skip("urdfdom's check_urdf is not installed (make test-setup installs liburdfdom-tools)")
+        pytest.fail("urdfdom's check_urdf is not installed: make test-setup installs liburdfdom-tools")
     run = subprocess.run([check_urdf, str(path)], capture_output=True, text=True, timeout=60, check=False)
     assert run.returncode == 0, run.stdout + run.stderr
     assert "error" not in (run.stdout + run.stderr).lower(), run.stdout + run.stderr
