@@ -22,6 +22,7 @@ from .controller import (
 from .errors import (
     InvalidValueError,
     MissingExtraError,
+    PlannerError,
     SabreError,
     ShapeError,
     SimulationError,
@@ -29,6 +30,7 @@ from .errors import (
     UnknownFrameError,
     UrdfError,
 )
+from .planner_process import PlanSnapshot
 from .plots import plot_episode
 from .realtime import RealtimeCascade, TickResult
 from .safety import (
@@ -51,6 +53,7 @@ __all__ = [
     "VARIANTS",
     "RealtimeCascade",
     "TickResult",
+    "PlanSnapshot",
     "__version__",
     "Scene",
     "ROBOTS",
@@ -93,4 +96,5 @@ __all__ = [
     "UnknownFrameError",
     "SimulationError",
     "MissingExtraError",
+    "PlannerError",
 ]

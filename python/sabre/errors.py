@@ -11,6 +11,7 @@ __all__ = [
     "UnknownFrameError",
     "SimulationError",
     "MissingExtraError",
+    "PlannerError",
 ]
 
 
@@ -47,3 +48,7 @@ class SimulationError(SabreError, RuntimeError):
 
 class MissingExtraError(SabreError, ImportError):
     """An optional feature needs a pip extra that is not installed (the message names it)."""
+
+
+class PlannerError(SabreError, RuntimeError):
+    """The planner running apart from the inner loop (a thread or a process) failed or stopped."""

@@ -5,15 +5,18 @@ driven by incoming state (e.g. a ROS 2 joint-state callback at 1 kHz).
 reference at time t, runs the controller's inner FILTER-QP with the energy tank (variants I, IO),
 integrates the tank, and returns the command (and, with a low-level controller, the torque). The
 planner runs ``Controller.update`` in a background thread on the most recent state it was given;
-its iterations release the GIL, so ticks are not held up by planning. The reference the inner loop
-reads is a snapshot swapped in after each iteration, never the planner's working copy.
+its iterations release the GIL in Rust, but its Python work between those calls (phase logic,
+guides) holds it. With ``planner_process=factory`` the planner runs in a process of its own on a
+controller the factory builds there (:class:`~sabre.planner_process.PlannerProcess`), so that a
+1 kHz callback never waits for it. The reference the inner loop reads is a snapshot swapped in
+after each iteration, never the planner's working copy.
 """
 
 from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +25,7 @@ from ._validate import as_finite, as_float_array, as_non_negative, as_positive
 from .control import LowLevelController
 from .controller import Controller
 from .errors import InvalidValueError
+from .planner_process import PlannerProcess, PlanSnapshot
 
 __all__ = ["RealtimeCascade", "TickResult"]
 
@@ -48,16 +52,33 @@ def _interpolate(sequence: np.ndarray, t0: float, dt: float, t: float) -> np.nda
 
 
 class RealtimeCascade:
-    """Runs `controller` as a real-time cascade. Use as a context manager or call start/stop."""
+    """Runs `controller` as a real-time cascade. Use as a context manager or call start/stop.
+
+    ``planner_process``: a picklable callable (a module-level function or a ``functools.partial``
+    of one) that builds the same controller as ``controller`` (scene, task, configuration); the
+    outer loop then plans in a spawned process on that copy, niced by ``planner_nice``, while
+    ``controller`` serves the inner loop (its FILTER-QP and tank). Obstacles then go through the
+    cascade's :meth:`add_obstacle` and friends, which reach both copies. None: a thread of this
+    process plans on ``controller`` itself.
+    """
 
     def __init__(self, controller: Controller, *, low_level: LowLevelController | None = None, inner_dt: float = 0.001,
-                 min_replan_period: float = 0.0) -> None:
+                 min_replan_period: float = 0.0, planner_process: Callable[[], Controller] | None = None,
+                 planner_nice: int = 5) -> None:
         if not isinstance(controller, Controller):
             raise TypeError(f"controller must be a sabre.Controller, got {type(controller).__name__}")
+        if planner_process is not None and not callable(planner_process):
+            raise InvalidValueError("planner_process must be a callable that builds the planner's Controller")
         self.controller = controller
         self.low_level = low_level
         self.inner_dt = as_positive("inner_dt", inner_dt)
         self.min_replan_period = as_non_negative("min_replan_period", min_replan_period)
+        self._factory = planner_process
+        self._planner_nice = int(planner_nice)
+        self._process: PlannerProcess | None = None
+        self._obstacle_log: list[tuple[str, tuple[object, ...]]] = []  # replayed in each planner process
+        self._phase = controller.phase
+        self._iteration_time = float("nan")
         self._lock = threading.Lock()
         self._latest: tuple[np.ndarray, float] | None = None
         # (nominal, t0, dt) and the plan's predicted port dissipation for the tank's refill
@@ -76,20 +97,47 @@ class RealtimeCascade:
     # Outer loop -----------------------------------------------------------------------------
     def start(self, x0: Sequence[float] | np.ndarray, t0: float = 0.0) -> RealtimeCascade:
         """Resets the controller, plans once from x0 (so the first tick has a reference) and starts
-        the planning thread."""
+        the planner: a thread, or the planner process (which makes that first plan itself)."""
         if self._thread is not None:
             raise InvalidValueError("the cascade is already running")
+        if self._process is not None:
+            raise InvalidValueError("the cascade is already running")
         x0 = as_float_array("x0", x0, (self.controller.scene.nx,))
-        self.controller.reset(t0=float(t0))
+        t0 = as_finite("t0", t0)
+        self.controller.reset(t0=t0)
         if self.low_level is not None:
             self.low_level.reset()
-        self._latest = (x0, float(t0))
+        self._latest = (x0, t0)
+        self._stopped = False
+        if self._factory is not None:
+            c = self.controller
+            self._process = PlannerProcess(self._factory, nx=c.scene.nx, steps=c.config.horizon_steps, nu=c.scene.nu,
+                                           phases=tuple(c.task.phases), min_replan_period=self.min_replan_period,
+                                           nice=self._planner_nice)
+            for name, args in self._obstacle_log:
+                self._process.call(name, *args)
+            try:
+                self._apply(self._process.start(x0, t0))
+            except BaseException:
+                self._process.stop()
+                self._process = None
+                raise
+            return self
         self._plan_once()
         self._stop.clear()
-        self._stopped = False
         self._thread = threading.Thread(target=self._run, name="sabre-outer-loop", daemon=True)
         self._thread.start()
         return self
+
+    def _apply(self, snapshot: PlanSnapshot) -> None:
+        """Takes over a plan the planner process handed over."""
+        with self._lock:
+            self._plan = (snapshot.nominal, snapshot.t0, snapshot.dt)
+            self._predicted = snapshot.predicted
+            self._floor = snapshot.floor
+        self._phase = snapshot.phase
+        self._iteration_time = snapshot.iteration_time
+        self.iterations = snapshot.iterations
 
     def _plan_once(self) -> None:
         with self._lock:
@@ -104,6 +152,9 @@ class RealtimeCascade:
             self._plan = plan
             self._predicted = None if predicted is None else np.array(predicted)
             self._floor = floor
+        self._phase = self.controller.phase
+        stats = self.controller.stats
+        self._iteration_time = float("nan") if stats is None else float(stats.iteration_time)
         self.iterations += 1
 
     def _run(self) -> None:
@@ -118,11 +169,15 @@ class RealtimeCascade:
             self._error = exc
 
     def stop(self) -> None:
-        """Stops the planning thread and waits for it to finish."""
+        """Stops the planner (thread or process) and waits for it to finish."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join()
             self._thread = None
+            self._stopped = True
+        if self._process is not None:
+            self._process.stop()
+            self._process = None
             self._stopped = True
 
     def __enter__(self) -> RealtimeCascade:
@@ -133,8 +188,51 @@ class RealtimeCascade:
 
     @property
     def running(self) -> bool:
-        """Whether the planning thread runs."""
+        """Whether the planner (thread or process) runs."""
+        if self._process is not None:
+            return self._process.alive
         return self._thread is not None and self._thread.is_alive()
+
+    @property
+    def phase(self) -> str:
+        """The task phase of the newest plan."""
+        return self._phase
+
+    @property
+    def iteration_time(self) -> float:
+        """Wall time (s) of the planning iteration that made the newest plan (NaN before one)."""
+        return self._iteration_time
+
+    @property
+    def planner_in_process(self) -> bool:
+        """Whether the outer loop plans in a process of its own."""
+        return self._factory is not None
+
+    # Obstacles, into both filters of the variant (and the planner process's copy) -----------
+    def add_obstacle(self, center: Sequence[float] | np.ndarray, radius: float) -> int | None:
+        """:meth:`Controller.add_obstacle` on the inner loop's controller and the planner's."""
+        oid = self.controller.add_obstacle(center, radius)
+        self._forward("add_obstacle", np.asarray(center, dtype=np.float64).tolist(), float(radius))
+        return oid
+
+    def _forward(self, name: str, *args: object) -> None:
+        """Sends an obstacle change to the planner process, and logs it: a planner process started
+        later builds its controller afresh and replays the log before its first plan."""
+        if self._factory is None:
+            return
+        self._obstacle_log.append((name, args))
+        if self._process is not None:
+            self._process.call(name, *args)
+
+    def move_obstacle(self, obstacle_id: int, center: Sequence[float] | np.ndarray) -> None:
+        """:meth:`Controller.move_obstacle` on both controllers."""
+        self.controller.move_obstacle(obstacle_id, center)
+        self._forward("move_obstacle", int(obstacle_id), np.asarray(center, dtype=np.float64).tolist())
+
+    def remove_obstacle(self, obstacle_id: int) -> None:
+        """:meth:`Controller.remove_obstacle` on both controllers."""
+        self.controller.remove_obstacle(obstacle_id)
+        self._forward("remove_obstacle", int(obstacle_id))
 
     # Inner loop -----------------------------------------------------------------------------
     def reference(self, t: float) -> np.ndarray:
@@ -146,9 +244,30 @@ class RealtimeCascade:
         nominal, t0, dt = plan
         return _interpolate(nominal, t0, dt, t)
 
+    def observe(self, x: Sequence[float] | np.ndarray, t: float) -> None:
+        """Hands the planner the newest measured state x (nx,) at time t without ticking (a caller
+        that answers this state with a safe stop instead, e.g. because the plan is stale, must
+        still let the planner catch up), and takes over a newer plan if the planner process has one."""
+        x = as_float_array("x", x, (self.controller.scene.nx,))
+        t = as_finite("t", t)
+        with self._lock:
+            self._latest = (x, t)
+        self._refresh(x, t)
+
+    def _refresh(self, x: np.ndarray, t: float) -> None:
+        if self._process is not None:
+            self._process.share_state(x, t)
+            snapshot = self._process.snapshot()  # raises PlannerError once the process failed
+            if snapshot is not None and snapshot.iterations != self.iterations:
+                self._apply(snapshot)
+
     @property
     def plan_start(self) -> float | None:
         """Time (s) of the first step of the plan the inner loop reads (None before start)."""
+        if self._process is not None and not self._stopped:
+            snapshot = self._process.snapshot()
+            if snapshot is not None and snapshot.iterations != self.iterations:
+                self._apply(snapshot)
         with self._lock:
             plan = self._plan
         return None if plan is None else plan[1]
@@ -175,6 +294,7 @@ class RealtimeCascade:
         t = as_finite("t", t)
         with self._lock:
             self._latest = (x, t)
+        self._refresh(x, t)
         u_ref = self.reference(t)
         tank = self.controller.tank
         status = "unfiltered"

@@ -194,7 +194,9 @@ def test_realtime_tick_refills_the_tank_only_while_the_measured_power_matches_th
         x = scene.default_state()
         with sabre.RealtimeCascade(controller, min_replan_period=10.0) as rt:
             rt.start(x)
-            while rt.iterations == 0:
+            # start() made the first plan; the thread's own first plan follows at once, the next
+            # one 10 s later: poke the prediction after that one, or it would overwrite the poke
+            while rt.iterations < 2:
                 rt.tick(x, np.zeros(scene.nq), 0.0)
             # The plan's own prediction is zero (no contact from here): give it a pull to compare with.
             rt._predicted = np.full_like(rt._predicted, 1.0)

@@ -20,7 +20,7 @@ from typing import Any
 
 from ..errors import MissingExtraError
 
-__all__ = ["RosUnavailableError", "require_ros", "spin_node", "realtime_thread", "ROS_EXTRA"]
+__all__ = ["RosUnavailableError", "require_ros", "spin_node", "make_executor", "realtime_thread", "ROS_EXTRA"]
 
 ROS_EXTRA = "sabre-mpc[ros]"
 
@@ -68,6 +68,17 @@ def realtime_thread(priority: int) -> bool:
     return True
 
 
+def make_executor(rclpy: Any) -> Any:
+    """rclpy's events executor where the installed rclpy has it: it dispatches each message from
+    C++ instead of rebuilding a Python wait set per message, which is what lets one interpreter
+    keep up with several 1 kHz topics; else the single-threaded executor."""
+    try:
+        from rclpy.experimental import EventsExecutor
+    except ImportError:
+        return rclpy.executors.SingleThreadedExecutor()
+    return EventsExecutor()
+
+
 def spin_node(node: Any, shutdown: Callable[[], dict[str, Any]], done: threading.Event | None = None,
               priority: int = 0) -> None:
     """Spins ``node.node`` (built after ``rclpy.init``), at real-time ``priority`` if permitted
@@ -80,13 +91,13 @@ def spin_node(node: Any, shutdown: Callable[[], dict[str, Any]], done: threading
     # default), which would delay a waiting callback by up to that much.
     sys.setswitchinterval(GIL_SWITCH_INTERVAL)
     if priority > 0 and not realtime_thread(priority):
-        node.node.get_logger().warn(
+        node.node.get_logger().warning(
             f"real-time priority {priority} not permitted (needs CAP_SYS_NICE or an rtprio limit): "
             "the 1 kHz callbacks compete with the planner for the cores")
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    executor = rclpy.executors.SingleThreadedExecutor()
+    executor = make_executor(rclpy)
     executor.add_node(node.node)
     try:
         while not stop.is_set() and not (done is not None and done.is_set()) and rclpy.ok():

@@ -4,6 +4,7 @@ around :class:`sabre.RealtimeCascade` with state and plan watchdogs."""
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import threading
@@ -25,6 +26,13 @@ from .params import CONTROLLER_PARAMETERS, declare
 __all__ = ["ControllerNode", "run_controller"]
 
 BASE_JOINTS = ("base_x", "base_y", "base_yaw")
+
+
+def planner_controller(obj: str, variant: str, seed: int, threads: int) -> Controller:
+    """The node's controller: OpenObject on the built-in object ``obj``. Module-level, so that the
+    planner process can build its own copy (:class:`sabre.RealtimeCascade`'s ``planner_process``)."""
+    scene = Scene.load(obj=obj)
+    return Controller(scene, tasks.OpenObject(), ControllerConfig(seed=seed, variant=variant, threads=threads or None))
 
 
 def stamp_seconds(stamp: Any) -> float:
@@ -53,11 +61,13 @@ class ControllerNode:
         self._rclpy = rclpy
         self.node = rclpy.create_node(node_name)
         p = self.params = declare(self.node, CONTROLLER_PARAMETERS, overrides)
-        self.scene = Scene.load(obj=p["object"])
-        self.task = tasks.OpenObject()
-        config = ControllerConfig(seed=int(p["seed"]), variant=str(p["variant"]), threads=int(p["threads"]) or None)
-        self.controller = Controller(self.scene, self.task, config)
-        self.cascade = RealtimeCascade(self.controller, min_replan_period=float(p["min_replan_period"]))
+        factory = functools.partial(planner_controller, str(p["object"]), str(p["variant"]), int(p["seed"]), int(p["threads"]))
+        self.controller = factory()
+        self.scene = self.controller.scene
+        self.task = self.controller.task
+        config = self.controller.config
+        self.cascade = RealtimeCascade(self.controller, min_replan_period=float(p["min_replan_period"]),
+                                       planner_process=factory if p["planner_process"] else None)
         # joint_names: the robot's names for sabre's joints, in sabre's order (Scene.joint_names)
         names = list(p["joint_names"]) or list(self.scene.joint_names)
         if len(names) != self.scene.nq:
@@ -156,16 +166,16 @@ class ControllerNode:
                 if i < len(self._obstacles) and self._obstacles[i][1][3] == row[3]:
                     oid = self._obstacles[i][0]
                     if oid is not None:
-                        self.controller.move_obstacle(oid, row[:3])
+                        self.cascade.move_obstacle(oid, row[:3])
                 else:
                     previous = self._obstacles[i][0] if i < len(self._obstacles) else None
                     if previous is not None:
-                        self.controller.remove_obstacle(previous)
-                    oid = self.controller.add_obstacle(row[:3], row[3])
+                        self.cascade.remove_obstacle(previous)
+                    oid = self.cascade.add_obstacle(row[:3], row[3])
                 kept.append((oid, row))
             for oid, _ in self._obstacles[len(rows):]:
                 if oid is not None:
-                    self.controller.remove_obstacle(oid)
+                    self.cascade.remove_obstacle(oid)
             self._obstacles = kept
 
     def _on_joint_state(self, msg: Any) -> None:
@@ -216,8 +226,13 @@ class ControllerNode:
         tau_ext = self._tau_filter.update(raw, dt)
         plan_start = self.cascade.plan_start
         if plan_start is not None and t - plan_start > self.horizon:
+            try:
+                self.cascade.observe(x, t)  # the planner re-plans from here, so the plan can become fresh
+            except SabreError as exc:
+                self.node.get_logger().error(f"planner failed: {exc}; zero command, planner stopped")
+                self.cascade.stop()
             self.stats["plan_stale"] += 1
-            self.node.get_logger().warn("plan older than its horizon: zero command", throttle_duration_sec=1.0)
+            self.node.get_logger().warning("plan older than its horizon: zero command", throttle_duration_sec=1.0)
             self._last_recv = received
             self.publish_zero(msg.header.stamp)
             return
@@ -276,7 +291,7 @@ class ControllerNode:
                         self.stats["zero_commands"] += 1
                         self._stale = True
                 if self._stale:
-                    self.node.get_logger().warn(f"state older than {self.state_timeout} s: zero command")
+                    self.node.get_logger().warning(f"state older than {self.state_timeout} s: zero command")
             wait = self.state_timeout - age if not self._stale else period * 10
             time.sleep(min(max(wait, period), 0.05))
 
@@ -298,7 +313,8 @@ class ControllerNode:
             "planner_iterations": self.cascade.iterations, "planner_rate_hz": self._planner_rate(),
             "tick_compute_p50_ms": percentile_ms(compute, 50), "tick_compute_p99_ms": percentile_ms(compute, 99),
             "tank_energy": self._last_tank, "tank_min": self._min_tank, "tank_floor": self.controller.tank.floor,
-            "filter_fallbacks": int(fallbacks), "phase": self.controller.phase,
+            "filter_fallbacks": int(fallbacks), "phase": self.cascade.phase,
+            "planner_process": self.cascade.planner_in_process,
         }
 
     def _publish_status(self) -> None:
@@ -308,13 +324,12 @@ class ControllerNode:
         # the flag, so a status that says stale always carries that event.
         stale = self._stale
         s = self.summary()
-        stats = self.controller.stats
         plan_start = self.cascade.plan_start
         values = {
             "phase": s["phase"], "tank_energy": f"{s['tank_energy']:.4f}", "tank_floor": f"{s['tank_floor']:.4f}",
             "plan_age": "nan" if plan_start is None or self._last_t is None else f"{self._last_t - plan_start:.4f}",
             "filter_status": self._last_status, "filter_fallbacks": str(s["filter_fallbacks"]),
-            "iteration_time": f"{math.nan if stats is None else stats.iteration_time:.5f}",
+            "iteration_time": f"{self.cascade.iteration_time:.5f}",
             "planner_rate": f"{s['planner_rate_hz']:.2f}", "ticks": str(s["ticks"]), "rejected": str(s["rejected"]),
             "stale_events": str(s["stale_events"]), "state_stale": str(stale).lower(),
             "stale_zero_age_ms": json.dumps(s["stale_zero_age_ms"]),

@@ -38,7 +38,8 @@ CONTROLLER_PARAMETERS: dict[str, Any] = {
     "tau_ext_cutoff": 10.0,  # Hz, low-pass of the wrench-derived τ_ext the tank reads
     "max_tick_dt": 0.02,  # s: the tank integrates at most this long per state
     "min_replan_period": 0.0,  # s: 0 plans as fast as the machine allows
-    "realtime_priority": 0,  # SCHED_FIFO priority of the state callbacks (0: normal scheduling)
+    "realtime_priority": 70,  # SCHED_FIFO priority of the state callbacks where permitted (0: normal scheduling)
+    "planner_process": True,  # plan in a process of its own (False: a thread sharing the interpreter)
 }
 
 #: Simulated robot node (``python -m sabre sim-robot``).

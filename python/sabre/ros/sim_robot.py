@@ -167,7 +167,7 @@ class SimRobotNode:
     def _loop(self) -> None:
         p = self.params
         if int(p["realtime_priority"]) > 0 and not realtime_thread(int(p["realtime_priority"])):
-            self.node.get_logger().warn("real-time priority not permitted for the plant loop: ticks may run late")
+            self.node.get_logger().warning("real-time priority not permitted for the plant loop: ticks may run late")
         check_every = max(1, int(round(0.01 / self.period)))  # the task's success test is Python: 100 Hz
         next_check = 0
         max_behind = max(1, int(float(p["max_catchup"]) / self.period))

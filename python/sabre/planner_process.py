@@ -1,0 +1,229 @@
+"""The outer loop in a process of its own: a controller built there by a picklable factory re-plans
+on the newest state the inner loop shares, and hands each plan back through shared memory.
+
+In one process, the planner's Python work (phase logic, guides, the task's probes) holds the
+interpreter lock between its Rust calls, and a 1 kHz state callback waits for it; here the inner
+loop's process only ever waits for its own work. Both sides exchange fixed-size float64 blocks
+guarded by a sequence counter (odd while a write is under way), so neither side blocks the other:
+a reader that saw the counter change copies again.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import queue
+import signal
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .errors import PlannerError
+
+__all__ = ["PlanSnapshot", "PlannerProcess"]
+
+# Plan block header: sequence, t0, dt, gain floor (NaN: none), phase index, iteration time (s),
+# iterations, has predicted dissipation, failed; then nominal (K·nu), then predicted (K).
+_SEQ, _T0, _DT, _FLOOR, _PHASE, _ITER_TIME, _ITERS, _HAS_PRED, _FAILED = range(9)
+_PLAN_HEADER = 9
+# State block: sequence, t, then x (nx).
+_STATE_HEADER = 2
+
+
+@dataclass(frozen=True)
+class PlanSnapshot:
+    """One plan as the planner process handed it over: nominal (K, nu) with row k applying at
+    t0 + k·dt, the predicted port dissipation (K,) for the tank's refill (None without one), the
+    task's low-level gain floor for the planned phase (None: the controller's own), the phase, the
+    iteration's wall time (s) and the number of iterations since the start."""
+
+    nominal: np.ndarray
+    t0: float
+    dt: float
+    predicted: np.ndarray | None
+    floor: float | None
+    phase: str
+    iteration_time: float
+    iterations: int
+
+
+def _write(block: np.ndarray, values: list[tuple[int, Any]]) -> None:
+    """Writes under the block's sequence counter: odd while writing, even when done."""
+    block[0] += 1.0
+    for start, value in values:
+        data = np.asarray(value, dtype=np.float64).ravel()
+        block[start : start + data.size] = data
+    block[0] += 1.0
+
+
+def _read(block: np.ndarray, tries: int = 1000) -> tuple[float, np.ndarray] | None:
+    """(sequence, copy) of a block no write was under way on, or None if every try overlapped one."""
+    for _ in range(tries):
+        before = float(block[0])
+        if before % 2.0 == 0.0:
+            copy = block.copy()
+            if float(block[0]) == before:
+                return before, copy
+        time.sleep(0)
+    return None
+
+
+def _planner_main(factory: Callable[[], Any], state_raw: Any, plan_raw: Any, dims: tuple[int, int, int],
+                  commands: Any, errors: Any, stop: Any, min_period: float, t0: float, nice: int) -> None:
+    """The planner process: build the controller, then plan on the newest shared state until told
+    to stop. SIGINT is the parent's to handle (it stops the planner through ``stop``)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if nice:
+        try:
+            os.nice(nice)  # leave the cores to the 1 kHz path and the DDS threads when they want them
+        except OSError:
+            pass
+    nx, steps, nu = dims
+    state = np.frombuffer(state_raw, dtype=np.float64)
+    plan = np.frombuffer(plan_raw, dtype=np.float64)
+    try:
+        controller = factory()
+        phases = tuple(controller.task.phases)
+        controller.reset(t0=t0)
+        while not stop.is_set():
+            started = time.perf_counter()
+            while True:
+                try:
+                    name, args = commands.get_nowait()
+                except queue.Empty:
+                    break
+                getattr(controller, name)(*args)
+            read = _read(state)
+            if read is None:
+                continue
+            copy = read[1]
+            t, x = float(copy[1]), copy[_STATE_HEADER : _STATE_HEADER + nx]
+            stats = controller.update(x, t)
+            floor = controller.task.gain_inertia_floor(controller.phase)
+            predicted = controller.predicted_dissipation
+            nominal = np.asarray(controller.nominal, dtype=np.float64)
+            header = [float(controller.nominal_t0), float(controller.config.dt), np.nan if floor is None else float(floor),
+                      float(phases.index(controller.phase)), float(stats.iteration_time), float(stats.iteration),
+                      0.0 if predicted is None else 1.0, 0.0]
+            values: list[tuple[int, Any]] = [(_T0, header), (_PLAN_HEADER, nominal[:steps, :nu])]
+            if predicted is not None:
+                values.append((_PLAN_HEADER + steps * nu, np.asarray(predicted, dtype=np.float64)[:steps]))
+            _write(plan, values)
+            rest = min_period - (time.perf_counter() - started)
+            if rest > 0.0:
+                stop.wait(rest)
+    except BaseException as exc:  # reported to the inner loop's process, raised on its next tick
+        errors.put(f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}")
+        _write(plan, [(_FAILED, [1.0])])
+
+
+class PlannerProcess:
+    """Runs the outer loop in a spawned process on a controller that ``factory`` builds there.
+
+    ``factory`` must be picklable (a module-level function, a ``functools.partial`` of one) and
+    build the same controller (scene, task, configuration) the inner loop holds, so that both agree
+    on the plan's shape and the obstacles' ids. The process runs at ``nice`` (added niceness) so
+    that a machine with few cores serves the 1 kHz path and the middleware's threads first.
+    """
+
+    def __init__(self, factory: Callable[[], Any], *, nx: int, steps: int, nu: int, phases: tuple[str, ...],
+                 min_replan_period: float = 0.0, nice: int = 10, start_timeout: float = 120.0) -> None:
+        self._factory = factory
+        self._dims = (int(nx), int(steps), int(nu))
+        self._phases = tuple(phases)
+        self._min_period = float(min_replan_period)
+        self._nice = int(nice)
+        self._start_timeout = float(start_timeout)
+        self._ctx = multiprocessing.get_context("spawn")
+        self._state_raw = self._ctx.RawArray("d", _STATE_HEADER + int(nx))
+        self._plan_raw = self._ctx.RawArray("d", _PLAN_HEADER + int(steps) * int(nu) + int(steps))
+        self._state = np.frombuffer(self._state_raw, dtype=np.float64)
+        self._plan = np.frombuffer(self._plan_raw, dtype=np.float64)
+        self._commands: Any = self._ctx.Queue()
+        self._errors: Any = self._ctx.Queue()
+        self._stop = self._ctx.Event()
+        self._process: Any = None
+        self._seen = -1.0
+        self._snapshot: PlanSnapshot | None = None
+        self._failure: str | None = None
+
+    def start(self, x0: np.ndarray, t0: float) -> PlanSnapshot:
+        """Shares x0, spawns the process and waits for its first plan."""
+        if self._process is not None:
+            raise PlannerError("the planner process is already running")
+        self.share_state(x0, t0)
+        self._stop.clear()
+        self._process = self._ctx.Process(
+            target=_planner_main, name="sabre-planner", daemon=True,
+            args=(self._factory, self._state_raw, self._plan_raw, self._dims, self._commands, self._errors,
+                  self._stop, self._min_period, float(t0), self._nice))
+        self._process.start()
+        deadline = time.monotonic() + self._start_timeout
+        while True:
+            snapshot = self.snapshot()
+            if snapshot is not None:
+                return snapshot
+            if not self._process.is_alive() or time.monotonic() > deadline:
+                self.stop()
+                raise PlannerError("the planner process did not deliver a first plan"
+                                   + ("" if self._process is None else f" (exit code {self._process.exitcode})"))
+            time.sleep(0.002)
+
+    def share_state(self, x: np.ndarray, t: float) -> None:
+        """The newest measured state, for the next planning iteration."""
+        _write(self._state, [(1, [float(t)]), (_STATE_HEADER, x)])
+
+    def snapshot(self) -> PlanSnapshot | None:
+        """The newest complete plan (None before the first one); raises :class:`PlannerError` with
+        the planner's traceback once the process has failed."""
+        if self._plan[_FAILED] != 0.0:
+            raise PlannerError(self._error_text())
+        if float(self._plan[_SEQ]) == self._seen:
+            return self._snapshot
+        read = _read(self._plan)
+        if read is None or read[0] == 0.0:
+            return self._snapshot
+        seq, block = read
+        _, steps, nu = self._dims
+        if block[_FAILED] != 0.0:
+            raise PlannerError(self._error_text())
+        floor = float(block[_FLOOR])
+        predicted = block[_PLAN_HEADER + steps * nu :] if block[_HAS_PRED] != 0.0 else None
+        self._snapshot = PlanSnapshot(
+            nominal=block[_PLAN_HEADER : _PLAN_HEADER + steps * nu].reshape(steps, nu), t0=float(block[_T0]),
+            dt=float(block[_DT]), predicted=None if predicted is None else predicted.copy(),
+            floor=None if np.isnan(floor) else floor, phase=self._phases[int(block[_PHASE])],
+            iteration_time=float(block[_ITER_TIME]), iterations=int(block[_ITERS]))
+        self._seen = seq
+        return self._snapshot
+
+    def _error_text(self) -> str:
+        if self._failure is None:
+            try:
+                self._failure = "the planner process failed: " + self._errors.get(timeout=1.0)
+            except queue.Empty:
+                self._failure = "the planner process failed"
+        return self._failure
+
+    def call(self, name: str, *args: Any) -> None:
+        """Calls ``controller.<name>(*args)`` in the planner process before its next iteration
+        (obstacles: ``add_obstacle``, ``move_obstacle``, ``remove_obstacle``)."""
+        self._commands.put((name, tuple(args)))
+
+    @property
+    def alive(self) -> bool:
+        return self._process is not None and self._process.is_alive()
+
+    def stop(self, timeout: float = 10.0) -> None:
+        """Stops the process (terminated if it does not finish an iteration within ``timeout`` s)."""
+        self._stop.set()
+        if self._process is not None:
+            self._process.join(timeout)
+            if self._process.is_alive():
+                self._process.terminate()
+                self._process.join(timeout)
+            self._process = None

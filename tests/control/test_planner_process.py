@@ -1,0 +1,98 @@
+"""The real-time cascade with its planner in a process of its own (RealtimeCascade(planner_process=...))."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import planner_factories
+import pytest
+
+import sabre
+
+
+def test_first_plan_from_the_process_equals_the_same_controllers_plan_in_this_process():
+    """The process builds its controller with the factory and plans from the shared x0 at t0: the
+    same seed gives the plan Controller.update gives here, to rounding."""
+    factory = functools.partial(planner_factories.open_shelf, "IO", 3)
+    reference = factory()
+    x0 = sabre.paper_start_state(reference.scene)
+    reference.reset(t0=0.25)
+    reference.update(x0, 0.25)
+    cascade = sabre.RealtimeCascade(factory(), planner_process=factory, min_replan_period=10.0)
+    with cascade.start(x0, t0=0.25):
+        assert cascade.planner_in_process and cascade.running and cascade.iterations == 1
+        assert cascade.plan_start == pytest.approx(reference.nominal_t0)
+        assert cascade.phase == reference.phase
+        np.testing.assert_allclose(cascade.reference(cascade.plan_start), reference.nominal[0], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(cascade.reference(cascade.plan_start + 2 * reference.config.dt), reference.nominal[2],
+                                   rtol=0, atol=1e-12)
+    assert not cascade.running
+
+
+def test_process_planner_replans_on_the_states_the_inner_loop_shares():
+    """The inner loop drives the plant at 1 kHz while plans arrive from the process; every tick's
+    command is finite and inside the limits, and the plans start at the times of shared states."""
+    factory = functools.partial(planner_factories.open_shelf, "IO", 5)
+    controller = factory()
+    scene = controller.scene
+    plant = sabre.Plant(scene)
+    low = sabre.LowLevelController(scene, dt=plant.dt)
+    x0 = scene.default_state()
+    plant.reset(x0)
+    starts = set()
+    with sabre.RealtimeCascade(controller, low_level=low, inner_dt=plant.dt, planner_process=factory).start(x0) as rt:
+        ticks = 0
+        while ticks < 300 or rt.iterations < 4:
+            r = rt.tick(plant.state, plant.measured_tau_ext, plant.time)
+            assert np.all(np.isfinite(r.command)) and np.all(np.abs(r.command) <= scene.dq_limit + 1e-9)
+            assert r.torque is not None and np.all(np.isfinite(r.torque))
+            plant.step(r.torque)
+            starts.add(rt.plan_start)
+            ticks += 1
+            assert ticks < 200_000, "the planner process delivered no plans"
+        assert np.isfinite(rt.iteration_time) and rt.iteration_time > 0.0
+    assert not rt.running
+    assert len(starts) >= 3
+    # each plan starts at a time the inner loop ticked at (a state it shared), on the plant's 1 ms grid
+    assert all(abs(s * 1000.0 - round(s * 1000.0)) < 1e-6 for s in starts)
+    with pytest.raises(sabre.InvalidValueError, match="stopped"):
+        rt.tick(plant.state, plant.measured_tau_ext, plant.time)
+
+
+def test_obstacle_changes_reach_the_planner_process_and_its_failures_reach_the_inner_loop():
+    """An obstacle added through the cascade before start and one added while running both reach
+    the process's controller: removing them there succeeds. Removing an id the process never had
+    fails in the process, and the next tick raises PlannerError (a SabreError) with its cause."""
+    factory = functools.partial(planner_factories.open_shelf, "IO", 1)
+    controller = factory()
+    x0 = controller.scene.default_state()
+    rt = sabre.RealtimeCascade(controller, planner_process=factory)
+    before = rt.add_obstacle([2.0, 2.0, 1.0], 0.1)
+    with rt.start(x0):
+        during = rt.add_obstacle([2.0, -2.0, 1.0], 0.1)
+        assert (before, during) == (0, 1)
+        rt.remove_obstacle(before)
+        rt.remove_obstacle(during)
+        seen = rt.iterations
+        t = 0.0
+        while rt.iterations < seen + 3:  # the process has run both removals and planned again
+            t += 0.001
+            rt.tick(x0, np.zeros(controller.scene.nq), t)
+        assert [o.id for f in controller.filters for o in f.obstacles] == []
+        rt._forward("remove_obstacle", 7)  # an id only the process is told about
+        with pytest.raises(sabre.PlannerError, match="obstacle"):
+            for _ in range(200_000):
+                t += 0.001
+                rt.tick(x0, np.zeros(controller.scene.nq), t)
+
+
+def test_a_factory_that_fails_is_a_planner_error_at_start_not_a_hang():
+    factory = planner_factories.open_shelf
+    controller = factory()
+    rt = sabre.RealtimeCascade(controller, planner_process=planner_factories.broken)
+    with pytest.raises(sabre.PlannerError, match="cannot build"):
+        rt.start(controller.scene.default_state())
+    assert not rt.running
+    with pytest.raises(sabre.InvalidValueError):
+        sabre.RealtimeCascade(controller, planner_process=42)  # type: ignore[arg-type]
