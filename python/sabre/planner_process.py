@@ -82,6 +82,7 @@ def _planner_main(factory: Callable[[], Any], state_raw: Any, plan_raw: Any, dim
             os.nice(nice)  # leave the cores to the 1 kHz path and the DDS threads when they want them
         except OSError:
             pass
+    parent = os.getppid()
     nx, steps, nu = dims
     state = np.frombuffer(state_raw, dtype=np.float64)
     plan = np.frombuffer(plan_raw, dtype=np.float64)
@@ -89,7 +90,7 @@ def _planner_main(factory: Callable[[], Any], state_raw: Any, plan_raw: Any, dim
         controller = factory()
         phases = tuple(controller.task.phases)
         controller.reset(t0=t0)
-        while not stop.is_set():
+        while not stop.is_set() and os.getppid() == parent:  # an orphan (its parent killed) stops
             started = time.perf_counter()
             while True:
                 try:
@@ -151,8 +152,9 @@ class PlannerProcess:
         self._snapshot: PlanSnapshot | None = None
         self._failure: str | None = None
 
-    def start(self, x0: np.ndarray, t0: float) -> PlanSnapshot:
-        """Shares x0, spawns the process and waits for its first plan."""
+    def start(self, x0: np.ndarray, t0: float, wait: bool = True) -> PlanSnapshot | None:
+        """Shares x0, spawns the process and waits for its first plan (``wait=False``: returns at
+        once; :meth:`snapshot` is None until the first plan arrives)."""
         if self._process is not None:
             raise PlannerError("the planner process is already running")
         self.share_state(x0, t0)
@@ -162,6 +164,8 @@ class PlannerProcess:
             args=(self._factory, self._state_raw, self._plan_raw, self._dims, self._commands, self._errors,
                   self._stop, self._min_period, float(t0), self._nice))
         self._process.start()
+        if not wait:
+            return None
         deadline = time.monotonic() + self._start_timeout
         while True:
             snapshot = self.snapshot()

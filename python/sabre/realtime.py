@@ -95,9 +95,12 @@ class RealtimeCascade:
         self.ticks = 0
 
     # Outer loop -----------------------------------------------------------------------------
-    def start(self, x0: Sequence[float] | np.ndarray, t0: float = 0.0) -> RealtimeCascade:
+    def start(self, x0: Sequence[float] | np.ndarray, t0: float = 0.0, *, wait: bool = True) -> RealtimeCascade:
         """Resets the controller, plans once from x0 (so the first tick has a reference) and starts
-        the planner: a thread, or the planner process (which makes that first plan itself)."""
+        the planner: a thread, or the planner process (which makes that first plan itself). With
+        the planner process, ``wait=False`` returns before that first plan: :attr:`ready` tells when
+        it has arrived (a caller answers the states before it with a safe stop and hands them to
+        :meth:`observe`); ticking earlier raises. A thread always plans once before returning."""
         if self._thread is not None:
             raise InvalidValueError("the cascade is already running")
         if self._process is not None:
@@ -109,7 +112,10 @@ class RealtimeCascade:
             self.low_level.reset()
         self._latest = (x0, t0)
         self._stopped = False
+        with self._lock:
+            self._plan, self._predicted, self._floor = None, None, None
         if self._factory is not None:
+            self.iterations = 0
             c = self.controller
             self._process = PlannerProcess(self._factory, nx=c.scene.nx, steps=c.config.horizon_steps, nu=c.scene.nu,
                                            phases=tuple(c.task.phases), min_replan_period=self.min_replan_period,
@@ -117,7 +123,9 @@ class RealtimeCascade:
             for name, args in self._obstacle_log:
                 self._process.call(name, *args)
             try:
-                self._apply(self._process.start(x0, t0))
+                first = self._process.start(x0, t0, wait=wait)
+                if first is not None:
+                    self._apply(first)
             except BaseException:
                 self._process.stop()
                 self._process = None
@@ -194,6 +202,15 @@ class RealtimeCascade:
         return self._thread is not None and self._thread.is_alive()
 
     @property
+    def ready(self) -> bool:
+        """Whether a plan is there for the inner loop to read (after start)."""
+        if self._process is not None and self._plan is None:
+            snapshot = self._process.snapshot()
+            if snapshot is not None:
+                self._apply(snapshot)
+        return self._plan is not None
+
+    @property
     def phase(self) -> str:
         """The task phase of the newest plan."""
         return self._phase
@@ -240,7 +257,7 @@ class RealtimeCascade:
         with self._lock:
             plan = self._plan
         if plan is None:
-            raise InvalidValueError("no plan yet: call start() first")
+            raise InvalidValueError("no plan yet: call start() first (and, with wait=False, wait until ready)")
         nominal, t0, dt = plan
         return _interpolate(nominal, t0, dt, t)
 

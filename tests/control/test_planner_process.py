@@ -96,3 +96,69 @@ def test_a_factory_that_fails_is_a_planner_error_at_start_not_a_hang():
     assert not rt.running
     with pytest.raises(sabre.InvalidValueError):
         sabre.RealtimeCascade(controller, planner_process=42)  # type: ignore[arg-type]
+
+
+def test_start_without_waiting_is_ready_once_the_first_plan_arrives():
+    """start(wait=False) returns at once; until the first plan, ticking raises and observe() is the
+    way to hand states over; then the cascade ticks as usual."""
+    factory = functools.partial(planner_factories.open_shelf, "N", 2)
+    controller = factory()
+    x0 = controller.scene.default_state()
+    tau = np.zeros(controller.scene.nq)
+    with sabre.RealtimeCascade(controller, planner_process=factory).start(x0, wait=False) as rt:
+        assert rt.running
+        if not rt.ready:
+            with pytest.raises(sabre.InvalidValueError, match="no plan yet"):
+                rt.tick(x0, tau, 0.0)
+        t = 0.0
+        while not rt.ready:
+            t += 0.001
+            rt.observe(x0, t)
+            assert t < 600.0, "no first plan"
+        r = rt.tick(x0, tau, t)
+        assert np.all(np.isfinite(r.command)) and rt.iterations >= 1
+
+
+_ORPHAN = """
+import functools, multiprocessing, sys, time
+sys.path.insert(0, {here!r})
+import planner_factories, sabre
+if __name__ == "__main__":
+    factory = functools.partial(planner_factories.open_shelf, "N", 0)
+    controller = factory()
+    rt = sabre.RealtimeCascade(controller, planner_process=factory).start(controller.scene.default_state())
+    print(*[p.pid for p in multiprocessing.active_children() if p.name == "sabre-planner"], flush=True)
+    time.sleep(600)
+"""
+
+
+def test_planner_process_ends_when_its_parent_is_killed(tmp_path):
+    """A parent killed outright (SIGKILL: no clean-up runs) leaves no planner behind."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    script = tmp_path / "orphan.py"
+    script.write_text(_ORPHAN.format(here=os.path.dirname(__file__)))
+    parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    try:
+        line = parent.stdout.readline()
+        planner = int(line.split()[0])
+        os.kill(planner, 0)  # alive while its parent is
+    finally:
+        parent.kill()
+        parent.wait()
+    deadline = time.monotonic() + 60.0
+    while time.monotonic() < deadline:
+        try:
+            os.kill(planner, 0)
+        except ProcessLookupError:
+            return
+        try:  # reap it if it became our child's orphan under us (it is re-parented to init, not us)
+            os.waitpid(planner, os.WNOHANG)
+        except ChildProcessError:
+            pass
+        time.sleep(0.05)
+    os.kill(planner, 9)
+    raise AssertionError("the planner process outlived its killed parent")

@@ -67,7 +67,8 @@ class ControllerNode:
         self.task = self.controller.task
         config = self.controller.config
         self.cascade = RealtimeCascade(self.controller, min_replan_period=float(p["min_replan_period"]),
-                                       planner_process=factory if p["planner_process"] else None)
+                                       planner_process=factory if p["planner_process"] else None,
+                                       planner_nice=int(p["planner_nice"]))
         # joint_names: the robot's names for sabre's joints, in sabre's order (Scene.joint_names)
         names = list(p["joint_names"]) or list(self.scene.joint_names)
         if len(names) != self.scene.nq:
@@ -103,7 +104,7 @@ class ControllerNode:
         self._min_tank = self._last_tank
         self._obstacles: list[tuple[int | None, tuple[float, ...]]] = []
         self.stats: dict[str, Any] = {"ticks": 0, "rejected": 0, "zero_commands": 0, "stale_events": 0, "plan_stale": 0,
-                                      "wrench_stale": 0, "stale_zero_age": [], "compute": []}
+                                      "wrench_stale": 0, "stale_zero_age": [], "compute": [], "state_age": []}
         self._running = True
         self._planner_started: float | None = None
 
@@ -180,6 +181,7 @@ class ControllerNode:
 
     def _on_joint_state(self, msg: Any) -> None:
         received = time.monotonic()
+        self.stats["state_age"].append(time.time() - stamp_seconds(msg.header.stamp))
         try:
             q = self.joints.values(msg.name, msg.position, "position")
             dq = self.joints.values(msg.name, msg.velocity, "velocity")
@@ -205,12 +207,19 @@ class ControllerNode:
             return
         x = np.concatenate([q, dq, o, od])
         if not self.cascade.running:
-            if self.cascade.ticks:
-                self.publish_zero(msg.header.stamp)  # the planner stopped (error logged)
+            if self._planner_started is not None:
+                self.publish_zero(msg.header.stamp)  # the planner stopped (error logged): never restarted
                 return
             self.node.get_logger().info("first state received: planning")
-            self.cascade.start(x, t)
+            # the planner process makes its first plan while this callback answers with zeros
+            self.cascade.start(x, t, wait=False)
             self._planner_started = time.monotonic()
+            self._last_t = t
+            self._last_recv = received
+            self.publish_zero(msg.header.stamp)
+            return
+        if not self.cascade.ready:
+            self._observe_or_stop(x, t)
             self._last_t = t
             self._last_recv = received
             self.publish_zero(msg.header.stamp)
@@ -226,11 +235,7 @@ class ControllerNode:
         tau_ext = self._tau_filter.update(raw, dt)
         plan_start = self.cascade.plan_start
         if plan_start is not None and t - plan_start > self.horizon:
-            try:
-                self.cascade.observe(x, t)  # the planner re-plans from here, so the plan can become fresh
-            except SabreError as exc:
-                self.node.get_logger().error(f"planner failed: {exc}; zero command, planner stopped")
-                self.cascade.stop()
+            self._observe_or_stop(x, t)  # the planner re-plans from here, so the plan can become fresh
             self.stats["plan_stale"] += 1
             self.node.get_logger().warning("plan older than its horizon: zero command", throttle_duration_sec=1.0)
             self._last_recv = received
@@ -253,6 +258,14 @@ class ControllerNode:
         self._fresh.set()
         self.stats["ticks"] += 1
         self.stats["compute"].append(time.monotonic() - received)
+
+    def _observe_or_stop(self, x: np.ndarray, t: float) -> None:
+        """Hands a state the node answers with zero to the planner; stops the planner if it failed."""
+        try:
+            self.cascade.observe(x, t)
+        except SabreError as exc:
+            self.node.get_logger().error(f"planner failed: {exc}; zero command, planner stopped")
+            self.cascade.stop()
 
     # Outputs ---------------------------------------------------------------------------------
     def _publish_command(self, u: np.ndarray, yaw: float, stamp: Any) -> None:
@@ -312,6 +325,8 @@ class ControllerNode:
             "plan_stale": self.stats["plan_stale"], "wrench_stale": self.stats["wrench_stale"],
             "planner_iterations": self.cascade.iterations, "planner_rate_hz": self._planner_rate(),
             "tick_compute_p50_ms": percentile_ms(compute, 50), "tick_compute_p99_ms": percentile_ms(compute, 99),
+            "state_age_p50_ms": percentile_ms(self.stats["state_age"], 50),
+            "state_age_p99_ms": percentile_ms(self.stats["state_age"], 99),
             "tank_energy": self._last_tank, "tank_min": self._min_tank, "tank_floor": self.controller.tank.floor,
             "filter_fallbacks": int(fallbacks), "phase": self.cascade.phase,
             "planner_process": self.cascade.planner_in_process,

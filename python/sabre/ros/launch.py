@@ -168,6 +168,7 @@ def format_run(run: BridgeRun) -> str:
         f"skipped {s['skipped_ticks']}, loop work p99 {s['loop_work_p99_ms']:.3f} ms",
         f"  planner {c['planner_rate_hz']:.1f} Hz ({c['planner_iterations']} iterations), inner tick compute "
         f"p50 {c['tick_compute_p50_ms']:.3f} ms p99 {c['tick_compute_p99_ms']:.3f} ms, stale-state events {c['stale_events']}",
+        f"  state age on arrival at the controller p50 {c['state_age_p50_ms']:.3f} ms, p99 {c['state_age_p99_ms']:.3f} ms",
         f"  exit codes: sim-robot {run.sim_exit}, controller {run.controller_exit}",
     ]
     return "\n".join(lines)

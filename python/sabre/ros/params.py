@@ -40,6 +40,7 @@ CONTROLLER_PARAMETERS: dict[str, Any] = {
     "min_replan_period": 0.0,  # s: 0 plans as fast as the machine allows
     "realtime_priority": 70,  # SCHED_FIFO priority of the state callbacks where permitted (0: normal scheduling)
     "planner_process": True,  # plan in a process of its own (False: a thread sharing the interpreter)
+    "planner_nice": 10,  # niceness added to the planner process: the middleware's threads come first
 }
 
 #: Simulated robot node (``python -m sabre sim-robot``).
