@@ -205,9 +205,7 @@ class RealtimeCascade:
     def ready(self) -> bool:
         """Whether a plan is there for the inner loop to read (after start)."""
         if self._process is not None and self._plan is None:
-            snapshot = self._process.snapshot()
-            if snapshot is not None:
-                self._apply(snapshot)
+            self._take_newer_plan()
         return self._plan is not None
 
     @property
@@ -274,17 +272,21 @@ class RealtimeCascade:
     def _refresh(self, x: np.ndarray, t: float) -> None:
         if self._process is not None:
             self._process.share_state(x, t)
-            snapshot = self._process.snapshot()  # raises PlannerError once the process failed
-            if snapshot is not None and snapshot.iterations != self.iterations:
-                self._apply(snapshot)
+            self._take_newer_plan()
+
+    def _take_newer_plan(self) -> None:
+        """Takes over the planner process's newest plan if it is not the one in use; raises
+        PlannerError once the process has failed."""
+        assert self._process is not None
+        snapshot = self._process.snapshot()
+        if snapshot is not None and (self._plan is None or snapshot.iterations != self.iterations):
+            self._apply(snapshot)
 
     @property
     def plan_start(self) -> float | None:
         """Time (s) of the first step of the plan the inner loop reads (None before start)."""
-        if self._process is not None and not self._stopped:
-            snapshot = self._process.snapshot()
-            if snapshot is not None and snapshot.iterations != self.iterations:
-                self._apply(snapshot)
+        if self._process is not None:
+            self._take_newer_plan()
         with self._lock:
             plan = self._plan
         return None if plan is None else plan[1]
