@@ -741,3 +741,21 @@ fn bad_arguments_give_the_matching_error_variant() {
         Err(SabreError::InvalidValue { .. })
     ));
 }
+
+#[test]
+fn spheres_face_obstacles_unless_marked_otherwise() {
+    let s = load(ROBOT_OK, OBJECT_OK).expect("baseline URDFs are valid");
+    assert!(s.spheres.iter().all(|sp| sp.obstacles));
+    let robot = ROBOT_OK.replace(
+        r#"xyz="0 0 0.1" radius="0.05"/>"#,
+        r#"xyz="0 0 0.1" radius="0.05" obstacles="false"/>"#,
+    );
+    let s = load(&robot, OBJECT_OK).expect("obstacles is a valid attribute");
+    let s1 = s.spheres.iter().find(|sp| sp.name == "s1").unwrap();
+    assert!(!s1.obstacles && s.spheres.iter().filter(|sp| sp.obstacles).count() == s.spheres.len() - 1);
+    let robot = ROBOT_OK.replace(
+        r#"xyz="0 0 0.1" radius="0.05"/>"#,
+        r#"xyz="0 0 0.1" radius="0.05" obstacles="maybe"/>"#,
+    );
+    expect_urdf_error("obstacles maybe", &robot, OBJECT_OK, "obstacles");
+}

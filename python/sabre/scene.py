@@ -233,6 +233,14 @@ class Scene:
         return tuple((name, link, (center[0], center[1], center[2]), radius) for name, link, center, radius in spheres)
 
     @property
+    def obstacle_spheres(self) -> tuple[tuple[str, str, tuple[float, float, float], float], ...]:
+        """(name, link, centre in link frame, radius) of each collision sphere that run-time
+        obstacles are checked against: the self-collision spheres except those marked
+        ``obstacles="false"`` in the URDF extension (sized to keep two links apart rather than to
+        cover one), and the obstacle-only spheres (in no pair)."""
+        return tuple((name, link, (c[0], c[1], c[2]), r) for name, link, c, r in self._core.obstacle_spheres())
+
+    @property
     def self_collision_pairs(self) -> tuple[tuple[str, str], ...]:
         return tuple((a, b) for a, b in self._core.self_collision()[1])
 

@@ -474,7 +474,7 @@ impl Cost {
                     weight_slope,
                 } => {
                     let mut sum = 0.0;
-                    for s in &scene.spheres {
+                    for s in scene.spheres.iter().filter(|s| s.obstacles) {
                         let p = view.robot.poses[s.link] * Point3::from(s.center);
                         for (c, r) in spheres {
                             sum += hinge_square(r + s.radius - (p - c).norm(), *weight, *weight_slope);

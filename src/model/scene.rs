@@ -31,13 +31,15 @@ pub fn default_object_pose(object: &str) -> [f64; 6] {
     }
 }
 
-/// A self-collision sphere attached to a robot link.
+/// A collision sphere attached to a robot link, in the self-collision pairs that name it and,
+/// where `obstacles`, against run-time sphere obstacles (see `SphereDecl`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Sphere {
     pub name: String,
     pub link: usize,
     pub center: Vector3<f64>,
     pub radius: f64,
+    pub obstacles: bool,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -135,6 +137,7 @@ impl Scene {
                 link: tree.link_id(&s.link).expect("validated by the parser"),
                 center: s.center,
                 radius: s.radius,
+                obstacles: s.obstacles,
             })
             .collect();
         let sphere_index = |name: &str| spheres.iter().position(|s| s.name == name).expect("validated by the parser");

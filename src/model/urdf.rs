@@ -7,13 +7,18 @@ use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 use super::kinematics::{Collision, Inertial, Joint, JointKind, JointLimits, KinematicTree, Link, Shape};
 use crate::error::{Result, SabreError};
 
-/// A self-collision sphere rigidly attached to a robot link.
+/// A collision sphere rigidly attached to a robot link, for the self-collision pairs that name it
+/// and, unless `obstacles="false"`, against run-time sphere obstacles. A self-collision sphere may
+/// be larger than its link to encode a minimum distance between two links; against an obstacle a
+/// sphere only needs to cover the link's geometry, so such a link gets a second, obstacle-only
+/// sphere (one in no pair).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SphereDecl {
     pub name: String,
     pub link: String,
     pub center: Vector3<f64>,
     pub radius: f64,
+    pub obstacles: bool,
 }
 
 /// Planar reach limit of a frame relative to the arm base (paper eqs. 32 and 40).
@@ -418,11 +423,22 @@ fn parse_extension(source: &str, text: &str) -> Result<SabreExtension> {
                 if radius <= 0.0 {
                     return Err(SabreError::urdf(source, "<sabre><sphere> radius must be positive"));
                 }
+                let obstacles = match node.attribute("obstacles").map(str::trim) {
+                    None | Some("true") => true,
+                    Some("false") => false,
+                    Some(other) => {
+                        return Err(SabreError::urdf(
+                            source,
+                            format!("<sabre><sphere> attribute 'obstacles'='{other}' must be true or false"),
+                        ))
+                    }
+                };
                 ext.spheres.push(SphereDecl {
                     name: attr("name")?,
                     link: attr("link")?,
                     center: parse_xyz(source, &node)?,
                     radius,
+                    obstacles,
                 });
             }
             "pair" => ext.pairs.push((attr("a")?, attr("b")?)),

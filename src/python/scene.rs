@@ -182,6 +182,22 @@ impl PyScene {
         }
         out
     }
+    /// The collision spheres checked against run-time obstacles as (name, link, centre xyz, radius).
+    fn obstacle_spheres(&self) -> Vec<SphereRow> {
+        let s = &self.inner;
+        s.spheres
+            .iter()
+            .filter(|sp| sp.obstacles)
+            .map(|sp| {
+                (
+                    sp.name.clone(),
+                    s.robot.links[sp.link].name.clone(),
+                    [sp.center.x, sp.center.y, sp.center.z],
+                    sp.radius,
+                )
+            })
+            .collect()
+    }
     /// Self-collision spheres as (name, link, centre xyz, radius) and the checked pairs (by name).
     fn self_collision(&self) -> (Vec<SphereRow>, Vec<(String, String)>) {
         let s = &self.inner;

@@ -153,7 +153,7 @@ impl Rows {
         }
         if on(ConstraintClass::Obstacles) {
             for slot in 0..config.max_obstacles {
-                for (sphere, s) in scene.spheres.iter().enumerate() {
+                for (sphere, s) in scene.spheres.iter().enumerate().filter(|(_, s)| s.obstacles) {
                     rows.push(Row {
                         kind: RowKind::Obstacle { slot, sphere },
                         class: ConstraintClass::Obstacles,
