@@ -163,7 +163,12 @@ class PlannerProcess:
             target=_planner_main, name="sabre-planner", daemon=True,
             args=(self._factory, self._state_raw, self._plan_raw, self._dims, self._commands, self._errors,
                   self._stop, self._min_period, float(t0), self._nice))
-        self._process.start()
+        try:
+            self._process.start()
+        except Exception as exc:  # pickling the factory, or the OS refusing a process
+            self._process = None
+            raise PlannerError(f"cannot start the planner process (the factory must be picklable: a module-level "
+                               f"function or a functools.partial of one): {type(exc).__name__}: {exc}") from exc
         if not wait:
             return None
         deadline = time.monotonic() + self._start_timeout

@@ -96,6 +96,10 @@ def test_a_factory_that_fails_is_a_planner_error_at_start_not_a_hang():
     assert not rt.running
     with pytest.raises(sabre.InvalidValueError):
         sabre.RealtimeCascade(controller, planner_process=42)  # type: ignore[arg-type]
+    rt = sabre.RealtimeCascade(controller, planner_process=lambda: factory())
+    with pytest.raises(sabre.PlannerError, match="picklable"):
+        rt.start(controller.scene.default_state())
+    assert not rt.running
 
 
 def test_start_without_waiting_is_ready_once_the_first_plan_arrives():
