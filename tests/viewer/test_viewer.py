@@ -171,10 +171,13 @@ def test_browser_draws_robot_and_door_and_both_move_along_the_timeline(tmp_path)
 
 
 def _settled_screenshot(page, path: Path) -> bytes:
-    """Screenshots until two consecutive ones agree (the scene has streamed in and rendered)."""
+    """Screenshots until two consecutive ones agree (the scene has streamed in and rendered), with
+    the page's notices (headless Chromium renders WebGL in software, which viser points out) closed."""
     previous = None
     for _ in range(40):
         page.wait_for_timeout(500)
+        for close in page.locator("button.mantine-Notification-closeButton").all():
+            close.click()
         shot = page.screenshot(path=str(path))
         if previous is not None and shot == previous:
             return shot
