@@ -65,7 +65,8 @@ def draw(name: str, records: list[dict], path: str | os.PathLike[str]) -> None:
             mean, std = _mean_std(runs, series, grid)
             label = f"α = {value:g}" if key == "alpha" else str(value)
             ax.plot(grid, mean, label=label)
-            ax.fill_between(grid, mean - std, mean + std, alpha=0.25)
+            # a force magnitude is never negative: its band stops at zero
+            ax.fill_between(grid, np.maximum(mean - std, 0.0) if series == "wrench" else mean - std, mean + std, alpha=0.25)
         if series == "tank":
             ax.axhline(2.0, color="k", ls="--", lw=0.8, label="floor ε")
         ax.axvline(0.0, color="grey", ls=":", lw=0.8)
