@@ -132,7 +132,7 @@ class PlannerProcess:
     """
 
     def __init__(self, factory: Callable[[], Any], *, nx: int, steps: int, nu: int, phases: tuple[str, ...],
-                 min_replan_period: float = 0.0, nice: int = 10, start_timeout: float = 120.0) -> None:
+                 min_replan_period: float, nice: int, start_timeout: float = 120.0) -> None:
         self._factory = factory
         self._dims = (int(nx), int(steps), int(nu))
         self._phases = tuple(phases)

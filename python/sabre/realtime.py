@@ -64,7 +64,7 @@ class RealtimeCascade:
 
     def __init__(self, controller: Controller, *, low_level: LowLevelController | None = None, inner_dt: float = 0.001,
                  min_replan_period: float = 0.0, planner_process: Callable[[], Controller] | None = None,
-                 planner_nice: int = 5) -> None:
+                 planner_nice: int = 10) -> None:
         if not isinstance(controller, Controller):
             raise TypeError(f"controller must be a sabre.Controller, got {type(controller).__name__}")
         if planner_process is not None and not callable(planner_process):
@@ -101,9 +101,7 @@ class RealtimeCascade:
         the planner process, ``wait=False`` returns before that first plan: :attr:`ready` tells when
         it has arrived (a caller answers the states before it with a safe stop and hands them to
         :meth:`observe`); ticking earlier raises. A thread always plans once before returning."""
-        if self._thread is not None:
-            raise InvalidValueError("the cascade is already running")
-        if self._process is not None:
+        if self._thread is not None or self._process is not None:
             raise InvalidValueError("the cascade is already running")
         x0 = as_float_array("x0", x0, (self.controller.scene.nx,))
         t0 = as_finite("t0", t0)

@@ -228,7 +228,7 @@ class Scene:
 
     @property
     def self_collision_spheres(self) -> tuple[tuple[str, str, tuple[float, float, float], float], ...]:
-        """(name, link, centre in link frame, radius) of each self-collision sphere."""
+        """(name, link, centre in link frame, radius) of each self-collision sphere (one in a pair)."""
         spheres, _ = self._core.self_collision()
         return tuple((name, link, (center[0], center[1], center[2]), radius) for name, link, center, radius in spheres)
 

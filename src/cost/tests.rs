@@ -31,7 +31,10 @@ impl Default for Step {
 
 /// The value of `term` alone at `step`, robot and object frames from the scene's kinematics.
 fn value(term: Term, step: Step) -> f64 {
-    let scene = probe_and_drawer();
+    value_in(probe_and_drawer(), term, step)
+}
+
+fn value_in(scene: std::sync::Arc<Scene>, term: Term, step: Step) -> f64 {
     let cost = Cost::new(vec![term]);
     cost.validate(&scene).expect("valid term");
     let x = state(step.q, [0.0, 0.0], step.o, 0.0);
@@ -549,6 +552,21 @@ fn obstacles_charge_penetration_of_robot_spheres() {
     assert_close(
         value(obstacle([0.1, 0.1, 0.5], 0.1), Step::default()),
         (6.0 + 100.0 * 0.05 * 0.05) + (6.0 + 100.0 * root_depth * root_depth),
+    );
+}
+
+#[test]
+fn obstacles_skip_spheres_marked_off_for_them() {
+    // As above with root marked obstacles="false": only the probe's 0.05 m depth is charged.
+    let mut scene = (*probe_and_drawer()).clone();
+    scene
+        .spheres
+        .iter_mut()
+        .filter(|s| s.name == "root")
+        .for_each(|s| s.obstacles = false);
+    assert_close(
+        value_in(std::sync::Arc::new(scene), obstacle([0.1, 0.1, 0.5], 0.1), Step::default()),
+        6.0 + 100.0 * 0.05 * 0.05,
     );
 }
 

@@ -25,6 +25,12 @@ impl PyScene {
     fn wrap(scene: Scene) -> Self {
         Self { inner: Arc::new(scene) }
     }
+
+    /// (name, link, centre xyz, radius) of one collision sphere.
+    fn sphere_row(&self, sp: &crate::model::scene::Sphere) -> SphereRow {
+        let link = self.inner.robot.links[sp.link].name.clone();
+        (sp.name.clone(), link, [sp.center.x, sp.center.y, sp.center.z], sp.radius)
+    }
 }
 
 #[pymethods]
@@ -184,34 +190,24 @@ impl PyScene {
     }
     /// The collision spheres checked against run-time obstacles as (name, link, centre xyz, radius).
     fn obstacle_spheres(&self) -> Vec<SphereRow> {
-        let s = &self.inner;
-        s.spheres
+        self.inner
+            .spheres
             .iter()
             .filter(|sp| sp.obstacles)
-            .map(|sp| {
-                (
-                    sp.name.clone(),
-                    s.robot.links[sp.link].name.clone(),
-                    [sp.center.x, sp.center.y, sp.center.z],
-                    sp.radius,
-                )
-            })
+            .map(|sp| self.sphere_row(sp))
             .collect()
     }
-    /// Self-collision spheres as (name, link, centre xyz, radius) and the checked pairs (by name).
+    /// Self-collision spheres (those in a pair) as (name, link, centre xyz, radius) and the checked
+    /// pairs (by name).
     fn self_collision(&self) -> (Vec<SphereRow>, Vec<(String, String)>) {
         let s = &self.inner;
+        let paired = |i: usize| s.sphere_pairs.iter().any(|&(a, b)| a == i || b == i);
         (
             s.spheres
                 .iter()
-                .map(|sp| {
-                    (
-                        sp.name.clone(),
-                        s.robot.links[sp.link].name.clone(),
-                        [sp.center.x, sp.center.y, sp.center.z],
-                        sp.radius,
-                    )
-                })
+                .enumerate()
+                .filter(|&(i, _)| paired(i))
+                .map(|(_, sp)| self.sphere_row(sp))
                 .collect(),
             s.sphere_pairs
                 .iter()

@@ -19,7 +19,7 @@ def _farthest_collision_point(link: str, about: np.ndarray) -> float:
     far = 0.0
     for element in ET.parse(ROBOT_URDF).getroot().find(f"link[@name='{link}']").findall("collision"):
         origin = element.find("origin")
-        assert origin.get("rpy", "0 0 0").split() == ["0"] * 3 or all(float(v) == 0 for v in origin.get("rpy").split())
+        assert all(float(v) == 0.0 for v in origin.get("rpy", "0 0 0").split())
         centre = np.array([float(v) for v in origin.get("xyz").split()]) - about
         shape = element.find("geometry")[0]
         r = float(shape.get("radius"))
@@ -45,7 +45,7 @@ def test_obstacles_meet_link7_at_a_sphere_that_covers_its_geometry():
     assert "link7" not in obstacle and pairs["link7"] == 0.2
     link, centre, radius = obstacle["link7_geometry"]
     assert link == "panda_link7" and radius == 0.08
-    assert not any("link7_geometry" in pair for pair in scene.self_collision_pairs)
+    assert "link7_geometry" not in pairs and not any("link7_geometry" in pair for pair in scene.self_collision_pairs)
     assert _farthest_collision_point("panda_link7", centre) == pytest.approx(radius, abs=1e-9)
 
     x = scene.default_state()
