@@ -104,9 +104,11 @@ fn a_joint_at_its_margin_is_held_and_the_others_take_over() {
     assert!(highest <= limits[elbow].upper - margin + 1e-9);
     let (dp, da) = pose_error(&scene.fk(&q, "grasp").unwrap(), &target);
     assert!(dp < 5e-3 && da < 2e-2, "redundancy should reach the target: {dp} m, {da} rad");
-    // Without the margin rule the same servo would have driven the elbow past it.
+    // Without the margin rule (and the limit weighting, which slows the elbow before the margin)
+    // the same servo would have driven the elbow past it.
     let loose = ServoGuideConfig {
         joint_margin: -1.0,
+        limit_weighting: false,
         ..config
     };
     let free = integrate(
@@ -180,4 +182,43 @@ fn bad_input_is_rejected() {
         servo_guide(&scene, &q0, &[pose, pose], DT, "gripper_of_doom", &config),
         Err(SabreError::UnknownFrame { .. })
     ));
+}
+
+#[test]
+fn limit_weighting_keeps_a_joint_further_from_its_limit_and_still_reaches() {
+    let scene = scene();
+    let limits = scene.robot_limits();
+    let elbow = 6; // panda_joint4, upper limit −0.0698 rad
+    let mut q0 = scene.home_configuration();
+    q0[elbow] = limits[elbow].upper - 0.25;
+    // The target is where the hand would be with the elbow 0.2 rad nearer its limit.
+    let mut toward = q0.clone();
+    toward[elbow] += 0.2;
+    let target = scene.fk(&toward, "grasp").unwrap();
+    let run = |limit_weighting: bool| {
+        let config = ServoGuideConfig {
+            gain: 4.0,
+            max_linear: 0.5,
+            max_angular: 1.0,
+            limit_weighting,
+            ..Default::default()
+        };
+        let guide = servo_guide(&scene, &q0, &vec![target; K + 1], DT, "grasp", &config).unwrap();
+        let mut highest = f64::NEG_INFINITY;
+        let q = integrate(&q0, &guide, |q, _| highest = highest.max(q[elbow]));
+        (highest, pose_error(&scene.fk(&q, "grasp").unwrap(), &target))
+    };
+    let (weighted, (dp, da)) = run(true);
+    let (plain, _) = run(false);
+    // The plain inverse moves the elbow part of the way; weighted, the other joints do most of it.
+    assert!(
+        weighted - q0[elbow] < 0.5 * (plain - q0[elbow]),
+        "toward its limit the weighted elbow moved {} rad, the unweighted {}",
+        weighted - q0[elbow],
+        plain - q0[elbow]
+    );
+    assert!(
+        dp < 5e-3 && da < 2e-2,
+        "the other joints should reach the target: {dp} m, {da} rad"
+    );
 }

@@ -179,6 +179,7 @@ class ServoGuideConfig:
     velocity_limit: list[float] | None
     damping: float
     joint_margin: float
+    limit_weighting: bool
     def __new__(cls) -> ServoGuideConfig: ...
 
 @final

@@ -51,16 +51,20 @@ def servo_guide(
     velocity_limit: np.ndarray | None = None,
     damping: float = _GUIDE.damping,
     joint_margin: float = _GUIDE.joint_margin,
+    limit_weighting: bool = _GUIDE.limit_weighting,
 ) -> np.ndarray:
     """(K, nu) joint velocities that servo ``frame`` along ``targets`` (K+1, 4, 4) from q0 (nq,).
 
     Step k commands v_k = J⁺(ξ_k + gain·e_k): ξ_k the targets' own motion from k to k+1 (feed
     forward), e_k the pose error at k (world frame, linear then rotation vector), the Cartesian
     rate capped at ``max_linear`` (m/s) and ``max_angular`` (rad/s), J⁺ the damped least-squares
-    inverse of the frame's Jacobian. Velocities are clipped to ``velocity_limit`` (default: the
-    URDF limits); a joint that would cross ``joint_margin`` (rad or m) inside its limits is held
-    there and the others re-solved for the rest of the rate. q is integrated with step dt, so the
-    guide is what the servo would do on the kinematics alone. Runs in Rust (about 5 µs per step).
+    inverse of the frame's Jacobian. With ``limit_weighting`` the inverse is weighted by Chan and
+    Dubey's joint-limit gradient (weighted least norm): a joint heading for a limit slows down as
+    it nears it and the redundant joints (the base) take over. Velocities are clipped to
+    ``velocity_limit`` (default: the URDF limits); a joint that would cross ``joint_margin`` (rad
+    or m) inside its limits is held there and the others re-solved for the rest of the rate. q is
+    integrated with step dt, so the guide is what the servo would do on the kinematics alone. Runs
+    in Rust.
     """
     q0 = as_float_array("q0", q0, (scene.nq,))
     targets = np.ascontiguousarray(targets, dtype=np.float64)
@@ -76,5 +80,6 @@ def servo_guide(
         velocity_limit=None if velocity_limit is None else velocity_limit.tolist(),
         damping=float(damping),
         joint_margin=float(joint_margin),
+        limit_weighting=bool(limit_weighting),
     )
     return scene._core.servo_guide(q0, targets, float(dt), frame, config)

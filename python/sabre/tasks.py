@@ -321,11 +321,11 @@ class OpenConfig:
 
 @dataclass(frozen=True)
 class ReleaseConfig:
-    """Letting go of an object that opens by itself (phase release).
+    """Letting go of an object that opens by itself (phase release, :meth:`OpenObject.release_path`).
 
     Attributes:
-        speed: speed (m/s) at which the hand backs off; 0: no release guide.
-        distance: how far (m) it backs off.
+        speed: speed (m/s) at which the hand leaves the pocket and backs off; 0: no release guide.
+        distance: how far (m) it backs off from the door.
         rate: opening rate (rad/s or m/s) that counts as opening by itself ...
         probe: ... within this many seconds of the object left alone (s, > 0).
         runaway_speed: handle speed (m/s) above which the object is taken to open by itself while
@@ -404,7 +404,8 @@ class OpenObject(Task):
     - hook (:class:`HookConfig`): slide sideways so the bar sits in the finger's pocket;
     - open (:class:`OpenConfig`): the pose target sits in the pocket, pulled out from the bar,
       and follows the handle as the object moves; the object cost (34) pulls toward the target;
-    - release (:class:`ReleaseConfig`): an object that opens by itself once free is let go.
+    - release (:class:`ReleaseConfig`): an object that opens by itself (a door past its balance
+      point) is let go: the finger leaves the pocket and the hand backs off.
 
     ``noise`` (:class:`NoiseConfig`) shapes the sampling covariance per phase and ``guide``
     (:class:`GuideConfig`) the reaching guides. ``horizon`` (s) is the controller's horizon T,
@@ -647,32 +648,28 @@ class OpenObject(Task):
         end = model.rollout(free, np.zeros((1, steps, scene.nu))).states[0, -1]
         return float(end[2 * nq + no]) > self.release.rate
 
-    def release_direction(self, scene: Scene, x: np.ndarray) -> np.ndarray:
-        """(3,) unit direction in which the hand backs off when releasing: away from the door
-        (the grasp frame's −z) and, for a hinged door, out of its sweep (away from the hinge axis,
-        found as the centre of the circle through three handle positions about the current
-        opening), half each."""
-        nq = scene.nq
-        pose = scene.fk(x[:nq], "grasp")
-        back = -pose[:3, 2]
-        if not scene.object_is_revolute:
-            return back
+    def release_path(self, scene: Scene, x: np.ndarray, steps: int, dt: float) -> np.ndarray:
+        """(steps + 1, 4, 4) grasp-frame targets that let go of the handle: the hook undone (a
+        grasp frame within ``open.slip_distance`` of it slides back across the bar to the insert
+        offset's sideways position, out of the pocket), then backed off from the door (the handle
+        frame's −z) by ``release.distance``, at ``release.speed``. The targets ride on the handle
+        as the object keeps opening at its current rate, so the hand leaves the pocket the way it
+        came in instead of dragging the bar (or lifting it, for a door hinged below) against the
+        hook."""
+        nq, no = scene.nq, scene.no
         o = float(x[2 * nq])
-        p0, p1, p2 = self.handle_poses(scene, np.array([[o - 0.1], [o], [o + 0.1]]))[:, :3, 3]
-        a, b = p0 - p1, p2 - p1
-        normal = np.cross(a, b)
-        nn = float(normal @ normal)
-        if nn < 1e-12:
-            return back
-        centre = p1 + (float(a @ a) * np.cross(b, normal) + float(b @ b) * np.cross(normal, a)) / (2.0 * nn)
-        radial = pose[:3, 3] - centre
-        axis = normal / np.sqrt(nn)
-        radial -= float(radial @ axis) * axis
-        norm = float(np.linalg.norm(radial))
-        if norm < 1e-9:
-            return back
-        way = back + radial / norm
-        return way / float(np.linalg.norm(way))
+        rate = max(float(x[2 * nq + no]), 0.0)
+        handle = self.handle_pose(scene, x[2 * nq : 2 * nq + no])
+        relative = np.linalg.solve(handle, scene.fk(x[:nq], "grasp"))
+        sideways = float(self.approach.insert_offset[1]) - relative[1, 3]
+        # Only a finger near the pocket has a hook to undo; one that slipped away just backs off.
+        unhook = abs(sideways) if abs(sideways) <= self.open.slip_distance else 0.0
+        travel = np.minimum(self.release.speed * dt * np.arange(steps + 1), self.release.distance + unhook)
+        offsets = np.repeat(relative[None], steps + 1, axis=0)
+        offsets[:, 1, 3] += np.sign(sideways) * np.minimum(travel, unhook)
+        offsets[:, 2, 3] -= np.maximum(travel - unhook, 0.0)
+        openings = np.minimum(o + rate * dt * np.arange(steps + 1), scene.o_upper[0])
+        return self.handle_poses(scene, openings[:, None]) @ offsets
 
     def _probe_model(self, scene: Scene) -> RolloutModel:
         cache = self.__dict__.setdefault("_probe_models", {})
@@ -710,10 +707,12 @@ class OpenObject(Task):
         if phase == "hook" and self.backed_out(scene, x):
             return "approach"
         if phase == "open" and not self.success(scene, x):
+            # A door past its balance point opens the rest of the way by itself: holding it only
+            # makes the arm follow it down into its joint limits.
+            if self.self_opening(scene, x):
+                return "release"
             dp = self.approach_error(scene, x, "open").distance
             if dp > self.open.slip_distance or abs(self.lateral_error(scene, x)) > self.open.slip_lateral:
-                if self.self_opening(scene, x):
-                    return "release"
                 if not self.running_ahead(scene, x):
                     return "approach"
         return phase
@@ -724,11 +723,7 @@ class OpenObject(Task):
         if phase == "release":
             if self.release.speed <= 0.0:
                 return None
-            pose = scene.fk(q, "grasp")
-            way = self.release_direction(scene, x)
-            back = np.minimum(self.release.speed * dt * np.arange(steps + 1), self.release.distance)
-            targets = np.repeat(pose[None], steps + 1, axis=0)
-            targets[:, :3, 3] += back[:, None] * way
+            targets = self.release_path(scene, x, steps, dt)
             guide = servo_guide(scene, q, targets, dt, gain=self.guide.gain, max_linear=2.0 * self.release.speed, max_angular=1.0)
             return guide[None]
         offset = self.grasp_offset(scene, phase)

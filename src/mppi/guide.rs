@@ -21,6 +21,9 @@ pub struct ServoGuideConfig {
     pub damping: f64,
     /// Distance (rad or m) inside each joint limit at which a joint is held.
     pub joint_margin: f64,
+    /// Weigh joints heading toward a limit by how close they are (weighted least norm), so that
+    /// the redundant joints (the base) take over before a joint reaches its margin.
+    pub limit_weighting: bool,
 }
 
 impl Default for ServoGuideConfig {
@@ -32,6 +35,7 @@ impl Default for ServoGuideConfig {
             velocity_limit: None,
             damping: 1e-3,
             joint_margin: 0.05,
+            limit_weighting: true,
         }
     }
 }
@@ -59,9 +63,10 @@ fn cap_rate(rate: &mut Vector6<f64>, max_linear: f64, max_angular: f64) {
 ///
 /// Step k commands v_k = J⁺(ξ_k + gain·e_k): ξ_k the targets' own motion from k to k + 1 (feed
 /// forward), e_k the frame's pose error at k, the Cartesian rate capped, J⁺ the damped
-/// least-squares inverse. A joint that would cross its margin within the step is held there and
-/// the others re-solved for the rest of the rate (clamp and re-solve), so that, for example, the
-/// base takes over from an arm joint at its limit. One common factor brings every joint within its
+/// least-squares inverse, weighted (with `limit_weighting`) by Chan and Dubey's joint-limit
+/// gradient so that joints heading for a limit slow down as they near it and the redundant ones
+/// take over. A joint that would cross its margin within the step is held there and the others
+/// re-solved for the rest of the rate (clamp and re-solve). One common factor brings every joint within its
 /// speed limit, keeping the direction. q is integrated with step `dt`: the guide is what the servo
 /// would do on the kinematics alone, which is all a sample needs to be.
 pub fn servo_guide(
@@ -128,8 +133,16 @@ pub fn servo_guide(
     let mut q = q0.to_vec();
     let mut frames = Frames::default();
     let mut jacobian = vec![0.0; 6 * nq];
-    let mut free = vec![true; nq];
-    let mut held = vec![0.0; nq];
+    let mut solver = HeldSolver {
+        lower,
+        upper,
+        dt,
+        damping: config.damping,
+        free: vec![true; nq],
+        held: vec![0.0; nq],
+    };
+    let unit = vec![1.0; nq];
+    let mut weights = vec![1.0; nq];
     let mut v = vec![0.0; nq];
     for k in 0..steps {
         scene.robot.update_frames(&Isometry3::identity(), &q, &mut frames);
@@ -141,44 +154,15 @@ pub fn servo_guide(
         let mut rate = displacement(&targets[k], &targets[k + 1]) / dt + config.gain * displacement(&pose, &targets[k]);
         cap_rate(&mut rate, config.max_linear, config.max_angular);
 
-        free.fill(true);
-        held.fill(0.0);
-        // Each pass holds at least one more joint, so nq + 1 passes always settle; in practice two.
-        for _ in 0..=nq {
-            let mut gram = Matrix6::identity() * config.damping;
-            let mut remaining = rate;
+        solver.solve(&column, &rate, &unit, &q, &mut v);
+        if config.limit_weighting {
+            let mut weighted = false;
             for c in 0..nq {
-                let col = column(c);
-                if free[c] {
-                    gram += col * col.transpose();
-                } else {
-                    remaining -= col * held[c];
-                }
+                weights[c] = limit_weight(q[c], limits[c].lower, limits[c].upper, v[c]);
+                weighted |= weights[c] > 1.0;
             }
-            let y = match gram.cholesky() {
-                Some(chol) => chol.solve(&remaining),
-                None => Vector6::zeros(),
-            };
-            let mut stopped = false;
-            for c in 0..nq {
-                if !free[c] {
-                    v[c] = held[c];
-                    continue;
-                }
-                v[c] = column(c).dot(&y);
-                let next = q[c] + dt * v[c];
-                if next > upper[c] && v[c] > 0.0 {
-                    held[c] = (upper[c] - q[c]).max(0.0) / dt;
-                } else if next < lower[c] && v[c] < 0.0 {
-                    held[c] = (lower[c] - q[c]).min(0.0) / dt;
-                } else {
-                    continue;
-                }
-                free[c] = false;
-                stopped = true;
-            }
-            if !stopped {
-                break;
+            if weighted {
+                solver.solve(&column, &rate, &weights, &q, &mut v);
             }
         }
         let over = v.iter().zip(&speed).map(|(vi, s)| vi.abs() / s).fold(0.0, f64::max);
@@ -191,4 +175,108 @@ pub fn servo_guide(
         }
     }
     Ok(out)
+}
+
+/// The joint-rate solve of [`servo_guide`] with its joint margins and scratch.
+struct HeldSolver {
+    lower: Vec<f64>,
+    upper: Vec<f64>,
+    dt: f64,
+    damping: f64,
+    free: Vec<bool>,
+    held: Vec<f64>,
+}
+
+impl HeldSolver {
+    /// v = W⁻¹Jᵀ(JW⁻¹Jᵀ + λI)⁻¹ rate (W = diag(weights)), with the joints that would cross their
+    /// margin within the step held there and the others re-solved for the rest of the rate (clamp
+    /// and re-solve), so that, for example, the base takes over from an arm joint at its limit.
+    fn solve(&mut self, column: &dyn Fn(usize) -> Vector6<f64>, rate: &Vector6<f64>, weights: &[f64], q: &[f64], v: &mut [f64]) {
+        let nq = q.len();
+        self.free.fill(true);
+        self.held.fill(0.0);
+        // Each pass holds at least one more joint, so nq + 1 passes always settle; in practice two.
+        for _ in 0..=nq {
+            let mut gram = Matrix6::identity() * self.damping;
+            let mut remaining = *rate;
+            for c in 0..nq {
+                let col = column(c);
+                if self.free[c] {
+                    gram += col * col.transpose() / weights[c];
+                } else {
+                    remaining -= col * self.held[c];
+                }
+            }
+            let y = match gram.cholesky() {
+                Some(chol) => chol.solve(&remaining),
+                None => Vector6::zeros(),
+            };
+            let mut stopped = false;
+            for c in 0..nq {
+                if !self.free[c] {
+                    v[c] = self.held[c];
+                    continue;
+                }
+                v[c] = column(c).dot(&y) / weights[c];
+                let next = q[c] + self.dt * v[c];
+                if next > self.upper[c] && v[c] > 0.0 {
+                    self.held[c] = (self.upper[c] - q[c]).max(0.0) / self.dt;
+                } else if next < self.lower[c] && v[c] < 0.0 {
+                    self.held[c] = (self.lower[c] - q[c]).min(0.0) / self.dt;
+                } else {
+                    continue;
+                }
+                self.free[c] = false;
+                stopped = true;
+            }
+            if !stopped {
+                break;
+            }
+        }
+    }
+}
+
+/// Chan and Dubey's weight 1 + |∂H/∂q| of a joint at q in [lower, upper] moving at rate v, with
+/// H = (upper − lower)² / (4 (upper − q)(q − lower)): large near a limit the joint heads for, 1
+/// when it heads for the middle, for an unlimited joint, or at rest.
+fn limit_weight(q: f64, lower: f64, upper: f64, v: f64) -> f64 {
+    let range = upper - lower;
+    if !range.is_finite() || range <= 0.0 {
+        return 1.0;
+    }
+    let to_upper = (upper - q).max(1e-6);
+    let from_lower = (q - lower).max(1e-6);
+    let gradient = range * range * (2.0 * q - upper - lower) / (4.0 * to_upper * to_upper * from_lower * from_lower);
+    if gradient * v > 0.0 {
+        1.0 + gradient.abs()
+    } else {
+        1.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::limit_weight;
+
+    /// H(q) = (u − l)² / (4 (u − q)(q − l)), whose gradient the weight adds to 1.
+    fn h(q: f64, l: f64, u: f64) -> f64 {
+        (u - l) * (u - l) / (4.0 * (u - q) * (q - l))
+    }
+
+    #[test]
+    fn the_weight_is_one_plus_the_gradient_toward_the_limit() {
+        let (l, u) = (-1.5, 0.5);
+        for q in [-1.4, -1.0, -0.3, 0.0, 0.45] {
+            let fd = (h(q + 1e-6, l, u) - h(q - 1e-6, l, u)) / 2e-6;
+            let toward = fd.signum();
+            let w = limit_weight(q, l, u, toward);
+            assert!(
+                (w - (1.0 + fd.abs())).abs() < 1e-5 * (1.0 + fd.abs()),
+                "q {q}: {w} vs 1 + {fd}"
+            );
+            assert_eq!(limit_weight(q, l, u, -toward), 1.0, "heading for the middle at q {q}");
+            assert_eq!(limit_weight(q, l, u, 0.0), 1.0);
+        }
+        assert_eq!(limit_weight(0.3, f64::NEG_INFINITY, f64::INFINITY, 1.0), 1.0);
+    }
 }

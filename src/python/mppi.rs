@@ -109,6 +109,8 @@ pub struct PyServoGuideConfig {
     damping: f64,
     /// Distance (rad or m) inside each joint limit at which a joint is held.
     joint_margin: f64,
+    /// Weigh joints heading toward a limit by how close they are (weighted least norm).
+    limit_weighting: bool,
 }
 
 impl PyServoGuideConfig {
@@ -129,6 +131,7 @@ impl PyServoGuideConfig {
             velocity_limit: self.velocity_limit.clone(),
             damping: self.damping,
             joint_margin: self.joint_margin,
+            limit_weighting: self.limit_weighting,
         })
     }
 }
@@ -145,6 +148,7 @@ impl PyServoGuideConfig {
             velocity_limit: c.velocity_limit,
             damping: c.damping,
             joint_margin: c.joint_margin,
+            limit_weighting: c.limit_weighting,
         }
     }
 }
