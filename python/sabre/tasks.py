@@ -632,9 +632,10 @@ class OpenObject(Task):
         return float(grasp[1, 3] - self.open.offset[1])
 
     def self_opening(self, scene: Scene, x: np.ndarray) -> bool:
-        """Whether the object, left alone, opens further by itself (a dishwasher door past its
-        balance point): the rollout model run for ``release.probe`` s from x with the robot at rest
-        and moved 5 m away from the object, checked against ``release.rate``."""
+        """Whether the object, left alone at rest, opens further by itself (a dishwasher door past
+        its balance point): the rollout model run for ``release.probe`` s from x with the robot and
+        the object at rest and the robot moved 5 m away from the object, checked against
+        ``release.rate``."""
         nq, no = scene.nq, scene.no
         if self.success(scene, x) or float(x[2 * nq]) >= scene.o_upper[0] - 1e-3:
             return False
@@ -644,6 +645,7 @@ class OpenObject(Task):
         norm = float(np.linalg.norm(away))
         free[:2] = scene.object_pose[:2, 3] + 5.0 * (away / norm if norm > 1e-9 else np.array([-1.0, 0.0]))
         free[nq : 2 * nq] = 0.0
+        free[2 * nq + no :] = 0.0  # from rest: a drawer still coasting from a pull does not open by itself
         steps = max(1, int(round(self.release.probe / model.dt)))
         end = model.rollout(free, np.zeros((1, steps, scene.nu))).states[0, -1]
         return float(end[2 * nq + no]) > self.release.rate
