@@ -31,7 +31,7 @@ def run(obj: str, seed: int, args) -> dict:
     ep = sabre.run_episode(scene, controller, args.duration, seed=seed, replan_rate=args.replan_rate, progress=False)
     wall = time.perf_counter() - start
     phases = [ep.phases[i] for i in ep.phase]
-    slips = sum(1 for a, b in itertools.pairwise(phases) if a == "open" and b in ("approach", "release"))
+    slips = sum(1 for a, b in itertools.pairwise(phases) if a == "open" and b == "approach")
     releases = sum(1 for a, b in itertools.pairwise(phases) if a != "release" and b == "release")
     return {
         "object": obj,

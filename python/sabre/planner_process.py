@@ -73,13 +73,20 @@ def _read(block: np.ndarray, tries: int = 1000) -> tuple[float, np.ndarray] | No
 
 
 def _planner_main(factory: Callable[[], Any], state_raw: Any, plan_raw: Any, dims: tuple[int, int, int],
-                  commands: Any, errors: Any, stop: Any, min_period: float, t0: float, nice: int) -> None:
+                  commands: Any, errors: Any, stop: Any, min_period: float, t0: float, nice: int, idle: bool) -> None:
     """The planner process: build the controller, then plan on the newest shared state until told
     to stop. SIGINT is the parent's to handle (it stops the planner through ``stop``)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if nice:
         try:
             os.nice(nice)  # leave the cores to the 1 kHz path and the DDS threads when they want them
+        except OSError:
+            pass
+    if idle and hasattr(os, "SCHED_IDLE"):
+        # Stronger than any niceness: a waking middleware or control thread preempts the planner at
+        # once instead of waiting for its time slice. The sampler's workers, started later, inherit it.
+        try:
+            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
         except OSError:
             pass
     parent = os.getppid()
@@ -127,17 +134,19 @@ class PlannerProcess:
 
     ``factory`` must be picklable (a module-level function, a ``functools.partial`` of one) and
     build the same controller (scene, task, configuration) the inner loop holds, so that both agree
-    on the plan's shape and the obstacles' ids. The process runs at ``nice`` (added niceness) so
-    that a machine with few cores serves the 1 kHz path and the middleware's threads first.
+    on the plan's shape and the obstacles' ids. The process runs at ``nice`` (added niceness) and,
+    with ``idle``, under SCHED_IDLE where the OS has it, so that a machine with few cores serves the
+    1 kHz path and the middleware's threads first.
     """
 
     def __init__(self, factory: Callable[[], Any], *, nx: int, steps: int, nu: int, phases: tuple[str, ...],
-                 min_replan_period: float, nice: int, start_timeout: float = 120.0) -> None:
+                 min_replan_period: float, nice: int, idle: bool = False, start_timeout: float = 120.0) -> None:
         self._factory = factory
         self._dims = (int(nx), int(steps), int(nu))
         self._phases = tuple(phases)
         self._min_period = float(min_replan_period)
         self._nice = int(nice)
+        self._idle = bool(idle)
         self._start_timeout = float(start_timeout)
         self._ctx = multiprocessing.get_context("spawn")
         self._state_raw = self._ctx.RawArray("d", _STATE_HEADER + int(nx))
@@ -152,6 +161,11 @@ class PlannerProcess:
         self._snapshot: PlanSnapshot | None = None
         self._failure: str | None = None
 
+    @property
+    def pid(self) -> int | None:
+        """The process's id while it runs, else None."""
+        return None if self._process is None else self._process.pid
+
     def start(self, x0: np.ndarray, t0: float, wait: bool = True) -> PlanSnapshot | None:
         """Shares x0, spawns the process and waits for its first plan (``wait=False``: returns at
         once; :meth:`snapshot` is None until the first plan arrives)."""
@@ -162,7 +176,7 @@ class PlannerProcess:
         self._process = self._ctx.Process(
             target=_planner_main, name="sabre-planner", daemon=True,
             args=(self._factory, self._state_raw, self._plan_raw, self._dims, self._commands, self._errors,
-                  self._stop, self._min_period, float(t0), self._nice))
+                  self._stop, self._min_period, float(t0), self._nice, self._idle))
         try:
             self._process.start()
         except Exception as exc:  # pickling the factory, or the OS refusing a process

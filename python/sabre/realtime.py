@@ -56,7 +56,8 @@ class RealtimeCascade:
 
     ``planner_process``: a picklable callable (a module-level function or a ``functools.partial``
     of one) that builds the same controller as ``controller`` (scene, task, configuration); the
-    outer loop then plans in a spawned process on that copy, niced by ``planner_nice``, while
+    outer loop then plans in a spawned process on that copy, niced by ``planner_nice`` and, with
+    ``planner_idle``, under SCHED_IDLE (it runs only on CPU time nothing else wants), while
     ``controller`` serves the inner loop (its FILTER-QP and tank). Obstacles then go through the
     cascade's :meth:`add_obstacle` and friends, which reach both copies. None: a thread of this
     process plans on ``controller`` itself.
@@ -64,7 +65,7 @@ class RealtimeCascade:
 
     def __init__(self, controller: Controller, *, low_level: LowLevelController | None = None, inner_dt: float = 0.001,
                  min_replan_period: float = 0.0, planner_process: Callable[[], Controller] | None = None,
-                 planner_nice: int = 10) -> None:
+                 planner_nice: int = 10, planner_idle: bool = False) -> None:
         if not isinstance(controller, Controller):
             raise TypeError(f"controller must be a sabre.Controller, got {type(controller).__name__}")
         if planner_process is not None and not callable(planner_process):
@@ -75,6 +76,7 @@ class RealtimeCascade:
         self.min_replan_period = as_non_negative("min_replan_period", min_replan_period)
         self._factory = planner_process
         self._planner_nice = int(planner_nice)
+        self._planner_idle = bool(planner_idle)
         self._process: PlannerProcess | None = None
         self._obstacle_log: list[tuple[str, tuple[object, ...]]] = []  # replayed in each planner process
         self._phase = controller.phase
@@ -117,7 +119,7 @@ class RealtimeCascade:
             c = self.controller
             self._process = PlannerProcess(self._factory, nx=c.scene.nx, steps=c.config.horizon_steps, nu=c.scene.nu,
                                            phases=tuple(c.task.phases), min_replan_period=self.min_replan_period,
-                                           nice=self._planner_nice)
+                                           nice=self._planner_nice, idle=self._planner_idle)
             for name, args in self._obstacle_log:
                 self._process.call(name, *args)
             try:
@@ -220,6 +222,11 @@ class RealtimeCascade:
     def planner_in_process(self) -> bool:
         """Whether the outer loop plans in a process of its own."""
         return self._factory is not None
+
+    @property
+    def planner_pid(self) -> int | None:
+        """The planner process's id while it runs (to pin it to cores, say), else None."""
+        return None if self._process is None else self._process.pid
 
     # Obstacles, into both filters of the variant (and the planner process's copy) -----------
     def add_obstacle(self, center: Sequence[float] | np.ndarray, radius: float) -> int | None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import os
 
 import numpy as np
 import planner_factories
@@ -166,3 +167,21 @@ def test_planner_process_ends_when_its_parent_is_killed(tmp_path):
         time.sleep(0.05)
     os.kill(planner, 9)
     raise AssertionError("the planner process outlived its killed parent")
+
+
+@pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="SCHED_IDLE is Linux's")
+@pytest.mark.parametrize("idle", [True, False])
+def test_the_planner_process_runs_niced_and_under_sched_idle_when_asked(idle):
+    """planner_nice adds niceness to the process and planner_idle puts it under SCHED_IDLE, as the
+    OS reports for its main thread; the id is gone once the cascade stops."""
+    factory = functools.partial(planner_factories.open_shelf, "IO", 3)
+    cascade = sabre.RealtimeCascade(factory(), planner_process=factory, min_replan_period=10.0, planner_nice=7,
+                                    planner_idle=idle)
+    x0 = sabre.paper_start_state(cascade.controller.scene)
+    assert cascade.planner_pid is None
+    with cascade.start(x0):
+        pid = cascade.planner_pid
+        assert pid is not None and pid != os.getpid()
+        assert os.sched_getscheduler(pid) == (os.SCHED_IDLE if idle else os.SCHED_OTHER)
+        assert os.getpriority(os.PRIO_PROCESS, pid) == os.getpriority(os.PRIO_PROCESS, 0) + 7
+    assert cascade.planner_pid is None
