@@ -651,16 +651,14 @@ class OpenObject(Task):
         return float(end[2 * nq + no]) > self.release.rate
 
     def release_path(self, scene: Scene, x: np.ndarray, steps: int, dt: float) -> np.ndarray:
-        """(steps + 1, 4, 4) grasp-frame targets that let go of the handle: the hook undone (a
-        grasp frame within ``open.slip_distance`` of it slides back across the bar to the insert
-        offset's sideways position, out of the pocket), then backed off from the door (the handle
-        frame's −z) by ``release.distance``, at ``release.speed``. The targets ride on the handle
-        as the object keeps opening at its current rate, so the hand leaves the pocket the way it
-        came in instead of dragging the bar (or lifting it, for a door hinged below) against the
-        hook."""
+        """(steps + 1, 4, 4) grasp-frame targets that let go of the handle, at ``release.speed``:
+        first the hook undone (a grasp frame within ``open.slip_distance`` of the pocket slides
+        back across the bar to the insert offset's sideways position, riding on the handle as the
+        object keeps opening at its current rate), then ``release.distance`` along
+        :meth:`release_direction`, fixed in the world. Backing off with the bar still in the pocket
+        drags it, or lifts it against a door hinged below, which pushes the door back toward closed;
+        following the handle once free would chase a falling door into the robot."""
         nq, no = scene.nq, scene.no
-        o = float(x[2 * nq])
-        rate = max(float(x[2 * nq + no]), 0.0)
         handle = self.handle_pose(scene, x[2 * nq : 2 * nq + no])
         relative = np.linalg.solve(handle, scene.fk(x[:nq], "grasp"))
         sideways = float(self.approach.insert_offset[1]) - relative[1, 3]
@@ -669,9 +667,41 @@ class OpenObject(Task):
         travel = np.minimum(self.release.speed * dt * np.arange(steps + 1), self.release.distance + unhook)
         offsets = np.repeat(relative[None], steps + 1, axis=0)
         offsets[:, 1, 3] += np.sign(sideways) * np.minimum(travel, unhook)
-        offsets[:, 2, 3] -= np.maximum(travel - unhook, 0.0)
-        openings = np.minimum(o + rate * dt * np.arange(steps + 1), scene.o_upper[0])
-        return self.handle_poses(scene, openings[:, None]) @ offsets
+        rate = max(float(x[2 * nq + no]), 0.0)
+        openings = np.minimum(float(x[2 * nq]) + rate * dt * np.arange(steps + 1), scene.o_upper[0])
+        targets = self.handle_poses(scene, openings[:, None]) @ offsets
+        out = int(np.argmax(travel >= unhook)) if np.any(travel >= unhook) else steps
+        back = np.maximum(travel - unhook, 0.0)
+        targets[out:] = targets[out]
+        targets[out:, :3, 3] += back[out:, None] * self.release_direction(scene, x)
+        return targets
+
+    def release_direction(self, scene: Scene, x: np.ndarray) -> np.ndarray:
+        """(3,) unit direction in which the hand backs off when releasing: away from the door
+        (the grasp frame's −z) and, for a hinged door, out of its sweep (away from the hinge axis,
+        found as the centre of the circle through three handle positions about the current
+        opening), half each."""
+        nq = scene.nq
+        pose = scene.fk(x[:nq], "grasp")
+        back = -pose[:3, 2]
+        if not scene.object_is_revolute:
+            return back
+        o = float(x[2 * nq])
+        p0, p1, p2 = self.handle_poses(scene, np.array([[o - 0.1], [o], [o + 0.1]]))[:, :3, 3]
+        a, b = p0 - p1, p2 - p1
+        normal = np.cross(a, b)
+        nn = float(normal @ normal)
+        if nn < 1e-12:
+            return back
+        centre = p1 + (float(a @ a) * np.cross(b, normal) + float(b @ b) * np.cross(normal, a)) / (2.0 * nn)
+        radial = pose[:3, 3] - centre
+        axis = normal / np.sqrt(nn)
+        radial -= float(radial @ axis) * axis
+        norm = float(np.linalg.norm(radial))
+        if norm < 1e-9:
+            return back
+        way = back + radial / norm
+        return way / float(np.linalg.norm(way))
 
     def _probe_model(self, scene: Scene) -> RolloutModel:
         cache = self.__dict__.setdefault("_probe_models", {})
