@@ -652,28 +652,33 @@ class OpenObject(Task):
 
     def release_path(self, scene: Scene, x: np.ndarray, steps: int, dt: float) -> np.ndarray:
         """(steps + 1, 4, 4) grasp-frame targets that let go of the handle, at ``release.speed``:
-        first the hook undone (a grasp frame within ``open.slip_distance`` of the pocket slides
-        back across the bar to the insert offset's sideways position, riding on the handle as the
-        object keeps opening at its current rate), then ``release.distance`` along
-        :meth:`release_direction`, fixed in the world. Backing off with the bar still in the pocket
-        drags it, or lifts it against a door hinged below, which pushes the door back toward closed;
-        following the handle once free would chase a falling door into the robot."""
+        a finger within ``open.slip_distance`` of the pocket leaves the way it came in, riding on
+        the handle as the object keeps opening at its current rate (back across the bar to the
+        insert offset's sideways position, then back to the pre-grasp offset's depth, clear of the
+        bar); then the hand backs off ``release.distance`` along :meth:`release_direction`, fixed in
+        the world. Backing off with the bar still in the pocket drags it, or lifts it against a door
+        hinged below, which pushes the door back toward closed; following the handle for longer
+        would chase a falling door into the robot."""
         nq, no = scene.nq, scene.no
         handle = self.handle_pose(scene, x[2 * nq : 2 * nq + no])
         relative = np.linalg.solve(handle, scene.fk(x[:nq], "grasp"))
         sideways = float(self.approach.insert_offset[1]) - relative[1, 3]
-        # Only a finger near the pocket has a hook to undo; one that slipped away just backs off.
-        unhook = abs(sideways) if abs(sideways) <= self.open.slip_distance else 0.0
-        travel = np.minimum(self.release.speed * dt * np.arange(steps + 1), self.release.distance + unhook)
+        hooked = abs(sideways) <= self.open.slip_distance  # else the finger slipped away: just back off
+        unhook = abs(sideways) if hooked else 0.0
+        clear = max(relative[2, 3] - float(self.approach.pregrasp_offset[2]), 0.0) if hooked else 0.0
+        travel = np.minimum(self.release.speed * dt * np.arange(steps + 1), unhook + clear + self.release.distance)
         offsets = np.repeat(relative[None], steps + 1, axis=0)
         offsets[:, 1, 3] += np.sign(sideways) * np.minimum(travel, unhook)
+        offsets[:, 2, 3] -= np.clip(travel - unhook, 0.0, clear)
         rate = max(float(x[2 * nq + no]), 0.0)
         openings = np.minimum(float(x[2 * nq]) + rate * dt * np.arange(steps + 1), scene.o_upper[0])
         targets = self.handle_poses(scene, openings[:, None]) @ offsets
-        out = int(np.argmax(travel >= unhook)) if np.any(travel >= unhook) else steps
-        back = np.maximum(travel - unhook, 0.0)
-        targets[out:] = targets[out]
-        targets[out:, :3, 3] += back[out:, None] * self.release_direction(scene, x)
+        free = travel >= unhook + clear
+        out = int(np.argmax(free)) if np.any(free) else steps + 1
+        if out <= steps:
+            targets[out:] = targets[out]
+            away = travel[out:] - unhook - clear
+            targets[out:, :3, 3] += away[:, None] * self.release_direction(scene, x)
         return targets
 
     def release_direction(self, scene: Scene, x: np.ndarray) -> np.ndarray:

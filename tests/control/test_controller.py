@@ -689,22 +689,27 @@ def test_a_door_that_falls_open_is_released_not_held():
     start = scene.fk(x[:nq], "grasp")
     np.testing.assert_allclose(np.linalg.solve(handle, start), task.grasp_offset(scene, "open"), atol=1e-3)
     assert task.next_phase(scene, x, 0.0, "open") == "release"
-    # First across the bar (the handle frame's y) to the insert offset's sideways position, out of
-    # the pocket, the hand's orientation kept; then the straight back-off from there.
-    sideways = task.approach.insert_offset[1] - np.linalg.solve(handle, start)[1, 3]
+    # The way it came in, in the handle's frame: first across the bar (y) to the insert offset's
+    # sideways position, out of the pocket, then back (−z) to the pre-grasp offset's depth, clear of
+    # the bar, the hand's orientation kept; then the straight back-off from there.
+    relative = np.linalg.solve(handle, start)
+    sideways = task.approach.insert_offset[1] - relative[1, 3]
+    clear = relative[2, 3] - task.approach.pregrasp_offset[2]
+    assert 0.0 < abs(sideways) < 0.05 and clear > 0.0
+    step = task.release.speed * 0.015
+    travel = np.minimum(step * np.arange(67), abs(sideways) + clear + task.release.distance)
+    out = int(np.ceil((abs(sideways) + clear) / step - 1e-9))  # the first step clear of the bar
+    assert 0 < out < 66
     path = task.release_path(scene, x, 66, 0.015)
     in_handle = np.linalg.solve(handle, path)
-    step = task.release.speed * 0.015
-    out = int(np.ceil(abs(sideways) / step - 1e-9))  # the first step whose travel covers the unhooking
-    assert 0 < out < 66
-    np.testing.assert_allclose(in_handle[:out, 2, 3], in_handle[0, 2, 3], atol=1e-12)
-    np.testing.assert_allclose(in_handle[:out, 1, 3] - in_handle[0, 1, 3], np.sign(sideways) * step * np.arange(out), atol=1e-12)
+    np.testing.assert_allclose(in_handle[:out, 1, 3], relative[1, 3] + np.sign(sideways) * np.minimum(travel[:out], abs(sideways)), atol=1e-12)
+    np.testing.assert_allclose(in_handle[:out, 2, 3], relative[2, 3] - np.clip(travel[:out] - abs(sideways), 0.0, clear), atol=1e-12)
     np.testing.assert_allclose(path[:, :3, :3], np.broadcast_to(start[:3, :3], (67, 3, 3)), atol=1e-12)
-    corner = np.linalg.solve(handle, start)
+    corner = relative.copy()
     corner[1, 3] += sideways
+    corner[2, 3] -= clear
     back = path[out:, :3, 3] - (handle @ corner)[:3, 3]
-    travel = np.minimum(step * np.arange(out, 67), task.release.distance + abs(sideways)) - abs(sideways)
-    np.testing.assert_allclose(back, np.outer(travel, task.release_direction(scene, x)), atol=1e-12)
+    np.testing.assert_allclose(back, np.outer(travel[out:] - abs(sideways) - clear, task.release_direction(scene, x)), atol=1e-12)
     (guide,) = task.guides(scene, x, "release", 66, 0.015)
     end = scene.fk(x[:nq] + 0.015 * guide.sum(axis=0), "grasp")
     np.testing.assert_allclose(end[:3, 3], path[-1, :3, 3], atol=0.01)
