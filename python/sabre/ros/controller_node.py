@@ -104,7 +104,9 @@ class ControllerNode:
         self._min_tank = self._last_tank
         self._obstacles: list[tuple[int | None, tuple[float, ...]]] = []
         self.stats: dict[str, Any] = {"ticks": 0, "rejected": 0, "zero_commands": 0, "stale_events": 0, "plan_stale": 0,
-                                      "wrench_stale": 0, "stale_zero_age": [], "compute": [], "state_age": []}
+                                      "wrench_stale": 0, "stale_zero_age": [], "compute": [], "state_age": [],
+                                      "phase_changes": []}
+        self._phase = self.controller.phase
         self._running = True
         self._planner_started: float | None = None
 
@@ -258,6 +260,10 @@ class ControllerNode:
         self._fresh.set()
         self.stats["ticks"] += 1
         self.stats["compute"].append(time.monotonic() - received)
+        if self.cascade.phase != self._phase:  # after the command: logging is off the 1 kHz path
+            self.node.get_logger().info(f"phase {self._phase} -> {self.cascade.phase} at t = {t:.3f} s")
+            self._phase = self.cascade.phase
+            self.stats["phase_changes"].append((t, self._phase))
 
     def _observe_or_stop(self, x: np.ndarray, t: float) -> None:
         """Hands a state the node answers with zero to the planner; stops the planner if it failed."""
@@ -329,6 +335,7 @@ class ControllerNode:
             "state_age_p99_ms": percentile_ms(self.stats["state_age"], 99),
             "tank_energy": self._last_tank, "tank_min": self._min_tank, "tank_floor": self.controller.tank.floor,
             "filter_fallbacks": int(fallbacks), "phase": self.cascade.phase,
+            "phase_changes": [[round(t, 3), phase] for t, phase in self.stats["phase_changes"]],
             "planner_process": self.cascade.planner_in_process,
         }
 

@@ -41,7 +41,7 @@ CONTROLLER_PARAMETERS: dict[str, Any] = {
     "realtime_priority": 70,  # SCHED_FIFO priority of the state callbacks where permitted (0: normal scheduling)
     "planner_process": True,  # plan in a process of its own (False: a thread sharing the interpreter)
     "planner_nice": 10,  # niceness added to the planner process: the middleware's threads come first
-    "planner_idle": True,  # the planner process under SCHED_IDLE: it runs only on CPU time nothing else wants
+    "planner_idle": False,  # the planner process under SCHED_IDLE: only CPU time nothing else wants (a dedicated machine)
 }
 
 #: Simulated robot node (``python -m sabre sim-robot``).
