@@ -199,12 +199,12 @@ impl HeldSolver {
         for _ in 0..=nq {
             let mut gram = Matrix6::identity() * self.damping;
             let mut remaining = *rate;
-            for c in 0..nq {
+            for (c, ((&free, &held), &weight)) in self.free.iter().zip(&self.held).zip(weights).enumerate() {
                 let col = column(c);
-                if self.free[c] {
-                    gram += col * col.transpose() / weights[c];
+                if free {
+                    gram += col * col.transpose() / weight;
                 } else {
-                    remaining -= col * self.held[c];
+                    remaining -= col * held;
                 }
             }
             let y = match gram.cholesky() {
