@@ -66,8 +66,8 @@ fn cap_rate(rate: &mut Vector6<f64>, max_linear: f64, max_angular: f64) {
 /// least-squares inverse, weighted (with `limit_weighting`) by Chan and Dubey's joint-limit
 /// gradient so that joints heading for a limit slow down as they near it and the redundant ones
 /// take over. A joint that would cross its margin within the step is held there and the others
-/// re-solved for the rest of the rate (clamp and re-solve). One common factor brings every joint within its
-/// speed limit, keeping the direction. q is integrated with step `dt`: the guide is what the servo
+/// re-solved for the rest of the rate (clamp and re-solve). One common factor brings every joint
+/// within its speed limit, keeping the direction. q is integrated with step `dt`: the guide is what the servo
 /// would do on the kinematics alone, which is all a sample needs to be.
 pub fn servo_guide(
     scene: &Scene,
