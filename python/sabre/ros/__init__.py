@@ -37,6 +37,7 @@ def require_ros():
     try:
         import diagnostic_msgs.msg  # noqa: F401
         import geometry_msgs.msg  # noqa: F401
+        import hdrh.histogram  # noqa: F401
         import rclpy
         import rosgraph_msgs.msg  # noqa: F401
         import sensor_msgs.msg  # noqa: F401

@@ -4,6 +4,7 @@ around :class:`sabre.RealtimeCascade` with state and plan watchdogs."""
 
 from __future__ import annotations
 
+import collections
 import functools
 import json
 import math
@@ -20,6 +21,7 @@ from ..realtime import RealtimeCascade
 from ..scene import Scene
 from . import require_ros, spin_node
 from .conversions import JointMap, LowPass, MessageError, tau_ext_from_wrench, world_to_base
+from .durations import Durations
 from .estimator import ObjectStateEstimator
 from .params import CONTROLLER_PARAMETERS, declare
 
@@ -37,10 +39,6 @@ def planner_controller(obj: str, variant: str, seed: int, threads: int) -> Contr
 
 def stamp_seconds(stamp: Any) -> float:
     return stamp.sec + 1e-9 * stamp.nanosec
-
-
-def percentile_ms(samples: list[float], q: float) -> float:
-    return float(np.percentile(samples, q) * 1e3) if samples else math.nan
 
 
 class ControllerNode:
@@ -104,8 +102,8 @@ class ControllerNode:
         self._min_tank = self._last_tank
         self._obstacles: list[tuple[int | None, tuple[float, ...]]] = []
         self.stats: dict[str, Any] = {"ticks": 0, "rejected": 0, "zero_commands": 0, "stale_events": 0, "plan_stale": 0,
-                                      "wrench_stale": 0, "stale_zero_age": [], "compute": [], "state_age": [],
-                                      "phase_changes": []}
+                                      "wrench_stale": 0, "stale_zero_age": [], "compute": Durations(), "state_age": Durations(),
+                                      "phase_changes": 0, "recent_phases": collections.deque(maxlen=100)}
         self._phase = self.controller.phase
         self._running = True
         self._planner_started: float | None = None
@@ -183,7 +181,7 @@ class ControllerNode:
 
     def _on_joint_state(self, msg: Any) -> None:
         received = time.monotonic()
-        self.stats["state_age"].append(time.time() - stamp_seconds(msg.header.stamp))
+        self.stats["state_age"].record(time.time() - stamp_seconds(msg.header.stamp))
         try:
             q = self.joints.values(msg.name, msg.position, "position")
             dq = self.joints.values(msg.name, msg.velocity, "velocity")
@@ -259,11 +257,12 @@ class ControllerNode:
             self._publish_command(result.command, q[self.base_index[2]] if len(self.base_index) == 3 else 0.0, msg.header.stamp)
         self._fresh.set()
         self.stats["ticks"] += 1
-        self.stats["compute"].append(time.monotonic() - received)
+        self.stats["compute"].record(time.monotonic() - received)
         if self.cascade.phase != self._phase:  # after the command: logging is off the 1 kHz path
             self.node.get_logger().info(f"phase {self._phase} -> {self.cascade.phase} at t = {t:.3f} s")
             self._phase = self.cascade.phase
-            self.stats["phase_changes"].append((t, self._phase))
+            self.stats["phase_changes"] += 1
+            self.stats["recent_phases"].append((t, self._phase))
 
     def _observe_or_stop(self, x: np.ndarray, t: float) -> None:
         """Hands a state the node answers with zero to the planner; stops the planner if it failed."""
@@ -330,12 +329,13 @@ class ControllerNode:
             "stale_zero_age_ms": [a * 1e3 for a in self.stats["stale_zero_age"]],
             "plan_stale": self.stats["plan_stale"], "wrench_stale": self.stats["wrench_stale"],
             "planner_iterations": self.cascade.iterations, "planner_rate_hz": self._planner_rate(),
-            "tick_compute_p50_ms": percentile_ms(compute, 50), "tick_compute_p99_ms": percentile_ms(compute, 99),
-            "state_age_p50_ms": percentile_ms(self.stats["state_age"], 50),
-            "state_age_p99_ms": percentile_ms(self.stats["state_age"], 99),
+            "tick_compute_p50_ms": compute.percentile_ms(50), "tick_compute_p99_ms": compute.percentile_ms(99),
+            "state_age_p50_ms": self.stats["state_age"].percentile_ms(50),
+            "state_age_p99_ms": self.stats["state_age"].percentile_ms(99),
             "tank_energy": self._last_tank, "tank_min": self._min_tank, "tank_floor": self.controller.tank.floor,
             "filter_fallbacks": int(fallbacks), "phase": self.cascade.phase,
-            "phase_changes": [[round(t, 3), phase] for t, phase in self.stats["phase_changes"]],
+            "phase_changes": self.stats["phase_changes"],
+            "recent_phases": [[round(t, 3), phase] for t, phase in self.stats["recent_phases"]],  # the last 100
             "planner_process": self.cascade.planner_in_process,
         }
 

@@ -20,8 +20,9 @@ from ..errors import SabreError
 from ..scene import Scene
 from ..sim import Plant
 from . import realtime_thread, require_ros, spin_node
-from .controller_node import BASE_JOINTS, percentile_ms, stamp_seconds
+from .controller_node import BASE_JOINTS, stamp_seconds
 from .conversions import base_to_world
+from .durations import Durations
 from .params import SIM_ROBOT_PARAMETERS, declare
 
 __all__ = ["SimRobotNode", "run_sim_robot"]
@@ -77,7 +78,8 @@ class SimRobotNode:
         self.stats: dict[str, Any] = {
             "ticks": 0, "loops": 0, "late_ticks": 0, "skipped_ticks": 0, "overrun_loops": 0, "states_published": 0,
             "arm_commands": 0, "base_commands": 0, "rejected_commands": 0, "echoes": 0, "late_echoes": 0,
-            "latency": [], "stops": [], "loop_work": [], "success_time": None, "contact_force": [],
+            "latency": Durations(), "stops": [], "loop_work": Durations(), "success_time": None,
+            "contact_force_sum": 0.0, "contact_steps": 0,
             "hold_started": None, "hold_ended": None,
         }
         self._hold_at = float(p["hold_at_opening"]) * float(scene.o_upper[0] - scene.o_lower[0]) + float(scene.o_lower[0])
@@ -136,7 +138,7 @@ class SimRobotNode:
     def _on_echo(self, msg: Any) -> None:
         latency = time.time() - stamp_seconds(msg.header.stamp)
         self.stats["echoes"] += 1
-        self.stats["latency"].append(latency)
+        self.stats["latency"].record(latency)
         if latency > self.period:
             self.stats["late_echoes"] += 1
 
@@ -196,10 +198,11 @@ class SimRobotNode:
                     self.stats["ticks"] += 1
                 if due:
                     self._publish_state()
-                    self.stats["loop_work"].append(time.monotonic() - work)
+                    self.stats["loop_work"].record(time.monotonic() - work)
                 self.stats["loops"] += 1
                 if self.plant.contact:
-                    self.stats["contact_force"].append(float(np.linalg.norm(self.plant.wrench[:3])))
+                    self.stats["contact_force_sum"] += float(np.linalg.norm(self.plant.wrench[:3]))
+                    self.stats["contact_steps"] += 1
                 if k >= next_check and self.stats["success_time"] is None:
                     next_check = k + check_every
                     if self.task.success(self.scene, self.plant.state):
@@ -262,24 +265,22 @@ class SimRobotNode:
     def summary(self) -> dict[str, Any]:
         s = self.stats
         x = self.plant.state
-        forces = s["contact_force"]
         lat = s["latency"]
         wall = time.monotonic() - self._start_wall
         return {
             "node": "sim_robot", "object": self.scene.object_name, "sim_time": self.plant.time, "wall_time": wall,
             "ticks": s["ticks"], "late_ticks": s["late_ticks"], "skipped_ticks": s["skipped_ticks"],
             "overrun_loops": s["overrun_loops"], "loops": s["loops"],
-            "loop_work_p50_ms": percentile_ms(s["loop_work"], 50), "loop_work_p99_ms": percentile_ms(s["loop_work"], 99),
+            "loop_work_p50_ms": s["loop_work"].percentile_ms(50), "loop_work_p99_ms": s["loop_work"].percentile_ms(99),
             "states_published": s["states_published"], "arm_commands": s["arm_commands"],
             "base_commands": s["base_commands"], "rejected_commands": s["rejected_commands"],
             "echoes": s["echoes"], "late_echoes": s["late_echoes"],
-            "latency_p50_ms": percentile_ms(lat, 50), "latency_p99_ms": percentile_ms(lat, 99),
-            "latency_max_ms": float(max(lat) * 1e3) if lat else math.nan,
+            "latency_p50_ms": lat.percentile_ms(50), "latency_p99_ms": lat.percentile_ms(99), "latency_max_ms": lat.max_ms(),
             "delivered_fraction": s["echoes"] / s["states_published"] if s["states_published"] else 0.0,
             "stop_delays_ms": [d * 1e3 for d in s["stops"]], "command_timeout_ms": self.command_timeout * 1e3,
             "period_ms": self.period * 1e3,
             "opening": float(x[2 * self._nq]), "success": s["success_time"] is not None, "time_to_open": s["success_time"],
-            "mean_wrench": float(np.mean(forces)) if forces else 0.0,
+            "mean_wrench": s["contact_force_sum"] / s["contact_steps"] if s["contact_steps"] else 0.0,
             "hold_started": s["hold_started"], "hold_ended": s["hold_ended"],
             "robot_speed": float(np.linalg.norm(x[self._nq : 2 * self._nq])),
         }
