@@ -20,7 +20,8 @@ from typing import Any
 
 from ..errors import MissingExtraError
 
-__all__ = ["RosUnavailableError", "require_ros", "spin_node", "make_executor", "realtime_thread", "ROS_EXTRA"]
+__all__ = ["RosUnavailableError", "require_ros", "spin_node", "make_executor", "realtime_thread", "realtime_middleware",
+           "MIDDLEWARE_PROFILE", "ROS_EXTRA"]
 
 ROS_EXTRA = "sabre-mpc[ros]"
 
@@ -66,6 +67,33 @@ def realtime_thread(priority: int) -> bool:
         os.sched_setscheduler(0, fifo | getattr(os, "SCHED_RESET_ON_FORK", 0), os.sched_param(min(int(priority), 99)))
     except OSError:
         return False
+    return True
+
+
+#: sabre's Fast DDS profile: the default transports with their receive threads under SCHED_FIFO.
+MIDDLEWARE_PROFILE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "fastdds_realtime.xml")
+
+#: The receive threads' SCHED_FIFO priority in :data:`MIDDLEWARE_PROFILE`.
+MIDDLEWARE_PRIORITY = 65
+
+
+def realtime_middleware() -> bool:
+    """Points Fast DDS at :data:`MIDDLEWARE_PROFILE` for the participants this process creates
+    afterwards (call it before ``rclpy.init``): its receive threads then run under SCHED_FIFO,
+    so that a message reaches a 1 kHz callback without waiting for the planner or any other
+    normally scheduled thread to give up a core. Changes nothing and returns False where a
+    profile is already chosen (``FASTDDS_DEFAULT_PROFILES_FILE``: the user's own wins), where
+    another middleware is selected, or where the OS does not permit SCHED_FIFO (probed on a
+    short-lived thread, so that Fast DDS never logs a refused priority)."""
+    if os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE") or os.environ.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp") != "rmw_fastrtps_cpp":
+        return False
+    permitted: list[bool] = []
+    probe = threading.Thread(target=lambda: permitted.append(realtime_thread(MIDDLEWARE_PRIORITY)), name="sabre-rt-probe")
+    probe.start()
+    probe.join()
+    if not permitted[0]:
+        return False
+    os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = MIDDLEWARE_PROFILE
     return True
 
 

@@ -19,7 +19,7 @@ from ..controller import Controller, ControllerConfig
 from ..errors import SabreError
 from ..realtime import RealtimeCascade
 from ..scene import Scene
-from . import require_ros, spin_node
+from . import realtime_middleware, require_ros, spin_node
 from .conversions import JointMap, LowPass, MessageError, tau_ext_from_wrench, world_to_base
 from .durations import Durations
 from .estimator import ObjectStateEstimator
@@ -377,6 +377,7 @@ def run_controller(overrides: dict[str, Any] | None = None, ros_args: list[str] 
     """Runs the controller node until SIGINT or SIGTERM; prints a one-line JSON summary
     (``SABRE_SUMMARY {...}``) on exit."""
     rclpy = require_ros()
+    realtime_middleware()
     rclpy.init(args=["sabre_controller"] + (ros_args or []), signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     node = ControllerNode(overrides)
     spin_node(node, node.shutdown, priority=int(node.params["realtime_priority"]))

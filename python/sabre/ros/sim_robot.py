@@ -19,7 +19,7 @@ from ..controller import paper_start_state
 from ..errors import SabreError
 from ..scene import Scene
 from ..sim import Plant
-from . import realtime_thread, require_ros, spin_node
+from . import realtime_middleware, realtime_thread, require_ros, spin_node
 from .controller_node import BASE_JOINTS, stamp_seconds
 from .conversions import base_to_world
 from .durations import Durations
@@ -310,6 +310,7 @@ def run_sim_robot(overrides: dict[str, Any] | None = None, ros_args: list[str] |
     """Runs the simulated robot until SIGINT/SIGTERM, ``duration`` or success (``stop_on_success``);
     prints a one-line JSON summary (``SABRE_SUMMARY {...}``) on exit."""
     rclpy = require_ros()
+    realtime_middleware()
     rclpy.init(args=["sabre_sim_robot"] + (ros_args or []), signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     node = SimRobotNode(overrides)
     node.start()
