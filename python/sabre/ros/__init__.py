@@ -10,6 +10,7 @@ plain NumPy and import without ROS.
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import signal
@@ -21,7 +22,7 @@ from typing import Any
 from ..errors import MissingExtraError
 
 __all__ = ["RosUnavailableError", "require_ros", "spin_node", "make_executor", "realtime_thread", "realtime_middleware",
-           "MIDDLEWARE_PROFILE", "ROS_EXTRA"]
+           "MIDDLEWARE_PROFILE", "PeriodicThread", "ROS_EXTRA"]
 
 ROS_EXTRA = "sabre-mpc[ros]"
 
@@ -97,6 +98,38 @@ def realtime_middleware() -> bool:
     return True
 
 
+class PeriodicThread:
+    """Calls ``work()`` every ``period`` s on a normally scheduled thread of its own until
+    :meth:`stop`. The nodes publish their status this way: its percentiles take a millisecond or
+    more of Python, which on the executor's thread would hold up the 1 kHz callbacks queued
+    behind it. An exception in ``work`` goes to ``on_error`` and the thread carries on."""
+
+    def __init__(self, period: float, work: Callable[[], None], name: str,
+                 on_error: Callable[[Exception], None] | None = None) -> None:
+        self._period = float(period)
+        self._work = work
+        self._on_error = on_error
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+
+    def start(self) -> PeriodicThread:
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        while not self._stop.wait(self._period):
+            try:
+                self._work()
+            except Exception as exc:
+                if self._on_error is not None:
+                    self._on_error(exc)
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join()
+
+
 def make_executor(rclpy: Any) -> Any:
     """rclpy's events executor where the installed rclpy has it: it dispatches each message from
     C++ instead of rebuilding a Python wait set per message, which is what lets one interpreter
@@ -123,6 +156,10 @@ def spin_node(node: Any, shutdown: Callable[[], dict[str, Any]], done: threading
         node.node.get_logger().warning(
             f"real-time priority {priority} not permitted (needs CAP_SYS_NICE or an rtprio limit): "
             "the 1 kHz callbacks compete with the planner for the cores")
+    # The nodes' long-lived objects (modules, scene, controller) leave the collector's scans: a
+    # full collection on the 1 kHz path then walks only what was made since, not milliseconds' worth.
+    gc.collect()
+    gc.freeze()
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())

@@ -19,7 +19,7 @@ from ..controller import Controller, ControllerConfig
 from ..errors import SabreError
 from ..realtime import RealtimeCascade
 from ..scene import Scene
-from . import realtime_middleware, require_ros, spin_node
+from . import PeriodicThread, realtime_middleware, require_ros, spin_node
 from .conversions import JointMap, LowPass, MessageError, tau_ext_from_wrench, world_to_base
 from .durations import Durations
 from .estimator import ObjectStateEstimator
@@ -125,9 +125,11 @@ class ControllerNode:
         if p["object_state_topic"]:
             self.node.create_subscription(JointState, p["object_state_topic"], self._on_object, 10)
         self.node.create_subscription(Float64MultiArray, p["obstacle_topic"], self._on_obstacles, 10)
-        self.node.create_timer(1.0 / float(p["status_rate"]), self._publish_status)
+        self._status = PeriodicThread(1.0 / float(p["status_rate"]), self._publish_status, "sabre-status",
+                                      lambda exc: self.node.get_logger().error(f"status not published: {exc}"))
         self._watchdog = threading.Thread(target=self._watch, name="sabre-state-watchdog", daemon=True)
         self._watchdog.start()
+        self._status.start()
         self.node.get_logger().info(
             f"sabre controller: {p['object']} variant {p['variant']}, joints {list(self.scene.joint_names)}, "
             f"object state from {p['object_state_topic'] or 'the hand-pose estimator'}")
@@ -368,6 +370,7 @@ class ControllerNode:
     def shutdown(self) -> dict[str, Any]:
         """Sends the final zero command, stops the planner and the watchdog; returns the summary."""
         self._running = False
+        self._status.stop()
         self.publish_zero()
         self.cascade.stop()
         return self.summary()

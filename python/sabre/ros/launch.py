@@ -154,16 +154,16 @@ def format_run(run: BridgeRun) -> str:
     if not s or not c:
         return "a node exited without a summary; logs:\n" + "\n".join(f"--- {k}\n{v[-3000:]}" for k, v in run.logs.items())
     when = "—" if s["time_to_open"] is None else f"{s['time_to_open']:.2f} s"
-    dropped = s["states_published"] - s["echoes"]
+    dropped = s["answered_window"] - s["echoes"]
     lines = [
         f"[{s['object']}] success: {s['success']}, time to open: {when}, final opening {s['opening']:.3f}",
         f"  mean wrench in contact {s['mean_wrench']:.1f} N; tank {c['tank_energy']:.2f} J (min {c['tank_min']:.2f}, "
         f"floor {c['tank_floor']:.2f}), filter fallbacks {c['filter_fallbacks']}",
         f"  state-to-command latency p50 {s['latency_p50_ms']:.3f} ms, p99 {s['latency_p99_ms']:.3f} ms, "
         f"max {s['latency_max_ms']:.2f} ms",
-        f"  states {s['states_published']} for {s['ticks']} plant ticks, commands back {s['echoes']} "
-        f"({100 * s['delivered_fraction']:.2f} %), dropped {dropped}, late (> {s['period_ms']:.0f} ms) {s['late_echoes']}, "
-        f"rejected {c['rejected']}",
+        f"  states {s['states_published']} for {s['ticks']} plant ticks; commands back for {s['echoes']} of the "
+        f"{s['answered_window']} published while the controller ran ({100 * s['delivered_fraction']:.2f} %), dropped {dropped}, "
+        f"late (> {s['period_ms']:.0f} ms) {s['late_echoes']}, rejected {c['rejected']}",
         f"  plant: {s['sim_time']:.2f} s simulated in {s['wall_time']:.2f} s wall, late ticks {s['late_ticks']}, "
         f"skipped {s['skipped_ticks']}, loop work p99 {s['loop_work_p99_ms']:.3f} ms",
         f"  planner {c['planner_rate_hz']:.1f} Hz ({c['planner_iterations']} iterations), inner tick compute "

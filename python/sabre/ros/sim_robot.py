@@ -19,13 +19,17 @@ from ..controller import paper_start_state
 from ..errors import SabreError
 from ..scene import Scene
 from ..sim import Plant
-from . import realtime_middleware, realtime_thread, require_ros, spin_node
+from . import PeriodicThread, realtime_middleware, realtime_thread, require_ros, spin_node
 from .controller_node import BASE_JOINTS, stamp_seconds
 from .conversions import base_to_world
 from .durations import Durations
 from .params import SIM_ROBOT_PARAMETERS, declare
 
 __all__ = ["SimRobotNode", "run_sim_robot"]
+
+#: How many of the newest states an echo is matched against (4 s at 1 kHz); an older echo is
+#: counted as unmatched, not as an answer.
+RECENT_STATES = 4096
 
 
 class SimRobotNode:
@@ -78,12 +82,15 @@ class SimRobotNode:
         self.stats: dict[str, Any] = {
             "ticks": 0, "loops": 0, "late_ticks": 0, "skipped_ticks": 0, "overrun_loops": 0, "states_published": 0,
             "arm_commands": 0, "base_commands": 0, "rejected_commands": 0, "echoes": 0, "late_echoes": 0,
+            "unmatched_echoes": 0, "first_answered": None, "last_answered": None,
             "latency": Durations(), "stops": [], "loop_work": Durations(), "success_time": None,
             "contact_force_sum": 0.0, "contact_steps": 0,
             "hold_started": None, "hold_ended": None,
         }
         self._hold_at = float(p["hold_at_opening"]) * float(scene.o_upper[0] - scene.o_lower[0]) + float(scene.o_lower[0])
         self._hold_done = False
+        # The recent states by stamp (ns) → their index: an echo names the state it answers
+        self._published: dict[int, int] = {}
 
         qos = 10
         self.js_pub = self.node.create_publisher(JointState, p["joint_state_topic"], qos)
@@ -105,7 +112,8 @@ class SimRobotNode:
         self.node.create_subscription(JointState, p["command_echo_topic"], self._on_echo, qos)
         self.node.create_subscription(Bool, p["hold_topic"], self._on_hold, qos)
         self.node.create_subscription(Float64MultiArray, p["set_obstacles_topic"], self._on_set_obstacles, qos)
-        self.node.create_timer(1.0 / float(p["status_rate"]), self._publish_status)
+        self._status = PeriodicThread(1.0 / float(p["status_rate"]), self._publish_status, "sabre-status",
+                                      lambda exc: self.node.get_logger().error(f"status not published: {exc}"))
         self._thread = threading.Thread(target=self._loop, name="sabre-sim-robot", daemon=True)
         self.done = threading.Event()
         self.error: Exception | None = None
@@ -113,6 +121,7 @@ class SimRobotNode:
     def start(self) -> None:
         self._start_wall = time.monotonic()
         self._thread.start()
+        self._status.start()
 
     # Commands --------------------------------------------------------------------------------
     def _on_arm(self, msg: Any) -> None:
@@ -137,6 +146,13 @@ class SimRobotNode:
 
     def _on_echo(self, msg: Any) -> None:
         latency = time.time() - stamp_seconds(msg.header.stamp)
+        index = self._published.get(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+        if index is None:  # a command the controller sent on its own (watchdog, shutdown), or a very late one
+            self.stats["unmatched_echoes"] += 1
+            return
+        s = self.stats
+        s["first_answered"] = index if s["first_answered"] is None else min(s["first_answered"], index)
+        s["last_answered"] = index if s["last_answered"] is None else max(s["last_answered"], index)
         self.stats["echoes"] += 1
         self.stats["latency"].record(latency)
         if latency > self.period:
@@ -236,9 +252,23 @@ class SimRobotNode:
                 self._hold_done = True
 
     def _publish_state(self) -> None:
+        """Publishes the state of this tick, the joint state first: it is what the controller
+        answers, and the wrench and object state of the same instant, right behind it, reach
+        the controller for its next tick (a robot's drivers publish on their own schedules too)."""
         x = self.plant.state
         nq = self._nq
         stamp = self.node.get_clock().now().to_msg()
+        published = self._published
+        published[stamp.sec * 1_000_000_000 + stamp.nanosec] = self.stats["states_published"]  # before an echo can come
+        if len(published) > RECENT_STATES:
+            del published[next(iter(published))]
+        self.stats["states_published"] += 1
+        js = self._js
+        js.header.stamp = stamp
+        extra = [0.0] * len(self.extra)
+        js.position = [float(v) for v in x[:nq][self.publish_index]] + extra
+        js.velocity = [float(v) for v in x[nq : 2 * nq][self.publish_index]] + extra
+        self.js_pub.publish(js)
         w = self.plant.wrench
         m = self._wrench
         m.header.stamp = stamp
@@ -253,13 +283,6 @@ class SimRobotNode:
         seconds = int(self.plant.time)
         self._clock.clock.sec, self._clock.clock.nanosec = seconds, int(round((self.plant.time % 1.0) * 1e9)) % 1_000_000_000
         self.clock_pub.publish(self._clock)
-        js = self._js
-        js.header.stamp = stamp
-        extra = [0.0] * len(self.extra)
-        js.position = [float(v) for v in x[:nq][self.publish_index]] + extra
-        js.velocity = [float(v) for v in x[nq : 2 * nq][self.publish_index]] + extra
-        self.js_pub.publish(js)
-        self.stats["states_published"] += 1
 
     # Reports ---------------------------------------------------------------------------------
     def summary(self) -> dict[str, Any]:
@@ -267,6 +290,9 @@ class SimRobotNode:
         x = self.plant.state
         lat = s["latency"]
         wall = time.monotonic() - self._start_wall
+        # The states published while the controller answered: from the first answered one to the
+        # last (before it, the controller was starting; after it, it had stopped)
+        window = 0 if s["first_answered"] is None else s["last_answered"] - s["first_answered"] + 1
         return {
             "node": "sim_robot", "object": self.scene.object_name, "sim_time": self.plant.time, "wall_time": wall,
             "ticks": s["ticks"], "late_ticks": s["late_ticks"], "skipped_ticks": s["skipped_ticks"],
@@ -276,7 +302,8 @@ class SimRobotNode:
             "base_commands": s["base_commands"], "rejected_commands": s["rejected_commands"],
             "echoes": s["echoes"], "late_echoes": s["late_echoes"],
             "latency_p50_ms": lat.percentile_ms(50), "latency_p99_ms": lat.percentile_ms(99), "latency_max_ms": lat.max_ms(),
-            "delivered_fraction": s["echoes"] / s["states_published"] if s["states_published"] else 0.0,
+            "answered_window": window, "unmatched_echoes": s["unmatched_echoes"],
+            "delivered_fraction": s["echoes"] / window if window else 0.0,
             "stop_delays_ms": [d * 1e3 for d in s["stops"]], "command_timeout_ms": self.command_timeout * 1e3,
             "period_ms": self.period * 1e3,
             "opening": float(x[2 * self._nq]), "success": s["success_time"] is not None, "time_to_open": s["success_time"],
@@ -301,6 +328,7 @@ class SimRobotNode:
 
     def shutdown(self) -> dict[str, Any]:
         self._running = False
+        self._status.stop()
         if self._thread.is_alive():
             self._thread.join()
         return self.summary()
