@@ -34,7 +34,7 @@ def as_float_array(name: str, value: Any, shape: Sequence[int | None]) -> np.nda
     if array.ndim != len(shape) or any(e is not None and g != e for g, e in zip(array.shape, shape)):
         raise ShapeError(f"{name}: expected shape {_shape_text(shape)}, got {array.shape}")
     array = np.ascontiguousarray(array, dtype=np.float64)
-    if not np.all(np.isfinite(array)):
+    if not np.isfinite(array).all():
         bad = tuple(int(i) for i in np.argwhere(~np.isfinite(array))[0])
         raise InvalidValueError(f"{name}: entry {bad} is {array[bad]}; values must be finite")
     return array

@@ -44,8 +44,8 @@ class TickResult:
 
 def _interpolate(sequence: np.ndarray, t0: float, dt: float, t: float) -> np.ndarray:
     """Row k of ``sequence`` applies at t0 + k·dt: linear in between, held at both ends."""
-    s = float(np.clip((float(t) - t0) / dt, 0.0, len(sequence) - 1))
-    i = int(np.floor(s))
+    s = min(max((float(t) - t0) / dt, 0.0), float(len(sequence) - 1))
+    i = int(s)
     j = min(i + 1, len(sequence) - 1)
     a = s - i
     return (1.0 - a) * sequence[i] + a * sequence[j]

@@ -22,7 +22,7 @@ from typing import Any
 from ..errors import MissingExtraError
 
 __all__ = ["RosUnavailableError", "require_ros", "spin_node", "make_executor", "realtime_thread", "realtime_middleware",
-           "MIDDLEWARE_PROFILE", "PeriodicThread", "ROS_EXTRA"]
+           "gil_priority", "MIDDLEWARE_PROFILE", "PeriodicThread", "ROS_EXTRA"]
 
 ROS_EXTRA = "sabre-mpc[ros]"
 
@@ -99,13 +99,15 @@ def realtime_middleware() -> bool:
 
 
 class PeriodicThread:
-    """Calls ``work()`` every ``period`` s on a normally scheduled thread of its own until
-    :meth:`stop`. The nodes publish their status this way: its percentiles take a millisecond or
-    more of Python, which on the executor's thread would hold up the 1 kHz callbacks queued
-    behind it. An exception in ``work`` goes to ``on_error`` and the thread carries on."""
+    """Calls ``work()`` every ``period`` s on a thread of its own until :meth:`stop`. The nodes
+    publish their status this way: its percentiles take a millisecond or more of Python, which on
+    the executor's thread would hold up the 1 kHz callbacks queued behind it. The thread runs at
+    real-time ``priority`` where permitted (see :func:`gil_priority`). An exception in ``work``
+    goes to ``on_error`` and the thread carries on."""
 
     def __init__(self, period: float, work: Callable[[], None], name: str,
-                 on_error: Callable[[Exception], None] | None = None) -> None:
+                 on_error: Callable[[Exception], None] | None = None, priority: int = 0) -> None:
+        self._priority = int(priority)
         self._period = float(period)
         self._work = work
         self._on_error = on_error
@@ -117,6 +119,7 @@ class PeriodicThread:
         return self
 
     def _run(self) -> None:
+        realtime_thread(self._priority)
         while not self._stop.wait(self._period):
             try:
                 self._work()
@@ -128,6 +131,15 @@ class PeriodicThread:
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join()
+
+
+def gil_priority(callback_priority: int) -> int:
+    """The real-time priority for a node's other Python threads (status, watchdog), given its
+    1 kHz callbacks' ``callback_priority`` (0: none). They hold the GIL now and then; under
+    normal scheduling on a machine whose cores the real-time threads fill, such a thread can be
+    preempted while it holds the GIL and the callback then waits for it (priority inversion).
+    Just below the callbacks, it gets a core whenever it holds what they need."""
+    return max(1, int(callback_priority) - 20) if int(callback_priority) > 0 else 0
 
 
 def make_executor(rclpy: Any) -> Any:

@@ -19,7 +19,7 @@ from ..controller import Controller, ControllerConfig
 from ..errors import SabreError
 from ..realtime import RealtimeCascade
 from ..scene import Scene
-from . import PeriodicThread, realtime_middleware, require_ros, spin_node
+from . import PeriodicThread, gil_priority, realtime_middleware, realtime_thread, require_ros, spin_node
 from .conversions import JointMap, LowPass, MessageError, tau_ext_from_wrench, world_to_base
 from .durations import Durations
 from .estimator import ObjectStateEstimator
@@ -110,7 +110,7 @@ class ControllerNode:
 
         self._JointState = JointState
         self._Float64MultiArray = Float64MultiArray
-        self._Twist = Twist
+        self._twist = Twist()
         self.arm_pub = self.node.create_publisher(Float64MultiArray, p["arm_command_topic"], 10)
         self.base_pub = self.node.create_publisher(Twist, p["cmd_vel_topic"], 10)
         self.echo_pub = self.node.create_publisher(JointState, p["command_echo_topic"], 10)
@@ -126,7 +126,8 @@ class ControllerNode:
             self.node.create_subscription(JointState, p["object_state_topic"], self._on_object, 10)
         self.node.create_subscription(Float64MultiArray, p["obstacle_topic"], self._on_obstacles, 10)
         self._status = PeriodicThread(1.0 / float(p["status_rate"]), self._publish_status, "sabre-status",
-                                      lambda exc: self.node.get_logger().error(f"status not published: {exc}"))
+                                      lambda exc: self.node.get_logger().error(f"status not published: {exc}"),
+                                      priority=gil_priority(int(p["realtime_priority"])))
         self._watchdog = threading.Thread(target=self._watch, name="sabre-state-watchdog", daemon=True)
         self._watchdog.start()
         self._status.start()
@@ -278,7 +279,7 @@ class ControllerNode:
     def _publish_command(self, u: np.ndarray, yaw: float, stamp: Any) -> None:
         self._arm_msg.data = [float(v) for v in u[self.arm_index]]
         self.arm_pub.publish(self._arm_msg)
-        tw = self._Twist()
+        tw = self._twist  # the messages are reused: every caller holds self._lock, publish serializes at once
         if len(self.base_index) == 3:
             vx, vy, wz = world_to_base(u[self.base_index], yaw)
             tw.linear.x, tw.linear.y, tw.angular.z = vx, vy, wz
@@ -299,6 +300,7 @@ class ControllerNode:
         """Zeroes the command once the last accepted state is ``state_timeout`` old; resumes
         (nothing to do) when ticks come back."""
         period = float(self.params["watchdog_period"])
+        realtime_thread(gil_priority(int(self.params["realtime_priority"])))
         while self._running:
             age = time.monotonic() - self._last_recv
             if self.cascade.ticks and not self._stale and age > self.state_timeout:

@@ -59,7 +59,7 @@ class JointMap:
         if arr.shape != (len(names),):
             raise MessageError(f"joint state {field}: {arr.size} values for {len(names)} names")
         out = arr[idx]
-        if not np.all(np.isfinite(out)):
+        if not np.isfinite(out).all():
             bad = [self.wanted[i] for i in np.flatnonzero(~np.isfinite(out))]
             raise MessageError(f"joint state {field}: non-finite value for {bad}")
         return out

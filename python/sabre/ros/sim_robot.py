@@ -19,7 +19,7 @@ from ..controller import paper_start_state
 from ..errors import SabreError
 from ..scene import Scene
 from ..sim import Plant
-from . import PeriodicThread, realtime_middleware, realtime_thread, require_ros, spin_node
+from . import PeriodicThread, gil_priority, realtime_middleware, realtime_thread, require_ros, spin_node
 from .controller_node import BASE_JOINTS, stamp_seconds
 from .conversions import base_to_world
 from .durations import Durations
@@ -113,7 +113,8 @@ class SimRobotNode:
         self.node.create_subscription(Bool, p["hold_topic"], self._on_hold, qos)
         self.node.create_subscription(Float64MultiArray, p["set_obstacles_topic"], self._on_set_obstacles, qos)
         self._status = PeriodicThread(1.0 / float(p["status_rate"]), self._publish_status, "sabre-status",
-                                      lambda exc: self.node.get_logger().error(f"status not published: {exc}"))
+                                      lambda exc: self.node.get_logger().error(f"status not published: {exc}"),
+                                      priority=gil_priority(int(p["realtime_priority"]) - 10))
         self._thread = threading.Thread(target=self._loop, name="sabre-sim-robot", daemon=True)
         self.done = threading.Event()
         self.error: Exception | None = None
