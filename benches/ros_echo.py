@@ -2,7 +2,8 @@
 
 One process publishes a 10-joint JointState at 1 kHz from a SCHED_FIFO thread, the other answers
 each with a JointState carrying the same stamp, both with the executor and GIL settings of the
-bridge's nodes (sabre.ros.make_executor, GIL_SWITCH_INTERVAL); prints the round trip's p50, p99
+bridge's nodes (sabre.ros.make_executor, GIL_SWITCH_INTERVAL, the Fast DDS profile of
+sabre.ros.realtime_middleware unless --no-profile); prints the round trip's p50, p99
 and max over the messages after the first 500. Loopback only, a private ROS_DOMAIN_ID.
 
     .venv/bin/python benches/ros_echo.py --seconds 10
@@ -19,10 +20,12 @@ import time
 import numpy as np
 
 
-def run(role: str, seconds: float) -> None:
-    from sabre.ros import GIL_SWITCH_INTERVAL, make_executor, realtime_thread, require_ros
+def run(role: str, seconds: float, profile: bool) -> None:
+    from sabre.ros import GIL_SWITCH_INTERVAL, make_executor, realtime_middleware, realtime_thread, require_ros
 
     rclpy = require_ros()
+    if profile:
+        realtime_middleware()
     from sensor_msgs.msg import JointState
 
     rclpy.init()
@@ -81,18 +84,21 @@ def run(role: str, seconds: float) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=10.0)
+    parser.add_argument("--no-profile", action="store_true",
+                        help="without sabre's Fast DDS profile (the receive threads under normal scheduling)")
     parser.add_argument("--role", choices=("source", "echo"), default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.role is not None:
-        run(args.role, args.seconds)
+        run(args.role, args.seconds, not args.no_profile)
         return
     from sabre.ros.launch import Domain, ros_environment
 
     with Domain() as domain:
         env = ros_environment(domain.id)
-        echo = subprocess.Popen([sys.executable, __file__, "--role", "echo", "--seconds", str(args.seconds)], env=env)
+        flags = ["--seconds", str(args.seconds)] + (["--no-profile"] if args.no_profile else [])
+        echo = subprocess.Popen([sys.executable, __file__, "--role", "echo"] + flags, env=env)
         try:
-            subprocess.run([sys.executable, __file__, "--role", "source", "--seconds", str(args.seconds)], env=env, check=True)
+            subprocess.run([sys.executable, __file__, "--role", "source"] + flags, env=env, check=True)
         finally:
             echo.wait(args.seconds + 30.0)
 

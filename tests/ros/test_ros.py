@@ -320,3 +320,45 @@ def test_controller_zeroes_its_commands_when_the_sim_robot_dies(bridge):
     status = probe.status("diagnostics", "sabre/controller")
     assert json.loads(status["stale_zero_age_ms"])[-1] >= 50.0
     assert ctrl.process.poll() is None
+
+
+def test_the_sim_robot_counts_an_answer_per_state_it_names_over_the_states_published_while_answers_came(bridge):
+    """The probe answers every tenth joint state it receives (an echo with that state's stamp)
+    for a while, and sends three echoes with stamps no state had. The sim robot matches each
+    real echo to its state, counts the made-up ones apart, and divides by the states it
+    published from the first answered to the last: a tenth, whatever it published before or after."""
+    domain, probe, processes = bridge
+    sim = start_node("sim-robot", domain.id, ["--object", "shelf"])
+    processes.append(sim)
+    echo_pub = probe.node.create_publisher(probe.JointState, "/sabre/command", 50)
+    answered: list[float] = []
+    received = [0]
+    answering = threading.Event()
+
+    def answer(msg):
+        received[0] += 1
+        if answering.is_set() and received[0] % 10 == 0:
+            echo = probe.JointState(name=list(msg.name))
+            echo.header.stamp = msg.header.stamp
+            echo_pub.publish(echo)
+            answered.append(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
+
+    probe.node.create_subscription(probe.JointState, "/joint_states", answer, 100)
+    probe.wait_for(lambda: received[0] > 200, "joint states from the sim robot")
+    answering.set()
+    probe.wait_for(lambda: len(answered) >= 150, "150 answers")
+    answering.clear()
+    for k in range(3):
+        made_up = probe.JointState()
+        made_up.header.stamp = stamp_of(1.0 + 0.001 * k)
+        echo_pub.publish(made_up)
+    n = len(answered)
+    status = probe.wait_for(lambda: (lambda s: s if s and int(s["echoes"]) == n and int(s["unmatched_echoes"]) == 3 else None)(
+        probe.status("sim_status", "sabre/sim_robot")), "the sim robot's count of the answers")
+    window = int(status["answered_window"])
+    span_ticks = (answered[-1] - answered[0]) / 0.001 + 1  # the sim robot publishes a state per 1 ms tick
+    print(f"{n} answers, window {window} states, span {span_ticks:.0f} ms, published {status['states_published']}")
+    assert abs(window - span_ticks) <= 0.05 * span_ticks
+    assert int(status["states_published"]) > window + 200  # states before the first answer are outside
+    assert float(status["delivered_fraction"]) == pytest.approx(n / window)
+    assert 0.07 < n / window < 0.13

@@ -318,7 +318,8 @@ class SimRobotNode:
 
         s = self.summary()
         keys = ("sim_time", "ticks", "late_ticks", "skipped_ticks", "states_published", "arm_commands", "echoes",
-                "latency_p50_ms", "latency_p99_ms", "opening", "success", "robot_speed")
+                "answered_window", "unmatched_echoes", "delivered_fraction", "latency_p50_ms", "latency_p99_ms",
+                "opening", "success", "robot_speed")
         status = DiagnosticStatus(name="sabre/sim_robot", hardware_id="sim", level=DiagnosticStatus.OK,
                                   message="stopped: commands stale" if self._stopped else "following commands",
                                   values=[KeyValue(key=k, value=json.dumps(s[k])) for k in keys]

@@ -1,0 +1,118 @@
+"""The bridge's scheduling: sabre's Fast DDS profile puts the middleware's receive threads (and
+only those) under SCHED_FIFO in a node's process, a user's own profile or another middleware
+wins, and the status thread runs its work periodically and survives a failing call."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+
+import sabre.ros
+from sabre.ros import MIDDLEWARE_PRIORITY, PeriodicThread, realtime_middleware, realtime_thread
+from sabre.ros.launch import Domain, ros_environment
+
+THREADS = r"""
+import json, os, time
+from sabre.ros import realtime_middleware, require_ros
+rclpy = require_ros()
+chosen = realtime_middleware()
+rclpy.init()
+node = rclpy.create_node("sabre_profile_probe")
+pub = node.create_publisher(__import__("std_msgs.msg").msg.Bool, "/sabre/profile_probe", 10)
+time.sleep(0.5)
+threads = {}
+for tid in os.listdir("/proc/self/task"):
+    name = open(f"/proc/self/task/{tid}/comm").read().strip()
+    policy = os.sched_getscheduler(int(tid)) & 0xFF
+    threads[tid] = [name, policy, os.sched_getparam(int(tid)).sched_priority]
+print("RESULT " + json.dumps({"chosen": chosen, "profile": os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE"), "threads": list(threads.values())}))
+node.destroy_node()
+rclpy.shutdown()
+"""
+
+
+def fifo_permitted() -> bool:
+    result: list[bool] = []
+    probe = threading.Thread(target=lambda: result.append(realtime_thread(1)))
+    probe.start()
+    probe.join()
+    return result[0]
+
+
+def run_probe(env_changes: dict[str, str | None]) -> dict:
+    pytest.importorskip("rclpy", reason="the ROS 2 extra sabre-mpc[ros] (make test installs it)")
+    with Domain() as domain:
+        env = ros_environment(domain.id)
+        env.pop("FASTDDS_DEFAULT_PROFILES_FILE", None)
+        for k, v in env_changes.items():
+            if v is None:
+                env.pop(k, None)
+            else:
+                env[k] = v
+        out = subprocess.run([sys.executable, "-c", THREADS], capture_output=True, text=True, timeout=120, env=env)
+    assert out.returncode == 0, out.stdout + out.stderr
+    line = next(ln for ln in out.stdout.splitlines() if ln.startswith("RESULT "))
+    return json.loads(line[len("RESULT "):]) | {"output": out.stdout + out.stderr}
+
+
+def test_the_profile_puts_the_receive_threads_and_only_them_under_sched_fifo():
+    if not fifo_permitted():
+        pytest.skip("SCHED_FIFO is not permitted here (no CAP_SYS_NICE or rtprio limit)")
+    result = run_probe({})
+    assert result["chosen"] and result["profile"] == sabre.ros.MIDDLEWARE_PROFILE
+    assert "Error" not in result["output"], result["output"]  # Fast DDS logs a profile it cannot parse
+    receive = [t for t in result["threads"] if t[0].startswith(("dds.shm.", "dds.udp.")) and t[0].split(".")[-1].isdigit()]
+    assert len(receive) >= 2, result["threads"]  # shared memory and UDP, at least one port each
+    assert all(policy == os.SCHED_FIFO and priority == MIDDLEWARE_PRIORITY for _, policy, priority in receive), receive
+    others = [t for t in result["threads"] if t[0].startswith("dds.") and t not in receive]
+    assert others and all(policy == os.SCHED_OTHER for _, policy, _ in others), others
+
+
+def test_a_users_profile_or_another_middleware_is_left_alone(monkeypatch, tmp_path):
+    own = tmp_path / "mine.xml"
+    own.write_text("<dds/>")
+    monkeypatch.setenv("FASTDDS_DEFAULT_PROFILES_FILE", str(own))
+    assert realtime_middleware() is False
+    assert os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] == str(own)
+    monkeypatch.delenv("FASTDDS_DEFAULT_PROFILES_FILE")
+    monkeypatch.setenv("RMW_IMPLEMENTATION", "rmw_cyclonedds_cpp")
+    assert realtime_middleware() is False
+    assert "FASTDDS_DEFAULT_PROFILES_FILE" not in os.environ
+
+
+def test_with_a_users_profile_the_receive_threads_keep_normal_scheduling(tmp_path):
+    own = tmp_path / "mine.xml"
+    own.write_text('<?xml version="1.0" encoding="UTF-8" ?><dds xmlns="http://www.eprosima.com"><profiles>'
+                   '<participant profile_name="mine" is_default_profile="true"><rtps/></participant></profiles></dds>')
+    result = run_probe({"FASTDDS_DEFAULT_PROFILES_FILE": str(own)})
+    assert not result["chosen"] and result["profile"] == str(own)
+    assert "Error" not in result["output"], result["output"]
+    receive = [t for t in result["threads"] if t[0].startswith(("dds.shm.", "dds.udp."))]
+    assert receive and all(policy == os.SCHED_OTHER for _, policy, _ in receive), receive
+
+
+def test_periodic_thread_calls_its_work_and_carries_on_after_an_error():
+    calls: list[float] = []
+    errors: list[Exception] = []
+
+    def work():
+        calls.append(time.monotonic())
+        if len(calls) == 2:
+            raise ValueError("status failed once")
+
+    thread = PeriodicThread(0.01, work, "sabre-test-periodic", errors.append).start()
+    deadline = time.monotonic() + 60.0
+    while len(calls) < 6 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    thread.stop()
+    count = len(calls)
+    time.sleep(0.05)
+    assert count >= 6 and len(calls) == count  # stopped for good
+    assert len(errors) == 1 and str(errors[0]) == "status failed once"
+    assert all(b > a for a, b in zip(calls, calls[1:]))
