@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import _core
-from ._validate import as_array, as_count, as_finite, as_float_array, as_positive, core_config
+from ._validate import as_array, as_count, as_finite, as_float_array, as_non_negative, as_positive, core_config
 from .control import LowLevelController, Trace
 from .costs import Batch, CompiledCost
 from .errors import InvalidValueError, ShapeError
@@ -390,6 +390,32 @@ class Controller:
         self._stats = IterationStats(**stats)
         return self._stats
 
+    def predict(self, x: Sequence[float] | np.ndarray, t: float, delay: float) -> tuple[np.ndarray, float]:
+        """The state the rollout model predicts ``delay`` s after the measured state x (nx,) at
+        time t under the current plan (:meth:`reference`), on the planning grid: k =
+        round(delay / dt) steps ahead, so the prediction is for t + k·dt. Returns (state, time).
+
+        A real-time planner plans from it, with its own iteration time as the delay: its plan
+        takes over only once computed, and the robot has meanwhile followed the previous plan, so
+        a plan made from the measured state would start from where the robot no longer is. Gives
+        (x, t) back for k = 0, before the first :meth:`update` and where the rollout fails.
+
+        Raises:
+            ShapeError: x is not (nx,).
+            InvalidValueError: non-finite x or t, negative or non-finite delay.
+        """
+        x = as_float_array("x", x, (self.scene.nx,))
+        t = as_finite("t", t)
+        steps = int(round(as_non_negative("delay", delay) / self.config.dt))
+        if steps == 0 or self._stats is None:
+            return x, t
+        dt = self.config.dt
+        inputs = np.stack([self.reference(t + j * dt) for j in range(steps)])
+        result = self.model.rollout(x, inputs[None], threads=1)
+        if result.failed[0]:
+            return x, t
+        return np.array(result.states[0, steps]), t + steps * dt
+
     def _predict_dissipation(self, x: np.ndarray) -> np.ndarray:
         """−τ_extᵀu (W) at each step of the current plan's rollout from x (K,), for the tank's refill."""
         nominal = self.nominal
@@ -421,6 +447,27 @@ class Controller:
     def stats(self) -> IterationStats | None:
         """Statistics of the last planning iteration; None before the first :meth:`update`."""
         return self._stats
+
+
+@dataclass(frozen=True)
+class _RunningPlan:
+    """A plan as the inner loop follows it (a copy: the controller's own moves on when it re-plans)."""
+
+    nominal: np.ndarray
+    t0: float
+    dt: float
+    predicted: np.ndarray | None
+    floor: float | None
+    cost: float
+    phase: int
+
+    @staticmethod
+    def of(controller: Controller, cost: float) -> _RunningPlan:
+        predicted = controller.predicted_dissipation
+        return _RunningPlan(np.array(controller.nominal), float(controller.nominal_t0), float(controller.config.dt),
+                            None if predicted is None else np.array(predicted),
+                            controller.task.gain_inertia_floor(controller.phase), cost,
+                            controller.task.phases.index(controller.phase))
 
 
 @dataclass
@@ -650,6 +697,8 @@ def run_episode(
     on_replan: Callable[[float, np.ndarray, Plant, Controller], None] | None = None,
     record_plans: bool = False,
     viewer: Viewer | None = None,
+    plan_delay: float = 0.0,
+    delay_compensation: bool = True,
 ) -> Episode:
     """Runs the controller on the plant for ``duration`` seconds of simulated time; returns the traces.
 
@@ -671,13 +720,21 @@ def run_episode(
             (default: a :class:`LowLevelController` at the plant's step).
         on_replan: ``on_replan(t, x, plant, controller)`` runs before each re-plan (for
             disturbances); returning True ends the episode there.
+        plan_delay: seconds (default 0) between the state a plan is made from and the plan taking
+            over, during which the previous plan keeps running: the computation time of a planner
+            running against the wall clock (:class:`sabre.RealtimeCascade`, the ROS 2 bridge),
+            here in simulated time. At most the re-planning period.
+        delay_compensation: with a ``plan_delay``, plan from the state :meth:`Controller.predict`
+            expects when the plan takes over (default True), as :class:`sabre.RealtimeCascade` does.
 
     Raises:
-        InvalidValueError: non-positive duration or replan_rate, record_every < 1, non-finite x0.
+        InvalidValueError: non-positive duration or replan_rate, record_every < 1, non-finite x0,
+            a negative plan_delay or one longer than the re-planning period.
         ShapeError: x0 is not (nx,).
     """
     duration = as_positive("duration", duration)
     replan_rate = as_positive("replan_rate", replan_rate)
+    plan_delay = as_non_negative("plan_delay", plan_delay)
     record_every = as_count("record_every", record_every)
     plant = plant or Plant(scene)
     low_level = low_level or LowLevelController(scene, dt=plant.dt)
@@ -687,6 +744,9 @@ def run_episode(
     own_floor = low_level.gain_inertia_floor
     controller.reset(seed, 0.0)
     steps_per_plan = max(1, int(round(1.0 / (replan_rate * plant.dt))))
+    delay_steps = int(round(plan_delay / plant.dt))
+    if delay_steps > steps_per_plan:
+        raise InvalidValueError(f"plan_delay {plan_delay} s is longer than the re-planning period {1.0 / replan_rate} s")
     total_steps = max(1, int(round(duration / plant.dt)))
     show = duration > 10.0 if progress is None else progress
     bar = None
@@ -702,6 +762,7 @@ def run_episode(
 
     planning_times = []
     success_time = None
+    running: _RunningPlan | None = None  # the plan the inner loop follows while the next one is computed
     wall = time.perf_counter()
     try:
         done = 0
@@ -712,16 +773,23 @@ def run_episode(
             t = plant.time
             if on_replan is not None and on_replan(t, x, plant, controller) is True:
                 break
-            stats = controller.update(x, t)
+            if delay_steps and delay_compensation:
+                stats = controller.update(*controller.predict(x, t, delay_steps * plant.dt))
+            else:
+                stats = controller.update(x, t)
             planning_times.append(stats.iteration_time)
-            floor = controller.task.gain_inertia_floor(controller.phase)
-            low_level.gain_inertia_floor = own_floor if floor is None else floor
-            trace = low_level.follow(
-                plant, controller.nominal, controller.nominal_t0, controller.config.dt, steps, record_every,
-                safety=controller.inner_filter, tank=controller.tank,
-                predicted_dissipation=controller.predicted_dissipation,
-            )
-            chunks.append(trace, cost=stats.nominal_cost, phase=controller.task.phases.index(controller.phase))
+            plan = _RunningPlan.of(controller, stats.nominal_cost)
+            segments = [(running or plan, min(delay_steps, steps)), (plan, steps - min(delay_steps, steps))]
+            for segment, count in segments:
+                if count == 0:
+                    continue
+                low_level.gain_inertia_floor = own_floor if segment.floor is None else segment.floor
+                trace = low_level.follow(
+                    plant, segment.nominal, segment.t0, segment.dt, count, record_every,
+                    safety=controller.inner_filter, tank=controller.tank, predicted_dissipation=segment.predicted,
+                )
+                chunks.append(trace, cost=segment.cost, phase=segment.phase)
+            running = plan
             if plans is not None:
                 plans.append(t, x, plant)
                 if viewer is not None:
