@@ -73,9 +73,12 @@ def _read(block: np.ndarray, tries: int = 1000) -> tuple[float, np.ndarray] | No
 
 
 def _planner_main(factory: Callable[[], Any], state_raw: Any, plan_raw: Any, dims: tuple[int, int, int],
-                  commands: Any, errors: Any, stop: Any, min_period: float, t0: float, nice: int, idle: bool) -> None:
+                  commands: Any, errors: Any, stop: Any, min_period: float, t0: float, nice: int, idle: bool,
+                  compensate: bool) -> None:
     """The planner process: build the controller, then plan on the newest shared state until told
-    to stop. SIGINT is the parent's to handle (it stops the planner through ``stop``)."""
+    to stop, with ``compensate`` from the state predicted when the plan will take over (the last
+    iteration's time from reading the state to handing the plan over). SIGINT is the parent's to
+    handle (it stops the planner through ``stop``)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if nice:
         try:
@@ -97,6 +100,7 @@ def _planner_main(factory: Callable[[], Any], state_raw: Any, plan_raw: Any, dim
         controller = factory()
         phases = tuple(controller.task.phases)
         controller.reset(t0=t0)
+        delay = 0.0
         while not stop.is_set() and os.getppid() == parent:  # an orphan (its parent killed) stops
             started = time.perf_counter()
             while True:
@@ -108,8 +112,11 @@ def _planner_main(factory: Callable[[], Any], state_raw: Any, plan_raw: Any, dim
             read = _read(state)
             if read is None:
                 continue
+            taken = time.perf_counter()
             copy = read[1]
             t, x = float(copy[1]), copy[_STATE_HEADER : _STATE_HEADER + nx]
+            if compensate:
+                x, t = controller.predict(x, t, delay)
             stats = controller.update(x, t)
             floor = controller.task.gain_inertia_floor(controller.phase)
             predicted = controller.predicted_dissipation
@@ -121,6 +128,7 @@ def _planner_main(factory: Callable[[], Any], state_raw: Any, plan_raw: Any, dim
             if predicted is not None:
                 values.append((_PLAN_HEADER + steps * nu, np.asarray(predicted, dtype=np.float64)[:steps]))
             _write(plan, values)
+            delay = time.perf_counter() - taken
             rest = min_period - (time.perf_counter() - started)
             if rest > 0.0:
                 stop.wait(rest)
@@ -136,17 +144,21 @@ class PlannerProcess:
     build the same controller (scene, task, configuration) the inner loop holds, so that both agree
     on the plan's shape and the obstacles' ids. The process runs at ``nice`` (added niceness) and,
     with ``idle``, under SCHED_IDLE where the OS has it, so that a machine with few cores serves the
-    1 kHz path and the middleware's threads first.
+    1 kHz path and the middleware's threads first. With ``compensate`` (default) each plan is made
+    from :meth:`Controller.predict` of the shared state, a delay ahead: the last iteration's time
+    from reading the state to handing its plan over, which the inner loop spent on the previous plan.
     """
 
     def __init__(self, factory: Callable[[], Any], *, nx: int, steps: int, nu: int, phases: tuple[str, ...],
-                 min_replan_period: float, nice: int, idle: bool = False, start_timeout: float = 120.0) -> None:
+                 min_replan_period: float, nice: int, idle: bool = False, compensate: bool = True,
+                 start_timeout: float = 120.0) -> None:
         self._factory = factory
         self._dims = (int(nx), int(steps), int(nu))
         self._phases = tuple(phases)
         self._min_period = float(min_replan_period)
         self._nice = int(nice)
         self._idle = bool(idle)
+        self._compensate = bool(compensate)
         self._start_timeout = float(start_timeout)
         self._ctx = multiprocessing.get_context("spawn")
         self._state_raw = self._ctx.RawArray("d", _STATE_HEADER + int(nx))
@@ -176,7 +188,7 @@ class PlannerProcess:
         self._process = self._ctx.Process(
             target=_planner_main, name="sabre-planner", daemon=True,
             args=(self._factory, self._state_raw, self._plan_raw, self._dims, self._commands, self._errors,
-                  self._stop, self._min_period, float(t0), self._nice, self._idle))
+                  self._stop, self._min_period, float(t0), self._nice, self._idle, self._compensate))
         try:
             self._process.start()
         except Exception as exc:  # pickling the factory, or the OS refusing a process

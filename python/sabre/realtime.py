@@ -61,11 +61,16 @@ class RealtimeCascade:
     ``controller`` serves the inner loop (its FILTER-QP and tank). Obstacles then go through the
     cascade's :meth:`add_obstacle` and friends, which reach both copies. None: a thread of this
     process plans on ``controller`` itself.
+
+    ``delay_compensation`` (default True): each plan takes over only once computed, while the inner
+    loop still follows the previous one, so the planner plans from the state
+    :meth:`Controller.predict` expects at that moment (its last iteration's time ahead) instead of
+    the measured one. ``run_episode(plan_delay=...)`` reproduces the delay in simulated time.
     """
 
     def __init__(self, controller: Controller, *, low_level: LowLevelController | None = None, inner_dt: float = 0.001,
                  min_replan_period: float = 0.0, planner_process: Callable[[], Controller] | None = None,
-                 planner_nice: int = 10, planner_idle: bool = False) -> None:
+                 planner_nice: int = 10, planner_idle: bool = False, delay_compensation: bool = True) -> None:
         if not isinstance(controller, Controller):
             raise TypeError(f"controller must be a sabre.Controller, got {type(controller).__name__}")
         if planner_process is not None and not callable(planner_process):
@@ -77,6 +82,8 @@ class RealtimeCascade:
         self._factory = planner_process
         self._planner_nice = int(planner_nice)
         self._planner_idle = bool(planner_idle)
+        self.delay_compensation = bool(delay_compensation)
+        self._delay = 0.0  # the planner thread's last time from reading a state to handing its plan over
         self._process: PlannerProcess | None = None
         self._obstacle_log: list[tuple[str, tuple[object, ...]]] = []  # replayed in each planner process
         self._phase = controller.phase
@@ -111,6 +118,7 @@ class RealtimeCascade:
         if self.low_level is not None:
             self.low_level.reset()
         self._latest = (x0, t0)
+        self._delay = 0.0
         self._stopped = False
         with self._lock:
             self._plan, self._predicted, self._floor = None, None, None
@@ -119,7 +127,8 @@ class RealtimeCascade:
             c = self.controller
             self._process = PlannerProcess(self._factory, nx=c.scene.nx, steps=c.config.horizon_steps, nu=c.scene.nu,
                                            phases=tuple(c.task.phases), min_replan_period=self.min_replan_period,
-                                           nice=self._planner_nice, idle=self._planner_idle)
+                                           nice=self._planner_nice, idle=self._planner_idle,
+                                           compensate=self.delay_compensation)
             for name, args in self._obstacle_log:
                 self._process.call(name, *args)
             try:
@@ -151,7 +160,10 @@ class RealtimeCascade:
         with self._lock:
             latest = self._latest
         assert latest is not None, "start() stores the first state before any planning"
+        taken = time.perf_counter()
         x, t = latest
+        if self.delay_compensation:
+            x, t = self.controller.predict(x, t, self._delay)
         self.controller.update(x, t)
         plan = (np.array(self.controller.nominal), float(self.controller.nominal_t0), float(self.controller.config.dt))
         predicted = self.controller.predicted_dissipation
@@ -164,6 +176,7 @@ class RealtimeCascade:
         stats = self.controller.stats
         self._iteration_time = float("nan") if stats is None else float(stats.iteration_time)
         self.iterations += 1
+        self._delay = time.perf_counter() - taken
 
     def _run(self) -> None:
         try:

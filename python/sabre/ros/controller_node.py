@@ -66,7 +66,8 @@ class ControllerNode:
         config = self.controller.config
         self.cascade = RealtimeCascade(self.controller, min_replan_period=float(p["min_replan_period"]),
                                        planner_process=factory if p["planner_process"] else None,
-                                       planner_nice=int(p["planner_nice"]), planner_idle=bool(p["planner_idle"]))
+                                       planner_nice=int(p["planner_nice"]), planner_idle=bool(p["planner_idle"]),
+                                       delay_compensation=bool(p["delay_compensation"]))
         # joint_names: the robot's names for sabre's joints, in sabre's order (Scene.joint_names)
         names = list(p["joint_names"]) or list(self.scene.joint_names)
         if len(names) != self.scene.nq:

@@ -42,6 +42,7 @@ CONTROLLER_PARAMETERS: dict[str, Any] = {
     "planner_process": True,  # plan in a process of its own (False: a thread sharing the interpreter)
     "planner_nice": 10,  # niceness added to the planner process: the middleware's threads come first
     "planner_idle": False,  # the planner process under SCHED_IDLE: only CPU time nothing else wants (a dedicated machine)
+    "delay_compensation": True,  # plan from the state predicted for when the plan takes over (its computation time ahead)
 }
 
 #: Simulated robot node (``python -m sabre sim-robot``).
