@@ -4,6 +4,7 @@ wins, and the status thread runs its work periodically and survives a failing ca
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import subprocess
@@ -115,4 +116,4 @@ def test_periodic_thread_calls_its_work_and_carries_on_after_an_error():
     time.sleep(0.05)
     assert count >= 6 and len(calls) == count  # stopped for good
     assert len(errors) == 1 and str(errors[0]) == "status failed once"
-    assert all(b > a for a, b in zip(calls, calls[1:]))
+    assert all(b > a for a, b in itertools.pairwise(calls))

@@ -86,7 +86,9 @@ def realtime_middleware() -> bool:
     profile is already chosen (``FASTDDS_DEFAULT_PROFILES_FILE``: the user's own wins), where
     another middleware is selected, or where the OS does not permit SCHED_FIFO (probed on a
     short-lived thread, so that Fast DDS never logs a refused priority)."""
-    if os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE") or os.environ.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp") != "rmw_fastrtps_cpp":
+    if os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE"):
+        return False
+    if os.environ.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp") != "rmw_fastrtps_cpp":
         return False
     permitted: list[bool] = []
     probe = threading.Thread(target=lambda: permitted.append(realtime_thread(MIDDLEWARE_PRIORITY)), name="sabre-rt-probe")
