@@ -115,6 +115,18 @@ pub struct Frames {
     root: Option<Isometry3<f64>>,
 }
 
+impl Frames {
+    /// World axis of joint `j` at the frames' configuration.
+    pub fn axis(&self, j: usize) -> Vector3<f64> {
+        self.axes[j]
+    }
+
+    /// World origin of joint `j`'s frame at the frames' configuration.
+    pub fn origin(&self, j: usize) -> Point3<f64> {
+        self.origins[j]
+    }
+}
+
 /// One Jacobian column: the velocity a unit joint rate gives `point` (linear) and the link (angular).
 fn fill_column(kind: JointKind, axis: &Vector3<f64>, origin: &Point3<f64>, point: &Point3<f64>, c: &mut [f64]) {
     match kind {
@@ -312,12 +324,22 @@ impl KinematicTree {
 
     /// Motion of a joint's child relative to the joint frame for coordinate value `value`.
     pub fn joint_motion(joint: &Joint, value: f64) -> Isometry3<f64> {
+        Self::moved(&Isometry3::identity(), joint, value)
+    }
+
+    /// `frame` (a joint's frame in the world) followed by the joint's motion at `value`: the pose
+    /// of the joint's child. The axis is a unit vector (the URDF loader normalises it).
+    fn moved(frame: &Isometry3<f64>, joint: &Joint, value: f64) -> Isometry3<f64> {
         match joint.kind {
-            JointKind::Fixed => Isometry3::identity(),
+            JointKind::Fixed => *frame,
             JointKind::Revolute => {
-                Isometry3::from_parts(Translation3::identity(), UnitQuaternion::from_scaled_axis(joint.axis * value))
+                let turn = UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_unchecked(joint.axis), value);
+                Isometry3::from_parts(frame.translation, frame.rotation * turn)
             }
-            JointKind::Prismatic => Isometry3::from_parts(Translation3::from(joint.axis * value), UnitQuaternion::identity()),
+            JointKind::Prismatic => Isometry3::from_parts(
+                Translation3::from(frame.translation.vector + frame.rotation * (joint.axis * value)),
+                frame.rotation,
+            ),
         }
     }
 
@@ -330,7 +352,7 @@ impl KinematicTree {
         for &j in &self.topological_joints {
             let joint = &self.joints[j];
             let value = joint.q_index.map_or(0.0, |i| q[i]);
-            out[joint.child] = out[joint.parent] * joint.origin * Self::joint_motion(joint, value);
+            out[joint.child] = Self::moved(&(out[joint.parent] * joint.origin), joint, value);
         }
     }
 
@@ -378,7 +400,7 @@ impl KinematicTree {
             frames.axes[j] = frame.rotation * joint.axis;
             frames.origins[j] = Point3::from(frame.translation.vector);
             let value = joint.q_index.map_or(0.0, |i| q[i]);
-            frames.poses[joint.child] = frame * Self::joint_motion(joint, value);
+            frames.poses[joint.child] = Self::moved(&frame, joint, value);
         }
         frames.q.clear();
         frames.q.extend_from_slice(q);
