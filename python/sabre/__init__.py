@@ -47,7 +47,7 @@ from .safety import (
 )
 from .scene import OBJECTS, ROBOTS, Scene
 from .scripted import ScriptedMotion, hook_and_pull
-from .sim import ContactPoint, Plant, RolloutModel, RolloutResult, default_threads
+from .sim import CONTACT_MODELS, ContactPoint, Plant, RolloutModel, RolloutResult, default_threads
 
 __all__ = [
     "VARIANTS",
@@ -60,6 +60,7 @@ __all__ = [
     "OBJECTS",
     "RolloutModel",
     "RolloutResult",
+    "CONTACT_MODELS",
     "Plant",
     "Trace",
     "ContactPoint",

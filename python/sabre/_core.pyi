@@ -134,6 +134,7 @@ class RolloutConfig:
     solver_iterations: int
     multibody_robot: bool
     skip_quiescent_steps: bool
+    contact_model: str
     def __new__(cls) -> RolloutConfig: ...
 
 @final

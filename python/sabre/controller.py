@@ -23,7 +23,7 @@ from .costs import Batch, CompiledCost
 from .errors import InvalidValueError, ShapeError
 from .safety import CLASSES, EnergyTank, SafetyConfig, SafetyFilter, TankRefill
 from .scene import Scene
-from .sim import MAX_THREADS, Plant, RolloutModel
+from .sim import CONTACT_MODELS, MAX_THREADS, Plant, RolloutModel
 from .tasks import OpenObject, Task
 
 if TYPE_CHECKING:
@@ -88,6 +88,8 @@ class ControllerConfig:
     #: Rollout-model settings (the closed loop the sampler predicts with).
     servo_bandwidth: float = _ROLLOUT.servo_bandwidth
     contact_friction: float = _ROLLOUT.contact_friction
+    #: how the rollout model resolves contacts (:data:`sabre.CONTACT_MODELS`): "reduced" or "rapier".
+    contact_model: str = _ROLLOUT.contact_model
     #: "N" (no filter), "I" (1 kHz FILTER-QP with the energy tank), "O" (Sequential FILTER-QP on
     #: the optimised sequence, which warm-starts the next round) or "IO" (both).
     variant: str = "N"
@@ -102,6 +104,8 @@ class ControllerConfig:
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
             raise InvalidValueError(f"variant must be one of {VARIANTS}, got {self.variant!r}")
+        if self.contact_model not in CONTACT_MODELS:
+            raise InvalidValueError(f"contact_model must be one of {CONTACT_MODELS}, got {self.contact_model!r}")
         if self.safety is not None and not isinstance(self.safety, SafetyConfig):
             raise InvalidValueError(f"safety must be a sabre.SafetyConfig, got {type(self.safety).__name__}")
         as_positive("tank_initial", self.tank_initial)
@@ -169,10 +173,11 @@ class IterationStats:
         iteration_time: wall time of the whole iteration (s): sampling, rollouts, cost, update, the
             task's guides and, with the outer filter, the sequential FILTER-QP.
         rollout_time: wall time of the parallel rollouts and their cost (s).
-        engine_steps: rollout steps, summed over the rollouts, that went through Rapier's pipeline
-            (the others were skipped as quiescent, see :class:`sabre.RolloutModel`).
-        engine_time: time spent inside Rapier's pipeline (s), summed over the workers, so
-            ``engine_time / (rollout_time * threads)`` is the physics engine's share of the rollouts.
+        engine_steps: rollout steps, summed over the rollouts, that went through the contact step
+            (contact detection and solve, or Rapier's pipeline with ``contact_model="rapier"``); the
+            others were skipped as quiescent, see :class:`sabre.RolloutModel`.
+        engine_time: time spent in those steps (s), summed over the workers, so
+            ``engine_time / (rollout_time * threads)`` is the contact physics' share of the rollouts.
         cost_min, cost_mean, cost_max: smallest, mean and largest finite rollout cost of the batch
             (dimensionless, the task's cost).
         nominal_cost: cost of the nominal (the sequence the reference follows) after the update.
@@ -234,7 +239,9 @@ class Controller:
         self.keep_samples = False
         self.last_samples: tuple[np.ndarray, np.ndarray] | None = None
         c = self.config
-        self.model = RolloutModel(scene, c.dt, servo_bandwidth=c.servo_bandwidth, contact_friction=c.contact_friction)
+        self.model = RolloutModel(
+            scene, c.dt, servo_bandwidth=c.servo_bandwidth, contact_friction=c.contact_friction, contact_model=c.contact_model
+        )
         task.check(scene)
         self.phase = task.initial_phase()
         self._compiled: dict[str, CompiledCost] = {}

@@ -9,6 +9,7 @@ import numpy as np
 
 from . import _core
 from ._validate import as_count, as_float_array, as_non_negative, as_positive, core_config, readonly
+from .errors import InvalidValueError
 from .scene import Scene
 
 #: Default bandwidth (Hz) of :attr:`Plant.measured_tau_ext`.
@@ -18,7 +19,21 @@ DEFAULT_TAU_EXT_CUTOFF: float = _core.DEFAULT_TAU_EXT_CUTOFF
 _ROLLOUT = _core.RolloutConfig()
 _PLANT = _core.PlantConfig()
 
-__all__ = ["RolloutModel", "RolloutResult", "Plant", "ContactPoint", "default_threads", "MAX_THREADS", "DEFAULT_TAU_EXT_CUTOFF"]
+__all__ = [
+    "RolloutModel",
+    "RolloutResult",
+    "Plant",
+    "ContactPoint",
+    "default_threads",
+    "MAX_THREADS",
+    "DEFAULT_TAU_EXT_CUTOFF",
+    "CONTACT_MODELS",
+]
+
+#: The rollout model's contact paths: "reduced" (contacts from parry's manifolds, one small soft
+#: solve in sabre against the object's joint coordinates) and "rapier" (Rapier's whole pipeline,
+#: the reference the reduced path is validated against; several times slower in contact).
+CONTACT_MODELS = ("reduced", "rapier")
 
 #: Largest worker-thread count accepted (pools are cached per size).
 MAX_THREADS = 256
@@ -40,10 +55,11 @@ class RolloutResult:
         wrench: (N, K, 6) force (N) and torque (N·m) on the hand and hook about the wrist flange, world frame.
         contact: (N, K) bool, robot–object contact carried force in that step.
         failed: (N,) bool, the physics diverged; that rollout is NaN from the failing step on.
-        engine_steps: (N,) int64, steps that went through Rapier's pipeline; the others were skipped
-            because nothing could move the object (``skip_quiescent_steps``).
-        engine_time: (N,) wall time (s) each rollout spent inside Rapier's pipeline, the physics
-            engine's own share of the work (the rest is the servo, contact measurement and cost).
+        engine_steps: (N,) int64, steps that went through the contact path (Rapier's pipeline, or
+            the reduced detection and solve); the others were skipped because nothing could move
+            the object (``skip_quiescent_steps``).
+        engine_time: (N,) wall time (s) each rollout spent in those steps, the physics engine's
+            own share of the work (the rest is the servo, contact measurement and cost).
             A timing, so it varies from run to run; everything else is deterministic.
     """
 
@@ -62,10 +78,14 @@ class RolloutModel:
     Robot joints follow the commanded velocities through a PI velocity servo, q̈ = Λ (u − q̇) +
     Λ_I ∫(u − q̇) + M(q)⁻¹ τ_ext, with Λ = ``servo_bandwidth`` (1/s) and Λ_I = ``servo_integral_gain``
     (1/s²) — the structure of the plant's low-level controller — pushed back by contact forces and
-    bounded by the joint torque limits; only the hand, hook and forearm colliders touch the object; the object is a
-    dynamic Rapier multibody with limits, damping, dry friction and gravity. With
-    ``multibody_robot=True`` the same servo loop is simulated by Rapier's multibody solver instead
-    (more faithful robot compliance, several times slower). While the object is statically held
+    bounded by the joint torque limits; only the hand, hook and forearm colliders touch the object,
+    as free bodies carrying the robot's effective mass; the object has joint limits, damping, dry
+    friction and gravity. ``contact_model`` (:data:`CONTACT_MODELS`) chooses how their contacts are
+    resolved: "reduced" finds them with parry's contact manifolds and solves them in sabre against
+    the object's joint coordinates; "rapier" runs Rapier's whole pipeline with the object as a
+    multibody, the reference the reduced path is tested against. With ``multibody_robot=True``
+    (Rapier only) the servo loop itself is simulated by Rapier's multibody solver (more faithful
+    robot compliance, several times slower). While the object is statically held
     (at rest, its dry friction or a limit holding it against gravity) and no contact body can reach
     it within a step, the physics step is skipped — it could not change anything — unless
     ``skip_quiescent_steps=False``.
@@ -87,9 +107,15 @@ class RolloutModel:
         solver_iterations: int = _ROLLOUT.solver_iterations,
         multibody_robot: bool = _ROLLOUT.multibody_robot,
         skip_quiescent_steps: bool = _ROLLOUT.skip_quiescent_steps,
+        contact_model: str = _ROLLOUT.contact_model,
     ) -> None:
         if not isinstance(scene, Scene):
             raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
+        if contact_model not in CONTACT_MODELS:
+            raise InvalidValueError(f"contact_model must be one of {CONTACT_MODELS}, got {contact_model!r}")
+        if multibody_robot and contact_model != "rapier":
+            raise InvalidValueError("multibody_robot=True runs in Rapier's pipeline: it needs contact_model='rapier'")
+        self.contact_model = contact_model
         self.scene = scene
         self.dt = as_positive("dt", dt)
         config = core_config(
@@ -102,6 +128,7 @@ class RolloutModel:
             solver_iterations=as_count("solver_iterations", solver_iterations),
             multibody_robot=bool(multibody_robot),
             skip_quiescent_steps=bool(skip_quiescent_steps),
+            contact_model=contact_model,
         )
         self._core = _core.RolloutModel(scene._core, config)
 
@@ -132,7 +159,7 @@ class RolloutModel:
         )
 
     def __repr__(self) -> str:
-        return f"RolloutModel({self.scene!r}, dt={self.dt})"
+        return f"RolloutModel({self.scene!r}, dt={self.dt}, contact_model={self.contact_model!r})"
 
 
 @dataclass(frozen=True)

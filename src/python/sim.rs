@@ -13,7 +13,7 @@ use super::error::{run, run_detached};
 use super::safety::{PyEnergyTank, PySafetyFilter};
 use super::scene::PyScene;
 use crate::control::{follow_reference, follow_reference_safe, InnerSafety, TrackTrace};
-use crate::sim::{Plant, PlantConfig, RolloutConfig, RolloutModel};
+use crate::sim::{ContactModel, Plant, PlantConfig, RolloutConfig, RolloutModel};
 
 /// Settings of the rollout model; `RolloutConfig()` holds the core's defaults.
 #[pyclass(name = "RolloutConfig", module = "sabre._core", get_all, set_all)]
@@ -28,12 +28,21 @@ pub struct PyRolloutConfig {
     servo_integral_limit: f64,
     /// Coulomb friction coefficient of robot–object contacts.
     contact_friction: f64,
-    /// Rapier solver iterations per step.
+    /// Solver iterations per step (Rapier's substeps, or the reduced solve's sweeps).
     solver_iterations: usize,
     /// Simulate the servo with Rapier's multibody solver instead of the joint-space servo.
     multibody_robot: bool,
     /// Skip the physics step while the object is statically held and out of reach.
     skip_quiescent_steps: bool,
+    /// "reduced" (contacts solved in sabre) or "rapier" (Rapier's pipeline, the reference).
+    contact_model: String,
+}
+
+fn contact_model_name(model: ContactModel) -> &'static str {
+    match model {
+        ContactModel::Reduced => "reduced",
+        ContactModel::Rapier => "rapier",
+    }
 }
 
 impl From<RolloutConfig> for PyRolloutConfig {
@@ -47,13 +56,26 @@ impl From<RolloutConfig> for PyRolloutConfig {
             solver_iterations: c.solver_iterations,
             multibody_robot: c.multibody_robot,
             skip_quiescent_steps: c.skip_quiescent_steps,
+            contact_model: contact_model_name(c.contact_model).to_string(),
         }
     }
 }
 
-impl From<&PyRolloutConfig> for RolloutConfig {
-    fn from(c: &PyRolloutConfig) -> Self {
-        Self {
+impl TryFrom<&PyRolloutConfig> for RolloutConfig {
+    type Error = crate::SabreError;
+
+    fn try_from(c: &PyRolloutConfig) -> crate::Result<Self> {
+        let contact_model = match c.contact_model.as_str() {
+            "reduced" => ContactModel::Reduced,
+            "rapier" => ContactModel::Rapier,
+            other => {
+                return Err(crate::SabreError::invalid(
+                    "contact_model",
+                    format!("must be 'reduced' or 'rapier', got '{other}'"),
+                ))
+            }
+        };
+        Ok(Self {
             dt: c.dt,
             servo_bandwidth: c.servo_bandwidth,
             servo_integral_gain: c.servo_integral_gain,
@@ -62,7 +84,8 @@ impl From<&PyRolloutConfig> for RolloutConfig {
             solver_iterations: c.solver_iterations,
             multibody_robot: c.multibody_robot,
             skip_quiescent_steps: c.skip_quiescent_steps,
-        }
+            contact_model,
+        })
     }
 }
 
@@ -147,8 +170,7 @@ pub struct PyRolloutModel {
 impl PyRolloutModel {
     #[new]
     fn new(scene: &PyScene, config: &PyRolloutConfig) -> PyResult<Self> {
-        let config = RolloutConfig::from(config);
-        run(|| RolloutModel::new(scene.inner.clone(), config)).map(|m| Self { inner: Arc::new(m) })
+        run(|| RolloutModel::new(scene.inner.clone(), RolloutConfig::try_from(config)?)).map(|m| Self { inner: Arc::new(m) })
     }
 
     #[getter]

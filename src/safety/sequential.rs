@@ -2,7 +2,7 @@
 
 use super::filter::{FilterStatus, SafetyFilter};
 use crate::error::{ensure_finite, Result, SabreError};
-use crate::sim::{RolloutModel, SimWorld};
+use crate::sim::{RolloutModel, RolloutWorld};
 
 /// A filtered sequence and the rollout it produces.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -33,7 +33,13 @@ impl SafetyFilter {
 
     /// [`Self::filter_sequence`] in a caller-held world, already placed at x0 (see
     /// [`RolloutModel::reset_world`]); `out` is overwritten and its buffers reused.
-    pub fn filter_sequence_in(&mut self, world: &mut SimWorld, x0: &[f64], u: &[f64], out: &mut SequenceOutput) -> Result<()> {
+    pub fn filter_sequence_in(
+        &mut self,
+        world: &mut RolloutWorld,
+        x0: &[f64],
+        u: &[f64],
+        out: &mut SequenceOutput,
+    ) -> Result<()> {
         let scene = self.scene().clone();
         let (nq, nx) = (scene.nq(), scene.nx());
         let other = world.scene();
@@ -64,7 +70,7 @@ impl SafetyFilter {
         result
     }
 
-    fn run_sequence(&mut self, world: &mut SimWorld, u: &[f64], out: &mut SequenceOutput) -> Result<()> {
+    fn run_sequence(&mut self, world: &mut RolloutWorld, u: &[f64], out: &mut SequenceOutput) -> Result<()> {
         let (nq, nx, k) = (self.scene().nq(), self.scene().nx(), out.k);
         for step in 0..k {
             let (done, rest) = out.states.split_at_mut((step + 1) * nx);

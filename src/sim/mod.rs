@@ -1,15 +1,22 @@
-//! Rapier worlds: the reduced-order rollout model (batch, parallel) and the full-dynamics plant.
+//! Simulation: the reduced-order rollout model (batch, parallel; its contacts through Rapier's
+//! pipeline or the reduced path solved in sabre) and the full-dynamics plant on Rapier.
 
 pub mod evaluator;
 pub mod plant;
+pub mod quiescence;
+pub mod reduced;
 pub mod rollout;
+pub mod rollout_world;
+pub mod servo;
 #[cfg(test)]
 pub(crate) mod test_scene;
 pub mod world;
 
 pub use evaluator::{StepEvaluator, StepView};
 pub use plant::{Plant, PlantConfig, DEFAULT_TAU_EXT_CUTOFF};
-pub use rollout::{default_threads, RolloutBatch, RolloutConfig, RolloutModel, MAX_BATCH_ELEMENTS};
+pub use reduced::{ReducedConfig, ReducedWorld};
+pub use rollout::{default_threads, ContactModel, RolloutBatch, RolloutConfig, RolloutModel, MAX_BATCH_ELEMENTS};
+pub use rollout_world::RolloutWorld;
 pub use world::{EngineClock, Interaction, SimWorld};
 
 /// A joint moving faster than this multiple of its velocity limit (or, for the object's joints,

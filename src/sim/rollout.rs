@@ -6,10 +6,24 @@ use std::sync::{Arc, Mutex, OnceLock};
 use rayon::prelude::*;
 
 use super::evaluator::StepEvaluator;
+use super::reduced::{ReducedConfig, ReducedWorld};
+use super::rollout_world::RolloutWorld;
+use super::servo::ServoGains;
 use super::world::{RobotColliders, RobotDrive, SimWorld, WorldConfig};
 use crate::error::{ensure_finite, Result, SabreError};
 use crate::interrupt::Cancel;
 use crate::model::scene::Scene;
+
+/// How the rollout model resolves the contacts between the robot's contact bodies and the object.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ContactModel {
+    /// Contacts from parry's manifolds and one small soft-contact solve in sabre against the
+    /// object's joint coordinates ([`ReducedWorld`]).
+    Reduced,
+    /// Rapier's whole pipeline (broad and narrow phase, islands, the object as a multibody): the
+    /// reference the reduced path is validated against, several times slower in contact.
+    Rapier,
+}
 
 /// Settings of the rollout model.
 #[derive(Debug, Clone, PartialEq)]
@@ -29,7 +43,13 @@ pub struct RolloutConfig {
     /// (its state cannot change then); off, every step goes through Rapier.
     pub skip_quiescent_steps: bool,
     pub contact_friction: f64,
+    /// Solver iterations per step: substeps of Rapier's TGS solver on the Rapier path, sweeps of
+    /// the position-correcting solve on the reduced path. Both warm-start each contact from its
+    /// impulse of the previous step, and one iteration holds a hooked handle at 15 ms steps; each
+    /// further one adds to the cost of every contact step.
     pub solver_iterations: usize,
+    /// Which contact path the model steps (the multibody robot needs [`ContactModel::Rapier`]).
+    pub contact_model: ContactModel,
 }
 
 impl Default for RolloutConfig {
@@ -42,9 +62,8 @@ impl Default for RolloutConfig {
             multibody_robot: false,
             skip_quiescent_steps: true,
             contact_friction: 0.2,
-            // One TGS iteration holds a hooked handle at 15 ms steps; each further one adds to the
-            // cost of every contact step.
             solver_iterations: 1,
+            contact_model: ContactModel::Reduced,
         }
     }
 }
@@ -88,9 +107,9 @@ impl RolloutBatch {
 pub struct RolloutModel {
     scene: Arc<Scene>,
     config: RolloutConfig,
-    template: SimWorld,
+    template: RolloutWorld,
     /// Worlds handed to workers; each is restored from `template` before every rollout.
-    worlds: Mutex<Vec<SimWorld>>,
+    worlds: Mutex<Vec<RolloutWorld>>,
     /// Per joint (robot, then object) the speed beyond which a rollout has diverged.
     speed_bounds: Vec<f64>,
 }
@@ -147,6 +166,9 @@ struct RolloutSlices<'a> {
 
 impl RolloutModel {
     pub fn new(scene: Arc<Scene>, config: RolloutConfig) -> Result<Self> {
+        if config.solver_iterations == 0 {
+            return Err(SabreError::invalid("solver_iterations", "must be at least 1"));
+        }
         for (name, v) in [
             ("contact_friction", config.contact_friction),
             ("servo_integral_gain", config.servo_integral_gain),
@@ -156,25 +178,49 @@ impl RolloutModel {
                 return Err(SabreError::invalid(name, format!("must be finite and non-negative, got {v}")));
             }
         }
-        let world_config = WorldConfig {
-            dt: config.dt,
-            colliders: RobotColliders::Links(scene.rollout_contact_links.clone()),
-            drive: if config.multibody_robot {
-                RobotDrive::MultibodyServo {
-                    bandwidth: config.servo_bandwidth,
-                }
-            } else {
-                RobotDrive::KinematicServo {
-                    bandwidth: config.servo_bandwidth,
-                    integral_gain: config.servo_integral_gain,
-                    integral_limit: config.servo_integral_limit,
+        let template = match config.contact_model {
+            ContactModel::Rapier => {
+                let world_config = WorldConfig {
+                    dt: config.dt,
+                    colliders: RobotColliders::Links(scene.rollout_contact_links.clone()),
+                    drive: if config.multibody_robot {
+                        RobotDrive::MultibodyServo {
+                            bandwidth: config.servo_bandwidth,
+                        }
+                    } else {
+                        RobotDrive::KinematicServo {
+                            bandwidth: config.servo_bandwidth,
+                            integral_gain: config.servo_integral_gain,
+                            integral_limit: config.servo_integral_limit,
+                            skip_quiescent: config.skip_quiescent_steps,
+                        }
+                    },
+                    contact_friction: config.contact_friction,
+                    solver_iterations: config.solver_iterations,
+                };
+                RolloutWorld::Rapier(Box::new(SimWorld::new(scene.clone(), &world_config)?))
+            }
+            ContactModel::Reduced if config.multibody_robot => {
+                return Err(SabreError::invalid(
+                    "multibody_robot",
+                    "the multibody robot is simulated by Rapier's pipeline: it needs contact_model Rapier",
+                ))
+            }
+            ContactModel::Reduced => RolloutWorld::Reduced(Box::new(ReducedWorld::new(
+                scene.clone(),
+                &ReducedConfig {
+                    dt: config.dt,
+                    gains: ServoGains {
+                        bandwidth: config.servo_bandwidth,
+                        integral_gain: config.servo_integral_gain,
+                        integral_limit: config.servo_integral_limit,
+                    },
                     skip_quiescent: config.skip_quiescent_steps,
-                }
-            },
-            contact_friction: config.contact_friction,
-            solver_iterations: config.solver_iterations,
+                    contact_friction: config.contact_friction,
+                    iterations: config.solver_iterations,
+                },
+            )?)),
         };
-        let template = SimWorld::new(scene.clone(), &world_config)?;
         Ok(Self {
             speed_bounds: super::joint_speed_bounds(&scene).into_iter().map(|j| j.2).collect(),
             scene,
@@ -197,14 +243,14 @@ impl RolloutModel {
     }
 
     /// A fresh world of this model (a copy of its pristine template) for stepping one command at a
-    /// time: place it with [`Self::reset_world`], advance it with [`SimWorld::step_once`].
-    pub fn new_world(&self) -> SimWorld {
+    /// time: place it with [`Self::reset_world`], advance it with [`RolloutWorld::step_once`].
+    pub fn new_world(&self) -> RolloutWorld {
         self.template.clone()
     }
 
     /// Puts `world`, one of this model's, at state x0 with no contact history and a fresh servo.
-    pub fn reset_world(&self, world: &mut SimWorld, x0: &[f64]) -> Result<()> {
-        if !Arc::ptr_eq(&world.layout, &self.template.layout) {
+    pub fn reset_world(&self, world: &mut RolloutWorld, x0: &[f64]) -> Result<()> {
+        if !world.same_model(&self.template) {
             return Err(SabreError::invalid("world", "belongs to a different rollout model"));
         }
         self.scene.check_state(x0)?;
@@ -216,19 +262,19 @@ impl RolloutModel {
     /// Runs `f` on a world of the pool that the batch rollouts use, placed at x0, and returns the
     /// world to the pool; repeated single-world work (Sequential FILTER-QP) builds no new world.
     /// A world whose user panicked is dropped, not returned.
-    pub fn with_world<T>(&self, x0: &[f64], f: impl FnOnce(&mut SimWorld) -> Result<T>) -> Result<T> {
+    pub fn with_world<T>(&self, x0: &[f64], f: impl FnOnce(&mut RolloutWorld) -> Result<T>) -> Result<T> {
         let mut world = self.checkout();
         let result = self.reset_world(&mut world, x0).and_then(|_| f(&mut world));
         self.checkin(world);
         result
     }
 
-    fn checkout(&self) -> SimWorld {
+    fn checkout(&self) -> RolloutWorld {
         let popped = self.worlds.lock().unwrap_or_else(|e| e.into_inner()).pop();
         popped.unwrap_or_else(|| self.template.clone())
     }
 
-    fn checkin(&self, world: SimWorld) {
+    fn checkin(&self, world: RolloutWorld) {
         self.worlds.lock().unwrap_or_else(|e| e.into_inner()).push(world);
     }
 
@@ -236,7 +282,7 @@ impl RolloutModel {
     /// produced non-finite numbers, if it did.
     fn rollout_one(
         &self,
-        world: &mut SimWorld,
+        world: &mut RolloutWorld,
         x0: &[f64],
         u: &[f64],
         cost: Option<&dyn StepEvaluator>,

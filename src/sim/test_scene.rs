@@ -3,6 +3,8 @@
 
 use std::sync::Arc;
 
+use super::reduced::ReducedConfig;
+use super::servo::ServoGains;
 use super::world::{RobotColliders, RobotDrive, SimWorld, WorldConfig};
 use crate::model::scene::Scene;
 
@@ -115,4 +117,19 @@ pub fn world_at(scene: &Arc<Scene>, config: &WorldConfig, x: &[f64]) -> SimWorld
     let mut world = SimWorld::new(scene.clone(), config).expect("test world");
     world.set_state(x);
     world
+}
+
+/// The reduced contact path's configuration matching [`servo_config`] without integral action.
+pub fn reduced_config() -> ReducedConfig {
+    ReducedConfig {
+        dt: DT,
+        gains: ServoGains {
+            bandwidth: BANDWIDTH,
+            integral_gain: 0.0,
+            integral_limit: 0.1,
+        },
+        skip_quiescent: false,
+        contact_friction: 0.2,
+        iterations: 1,
+    }
 }

@@ -6,7 +6,6 @@ use std::sync::Arc;
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, UnitQuaternion, Vector3};
 use rapier3d_f64::prelude::*;
 
-use super::quiescence::link_spheres;
 use super::{
     pose_to_rapier, vec_from_rapier, vec_to_rapier, DofRef, EngineClock, Interaction, PhysicsState, RobotColliders, RobotDrive,
     SimWorld, WorldConfig, WorldLayout, OBJECT_GROUP, OWNER_OBJECT, OWNER_ROBOT, ROBOT_GROUP,
@@ -15,6 +14,8 @@ use crate::error::{Result, SabreError};
 use crate::model::dynamics::{joint_space_terms, DynamicsWorkspace};
 use crate::model::kinematics::{JointKind, KinematicTree, Shape};
 use crate::model::scene::Scene;
+use crate::sim::quiescence::Quiescence;
+use crate::sim::servo::{ServoLimits, ServoState};
 
 /// Rotation that maps the x axis onto `axis` (Rapier joints move along or about their local x).
 fn align_x_to(axis: &Vector3<f64>) -> UnitQuaternion<f64> {
@@ -23,7 +24,7 @@ fn align_x_to(axis: &Vector3<f64>) -> UnitQuaternion<f64> {
 }
 
 /// For each link: the link that owns its rigid body (fixed joints merge links) and its pose in that body.
-fn body_groups(tree: &KinematicTree) -> (Vec<usize>, Vec<Isometry3<f64>>) {
+pub(crate) fn body_groups(tree: &KinematicTree) -> (Vec<usize>, Vec<Isometry3<f64>>) {
     let n = tree.links.len();
     let mut group: Vec<usize> = (0..n).collect();
     let mut offset = vec![Isometry3::identity(); n];
@@ -70,16 +71,17 @@ fn mass_properties(tree: &KinematicTree, group: &[usize], offset: &[Isometry3<f6
     total
 }
 
-fn collider_for(shape: &Shape) -> (ColliderBuilder, Isometry3<f64>) {
+/// The parry shape of a collision primitive and the rotation that takes it to the URDF's axes
+/// (Rapier's and parry's cylinders run along y, URDF's along z).
+pub(crate) fn shared_shape(shape: &Shape) -> (SharedShape, Isometry3<f64>) {
     match *shape {
-        Shape::Box { half_extents: h } => (ColliderBuilder::cuboid(h.x, h.y, h.z), Isometry3::identity()),
-        Shape::Sphere { radius } => (ColliderBuilder::ball(radius), Isometry3::identity()),
-        // URDF cylinders run along z, Rapier's along y: rotate y onto z.
+        Shape::Box { half_extents: h } => (SharedShape::cuboid(h.x, h.y, h.z), Isometry3::identity()),
+        Shape::Sphere { radius } => (SharedShape::ball(radius), Isometry3::identity()),
         Shape::Cylinder { radius, half_length } => (
-            ColliderBuilder::cylinder(half_length, radius),
+            SharedShape::cylinder(half_length, radius),
             Isometry3::rotation(Vector3::x() * std::f64::consts::FRAC_PI_2),
         ),
-        Shape::Capsule { radius, half_length } => (ColliderBuilder::capsule_z(half_length, radius), Isometry3::identity()),
+        Shape::Capsule { radius, half_length } => (SharedShape::capsule_z(half_length, radius), Isometry3::identity()),
         Shape::Hull {
             ref points,
             half_extents,
@@ -87,15 +89,37 @@ fn collider_for(shape: &Shape) -> (ColliderBuilder, Isometry3<f64>) {
             let vertices: Vec<Vector> = points.iter().map(|p| Vector::new(p.x, p.y, p.z)).collect();
             // The URDF loader only keeps hulls with volume; a box of the same extents is the fallback
             // should parry still refuse one.
-            let builder = ColliderBuilder::convex_hull(&vertices)
-                .unwrap_or_else(|| ColliderBuilder::cuboid(half_extents.x, half_extents.y, half_extents.z));
-            (builder, Isometry3::identity())
+            let hull = SharedShape::convex_hull(&vertices)
+                .unwrap_or_else(|| SharedShape::cuboid(half_extents.x, half_extents.y, half_extents.z));
+            (hull, Isometry3::identity())
         }
     }
 }
 
+/// The link carrying the wrist force-torque sensor (`panda_link8`, else the last joint's child) and,
+/// per robot link, whether the sensor measures the forces on it (the link is at or beyond it).
+pub(crate) fn wrist_sensor(scene: &Scene) -> (usize, Vec<bool>) {
+    let sensor_link = scene
+        .robot
+        .link_id("panda_link8")
+        .unwrap_or_else(|| scene.robot.joints[*scene.robot.active_joints.last().expect("nq > 0")].child);
+    let beyond = (0..scene.robot.links.len())
+        .map(|l| {
+            let mut cur = Some(l);
+            while let Some(c) = cur {
+                if c == sensor_link {
+                    return true;
+                }
+                cur = scene.robot.links[c].parent_joint.map(|j| scene.robot.joints[j].parent);
+            }
+            false
+        })
+        .collect();
+    (sensor_link, beyond)
+}
+
 /// Smallest effective mass of the robot felt at `point` (link frame) of `link`: 1 / λ_max(J_v M⁻¹ J_vᵀ).
-fn effective_mass(tree: &KinematicTree, q: &[f64], link: usize, point: &Point3<f64>) -> f64 {
+pub(crate) fn effective_mass(tree: &KinematicTree, q: &[f64], link: usize, point: &Point3<f64>) -> f64 {
     let n = tree.nq();
     let mut ws = DynamicsWorkspace::default();
     let mut m = DMatrix::zeros(n, n);
@@ -182,8 +206,8 @@ fn build_tree(
         }
         let Some(body) = bodies[group[link]] else { continue };
         for c in &l.collisions {
-            let (builder, shape_frame) = collider_for(&c.shape);
-            let collider = builder
+            let (shape, shape_frame) = shared_shape(&c.shape);
+            let collider = ColliderBuilder::new(shape)
                 .position(pose_to_rapier(&(offset[link] * c.origin * shape_frame)))
                 .density(0.0)
                 .friction(friction)
@@ -306,17 +330,12 @@ impl SimWorld {
             multibody_joints: MultibodyJointSet::new(),
             soft_bodies: SoftBodySet::new(),
             ccd_solver: CCDSolver::new(),
-            robot_q: vec![0.0; nq],
-            robot_qd: vec![0.0; nq],
-            robot_integral: vec![0.0; nq],
-            command: vec![0.0; nq],
+            servo: ServoState::new(nq),
             last: Interaction {
                 contact: false,
                 tau_ext: vec![0.0; nq],
                 wrench: [0.0; 6],
             },
-            mass_factor: None,
-            mass_factor_q: Vec::new(),
         };
         let x0 = scene.default_state();
         let no = scene.no();
@@ -362,69 +381,21 @@ impl SimWorld {
             .filter(|_| matches!(config.drive, RobotDrive::KinematicServo { .. }))
             .map(|(link, b)| (link, b, Point3::from(vec_from_rapier(state.bodies[b].local_center_of_mass()))))
             .collect();
-        let mut dynamics = DynamicsWorkspace::default();
-        let mut mass_matrix = DMatrix::zeros(nq, nq);
-        let mut gravity_torque = DVector::zeros(nq);
-        joint_space_terms(
-            &scene.robot,
-            &Isometry3::identity(),
-            &scene.home_configuration(),
-            &Vector3::zeros(),
-            &mut dynamics,
-            &mut mass_matrix,
-            &mut gravity_torque,
-        );
-
-        let sensor_link = scene
-            .robot
-            .link_id("panda_link8")
-            .unwrap_or_else(|| scene.robot.joints[*scene.robot.active_joints.last().expect("nq > 0")].child);
-        let sensor_links = (0..scene.robot.links.len())
-            .map(|l| {
-                let mut cur = Some(l);
-                while let Some(c) = cur {
-                    if c == sensor_link {
-                        return true;
-                    }
-                    cur = scene.robot.links[c].parent_joint.map(|j| scene.robot.joints[j].parent);
-                }
-                false
-            })
-            .collect();
+        // Buffers of the servo's contact term (it computes M(q) where the robot is).
+        let (dynamics, mass_matrix, gravity_torque) = (DynamicsWorkspace::default(), DMatrix::zeros(nq, nq), DVector::zeros(nq));
+        let (sensor_link, sensor_links) = wrist_sensor(&scene);
         let limits = scene.robot_limits();
-        let robot_spheres = link_spheres(&scene.robot, &|l| robot_links[l]);
-        let object_shapes = scene
-            .object
-            .links
-            .iter()
-            .enumerate()
-            .flat_map(|(link, l)| l.collisions.iter().map(move |c| (link, c.origin, c.shape.clone())))
-            .collect();
-        let object_friction = scene
-            .object
-            .active_joints
-            .iter()
-            .map(|&j| scene.object.joints[j].friction)
-            .collect();
         let layout = WorldLayout {
-            robot_spheres,
-            object_shapes,
-            object_friction,
+            quiescence: Quiescence::new(&scene, &|l| robot_links[l]),
             nq,
             no,
             drive: config.drive,
             proxies,
-            acceleration_limits: limits
-                .iter()
-                .enumerate()
-                .map(|(i, l)| l.effort / mass_matrix[(i, i)].max(1e-9))
-                .collect(),
-            position_limits: limits.iter().map(|l| (l.lower, l.upper)).collect(),
+            servo_limits: ServoLimits::new(&scene),
             robot_handle: robot.first_joint,
             object_handle: object.first_joint.expect("object has joints"),
             robot_dofs: robot.dofs,
             object_dofs: object.dofs,
-            velocity_limits: limits.iter().map(|l| l.velocity).collect(),
             effort_limits: limits.iter().map(|l| l.effort).collect(),
             sensor_links,
             sensor_link,

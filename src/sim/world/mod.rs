@@ -1,12 +1,12 @@
 //! The Rapier world of one robot and one articulated object: its types (configuration, layout,
 //! mutable physics state, interaction readings) and the conversions the other files share. What
 //! each part of the world does lives beside it: `build` (construction), `servo` (driving the robot
-//! and setting or reading the state), `step` (one step and its evaluation), `quiescence` (steps
-//! that cannot move the object) and `contacts` (τ_ext, the wrist wrench and contact reports).
+//! and setting or reading the state), `step` (one step, the quiescence test that skips it, and its
+//! evaluation) and `contacts` (τ_ext, the wrist wrench and contact reports).
 
 mod build;
+pub(crate) use build::{body_groups, effective_mass, shared_shape, wrist_sensor};
 mod contacts;
-mod quiescence;
 mod servo;
 mod step;
 
@@ -16,8 +16,10 @@ use nalgebra::{DMatrix, DVector, Isometry3, Point3, Vector3};
 use rapier3d_f64::prelude::*;
 
 use crate::model::dynamics::DynamicsWorkspace;
-use crate::model::kinematics::{Frames, Shape};
+use crate::model::kinematics::Frames;
 use crate::model::scene::Scene;
+use crate::sim::quiescence::Quiescence;
+use crate::sim::servo::{ServoLimits, ServoState};
 
 /// Which robot colliders exist in the world.
 #[derive(Debug, Clone, PartialEq)]
@@ -105,24 +107,18 @@ pub struct WorldLayout {
     /// Proxy bodies of the robot (kinematic servo): link owning the body, the body, its centre of
     /// mass in the link frame.
     proxies: Vec<(usize, RigidBodyHandle, Point3<f64>)>,
-    /// Largest joint acceleration the servo can produce: effort / M_ii at the home configuration.
-    acceleration_limits: Vec<f64>,
-    position_limits: Vec<(f64, f64)>,
+    /// Acceleration, velocity and position bounds of the robot's joints.
+    servo_limits: ServoLimits,
     robot_handle: Option<MultibodyJointHandle>,
     object_handle: MultibodyJointHandle,
     robot_dofs: Vec<DofRef>,
     object_dofs: Vec<DofRef>,
-    velocity_limits: Vec<f64>,
     effort_limits: Vec<f64>,
     /// Robot links whose contact forces the wrist force-torque sensor measures.
     pub sensor_links: Vec<bool>,
     pub sensor_link: usize,
-    /// Bounding spheres (link, centre in the link frame, radius) of the robot's contact geometry
-    /// and of the object's links, for the quiescence test.
-    robot_spheres: Vec<(usize, Point3<f64>, f64)>,
-    /// Object collision primitives (link, pose in the link frame, shape).
-    object_shapes: Vec<(usize, Isometry3<f64>, Shape)>,
-    object_friction: Vec<f64>,
+    /// The quiescence test's geometry and the object's dry friction.
+    quiescence: Quiescence,
 }
 
 /// Per-step interaction readings.
@@ -162,19 +158,10 @@ struct PhysicsState {
     multibody_joints: MultibodyJointSet,
     soft_bodies: SoftBodySet,
     ccd_solver: CCDSolver,
-    /// Robot configuration and velocity when the robot is a kinematic servo (else unused).
-    robot_q: Vec<f64>,
-    robot_qd: Vec<f64>,
-    /// Accumulated velocity error of the servo's integral term.
-    robot_integral: Vec<f64>,
-    /// Velocity command of the next step (servo drives).
-    command: Vec<f64>,
+    /// The robot when it is a kinematic servo; for the multibody servo only its command is used.
+    servo: ServoState,
     /// Interaction measured in the last step.
     last: Interaction,
-    /// Factorised robot mass matrix for the contact term of the kinematic servo, and the
-    /// configuration it was computed at (recomputed once the robot has moved on).
-    mass_factor: Option<nalgebra::linalg::Cholesky<f64, nalgebra::Dyn>>,
-    mass_factor_q: Vec<f64>,
 }
 
 /// A Rapier world holding one robot and one articulated object.
@@ -241,40 +228,4 @@ fn vec_from_rapier(v: Vector) -> Vector3<f64> {
 
 fn pose_to_rapier(iso: &Isometry3<f64>) -> Pose {
     Pose::from(*iso)
-}
-
-#[cfg(test)]
-mod tests {
-    use crate::sim::test_scene::{probe_and_drawer, servo_config, state, world_at};
-
-    #[test]
-    fn a_restored_world_repeats_a_fresh_one_bit_for_bit() {
-        let scene = probe_and_drawer();
-        let config = servo_config(400.0, true);
-        let x0 = state([0.62, 0.3], [0.3, 0.0], 0.0, 0.0);
-        let template = world_at(&scene, &config, &x0);
-        let run = |world: &mut super::SimWorld| {
-            let mut x = x0.clone();
-            (0..8)
-                .flat_map(|_| {
-                    world.step_once(&[0.3, 0.2], &mut x);
-                    x.iter()
-                        .chain(&world.interaction().tau_ext)
-                        .map(|v| v.to_bits())
-                        .collect::<Vec<_>>()
-                })
-                .collect::<Vec<_>>()
-        };
-        let mut fresh = template.clone();
-        let expected = run(&mut fresh);
-        // A world that has pushed the drawer elsewhere, restored and placed again.
-        let mut used = template.clone();
-        let mut x = x0.clone();
-        for _ in 0..20 {
-            used.step_once(&[1.0, -1.0], &mut x);
-        }
-        used.restore_from(&template);
-        used.set_state(&x0);
-        assert_eq!(run(&mut used), expected);
-    }
 }

@@ -2,11 +2,11 @@
 //! object lock, and setting or reading the state x = [q, q̇, o, ȯ] (proxies placed at the robot's
 //! forward kinematics).
 
-use nalgebra::{DVector, Isometry3, Vector3};
+use nalgebra::Isometry3;
 use rapier3d_f64::prelude::*;
 
 use super::{pose_to_rapier, DofRef, RobotDrive, SimWorld};
-use crate::model::dynamics::joint_space_terms;
+use crate::sim::servo::ServoGains;
 
 impl SimWorld {
     fn set_tree_state(
@@ -52,12 +52,8 @@ impl SimWorld {
                 &mut self.scratch,
             ),
             None => {
-                self.state.robot_q.copy_from_slice(&x[..nq]);
-                self.state.robot_qd.copy_from_slice(&x[nq..2 * nq]);
-                self.state.robot_integral.iter_mut().for_each(|v| *v = 0.0);
-                self.state.mass_factor = None;
-                let qd = self.state.robot_qd.clone();
-                self.place_proxies(&qd);
+                self.state.servo.reset(&x[..nq], &x[nq..2 * nq]);
+                self.place_proxies();
             }
         }
         Self::set_tree_state(
@@ -69,19 +65,20 @@ impl SimWorld {
             &x[2 * nq + no..],
             &mut self.scratch,
         );
-        self.state.command.iter_mut().for_each(|v| *v = 0.0);
+        self.state.servo.command.iter_mut().for_each(|v| *v = 0.0);
         self.state.last.contact = false;
         self.state.last.tau_ext.iter_mut().for_each(|v| *v = 0.0);
         self.state.last.wrench = [0.0; 6];
     }
 
-    /// Places every proxy body at the forward kinematics of `robot_q` with the velocity that the
-    /// joint velocities `qd` give it.
-    fn place_proxies(&mut self, qd: &[f64]) {
+    /// Places every proxy body at the forward kinematics of the servo's configuration with the
+    /// velocity that its joint velocities give it.
+    fn place_proxies(&mut self) {
         let frames = &mut self.dynamics.frames;
+        let qd = &self.state.servo.qd;
         self.scene
             .robot
-            .update_frames(&Isometry3::identity(), &self.state.robot_q, frames);
+            .update_frames(&Isometry3::identity(), &self.state.servo.q, frames);
         for &(link, body, com) in &self.layout.proxies {
             let pose = frames.poses[link];
             let com_world = pose * com;
@@ -116,8 +113,8 @@ impl SimWorld {
                 }
             }
             None => {
-                x[..nq].copy_from_slice(&self.state.robot_q);
-                x[nq..2 * nq].copy_from_slice(&self.state.robot_qd);
+                x[..nq].copy_from_slice(&self.state.servo.q);
+                x[nq..2 * nq].copy_from_slice(&self.state.servo.qd);
             }
         }
         let (object, _) = mbs.get(self.layout.object_handle).expect("object");
@@ -132,15 +129,14 @@ impl SimWorld {
     /// joint velocity limits.
     pub fn set_velocity_command(&mut self, u: &[f64]) {
         let layout = self.layout.clone();
-        for (i, c) in self.state.command.iter_mut().enumerate() {
-            let limit = layout.velocity_limits[i];
-            *c = u[i].clamp(-limit, limit);
-        }
+        self.state.servo.set_command(u, &layout.servo_limits);
         if let (Some(handle), RobotDrive::MultibodyServo { bandwidth }) = (layout.robot_handle, layout.drive) {
             let (mb, _) = self.state.multibody_joints.get_mut(handle).expect("robot");
             for (i, d) in layout.robot_dofs.iter().enumerate() {
                 if let Some(link) = mb.link_mut(d.link_id) {
-                    link.joint.data.set_motor_velocity(d.axis, self.state.command[i], bandwidth);
+                    link.joint
+                        .data
+                        .set_motor_velocity(d.axis, self.state.servo.command[i], bandwidth);
                 }
             }
         }
@@ -208,75 +204,22 @@ impl SimWorld {
         }
     }
 
-    /// One step of the kinematic servo: semi-implicit Euler of q̈ = Λ (u − q̇) + Λ_I ∫(u − q̇) + M⁻¹ τ_ext.
-    pub(super) fn advance_kinematic_robot(&mut self, bandwidth: f64, integral_gain: f64, integral_limit: f64) {
-        let dt = self.params.dt;
-        let nq = self.layout.nq;
-        let in_contact = self.state.last.tau_ext.iter().any(|&t| t != 0.0);
-        // M(q) varies slowly; refactorising it only after a joint moved by MASS_REFRESH keeps the
-        // contact term within a few percent at a fraction of the cost.
-        const MASS_REFRESH: f64 = 0.02;
-        let stale = self.state.mass_factor.is_none()
-            || self
-                .state
-                .mass_factor_q
-                .iter()
-                .zip(&self.state.robot_q)
-                .any(|(a, b)| (a - b).abs() > MASS_REFRESH);
-        if in_contact && stale {
-            joint_space_terms(
-                &self.scene.robot,
-                &Isometry3::identity(),
-                &self.state.robot_q,
-                &Vector3::zeros(),
-                &mut self.dynamics,
-                &mut self.mass_matrix,
-                &mut self.gravity_torque,
-            );
-            self.state.mass_factor = self.mass_matrix.clone().cholesky();
-            self.state.mass_factor_q.clone_from(&self.state.robot_q);
-        }
-        let contact_acceleration = match (&self.state.mass_factor, in_contact) {
-            (Some(factor), true) => Some(factor.solve(&DVector::from_column_slice(&self.state.last.tau_ext))),
-            _ => None,
-        };
-        let mut q_next = std::mem::take(&mut self.scratch);
-        q_next.clear();
-        for i in 0..nq {
-            let qd = self.state.robot_qd[i];
-            let external = contact_acceleration.as_ref().map_or(0.0, |a| a[i]);
-            // The integral is the position lag behind the integrated command, ∫u dt − (q − q₀),
-            // booked with the same velocity that moves q so that it settles at zero lag exactly.
-            let integral = self.state.robot_integral[i];
-            let drive = bandwidth * self.state.command[i] + integral_gain * integral + external;
-            let target = (qd + dt * drive) / (1.0 + dt * bandwidth);
-            let max_change = self.layout.acceleration_limits[i] * dt;
-            let saturated = (target - qd).abs() > max_change;
-            let velocity_limit = self.layout.velocity_limits[i];
-            let unclamped = qd + (target - qd).clamp(-max_change, max_change);
-            let mut qd_next = unclamped.clamp(-velocity_limit, velocity_limit);
-            let saturated = saturated || qd_next != unclamped;
-            let (lower, upper) = self.layout.position_limits[i];
-            let mut next = self.state.robot_q[i] + dt * qd_next;
-            let at_limit = next < lower || next > upper;
-            if at_limit {
-                next = next.clamp(lower, upper);
-                qd_next = (next - self.state.robot_q[i]) / dt;
-            }
-            // Anti-windup: a joint that is saturated or at a limit does not accumulate lag it
-            // cannot act on.
-            if !saturated && !at_limit {
-                let lag = integral + dt * self.state.command[i] - (next - self.state.robot_q[i]);
-                self.state.robot_integral[i] = lag.clamp(-integral_limit, integral_limit);
-            }
-            q_next.push(next);
-            self.state.robot_qd[i] = qd_next;
-        }
-        // The proxies start the step where the robot is, moving as it will move during the step.
-        let qd = self.state.robot_qd.clone();
-        self.place_proxies(&qd);
-        self.state.robot_q.copy_from_slice(&q_next);
-        self.scratch = q_next;
+    /// One step of the kinematic servo (see [`ServoState::advance`]); the proxies start the step
+    /// where the robot is, moving as it will move during the step.
+    pub(super) fn advance_kinematic_robot(&mut self, gains: &ServoGains) {
+        let layout = self.layout.clone();
+        self.state.servo.advance(
+            gains,
+            &layout.servo_limits,
+            &self.scene,
+            &self.state.last.tau_ext,
+            self.params.dt,
+            &mut self.dynamics,
+            &mut self.mass_matrix,
+            &mut self.gravity_torque,
+        );
+        self.place_proxies();
+        self.state.servo.commit();
     }
 
     pub(super) fn read_robot_q(&self, q: &mut [f64]) {
@@ -287,7 +230,7 @@ impl SimWorld {
                     q[i] = d.value(robot);
                 }
             }
-            None => q.copy_from_slice(&self.state.robot_q),
+            None => q.copy_from_slice(&self.state.servo.q),
         }
     }
 }

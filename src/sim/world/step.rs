@@ -9,6 +9,7 @@ use nalgebra::Isometry3;
 use super::{EngineClock, Interaction, RobotDrive, SimWorld};
 use crate::model::scene::Scene;
 use crate::sim::evaluator::{StepEvaluator, StepView};
+use crate::sim::servo::ServoGains;
 
 impl SimWorld {
     pub fn scene(&self) -> &Scene {
@@ -35,7 +36,11 @@ impl SimWorld {
             skip_quiescent,
         } = self.layout.drive
         {
-            self.advance_kinematic_robot(bandwidth, integral_gain, integral_limit);
+            self.advance_kinematic_robot(&ServoGains {
+                bandwidth,
+                integral_gain,
+                integral_limit,
+            });
             if skip_quiescent && self.quiescent() {
                 // Nothing can touch the object and it is held at rest: the physics step would leave
                 // it exactly where it is, as Rapier's island sleeping would. Skip it.
@@ -133,6 +138,30 @@ impl SimWorld {
                 object: object_frames,
             },
         )
+    }
+}
+
+impl SimWorld {
+    /// [`Quiescence::holds`] for this world's state, with the contact prediction distance and 2 cm
+    /// as margin. The robot frames must be those of the step's start (placed proxies).
+    fn quiescent(&mut self) -> bool {
+        let (nq, no) = (self.layout.nq, self.layout.no);
+        let mut x = std::mem::take(&mut self.scratch);
+        x.resize(2 * (nq + no), 0.0);
+        self.read_state(&mut x);
+        let margin = self.params.normalized_prediction_distance * self.params.length_unit + 0.02;
+        let quiet = self.layout.quiescence.holds(
+            &self.scene,
+            &self.dynamics.frames,
+            &self.state.servo.qd,
+            &x[2 * nq..2 * nq + no],
+            &x[2 * nq + no..],
+            self.params.dt,
+            margin,
+            &mut self.jacobian,
+        );
+        self.scratch = x;
+        quiet
     }
 }
 

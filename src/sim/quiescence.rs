@@ -3,8 +3,8 @@
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
-use super::SimWorld;
-use crate::model::kinematics::{KinematicTree, Shape};
+use crate::model::kinematics::{Frames, KinematicTree, Shape};
+use crate::model::scene::Scene;
 
 /// Radius of a sphere about the primitive's centre that contains it.
 fn bounding_radius(shape: &Shape) -> f64 {
@@ -19,7 +19,7 @@ fn bounding_radius(shape: &Shape) -> f64 {
 
 /// Distance from `point` to a primitive placed at `pose` (exact for boxes and spheres, through the
 /// bounding sphere otherwise; never more than the true distance).
-fn distance_to_shape(pose: &Isometry3<f64>, shape: &Shape, point: &Point3<f64>) -> f64 {
+pub(crate) fn distance_to_shape(pose: &Isometry3<f64>, shape: &Shape, point: &Point3<f64>) -> f64 {
     let local = pose.inverse_transform_point(point);
     match *shape {
         Shape::Box { half_extents } => {
@@ -35,7 +35,7 @@ fn distance_to_shape(pose: &Isometry3<f64>, shape: &Shape, point: &Point3<f64>) 
 }
 
 /// One bounding sphere per link with collision geometry (of the links `include` accepts).
-pub(super) fn link_spheres(tree: &KinematicTree, include: &dyn Fn(usize) -> bool) -> Vec<(usize, Point3<f64>, f64)> {
+pub(crate) fn link_spheres(tree: &KinematicTree, include: &dyn Fn(usize) -> bool) -> Vec<(usize, Point3<f64>, f64)> {
     let mut out = Vec::new();
     for (link, l) in tree.links.iter().enumerate() {
         if l.collisions.is_empty() || !include(link) {
@@ -58,71 +58,97 @@ pub(super) fn link_spheres(tree: &KinematicTree, include: &dyn Fn(usize) -> bool
     out
 }
 
-impl SimWorld {
-    /// True when the object is at rest and statically held (dry friction at least its gravity
-    /// torque, or gravity pressing it onto a limit), and no robot contact body can reach any object
-    /// link within this step (bounding spheres, with the contact prediction distance and each
-    /// body's travel as margin). The robot frames must be those of the step's start (placed proxies).
-    pub(super) fn quiescent(&mut self) -> bool {
-        let (nq, no) = (self.layout.nq, self.layout.no);
-        let mut x = std::mem::take(&mut self.scratch);
-        x.resize(2 * (nq + no), 0.0);
-        self.read_state(&mut x);
-        let o = &x[2 * nq..2 * nq + no];
-        let od = &x[2 * nq + no..];
-        let at_rest = od.iter().all(|v| v.abs() < 1e-9);
-        let mut quiet = at_rest;
-        if quiet {
-            // Rest is kept only if no generalized force beats the dry friction, or a limit takes it.
-            let g =
-                crate::model::dynamics::gravity_torque(&self.scene.object, &self.scene.object_pose, o, &crate::model::GRAVITY);
-            let limits = self.scene.object_limits();
-            for i in 0..no {
-                // g is the torque that holds the object still; gravity itself pushes with −g.
-                let push = -g[i];
-                let held_by_friction = push.abs() <= self.layout.object_friction[i];
-                let on_lower = (o[i] - limits[i].lower).abs() <= 1e-6 && push <= 0.0;
-                let on_upper = (o[i] - limits[i].upper).abs() <= 1e-6 && push >= 0.0;
-                // Beyond a limit the limit itself moves the object back, whatever holds it.
-                let outside = o[i] < limits[i].lower - 1e-6 || o[i] > limits[i].upper + 1e-6;
-                if outside || !(held_by_friction || on_lower || on_upper) {
-                    quiet = false;
-                }
+/// What the quiescence test needs of a scene: bounding spheres of the robot's contact links, the
+/// object's collision primitives and its joints' dry friction.
+#[derive(Debug, Clone)]
+pub struct Quiescence {
+    /// (link, centre in the link frame, radius) of each robot link with contact geometry.
+    robot_spheres: Vec<(usize, Point3<f64>, f64)>,
+    /// Object collision primitives (link, pose in the link frame, shape).
+    object_shapes: Vec<(usize, Isometry3<f64>, Shape)>,
+    object_friction: Vec<f64>,
+}
+
+impl Quiescence {
+    /// The test for `scene` with the robot links that `include` accepts as contact bodies.
+    pub fn new(scene: &Scene, include: &dyn Fn(usize) -> bool) -> Self {
+        Self {
+            robot_spheres: link_spheres(&scene.robot, include),
+            object_shapes: scene
+                .object
+                .links
+                .iter()
+                .enumerate()
+                .flat_map(|(link, l)| l.collisions.iter().map(move |c| (link, c.origin, c.shape.clone())))
+                .collect(),
+            object_friction: scene
+                .object
+                .active_joints
+                .iter()
+                .map(|&j| scene.object.joints[j].friction)
+                .collect(),
+        }
+    }
+
+    /// True when the object (at `o`, moving at `od`) is at rest and statically held (dry friction at
+    /// least its gravity torque, or gravity pressing it onto a limit), and no robot contact body can
+    /// reach any object link within a step of `dt` (bounding spheres, with `margin` and each body's
+    /// travel at the joint velocities `qd`). `frames` are the robot's at the step's start;
+    /// `jacobian` is scratch space.
+    #[allow(clippy::too_many_arguments)]
+    pub fn holds(
+        &self,
+        scene: &Scene,
+        frames: &Frames,
+        qd: &[f64],
+        o: &[f64],
+        od: &[f64],
+        dt: f64,
+        margin: f64,
+        jacobian: &mut Vec<f64>,
+    ) -> bool {
+        if !od.iter().all(|v| v.abs() < 1e-9) {
+            return false;
+        }
+        // Rest is kept only if no generalized force beats the dry friction, or a limit takes it.
+        let g = crate::model::dynamics::gravity_torque(&scene.object, &scene.object_pose, o, &crate::model::GRAVITY);
+        let limits = scene.object_limits();
+        for (i, &oi) in o.iter().enumerate() {
+            // g is the torque that holds the object still; gravity itself pushes with −g.
+            let push = -g[i];
+            let held_by_friction = push.abs() <= self.object_friction[i];
+            let on_lower = (oi - limits[i].lower).abs() <= 1e-6 && push <= 0.0;
+            let on_upper = (oi - limits[i].upper).abs() <= 1e-6 && push >= 0.0;
+            // Beyond a limit the limit itself moves the object back, whatever holds it.
+            let outside = oi < limits[i].lower - 1e-6 || oi > limits[i].upper + 1e-6;
+            if outside || !(held_by_friction || on_lower || on_upper) {
+                return false;
             }
         }
-        if quiet {
-            let frames = &self.dynamics.frames; // robot frames at the step's start (place_proxies)
-            let object_poses = self.scene.object.link_poses(&self.scene.object_pose, o);
-            let dt = self.params.dt;
-            let margin = self.params.normalized_prediction_distance * self.params.length_unit + 0.02;
-            for &(link, center, radius) in &self.layout.robot_spheres {
-                let c = frames.poses[link] * center;
-                let nearest = self
-                    .layout
-                    .object_shapes
-                    .iter()
-                    .map(|(olink, origin, shape)| distance_to_shape(&(object_poses[*olink] * origin), shape, &c))
-                    .fold(f64::INFINITY, f64::min);
-                if nearest >= radius + margin {
-                    // Travel bound of this body over the step: its link's linear speed at the
-                    // centre (only needed when the static clearance does not already decide).
-                    let mut jac = std::mem::take(&mut self.jacobian);
-                    self.scene.robot.frames_jacobian_into(frames, link, &c, &mut jac);
-                    let mut v = Vector3::zeros();
-                    for (col, &rate) in self.state.robot_qd.iter().enumerate() {
-                        v += Vector3::new(jac[6 * col], jac[6 * col + 1], jac[6 * col + 2]) * rate;
-                    }
-                    self.jacobian = jac;
-                    if nearest >= radius + v.norm() * dt + margin {
-                        continue;
-                    }
-                }
-                quiet = false;
-                break;
+        let object_poses = scene.object.link_poses(&scene.object_pose, o);
+        jacobian.resize(6 * scene.nq(), 0.0);
+        for &(link, center, radius) in &self.robot_spheres {
+            let c = frames.poses[link] * center;
+            let nearest = self
+                .object_shapes
+                .iter()
+                .map(|(olink, origin, shape)| distance_to_shape(&(object_poses[*olink] * origin), shape, &c))
+                .fold(f64::INFINITY, f64::min);
+            if nearest < radius + margin {
+                return false;
+            }
+            // Travel bound of this body over the step: its link's linear speed at the centre (only
+            // needed when the static clearance does not already decide).
+            scene.robot.frames_jacobian_into(frames, link, &c, jacobian);
+            let mut v = Vector3::zeros();
+            for (col, &rate) in qd.iter().enumerate() {
+                v += Vector3::new(jacobian[6 * col], jacobian[6 * col + 1], jacobian[6 * col + 2]) * rate;
+            }
+            if nearest < radius + v.norm() * dt + margin {
+                return false;
             }
         }
-        self.scratch = x;
-        quiet
+        true
     }
 }
 

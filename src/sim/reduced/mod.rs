@@ -1,0 +1,675 @@
+//! The rollout model's reduced contact path: the robot's contact bodies (free proxies with the
+//! robot's effective mass, driven by the joint velocity servo, as in the Rapier path) against the
+//! object's joint coordinates, with contacts from parry's manifolds and one small soft-contact
+//! solve in sabre per step; no physics pipeline, broad phase, islands or multibody. Rapier's
+//! pipeline ([`crate::sim::SimWorld`]) stays the reference this path is validated against.
+
+mod geometry;
+mod solver;
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Point3, Vector3};
+
+use self::geometry::{Collider, ContactKey, Detector};
+use self::solver::{softness, Proxy, Solver, SolverParams};
+use super::evaluator::{StepEvaluator, StepView};
+use super::quiescence::Quiescence;
+use super::servo::{ServoGains, ServoLimits, ServoState};
+use super::world::{body_groups, effective_mass, wrist_sensor, ContactReport, EngineClock, Interaction};
+use crate::error::{Result, SabreError};
+use crate::model::dynamics::{joint_space_terms, DynamicsWorkspace};
+use crate::model::kinematics::KinematicTree;
+use crate::model::scene::Scene;
+use crate::model::GRAVITY;
+
+/// Settings of the reduced contact path.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReducedConfig {
+    pub dt: f64,
+    pub gains: ServoGains,
+    /// Skip the contact step while the object is statically held and out of the robot's reach.
+    pub skip_quiescent: bool,
+    /// Coulomb friction coefficient between robot and object surfaces.
+    pub contact_friction: f64,
+    /// Sweeps of the position-correcting solve per step.
+    pub iterations: usize,
+}
+
+/// Contacts are found up to 1 cm before the surfaces meet: a hand moving below 0.6 m/s covers
+/// less than that in a 15 ms step (the Rapier path's prediction distance).
+const PREDICTION: f64 = 0.01;
+/// Contact stiffness: a spring of 60 Hz, critically damped (the Rapier path's contact softness),
+/// which resolves what a proxy re-enters every step within a step or two at 15 ms.
+const CONTACT_FREQUENCY: f64 = 60.0;
+const CONTACT_DAMPING_RATIO: f64 = 1.0;
+/// The fastest an overlap is pushed apart (m/s).
+const MAX_CORRECTIVE_VELOCITY: f64 = 3.0;
+/// Sweeps of the relaxation that leaves the object its velocity without the overlap correction.
+const RELAXATION_ITERATIONS: usize = 1;
+/// How much further (rad or m) than its free travel over a step a joint limit gets a row: the
+/// contacts of one step would have to move the object faster than 3 rad/s or m/s to reach a limit
+/// that far.
+const LIMIT_REACH: f64 = 0.05;
+/// Extra clearance (m) of the quiescence test beyond the prediction distance.
+const QUIESCENCE_MARGIN: f64 = 0.02;
+
+/// A proxy: the rigid body of robot links joined by fixed joints that carries contact geometry,
+/// with the robot's effective mass at its centre of mass.
+#[derive(Debug, Clone)]
+struct ProxyBody {
+    /// The link whose frame the body lives in (the first link of its fixed group).
+    link: usize,
+    /// Centre of mass in that frame.
+    com: Point3<f64>,
+    inv_mass: f64,
+    /// Inverse inertia about the centre of mass, in that frame.
+    inv_inertia: Matrix3<f64>,
+}
+
+/// Mass, centre of mass and inertia (about that centre, in the frame of `body`) of the links of
+/// `tree` that fixed joints join into `body`.
+fn group_mass(tree: &KinematicTree, group: &[usize], offset: &[Isometry3<f64>], body: usize) -> (f64, Point3<f64>, Matrix3<f64>) {
+    let parts: Vec<(f64, Point3<f64>, Matrix3<f64>)> = tree
+        .links
+        .iter()
+        .enumerate()
+        .filter(|&(link, _)| group[link] == body)
+        .filter_map(|(link, l)| {
+            let inertial = l.inertial.as_ref()?;
+            let r = offset[link].rotation.to_rotation_matrix();
+            Some((
+                inertial.mass,
+                offset[link] * Point3::from(inertial.com),
+                r.matrix() * inertial.inertia * r.matrix().transpose(),
+            ))
+        })
+        .collect();
+    let mass: f64 = parts.iter().map(|p| p.0).sum();
+    if mass <= 0.0 {
+        // Massless links still need an invertible inertia.
+        return (1e-3, Point3::origin(), Matrix3::identity() * 1e-6);
+    }
+    let com = Point3::from(parts.iter().map(|(m, c, _)| c.coords * *m).sum::<Vector3<f64>>() / mass);
+    let inertia = parts
+        .iter()
+        .map(|(m, c, i)| {
+            let d = c - com;
+            i + (Matrix3::identity() * d.norm_squared() - d * d.transpose()) * *m
+        })
+        .sum();
+    (mass, com, inertia)
+}
+
+/// The proxies of the links `include` accepts, and for each of those links' primitives (in
+/// [`Collider::of_tree`] order) the proxy it belongs to.
+fn proxy_bodies(scene: &Scene, colliders: &[Collider]) -> (Vec<ProxyBody>, Vec<usize>) {
+    let tree = &scene.robot;
+    let (group, offset) = body_groups(tree);
+    let q0 = &scene.default_state()[..scene.nq()];
+    let mut bodies: Vec<ProxyBody> = Vec::new();
+    let owner = colliders
+        .iter()
+        .map(|c| {
+            let body = group[c.link];
+            if let Some(i) = bodies.iter().position(|b| b.link == body) {
+                return i;
+            }
+            let (mass, com, inertia) = group_mass(tree, &group, &offset, body);
+            let effective = effective_mass(tree, q0, body, &com);
+            let scale = effective / mass;
+            bodies.push(ProxyBody {
+                link: body,
+                com,
+                inv_mass: 1.0 / effective,
+                inv_inertia: (inertia * scale).try_inverse().unwrap_or_else(Matrix3::zeros),
+            });
+            bodies.len() - 1
+        })
+        .collect();
+    (bodies, owner)
+}
+
+/// Static facts about a reduced world, shared by every copy of it.
+#[derive(Debug)]
+struct ReducedLayout {
+    nq: usize,
+    no: usize,
+    config: ReducedConfig,
+    params: SolverParams,
+    servo_limits: ServoLimits,
+    quiescence: Quiescence,
+    proxies: Vec<ProxyBody>,
+    robot_colliders: Vec<Collider>,
+    /// The proxy of each robot primitive.
+    collider_proxy: Vec<usize>,
+    object_colliders: Vec<Collider>,
+    object_damping: Vec<f64>,
+    object_friction: Vec<f64>,
+    object_limits: Vec<(f64, f64)>,
+    sensor_link: usize,
+    sensor_links: Vec<bool>,
+}
+
+/// One robot–object contact of the last step: the robot link it touched, the point in that
+/// link's frame, and the object link.
+#[derive(Debug, Clone, Copy)]
+struct Touch {
+    robot_link: usize,
+    local_point: Point3<f64>,
+    object_link: usize,
+}
+
+/// A world of the reduced contact path: the robot's servo state and the object's coordinates.
+#[derive(Clone)]
+pub struct ReducedWorld {
+    layout: Arc<ReducedLayout>,
+    scene: Arc<Scene>,
+    servo: ServoState,
+    o: Vec<f64>,
+    od: Vec<f64>,
+    last: Interaction,
+    /// Contacts of the last step and the impulses they carried (N·s, on the robot, world frame).
+    touches: Vec<Touch>,
+    impulses: Vec<Vector3<f64>>,
+    /// The last step's impulse of each contact by its key: the next step's warm start.
+    warm_start: Vec<(ContactKey, Vector3<f64>)>,
+    /// Robot link poses (`robot.frames`) and the servo's mass-matrix buffers.
+    robot: DynamicsWorkspace,
+    mass_matrix: DMatrix<f64>,
+    gravity_torque: DVector<f64>,
+    /// Object link poses (`object.frames`) and its joint-space terms.
+    object: DynamicsWorkspace,
+    object_mass: DMatrix<f64>,
+    object_gravity: DVector<f64>,
+    inverse_mass: DMatrix<f64>,
+    detector: Detector,
+    solver: Solver,
+    jacobian: Vec<f64>,
+    object_jacobian: Vec<f64>,
+    linear_jacobian: Vec<f64>,
+    /// The object's coordinates at the step's start, and its velocity before the contacts act.
+    o_before: Vec<f64>,
+    free_velocity: Vec<f64>,
+    engine: EngineClock,
+}
+
+impl ReducedWorld {
+    /// Builds the world once; copies of it are reset, never rebuilt.
+    pub fn new(scene: Arc<Scene>, config: &ReducedConfig) -> Result<Self> {
+        if !(config.dt.is_finite() && config.dt > 0.0) {
+            return Err(SabreError::invalid(
+                "dt",
+                format!("must be positive and finite, got {}", config.dt),
+            ));
+        }
+        if !(config.gains.bandwidth.is_finite() && config.gains.bandwidth > 0.0) {
+            return Err(SabreError::invalid(
+                "servo bandwidth",
+                format!("must be positive, got {}", config.gains.bandwidth),
+            ));
+        }
+        let (nq, no) = (scene.nq(), scene.no());
+        let mut contact_links = vec![false; scene.robot.links.len()];
+        scene.rollout_contact_links.iter().for_each(|&l| contact_links[l] = true);
+        let robot_colliders = Collider::of_tree(&scene.robot, &|l| contact_links[l]);
+        let (proxies, collider_proxy) = proxy_bodies(&scene, &robot_colliders);
+        let object_colliders = Collider::of_tree(&scene.object, &|_| true);
+        let object_joints: Vec<_> = scene.object.active_joints.iter().map(|&j| &scene.object.joints[j]).collect();
+        let (erp_inv_dt, cfm_factor) = softness(CONTACT_FREQUENCY, CONTACT_DAMPING_RATIO, config.dt);
+        let (sensor_link, sensor_links) = wrist_sensor(&scene);
+        let layout = ReducedLayout {
+            nq,
+            no,
+            params: SolverParams {
+                dt: config.dt,
+                erp_inv_dt,
+                cfm_factor,
+                max_corrective_velocity: MAX_CORRECTIVE_VELOCITY,
+                limit_erp_inv_dt: 1.0 / config.dt,
+                iterations: config.iterations.max(1),
+                relaxation_iterations: RELAXATION_ITERATIONS,
+            },
+            config: config.clone(),
+            servo_limits: ServoLimits::new(&scene),
+            quiescence: Quiescence::new(&scene, &|l| contact_links[l]),
+            proxies,
+            robot_colliders,
+            collider_proxy,
+            object_colliders,
+            object_damping: object_joints.iter().map(|j| j.damping).collect(),
+            object_friction: object_joints.iter().map(|j| j.friction).collect(),
+            object_limits: object_joints.iter().map(|j| (j.limits.lower, j.limits.upper)).collect(),
+            sensor_link,
+            sensor_links,
+        };
+        let mut world = Self {
+            layout: Arc::new(layout),
+            servo: ServoState::new(nq),
+            o: vec![0.0; no],
+            od: vec![0.0; no],
+            last: Interaction {
+                contact: false,
+                tau_ext: vec![0.0; nq],
+                wrench: [0.0; 6],
+            },
+            touches: Vec::new(),
+            impulses: Vec::new(),
+            warm_start: Vec::new(),
+            robot: DynamicsWorkspace::default(),
+            mass_matrix: DMatrix::zeros(nq, nq),
+            gravity_torque: DVector::zeros(nq),
+            object: DynamicsWorkspace::default(),
+            object_mass: DMatrix::zeros(no, no),
+            object_gravity: DVector::zeros(no),
+            inverse_mass: DMatrix::zeros(no, no),
+            detector: Detector::default(),
+            solver: Solver::default(),
+            jacobian: vec![0.0; 6 * nq],
+            object_jacobian: vec![0.0; 6 * no],
+            linear_jacobian: vec![0.0; 3 * no],
+            o_before: Vec::with_capacity(no),
+            free_velocity: Vec::with_capacity(no),
+            engine: EngineClock::default(),
+            scene: scene.clone(),
+        };
+        world.set_state(&scene.default_state());
+        Ok(world)
+    }
+
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    pub fn dt(&self) -> f64 {
+        self.layout.config.dt
+    }
+
+    /// Whether `other` is a copy of this world (built together, sharing one layout).
+    pub fn same_layout(&self, other: &ReducedWorld) -> bool {
+        Arc::ptr_eq(&self.layout, &other.layout)
+    }
+
+    /// Takes the state of `snapshot`; nothing of what this world simulated before remains.
+    pub fn restore_from(&mut self, snapshot: &ReducedWorld) {
+        self.servo.clone_from(&snapshot.servo);
+        self.o.clone_from(&snapshot.o);
+        self.od.clone_from(&snapshot.od);
+        self.last.clone_from(&snapshot.last);
+        self.touches.clone_from(&snapshot.touches);
+        self.impulses.clone_from(&snapshot.impulses);
+        self.warm_start.clone_from(&snapshot.warm_start);
+        self.detector.restore_from(&snapshot.detector);
+    }
+
+    /// Places robot and object at state x = [q, q̇, o, ȯ] (x must be validated by the caller),
+    /// with a fresh servo and no contact history.
+    pub fn set_state(&mut self, x: &[f64]) {
+        let (nq, no) = (self.layout.nq, self.layout.no);
+        self.servo.reset(&x[..nq], &x[nq..2 * nq]);
+        self.o.copy_from_slice(&x[2 * nq..2 * nq + no]);
+        self.od.copy_from_slice(&x[2 * nq + no..2 * (nq + no)]);
+        self.clear_interaction();
+    }
+
+    fn clear_interaction(&mut self) {
+        self.last.contact = false;
+        self.last.tau_ext.iter_mut().for_each(|v| *v = 0.0);
+        self.last.wrench = [0.0; 6];
+        self.touches.clear();
+        self.impulses.clear();
+        self.warm_start.clear();
+        self.detector.reset();
+    }
+
+    /// Writes the current state into `x` (length nx): the object's velocity is the one the solve
+    /// left it (see [`Self::step_once`], which reports its displacement rate instead).
+    pub fn read_state(&self, x: &mut [f64]) {
+        let (nq, no) = (self.layout.nq, self.layout.no);
+        x[..nq].copy_from_slice(&self.servo.q);
+        x[nq..2 * nq].copy_from_slice(&self.servo.qd);
+        x[2 * nq..2 * nq + no].copy_from_slice(&self.o);
+        x[2 * nq + no..2 * (nq + no)].copy_from_slice(&self.od);
+    }
+
+    /// One step under the velocity command `u` (projected onto the velocity limits); writes the
+    /// state after the step into `x` (nx), the object's velocity being the rate at which it moved
+    /// over the step (as in the Rapier path).
+    pub fn step_once(&mut self, u: &[f64], x: &mut [f64]) {
+        let layout = self.layout.clone();
+        self.servo.set_command(u, &layout.servo_limits);
+        self.o_before.clone_from(&self.o);
+        self.step();
+        self.read_state(x);
+        let (nq, no) = (layout.nq, layout.no);
+        for (i, b) in self.o_before.iter().enumerate() {
+            x[2 * nq + no + i] = (self.o[i] - b) / layout.config.dt;
+        }
+    }
+
+    /// Advances one step under the current command and measures its interaction.
+    pub fn step(&mut self) {
+        let layout = self.layout.clone();
+        let dt = layout.config.dt;
+        self.servo.advance(
+            &layout.config.gains,
+            &layout.servo_limits,
+            &self.scene,
+            &self.last.tau_ext,
+            dt,
+            &mut self.robot,
+            &mut self.mass_matrix,
+            &mut self.gravity_torque,
+        );
+        // The contact bodies start the step where the robot is, moving as it will move in it.
+        self.scene
+            .robot
+            .update_frames(&Isometry3::identity(), &self.servo.q, &mut self.robot.frames);
+        if layout.config.skip_quiescent
+            && layout.quiescence.holds(
+                &self.scene,
+                &self.robot.frames,
+                &self.servo.qd,
+                &self.o,
+                &self.od,
+                dt,
+                PREDICTION + QUIESCENCE_MARGIN,
+                &mut self.jacobian,
+            )
+        {
+            // Nothing can touch the object and it is held at rest: the step cannot move it.
+            self.servo.commit();
+            self.clear_interaction();
+            return;
+        }
+        let started = Instant::now();
+        self.solve_contacts(&layout);
+        self.engine.steps += 1;
+        self.engine.seconds += started.elapsed().as_secs_f64();
+        self.servo.commit();
+        self.measure_interaction(&layout);
+    }
+
+    /// Detection, the solve and the object's integration over one step.
+    fn solve_contacts(&mut self, layout: &ReducedLayout) {
+        let (no, dt) = (layout.no, layout.config.dt);
+        let scene = &self.scene;
+        joint_space_terms(
+            &scene.object,
+            &scene.object_pose,
+            &self.o,
+            &GRAVITY,
+            &mut self.object,
+            &mut self.object_mass,
+            &mut self.object_gravity,
+        );
+        // Damping is implicit: (M + dt D) ȯ⁺ = M ȯ + dt (−g) with g the torque that holds the
+        // object against gravity.
+        self.inverse_mass.copy_from(&self.object_mass);
+        for i in 0..no {
+            self.inverse_mass[(i, i)] += dt * layout.object_damping[i];
+        }
+        if !self.inverse_mass.try_inverse_mut() {
+            self.inverse_mass.fill(0.0);
+        }
+        let free = &mut self.free_velocity;
+        free.clear();
+        for a in 0..no {
+            let mut v = self.od[a];
+            for b in 0..no {
+                let force = -self.object_gravity[b] - layout.object_damping[b] * self.od[b];
+                v += dt * self.inverse_mass[(a, b)] * force;
+            }
+            free.push(v);
+        }
+        // nalgebra's DMatrix is column-major; the solver takes it row-major (it is symmetric).
+        self.solver.begin(free, self.inverse_mass.as_slice());
+        let frames = &self.robot.frames;
+        for body in &layout.proxies {
+            let pose = frames.poses[body.link];
+            let com = pose * body.com;
+            scene.robot.frames_jacobian_into(frames, body.link, &com, &mut self.jacobian);
+            let mut twist = [0.0; 6];
+            for (c, &v) in self.servo.qd.iter().enumerate() {
+                for (r, t) in twist.iter_mut().enumerate() {
+                    *t += self.jacobian[6 * c + r] * v;
+                }
+            }
+            let r = pose.rotation.to_rotation_matrix();
+            self.solver.proxies.push(Proxy {
+                inv_mass: body.inv_mass,
+                inv_inertia: r.matrix() * body.inv_inertia * r.matrix().transpose(),
+                com,
+                v: Vector3::new(twist[0], twist[1], twist[2]),
+                w: Vector3::new(twist[3], twist[4], twist[5]),
+            });
+        }
+        self.detector.detect(
+            &layout.robot_colliders,
+            &layout.object_colliders,
+            frames,
+            &self.object.frames,
+            PREDICTION,
+        );
+        self.touches.clear();
+        for contact in &self.detector.contacts {
+            let object_link = layout.object_colliders[contact.object].link;
+            if layout.object_colliders[contact.object].moves {
+                scene
+                    .object
+                    .frames_jacobian_into(&self.object.frames, object_link, &contact.point, &mut self.object_jacobian);
+                for c in 0..no {
+                    self.linear_jacobian[3 * c..3 * c + 3].copy_from_slice(&self.object_jacobian[6 * c..6 * c + 3]);
+                }
+            } else {
+                self.linear_jacobian.fill(0.0);
+            }
+            let warm = self
+                .warm_start
+                .iter()
+                .find(|(key, _)| *key == contact.key)
+                .map(|(_, impulse)| *impulse);
+            self.solver.add_contact(
+                &layout.params,
+                layout.collider_proxy[contact.robot],
+                &contact.point,
+                &contact.normal,
+                contact.dist,
+                &self.linear_jacobian,
+                layout.config.contact_friction,
+                warm,
+            );
+            let robot_link = layout.robot_colliders[contact.robot].link;
+            self.touches.push(Touch {
+                robot_link,
+                local_point: frames.poses[robot_link].inverse_transform_point(&contact.point),
+                object_link,
+            });
+        }
+        for i in 0..no {
+            // A limit further than the step's free travel plus LIMIT_REACH cannot be reached within
+            // the step; its row would never bind.
+            let (lower, upper) = layout.object_limits[i];
+            let reach = self.free_velocity[i].abs() * dt + LIMIT_REACH;
+            for (is_lower, distance) in [(true, self.o[i] - lower), (false, upper - self.o[i])] {
+                if distance < reach {
+                    self.solver.add_limit(&layout.params, i, is_lower, distance);
+                }
+            }
+            if layout.object_friction[i] > 0.0 {
+                self.solver.add_dry_friction(i, layout.object_friction[i] * dt);
+            }
+        }
+        self.solver.solve(&layout.params);
+        for (o, od) in self.o.iter_mut().zip(self.solver.object_velocity()) {
+            *o += dt * od;
+        }
+        self.solver.relax(&layout.params);
+        self.od.copy_from_slice(self.solver.object_velocity());
+        self.impulses.clear();
+        self.impulses.extend(self.solver.contact_impulses());
+        self.warm_start.clear();
+        self.warm_start.extend(
+            self.detector
+                .contacts
+                .iter()
+                .zip(&self.impulses)
+                .map(|(contact, impulse)| (contact.key, *impulse)),
+        );
+    }
+
+    /// τ_ext = Σ J_cᵀ f_c (35) and the wrist wrench of the last step's contact forces, taken at the
+    /// configuration the step ended in (each contact point carried along with its link).
+    fn measure_interaction(&mut self, layout: &ReducedLayout) {
+        self.last.contact = false;
+        self.last.tau_ext.iter_mut().for_each(|v| *v = 0.0);
+        self.last.wrench = [0.0; 6];
+        if self.touches.is_empty() {
+            return;
+        }
+        let frames = &mut self.robot.frames;
+        self.scene.robot.update_frames(&Isometry3::identity(), &self.servo.q, frames);
+        let inv_dt = 1.0 / layout.config.dt;
+        for (touch, impulse) in self.touches.iter().zip(&self.impulses) {
+            if *impulse == Vector3::zeros() {
+                continue;
+            }
+            self.last.contact = true;
+            let force = impulse * inv_dt;
+            let point = frames.poses[touch.robot_link] * touch.local_point;
+            self.scene
+                .robot
+                .frames_jacobian_into(frames, touch.robot_link, &point, &mut self.jacobian);
+            for (c, t) in self.last.tau_ext.iter_mut().enumerate() {
+                let col = &self.jacobian[6 * c..6 * c + 3];
+                *t += col[0] * force.x + col[1] * force.y + col[2] * force.z;
+            }
+            if layout.sensor_links[touch.robot_link] {
+                let sensor = frames.poses[layout.sensor_link].translation.vector;
+                let torque = (point.coords - sensor).cross(&force);
+                for (w, v) in self
+                    .last
+                    .wrench
+                    .iter_mut()
+                    .zip([force.x, force.y, force.z, torque.x, torque.y, torque.z])
+                {
+                    *w += v;
+                }
+            }
+        }
+    }
+
+    /// Interaction measured in the last step.
+    pub fn interaction(&self) -> &Interaction {
+        &self.last
+    }
+
+    /// Every robot–object contact point that carried force in the last step, with the force on
+    /// the robot (allocates; for diagnosis).
+    pub fn contacts(&self) -> Vec<ContactReport> {
+        let frames_q = &self.servo.q;
+        let poses = self.scene.robot.link_poses(&Isometry3::identity(), frames_q);
+        let inv_dt = 1.0 / self.layout.config.dt;
+        self.touches
+            .iter()
+            .zip(&self.impulses)
+            .filter(|(_, impulse)| **impulse != Vector3::zeros())
+            .map(|(touch, impulse)| {
+                let p = poses[touch.robot_link] * touch.local_point;
+                let f = impulse * inv_dt;
+                ContactReport {
+                    robot_link: touch.robot_link,
+                    object_link: touch.object_link,
+                    point: [p.x, p.y, p.z],
+                    force: [f.x, f.y, f.z],
+                }
+            })
+            .collect()
+    }
+
+    /// Steps that went through the contact solve and the time spent in them (detection, solve
+    /// and integration), since the world was built.
+    pub fn engine_clock(&self) -> EngineClock {
+        self.engine
+    }
+
+    /// `evaluator`'s value of the last step, which led to state `x` under command `u` (frames from
+    /// the world's caches, as in the Rapier path).
+    pub fn evaluate_step(&mut self, evaluator: &dyn StepEvaluator, x: &[f64], u: &[f64]) -> f64 {
+        let (nq, no) = (self.layout.nq, self.layout.no);
+        self.scene
+            .robot
+            .update_frames(&Isometry3::identity(), &x[..nq], &mut self.robot.frames);
+        if evaluator.needs_object_frames() {
+            self.scene
+                .object
+                .update_frames(&self.scene.object_pose, &x[2 * nq..2 * nq + no], &mut self.object.frames);
+        }
+        evaluator.evaluate(
+            &self.scene,
+            &StepView {
+                x,
+                u,
+                tau_ext: &self.last.tau_ext,
+                contact: self.last.contact,
+                robot: &self.robot.frames,
+                object: &self.object.frames,
+            },
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use super::ReducedWorld;
+    use crate::model::scene::Scene;
+    use crate::sim::test_scene::{probe_and_drawer, reduced_config, servo_config, state, world_at, DT};
+
+    fn reduced_at(scene: &Arc<Scene>, x: &[f64]) -> ReducedWorld {
+        let mut world = ReducedWorld::new(scene.clone(), &reduced_config()).expect("reduced world");
+        world.set_state(x);
+        world
+    }
+
+    /// Against the Rapier path on the same pushes: the drawer ends where Rapier's pipeline puts it
+    /// (within 1 mm after 0.3 s of pushing) and the robot feels the same force.
+    #[test]
+    fn the_drawer_moves_as_in_rapiers_pipeline() {
+        let scene = probe_and_drawer();
+        let x0 = state([0.62, 0.3], [0.3, 0.0], 0.0, 0.0);
+        let mut reduced = reduced_at(&scene, &x0);
+        let mut rapier = world_at(&scene, &servo_config(0.0, false), &x0);
+        let (mut a, mut b) = (x0.clone(), x0.clone());
+        let (mut impulse_a, mut impulse_b) = (0.0, 0.0);
+        for _ in 0..20 {
+            reduced.step_once(&[0.3, 0.2], &mut a);
+            rapier.step_once(&[0.3, 0.2], &mut b);
+            impulse_a += reduced.interaction().tau_ext[0] * DT;
+            impulse_b += rapier.interaction().tau_ext[0] * DT;
+        }
+        assert!(b[4] > 0.05, "Rapier's drawer opened: {}", b[4]);
+        assert!((a[4] - b[4]).abs() < 1e-3, "drawer {} vs {}", a[4], b[4]);
+        assert!(
+            (impulse_a - impulse_b).abs() < 0.05 * impulse_b.abs(),
+            "{impulse_a} vs {impulse_b}"
+        );
+    }
+
+    #[test]
+    fn nothing_touches_a_robot_far_from_the_object() {
+        let scene = probe_and_drawer();
+        let x0 = state([-0.5, 0.0], [0.0, 0.0], 0.2, 0.0);
+        let mut world = reduced_at(&scene, &x0);
+        let mut x = x0.clone();
+        for _ in 0..10 {
+            world.step_once(&[0.1, 0.5], &mut x);
+            assert!(!world.interaction().contact && world.contacts().is_empty());
+            assert_eq!(world.interaction().tau_ext, vec![0.0; 2]);
+        }
+        // Held by its dry friction, the drawer stays put.
+        assert_eq!(x[4], 0.2);
+    }
+}

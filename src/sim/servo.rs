@@ -1,0 +1,193 @@
+//! The rollout model's joint velocity servo (57) with the integral action of the plant's controller
+//! (53), integrated in joint space: its gains, its limits and its state. Both contact paths of the
+//! rollout model (Rapier's pipeline and the reduced solve) drive the robot with it.
+
+use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
+
+use crate::model::dynamics::{joint_space_terms, DynamicsWorkspace};
+use crate::model::scene::Scene;
+
+/// Gains of q̈ = Λ (u − q̇) + Λ_I ∫(u − q̇) + M(q)⁻¹ τ_ext.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServoGains {
+    /// Λ (1/s).
+    pub bandwidth: f64,
+    /// Λ_I (1/s²).
+    pub integral_gain: f64,
+    /// Bound on the accumulated velocity error (rad or m).
+    pub integral_limit: f64,
+}
+
+/// Per-joint bounds of the servo, fixed for a scene.
+#[derive(Debug, Clone)]
+pub struct ServoLimits {
+    /// Largest joint acceleration the servo can produce: effort / M_ii at the home configuration.
+    pub acceleration: Vec<f64>,
+    pub velocity: Vec<f64>,
+    pub position: Vec<(f64, f64)>,
+}
+
+impl ServoLimits {
+    pub fn new(scene: &Scene) -> Self {
+        let nq = scene.nq();
+        let mut ws = DynamicsWorkspace::default();
+        let mut mass_matrix = DMatrix::zeros(nq, nq);
+        let mut gravity = DVector::zeros(nq);
+        joint_space_terms(
+            &scene.robot,
+            &Isometry3::identity(),
+            &scene.home_configuration(),
+            &Vector3::zeros(),
+            &mut ws,
+            &mut mass_matrix,
+            &mut gravity,
+        );
+        let limits = scene.robot_limits();
+        Self {
+            acceleration: limits
+                .iter()
+                .enumerate()
+                .map(|(i, l)| l.effort / mass_matrix[(i, i)].max(1e-9))
+                .collect(),
+            velocity: limits.iter().map(|l| l.velocity).collect(),
+            position: limits.iter().map(|l| (l.lower, l.upper)).collect(),
+        }
+    }
+}
+
+/// The servo's state: configuration, velocity, accumulated lag, the command of the next step and
+/// the factorised mass matrix of the contact term.
+#[derive(Clone, Debug)]
+pub struct ServoState {
+    pub q: Vec<f64>,
+    pub qd: Vec<f64>,
+    /// Accumulated velocity error of the integral term.
+    pub integral: Vec<f64>,
+    /// Velocity command of the next step, projected onto the velocity limits.
+    pub command: Vec<f64>,
+    /// The configuration at the end of the step being taken (see [`Self::advance`]).
+    q_next: Vec<f64>,
+    /// Factorised robot mass matrix for the contact term and the configuration it was computed at
+    /// (recomputed once the robot has moved on).
+    mass_factor: Option<nalgebra::linalg::Cholesky<f64, nalgebra::Dyn>>,
+    mass_factor_q: Vec<f64>,
+    /// M⁻¹ τ_ext of the step being taken.
+    contact_acceleration: DVector<f64>,
+}
+
+/// M(q) varies slowly; refactorising it only after a joint moved by this much (rad or m) keeps the
+/// contact term within a few percent at a fraction of the cost.
+const MASS_REFRESH: f64 = 0.02;
+
+impl ServoState {
+    pub fn new(nq: usize) -> Self {
+        Self {
+            q: vec![0.0; nq],
+            qd: vec![0.0; nq],
+            integral: vec![0.0; nq],
+            command: vec![0.0; nq],
+            q_next: Vec::with_capacity(nq),
+            mass_factor: None,
+            mass_factor_q: Vec::new(),
+            contact_acceleration: DVector::zeros(nq),
+        }
+    }
+
+    /// Places the servo at (q, q̇) with no accumulated lag, no command and no cached mass matrix.
+    pub fn reset(&mut self, q: &[f64], qd: &[f64]) {
+        self.q.copy_from_slice(q);
+        self.qd.copy_from_slice(qd);
+        self.integral.iter_mut().for_each(|v| *v = 0.0);
+        self.command.iter_mut().for_each(|v| *v = 0.0);
+        self.mass_factor = None;
+    }
+
+    /// Sets the command of the next step, projected onto the joint velocity limits.
+    pub fn set_command(&mut self, u: &[f64], limits: &ServoLimits) {
+        for ((c, &v), &limit) in self.command.iter_mut().zip(u).zip(&limits.velocity) {
+            *c = v.clamp(-limit, limit);
+        }
+    }
+
+    /// One step of semi-implicit Euler of q̈ = Λ (u − q̇) + Λ_I ∫(u − q̇) + M⁻¹ τ_ext: updates q̇ and
+    /// the lag and computes the configuration at the end of the step, which [`Self::commit`] makes
+    /// current. In between, `q` is still the step's start, where the contact bodies are placed.
+    #[allow(clippy::too_many_arguments)]
+    pub fn advance(
+        &mut self,
+        gains: &ServoGains,
+        limits: &ServoLimits,
+        scene: &Scene,
+        tau_ext: &[f64],
+        dt: f64,
+        dynamics: &mut DynamicsWorkspace,
+        mass_matrix: &mut DMatrix<f64>,
+        gravity_torque: &mut DVector<f64>,
+    ) {
+        let nq = self.q.len();
+        let in_contact = tau_ext.iter().any(|&t| t != 0.0);
+        let stale = self.mass_factor.is_none()
+            || self
+                .mass_factor_q
+                .iter()
+                .zip(&self.q)
+                .any(|(a, b)| (a - b).abs() > MASS_REFRESH);
+        if in_contact && stale {
+            joint_space_terms(
+                &scene.robot,
+                &Isometry3::identity(),
+                &self.q,
+                &Vector3::zeros(),
+                dynamics,
+                mass_matrix,
+                gravity_torque,
+            );
+            self.mass_factor = mass_matrix.clone().cholesky();
+            self.mass_factor_q.clone_from(&self.q);
+        }
+        let contact = match (&self.mass_factor, in_contact) {
+            (Some(factor), true) => {
+                self.contact_acceleration.as_mut_slice().copy_from_slice(tau_ext);
+                factor.solve_mut(&mut self.contact_acceleration);
+                true
+            }
+            _ => false,
+        };
+        self.q_next.clear();
+        for i in 0..nq {
+            let qd = self.qd[i];
+            let external = if contact { self.contact_acceleration[i] } else { 0.0 };
+            // The integral is the position lag behind the integrated command, ∫u dt − (q − q₀),
+            // booked with the same velocity that moves q so that it settles at zero lag exactly.
+            let integral = self.integral[i];
+            let drive = gains.bandwidth * self.command[i] + gains.integral_gain * integral + external;
+            let target = (qd + dt * drive) / (1.0 + dt * gains.bandwidth);
+            let max_change = limits.acceleration[i] * dt;
+            let saturated = (target - qd).abs() > max_change;
+            let velocity_limit = limits.velocity[i];
+            let unclamped = qd + (target - qd).clamp(-max_change, max_change);
+            let mut qd_next = unclamped.clamp(-velocity_limit, velocity_limit);
+            let saturated = saturated || qd_next != unclamped;
+            let (lower, upper) = limits.position[i];
+            let mut next = self.q[i] + dt * qd_next;
+            let at_limit = next < lower || next > upper;
+            if at_limit {
+                next = next.clamp(lower, upper);
+                qd_next = (next - self.q[i]) / dt;
+            }
+            // Anti-windup: a joint that is saturated or at a limit does not accumulate lag it
+            // cannot act on.
+            if !saturated && !at_limit {
+                let lag = integral + dt * self.command[i] - (next - self.q[i]);
+                self.integral[i] = lag.clamp(-gains.integral_limit, gains.integral_limit);
+            }
+            self.q_next.push(next);
+            self.qd[i] = qd_next;
+        }
+    }
+
+    /// Makes the configuration computed by [`Self::advance`] current.
+    pub fn commit(&mut self) {
+        std::mem::swap(&mut self.q, &mut self.q_next);
+    }
+}
