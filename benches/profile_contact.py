@@ -1,10 +1,11 @@
-"""A steady in-contact planning loop to profile with `perf` (the breakdown in docs/design.md).
+"""A steady in-contact planning loop to profile with `perf` (the breakdown in docs/results.md).
 
-    perf record -F 1999 -g -o /tmp/contact.perf -- .venv/bin/python benches/profile_contact.py --iterations 300
-    perf report -i /tmp/contact.perf --no-children --sort symbol --percent-limit 0.5
+    perf record -e cpu-clock -F 999 -g -o /tmp/contact.perf -- .venv/bin/python benches/profile_contact.py --iterations 300
+    .venv/bin/python benches/perf_breakdown.py /tmp/contact.perf
 
 Repeats `Controller.update` from the hooked shelf state in the open phase (N = 40, K = 67,
-2 threads), the iteration that benches/compare_planning.py times against `mujoco.rollout`.
+2 threads), the iteration that benches/compare_planning.py times against `mujoco.rollout`;
+--contact-model rapier profiles the reference path.
 """
 
 from __future__ import annotations
@@ -24,9 +25,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--iterations", type=int, default=300)
     parser.add_argument("--object", default="shelf", choices=sabre.OBJECTS)
+    parser.add_argument("--contact-model", default="reduced", choices=sabre.CONTACT_MODELS)
     args = parser.parse_args(argv)
     scene = sabre.Scene.load(obj=args.object)
-    controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=0, threads=2))
+    controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=0, threads=2, contact_model=args.contact_model))
     controller.set_phase("open")
     x = hooked_state(scene)
     started = time.perf_counter()
@@ -37,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
         rollout += controller.stats.rollout_time
     wall = time.perf_counter() - started
     print(f"{args.iterations} in-contact iterations: {1e3 * wall / args.iterations:.2f} ms each; "
-          f"Rapier pipeline {100 * engine / (2 * rollout):.0f} % of the workers' rollout time")
+          f"contact step {100 * engine / (2 * rollout):.0f} % of the workers' rollout time")
     return 0
 
 

@@ -321,6 +321,17 @@ class Controller:
         for f in self.filters:
             f.remove_obstacle(obstacle_id)
 
+    def set_nominal(self, U: np.ndarray, t0: float) -> None:
+        """Replaces the nominal sequence with U (K, nu), row 0 applying at t0 (s): to start from a
+        plan saved earlier (:attr:`nominal`, :attr:`nominal_t0`) instead of from rest.
+
+        Raises:
+            ShapeError: U is not (K, nu) with the configured horizon.
+            InvalidValueError: non-finite U or t0.
+        """
+        U = as_float_array("U", U, (self.config.horizon_steps, self.scene.nu))
+        self._planner.set_nominal(np.ascontiguousarray(U), as_finite("t0", t0))
+
     def set_phase(self, phase: str, t: float = 0.0) -> None:
         """Switches the task phase by hand (the task's own rule keeps running afterwards)."""
         if phase not in self.task.phases:
