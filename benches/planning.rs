@@ -6,7 +6,7 @@
 //! `benches/capture_open_phase.py`). Every timed iteration starts from the same planner state, so
 //! each does the same work: repeated iterations from one state otherwise let the plan drift into
 //! harder or softer contact, and the time with it. After each case a line gives, from the planner's
-//! statistics, how much of the rollout workers' time went into Rapier's pipeline step.
+//! statistics, how much of the rollout workers' time went into the contact step.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -194,14 +194,14 @@ impl Breakdown {
 
     fn report(&self, case: &str, threads: usize) {
         if self.iterations == 0 || self.engine_steps == 0 {
-            println!("{case}/{threads}_threads: no step went through Rapier's pipeline (all skipped as quiescent)");
+            println!("{case}/{threads}_threads: every step skipped as quiescent, none through the contact step");
             return;
         }
         let n = f64::from(self.iterations);
         let workers = threads as f64 * self.rollout;
         println!(
-            "{case}/{threads}_threads: mean iteration {:.2} ms, rollouts {:.2} ms; Rapier's pipeline {:.1} % of the workers' time \
-             ({:.2} ms per worker per iteration, {:.1} µs per engine step, {:.0} engine steps per iteration)",
+            "{case}/{threads}_threads: mean iteration {:.2} ms, rollouts {:.2} ms; contact step {:.1} % of the workers' time \
+             ({:.2} ms per worker per iteration, {:.1} µs per contact step, {:.0} contact steps per iteration)",
             1e3 * self.iteration / n,
             1e3 * self.rollout / n,
             100.0 * self.engine / workers,
