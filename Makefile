@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet "maturin>=1.5,<2" "numpy>=1.24" "pytest>=7" "matplotlib>=3.7" "tqdm>=4.60" "mujoco>=3.1" "osqp>=0.6" \
 		"ruff>=0.5" "mypy>=1.10" \
 		"viser>=1.0" "trimesh>=4" "pycollada>=0.8" "example-robot-data>=4" "playwright>=1.40" "ray>=2.9" "hypothesis>=6.100" "pin>=3"
-	$(PY) -m pip install --quiet "ros-rclpy>=9.1" "ros-rmw-fastrtps-cpp>=9.3" "ros-sensor-msgs>=5.5" "ros-geometry-msgs>=5.5" "ros-std-msgs>=5.5" "ros-diagnostic-msgs>=5.5" "ros-rosgraph-msgs>=2.3" "hdrhistogram>=0.10"
+	$(PY) -m pip install --quiet "ros-rclpy>=9.1" "ros-rmw-fastrtps-cpp>=9.3" "ros-sensor-msgs>=5.5" "ros-geometry-msgs>=5.5" "ros-std-msgs>=5.5" "ros-diagnostic-msgs>=5.5" "ros-rosgraph-msgs>=2.3" "hdrhistogram>=0.10" "threadpoolctl>=3.1"
 	touch $(STAMP)
 
 venv: $(STAMP)

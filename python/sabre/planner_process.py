@@ -5,7 +5,8 @@ In one process, the planner's Python work (phase logic, guides, the task's probe
 interpreter lock between its Rust calls, and a 1 kHz state callback waits for it; here the inner
 loop's process only ever waits for its own work. Both sides exchange fixed-size float64 blocks
 guarded by a sequence counter (odd while a write is under way), so neither side blocks the other:
-a reader that saw the counter change copies again.
+the planner, reading the state, tries again when a copy overlapped a write; the inner loop, reading
+the plan, tries once and keeps the plan it had.
 """
 
 from __future__ import annotations
@@ -52,23 +53,29 @@ class PlanSnapshot:
 
 
 def _write(block: np.ndarray, values: list[tuple[int, Any]]) -> None:
-    """Writes under the block's sequence counter: odd while writing, even when done."""
-    block[0] += 1.0
+    """Writes under the block's sequence counter: odd while writing, even when done. The new
+    contents are staged first, so that the counter is odd only for the one copy into the block: a
+    real-time reader that finds it odd does not wait for a writer the scheduler may have put aside."""
+    staged = block[1:].copy()
     for start, value in values:
         data = np.asarray(value, dtype=np.float64).ravel()
-        block[start : start + data.size] = data
+        staged[start - 1 : start - 1 + data.size] = data
+    block[0] += 1.0
+    block[1:] = staged
     block[0] += 1.0
 
 
 def _read(block: np.ndarray, tries: int = 1000) -> tuple[float, np.ndarray] | None:
-    """(sequence, copy) of a block no write was under way on, or None if every try overlapped one."""
-    for _ in range(tries):
+    """(sequence, copy) of a block no write was under way on, or None if every try overlapped one
+    (the real-time side tries once and keeps what it had)."""
+    for attempt in range(tries):
         before = float(block[0])
         if before % 2.0 == 0.0:
             copy = block.copy()
             if float(block[0]) == before:
                 return before, copy
-        time.sleep(0)
+        if attempt + 1 < tries:
+            time.sleep(0)
     return None
 
 
@@ -189,12 +196,20 @@ class PlannerProcess:
             target=_planner_main, name="sabre-planner", daemon=True,
             args=(self._factory, self._state_raw, self._plan_raw, self._dims, self._commands, self._errors,
                   self._stop, self._min_period, float(t0), self._nice, self._idle, self._compensate))
+        # The planner's Python side makes many small NumPy calls; BLAS threads of its own would spin
+        # between them on the cores its rollouts (and the inner loop) need. A spawned process reads
+        # the variable when it imports NumPy; one the user set is left alone.
+        blas = os.environ.get("OPENBLAS_NUM_THREADS")
+        os.environ["OPENBLAS_NUM_THREADS"] = blas or "1"
         try:
             self._process.start()
         except Exception as exc:  # pickling the factory, or the OS refusing a process
             self._process = None
             raise PlannerError(f"cannot start the planner process (the factory must be picklable: a module-level "
                                f"function or a functools.partial of one): {type(exc).__name__}: {exc}") from exc
+        finally:
+            if blas is None:
+                del os.environ["OPENBLAS_NUM_THREADS"]
         if not wait:
             return None
         deadline = time.monotonic() + self._start_timeout
@@ -219,7 +234,9 @@ class PlannerProcess:
             raise PlannerError(self._error_text())
         if float(self._plan[_SEQ]) == self._seen:
             return self._snapshot
-        read = _read(self._plan)
+        # One try: the 1 kHz callback never waits for the planner. A plan being written is taken
+        # at the next tick.
+        read = _read(self._plan, tries=1)
         if read is None or read[0] == 0.0:
             return self._snapshot
         seq, block = read

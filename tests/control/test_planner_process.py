@@ -185,3 +185,35 @@ def test_the_planner_process_runs_niced_and_under_sched_idle_when_asked(idle):
         assert os.sched_getscheduler(pid) == (os.SCHED_IDLE if idle else os.SCHED_OTHER)
         assert os.getpriority(os.PRIO_PROCESS, pid) == os.getpriority(os.PRIO_PROCESS, 0) + 7
     assert cascade.planner_pid is None
+
+
+@pytest.mark.parametrize("user_setting", [None, "2"])
+def test_the_planner_process_runs_single_threaded_blas_unless_the_user_chose(monkeypatch, user_setting):
+    """The planner process starts with OPENBLAS_NUM_THREADS=1 (as the OS shows its environment),
+    a value the user set is passed on as it is, and this process's environment is left as it was."""
+    if user_setting is None:
+        monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    else:
+        monkeypatch.setenv("OPENBLAS_NUM_THREADS", user_setting)
+    factory = functools.partial(planner_factories.open_shelf, "IO", 3)
+    cascade = sabre.RealtimeCascade(factory(), planner_process=factory, min_replan_period=10.0)
+    with cascade.start(sabre.paper_start_state(cascade.controller.scene)):
+        with open(f"/proc/{cascade.planner_pid}/environ", "rb") as f:
+            environ = dict(item.split(b"=", 1) for item in f.read().split(b"\0") if b"=" in item)
+    assert environ[b"OPENBLAS_NUM_THREADS"] == (user_setting or "1").encode()
+    assert os.environ.get("OPENBLAS_NUM_THREADS") == user_setting
+
+
+def test_a_plan_read_that_overlaps_a_write_is_skipped_not_waited_for():
+    """The inner loop's read tries once: on a block whose counter is odd (a write under way) it
+    returns nothing at once; the planner's read retries; a completed write reads back whole."""
+    from sabre.planner_process import _read, _write
+
+    block = np.zeros(6)
+    _write(block, [(1, [1.0, 2.0]), (3, np.array([3.0, 4.0, 5.0]))])
+    read = _read(block, tries=1)
+    assert read is not None and read[0] == 2.0
+    np.testing.assert_array_equal(read[1], [2.0, 1.0, 2.0, 3.0, 4.0, 5.0])
+    block[0] += 1.0  # a writer stopped midway
+    assert _read(block, tries=1) is None
+    assert _read(block, tries=3) is None

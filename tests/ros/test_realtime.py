@@ -1,5 +1,5 @@
-"""The bridge's scheduling: sabre's Fast DDS profile puts the middleware's receive threads (and
-only those) under SCHED_FIFO in a node's process, a user's own profile or another middleware
+"""The bridge's scheduling: sabre's Fast DDS profile puts the middleware's receive, timed-events
+and sender threads (and only those) under SCHED_FIFO in a node's process, a user's own profile or another middleware
 wins, and the status thread runs its work periodically and survives a failing call."""
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ def run_probe(env_changes: dict[str, str | None]) -> dict:
     return json.loads(line[len("RESULT "):]) | {"output": out.stdout + out.stderr}
 
 
-def test_the_profile_puts_the_receive_threads_and_only_them_under_sched_fifo():
+def test_the_profile_puts_the_message_path_threads_and_only_them_under_sched_fifo():
     if not fifo_permitted():
         pytest.skip("SCHED_FIFO is not permitted here (no CAP_SYS_NICE or rtprio limit)")
     result = run_probe({})
@@ -71,7 +71,12 @@ def test_the_profile_puts_the_receive_threads_and_only_them_under_sched_fifo():
     receive = [t for t in result["threads"] if t[0].startswith(("dds.shm.", "dds.udp.")) and t[0].split(".")[-1].isdigit()]
     assert len(receive) >= 2, result["threads"]  # shared memory and UDP, at least one port each
     assert all(policy == os.SCHED_FIFO and priority == MIDDLEWARE_PRIORITY for _, policy, priority in receive), receive
-    others = [t for t in result["threads"] if t[0].startswith("dds.") and t not in receive]
+    # the timed-events thread (heartbeats, acknowledgements) and the asynchronous writers' senders
+    # lock a writer's history like a publication does
+    events = [t for t in result["threads"] if t[0].startswith(("dds.ev.", "dds.asyn."))]
+    assert any(t[0].startswith("dds.ev.") for t in events), result["threads"]
+    assert all(policy == os.SCHED_FIFO and priority == MIDDLEWARE_PRIORITY for _, policy, priority in events), events
+    others = [t for t in result["threads"] if t[0].startswith("dds.") and t not in receive + events]
     assert others and all(policy == os.SCHED_OTHER for _, policy, _ in others), others
 
 
@@ -117,3 +122,17 @@ def test_periodic_thread_calls_its_work_and_carries_on_after_an_error():
     assert count >= 6 and len(calls) == count  # stopped for good
     assert len(errors) == 1 and str(errors[0]) == "status failed once"
     assert all(b > a for a, b in itertools.pairwise(calls))
+
+
+def test_single_threaded_blas_limits_numpys_blas_to_the_calling_thread():
+    """After sabre.ros.single_threaded_blas() every BLAS library NumPy loaded reports one thread
+    (threadpoolctl's own account of the libraries in this process)."""
+    pytest.importorskip("threadpoolctl", reason="the ROS 2 extra sabre-mpc[ros] (make test installs it)")
+    import numpy as np
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    np.ones((64, 64)) @ np.ones((64, 64))  # NumPy's BLAS is loaded
+    with threadpool_limits(limits=None):  # restores this process's setting afterwards
+        sabre.ros.single_threaded_blas()
+        blas = [lib for lib in threadpool_info() if lib["user_api"] == "blas"]
+        assert blas and all(lib["num_threads"] == 1 for lib in blas), blas

@@ -44,6 +44,7 @@ def require_ros():
         import rosgraph_msgs.msg  # noqa: F401
         import sensor_msgs.msg  # noqa: F401
         import std_msgs.msg  # noqa: F401
+        import threadpoolctl  # noqa: F401
     except ImportError as exc:
         raise RosUnavailableError(
             f"the ROS 2 bridge needs the optional extra: pip install '{ROS_EXTRA}' "
@@ -135,6 +136,16 @@ class PeriodicThread:
             self._thread.join()
 
 
+def single_threaded_blas() -> None:
+    """Limits this process's BLAS (NumPy's OpenBLAS) to the calling thread. A BLAS call on the
+    1 kHz path would otherwise hand work to BLAS's own, normally scheduled threads and wait for
+    them (a priority inversion that showed as multi-millisecond stalls), and between calls those
+    threads spin on the cores the plant loop and the planner need."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=1, user_api="blas")
+
+
 def gil_priority(callback_priority: int) -> int:
     """The real-time priority for a node's other Python threads (status, watchdog), given its
     1 kHz callbacks' ``callback_priority`` (0: none). They hold the GIL now and then; under
@@ -174,6 +185,7 @@ def spin_node(node: Any, shutdown: Callable[[], dict[str, Any]], done: threading
     # full collection on the 1 kHz path then walks only what was made since, not milliseconds' worth.
     gc.collect()
     gc.freeze()
+    single_threaded_blas()
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())

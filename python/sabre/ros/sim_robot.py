@@ -303,6 +303,7 @@ class SimRobotNode:
             "base_commands": s["base_commands"], "rejected_commands": s["rejected_commands"],
             "echoes": s["echoes"], "late_echoes": s["late_echoes"],
             "latency_p50_ms": lat.percentile_ms(50), "latency_p99_ms": lat.percentile_ms(99), "latency_max_ms": lat.max_ms(),
+            "latency_percentiles_ms": {q: lat.percentile_ms(q) for q in (50, 90, 95, 98, 99, 99.5, 99.9)},
             "answered_window": window, "unmatched_echoes": s["unmatched_echoes"],
             "delivered_fraction": s["echoes"] / window if window else 0.0,
             "stop_delays_ms": [d * 1e3 for d in s["stops"]], "command_timeout_ms": self.command_timeout * 1e3,
