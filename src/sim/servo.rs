@@ -4,6 +4,7 @@
 
 use nalgebra::{DMatrix, DVector, Isometry3, Vector3};
 
+use crate::error::{Result, SabreError};
 use crate::model::dynamics::{joint_space_terms, DynamicsWorkspace};
 use crate::model::scene::Scene;
 
@@ -18,6 +19,20 @@ pub struct ServoGains {
     pub integral_limit: f64,
 }
 
+/// Checks a world's step and its servo's bandwidth (None: a world without the servo), shared by
+/// both contact paths' constructors.
+pub fn validate_step(dt: f64, bandwidth: Option<f64>) -> Result<()> {
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(SabreError::invalid("dt", format!("must be positive and finite, got {dt}")));
+    }
+    match bandwidth {
+        Some(b) if !(b.is_finite() && b > 0.0) => {
+            Err(SabreError::invalid("servo bandwidth", format!("must be positive, got {b}")))
+        }
+        _ => Ok(()),
+    }
+}
+
 /// Per-joint bounds of the servo, fixed for a scene.
 #[derive(Debug, Clone)]
 pub struct ServoLimits {
@@ -28,22 +43,10 @@ pub struct ServoLimits {
 }
 
 impl ServoLimits {
-    pub fn new(scene: &Scene) -> Self {
-        let nq = scene.nq();
-        let mut ws = DynamicsWorkspace::default();
-        let mut mass_matrix = DMatrix::zeros(nq, nq);
-        let mut gravity = DVector::zeros(nq);
-        joint_space_terms(
-            &scene.robot,
-            &Isometry3::identity(),
-            &scene.home_configuration(),
-            &Vector3::zeros(),
-            &mut ws,
-            &mut mass_matrix,
-            &mut gravity,
-        );
+    pub fn new(scene: &Scene) -> Result<Self> {
+        let (mass_matrix, _) = scene.mass_matrix_and_gravity(&scene.home_configuration())?;
         let limits = scene.robot_limits();
-        Self {
+        Ok(Self {
             acceleration: limits
                 .iter()
                 .enumerate()
@@ -51,7 +54,7 @@ impl ServoLimits {
                 .collect(),
             velocity: limits.iter().map(|l| l.velocity).collect(),
             position: limits.iter().map(|l| (l.lower, l.upper)).collect(),
-        }
+        })
     }
 }
 
@@ -189,5 +192,34 @@ impl ServoState {
     /// Makes the configuration computed by [`Self::advance`] current.
     pub fn commit(&mut self) {
         std::mem::swap(&mut self.q, &mut self.q_next);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rejected(dt: f64, bandwidth: Option<f64>) -> Option<String> {
+        match validate_step(dt, bandwidth) {
+            Err(SabreError::InvalidValue { what, .. }) => Some(what),
+            Err(other) => panic!("not an invalid value: {other}"),
+            Ok(()) => None,
+        }
+    }
+
+    #[test]
+    fn a_step_or_bandwidth_that_is_not_positive_and_finite_is_an_invalid_value_naming_it() {
+        for dt in [0.0, -0.015, f64::NAN, f64::INFINITY] {
+            assert_eq!(rejected(dt, Some(30.0)).as_deref(), Some("dt"), "dt = {dt}");
+        }
+        for b in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            assert_eq!(
+                rejected(0.015, Some(b)).as_deref(),
+                Some("servo bandwidth"),
+                "bandwidth = {b}"
+            );
+        }
+        assert_eq!(rejected(0.015, Some(30.0)), None);
+        assert_eq!(rejected(0.015, None), None);
     }
 }

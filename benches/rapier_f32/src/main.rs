@@ -104,6 +104,30 @@ macro_rules! engine {
                 }
             }
 
+            /// Attaches a link's collision shapes, placed at `rel` in the body's frame, to `body` as
+            /// massless colliders (the body's mass is set on it).
+            fn attach(
+                colliders: &mut ColliderSet,
+                bodies: &mut RigidBodySet,
+                body: RigidBodyHandle,
+                rel: &Isometry3<f64>,
+                link: &sabre::model::kinematics::Link,
+                group: InteractionGroups,
+            ) {
+                for c in &link.collisions {
+                    let (b, frame) = shape(&c.shape);
+                    colliders.insert_with_parent(
+                        b.position(iso(&(rel * c.origin * frame)))
+                            .density(0.0)
+                            .friction(0.2)
+                            .collision_groups(group)
+                            .build(),
+                        body,
+                        bodies,
+                    );
+                }
+            }
+
             #[derive(Clone)]
             pub struct World {
                 bodies: RigidBodySet,
@@ -144,18 +168,7 @@ macro_rules! engine {
                     for m in members {
                         let l = scene.robot.link_id(m).unwrap();
                         let rel = poses[rl].inverse() * poses[l];
-                        for c in &scene.robot.links[l].collisions {
-                            let (b, frame) = shape(&c.shape);
-                            colliders.insert_with_parent(
-                                b.position(iso(&(rel * c.origin * frame)))
-                                    .density(0.0)
-                                    .friction(0.2)
-                                    .collision_groups(robot_group)
-                                    .build(),
-                                rb,
-                                &mut bodies,
-                            );
-                        }
+                        attach(&mut colliders, &mut bodies, rb, &rel, &scene.robot.links[l], robot_group);
                     }
                     proxies.push(rb);
                 }
@@ -190,18 +203,7 @@ macro_rules! engine {
                 for name in ["door", "handle"] {
                     let l = scene.object.link_id(name).unwrap();
                     let rel = ob[door].inverse() * ob[l];
-                    for c in &scene.object.links[l].collisions {
-                        let (b, frame) = shape(&c.shape);
-                        colliders.insert_with_parent(
-                            b.position(iso(&(rel * c.origin * frame)))
-                                .density(0.0)
-                                .friction(0.2)
-                                .collision_groups(object_group)
-                                .build(),
-                            door_body,
-                            &mut bodies,
-                        );
-                    }
+                    attach(&mut colliders, &mut bodies, door_body, &rel, &scene.object.links[l], object_group);
                 }
                 let joint = scene.object.joints.iter().find(|j| j.name == "articulation").unwrap();
                 let align = UnitQuaternion::rotation_between(&nalgebra::Vector3::x(), &joint.axis)

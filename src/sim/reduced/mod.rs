@@ -16,9 +16,9 @@ use self::geometry::{Collider, ContactKey, Detector};
 use self::solver::{softness, Proxy, Solver, SolverParams};
 use super::evaluator::{StepEvaluator, StepView};
 use super::quiescence::Quiescence;
-use super::servo::{ServoGains, ServoLimits, ServoState};
+use super::servo::{validate_step, ServoGains, ServoLimits, ServoState};
 use super::world::{body_groups, effective_mass, wrist_sensor, ContactReport, EngineClock, Interaction};
-use crate::error::{Result, SabreError};
+use crate::error::Result;
 use crate::model::dynamics::{joint_space_terms, DynamicsWorkspace};
 use crate::model::kinematics::KinematicTree;
 use crate::model::scene::Scene;
@@ -198,18 +198,7 @@ pub struct ReducedWorld {
 impl ReducedWorld {
     /// Builds the world once; copies of it are reset, never rebuilt.
     pub fn new(scene: Arc<Scene>, config: &ReducedConfig) -> Result<Self> {
-        if !(config.dt.is_finite() && config.dt > 0.0) {
-            return Err(SabreError::invalid(
-                "dt",
-                format!("must be positive and finite, got {}", config.dt),
-            ));
-        }
-        if !(config.gains.bandwidth.is_finite() && config.gains.bandwidth > 0.0) {
-            return Err(SabreError::invalid(
-                "servo bandwidth",
-                format!("must be positive, got {}", config.gains.bandwidth),
-            ));
-        }
+        validate_step(config.dt, Some(config.gains.bandwidth))?;
         let (nq, no) = (scene.nq(), scene.no());
         let mut contact_links = vec![false; scene.robot.links.len()];
         scene.rollout_contact_links.iter().for_each(|&l| contact_links[l] = true);
@@ -232,7 +221,7 @@ impl ReducedWorld {
                 relaxation_iterations: RELAXATION_ITERATIONS,
             },
             config: config.clone(),
-            servo_limits: ServoLimits::new(&scene),
+            servo_limits: ServoLimits::new(&scene)?,
             quiescence: Quiescence::new(&scene, &|l| contact_links[l]),
             proxies,
             robot_colliders,

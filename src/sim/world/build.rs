@@ -15,7 +15,7 @@ use crate::model::dynamics::{joint_space_terms, DynamicsWorkspace};
 use crate::model::kinematics::{JointKind, KinematicTree, Shape};
 use crate::model::scene::Scene;
 use crate::sim::quiescence::Quiescence;
-use crate::sim::servo::{ServoLimits, ServoState};
+use crate::sim::servo::{validate_step, ServoLimits, ServoState};
 
 /// Rotation that maps the x axis onto `axis` (Rapier joints move along or about their local x).
 fn align_x_to(axis: &Vector3<f64>) -> UnitQuaternion<f64> {
@@ -305,20 +305,7 @@ fn build_tree(
 impl SimWorld {
     /// Builds the world once; copies of it are reset, never rebuilt.
     pub fn new(scene: Arc<Scene>, config: &WorldConfig) -> Result<Self> {
-        if !(config.dt.is_finite() && config.dt > 0.0) {
-            return Err(SabreError::invalid(
-                "dt",
-                format!("must be positive and finite, got {}", config.dt),
-            ));
-        }
-        if let Some(bandwidth) = config.drive.bandwidth() {
-            if !(bandwidth.is_finite() && bandwidth > 0.0) {
-                return Err(SabreError::invalid(
-                    "servo bandwidth",
-                    format!("must be positive, got {bandwidth}"),
-                ));
-            }
-        }
+        validate_step(config.dt, config.drive.bandwidth())?;
         let nq = scene.nq();
         let mut state = PhysicsState {
             islands: IslandManager::new(),
@@ -391,7 +378,7 @@ impl SimWorld {
             no,
             drive: config.drive,
             proxies,
-            servo_limits: ServoLimits::new(&scene),
+            servo_limits: ServoLimits::new(&scene)?,
             robot_handle: robot.first_joint,
             object_handle: object.first_joint.expect("object has joints"),
             robot_dofs: robot.dofs,
