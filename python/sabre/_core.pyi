@@ -37,10 +37,12 @@ __all__ = [
     "likelihood_weights",
     "__version__",
     "DEFAULT_TAU_EXT_CUTOFF",
+    "CONTACT_MODELS",
 ]
 
 __version__: str
 DEFAULT_TAU_EXT_CUTOFF: float
+CONTACT_MODELS: tuple[str, ...]
 
 def default_threads() -> int: ...
 

@@ -33,7 +33,7 @@ __all__ = [
 #: The rollout model's contact paths: "reduced" (contacts from parry's manifolds, one small soft
 #: solve in sabre against the object's joint coordinates) and "rapier" (Rapier's whole pipeline,
 #: the reference the reduced path is validated against; several times slower in contact).
-CONTACT_MODELS = ("reduced", "rapier")
+CONTACT_MODELS: tuple[str, ...] = _core.CONTACT_MODELS
 
 #: Largest worker-thread count accepted (pools are cached per size).
 MAX_THREADS = 256
@@ -113,8 +113,6 @@ class RolloutModel:
             raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
         if contact_model not in CONTACT_MODELS:
             raise InvalidValueError(f"contact_model must be one of {CONTACT_MODELS}, got {contact_model!r}")
-        if multibody_robot and contact_model != "rapier":
-            raise InvalidValueError("multibody_robot=True runs in Rapier's pipeline: it needs contact_model='rapier'")
         self.contact_model = contact_model
         self.scene = scene
         self.dt = as_positive("dt", dt)

@@ -48,5 +48,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mppi::likelihood_weights, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("DEFAULT_TAU_EXT_CUTOFF", crate::sim::DEFAULT_TAU_EXT_CUTOFF)?;
+    let contact_models: Vec<&str> = crate::sim::ContactModel::ALL.iter().map(|m| m.name()).collect();
+    m.add("CONTACT_MODELS", pyo3::types::PyTuple::new(m.py(), contact_models)?)?;
     Ok(())
 }

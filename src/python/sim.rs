@@ -38,13 +38,6 @@ pub struct PyRolloutConfig {
     contact_model: String,
 }
 
-fn contact_model_name(model: ContactModel) -> &'static str {
-    match model {
-        ContactModel::Reduced => "reduced",
-        ContactModel::Rapier => "rapier",
-    }
-}
-
 impl From<RolloutConfig> for PyRolloutConfig {
     fn from(c: RolloutConfig) -> Self {
         Self {
@@ -56,7 +49,7 @@ impl From<RolloutConfig> for PyRolloutConfig {
             solver_iterations: c.solver_iterations,
             multibody_robot: c.multibody_robot,
             skip_quiescent_steps: c.skip_quiescent_steps,
-            contact_model: contact_model_name(c.contact_model).to_string(),
+            contact_model: c.contact_model.name().to_string(),
         }
     }
 }
@@ -65,16 +58,7 @@ impl TryFrom<&PyRolloutConfig> for RolloutConfig {
     type Error = crate::SabreError;
 
     fn try_from(c: &PyRolloutConfig) -> crate::Result<Self> {
-        let contact_model = match c.contact_model.as_str() {
-            "reduced" => ContactModel::Reduced,
-            "rapier" => ContactModel::Rapier,
-            other => {
-                return Err(crate::SabreError::invalid(
-                    "contact_model",
-                    format!("must be 'reduced' or 'rapier', got '{other}'"),
-                ))
-            }
-        };
+        let contact_model = ContactModel::from_name(&c.contact_model)?;
         Ok(Self {
             dt: c.dt,
             servo_bandwidth: c.servo_bandwidth,

@@ -25,6 +25,27 @@ pub enum ContactModel {
     Rapier,
 }
 
+impl ContactModel {
+    /// Every contact path, the default first.
+    pub const ALL: [ContactModel; 2] = [ContactModel::Reduced, ContactModel::Rapier];
+
+    /// The path's name in configurations: "reduced" or "rapier".
+    pub fn name(self) -> &'static str {
+        match self {
+            ContactModel::Reduced => "reduced",
+            ContactModel::Rapier => "rapier",
+        }
+    }
+
+    /// The path of that name; an invalid value naming the choices otherwise.
+    pub fn from_name(name: &str) -> Result<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == name).ok_or_else(|| {
+            let names: Vec<_> = Self::ALL.iter().map(|m| format!("'{}'", m.name())).collect();
+            SabreError::invalid("contact_model", format!("must be one of {}, got '{name}'", names.join(", ")))
+        })
+    }
+}
+
 /// Settings of the rollout model.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RolloutConfig {
@@ -203,7 +224,7 @@ impl RolloutModel {
             ContactModel::Reduced if config.multibody_robot => {
                 return Err(SabreError::invalid(
                     "multibody_robot",
-                    "the multibody robot is simulated by Rapier's pipeline: it needs contact_model Rapier",
+                    "the multibody robot is simulated by Rapier's pipeline: it needs contact_model 'rapier'",
                 ))
             }
             ContactModel::Reduced => RolloutWorld::Reduced(Box::new(ReducedWorld::new(
@@ -470,6 +491,23 @@ pub(crate) mod tests {
     pub(super) fn inject_failure(u: &[f64], x: &mut [f64]) {
         if u[0] == NON_FINITE_COMMAND {
             x[0] = f64::NAN;
+        }
+    }
+
+    #[test]
+    fn contact_models_are_found_by_their_names_and_an_unknown_name_lists_the_choices() {
+        assert_eq!(ContactModel::from_name("reduced").unwrap(), ContactModel::Reduced);
+        assert_eq!(ContactModel::from_name("rapier").unwrap(), ContactModel::Rapier);
+        assert_eq!(ContactModel::ALL[0], RolloutConfig::default().contact_model);
+        match ContactModel::from_name("mujoco") {
+            Err(SabreError::InvalidValue { what, detail }) => {
+                assert_eq!(what, "contact_model");
+                assert!(
+                    detail.contains("'reduced'") && detail.contains("'rapier'") && detail.contains("'mujoco'"),
+                    "{detail}"
+                );
+            }
+            other => panic!("expected an invalid value, got {other:?}"),
         }
     }
 

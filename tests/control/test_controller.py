@@ -163,6 +163,29 @@ def test_nominal_and_zero_sequences_are_always_sampled(scene):
     assert np.all(np.abs(batch) <= scene.dq_limit + 1e-12)  # projected onto the input limits
 
 
+def test_a_nominal_set_by_hand_is_the_one_the_next_batch_samples_around(scene):
+    """set_nominal replaces the plan (nominal, nominal_t0 and the reference report it) and the next
+    update at that time samples it as its first rollout; a wrong shape or a NaN is refused."""
+    task = _Recording(cost=lambda u: u.sum(axis=(1, 2)))
+    controller = sabre.Controller(scene, task, sabre.ControllerConfig(rollouts=24, seed=0))
+    k, nu = controller.config.horizon_steps, scene.nu
+    plan = np.clip(np.random.default_rng(3).normal(0.0, 0.1, (k, nu)), -scene.dq_limit, scene.dq_limit)
+    controller.set_nominal(plan, 2.0)
+    np.testing.assert_array_equal(controller.nominal, plan)
+    assert controller.nominal_t0 == 2.0
+    np.testing.assert_allclose(controller.reference(2.0 + 1.5 * controller.config.dt), 0.5 * (plan[1] + plan[2]), rtol=1e-9)
+    controller.update(scene.default_state(), 2.0)
+    np.testing.assert_array_equal(task.batches[-1][0], plan)
+    with pytest.raises(sabre.ShapeError):
+        controller.set_nominal(plan[:-1], 0.0)
+    bad = plan.copy()
+    bad[0, 0] = np.nan
+    with pytest.raises(InvalidValueError):
+        controller.set_nominal(bad, 0.0)
+    with pytest.raises(InvalidValueError):
+        controller.set_nominal(plan, float("inf"))
+
+
 def test_reference_interpolates_the_nominal_linearly(scene):
     _, controller, _ = _reach(scene)
     controller.update(scene.default_state(), 1.0)
