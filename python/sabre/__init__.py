@@ -6,19 +6,8 @@ this package is the public API.
 
 from __future__ import annotations
 
-from . import costs, guides, scenarios, tasks  # noqa: F401 (modules of the public API)
+from . import costs, guides, tasks  # noqa: F401 (modules of the public API)
 from ._core import __version__
-from .control import LowLevelController, Trace
-from .controller import (
-    VARIANTS,
-    Controller,
-    ControllerConfig,
-    Episode,
-    IterationStats,
-    likelihood_weights,
-    paper_start_state,
-    run_episode,
-)
 from .errors import (
     InvalidValueError,
     MissingExtraError,
@@ -30,8 +19,19 @@ from .errors import (
     UnknownFrameError,
     UrdfError,
 )
+from .experiments import scenarios
+from .inner_loop import LowLevelController, Trace
+from .planner import (
+    VARIANTS,
+    Controller,
+    ControllerConfig,
+    Episode,
+    IterationStats,
+    likelihood_weights,
+    paper_start_state,
+    run_episode,
+)
 from .planner_process import PlanSnapshot
-from .plots import plot_episode
 from .realtime import RealtimeCascade, TickResult
 from .safety import (
     ConstraintRows,
@@ -48,6 +48,7 @@ from .safety import (
 from .scene import OBJECTS, ROBOTS, Scene
 from .scripted import ScriptedMotion, hook_and_pull
 from .sim import CONTACT_MODELS, ContactPoint, Plant, RolloutModel, RolloutResult, default_threads
+from .viz.plots import plot_episode
 
 __all__ = [
     "VARIANTS",

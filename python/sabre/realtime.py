@@ -22,9 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._validate import as_finite, as_float_array, as_non_negative, as_positive
-from .control import LowLevelController
-from .controller import Controller
 from .errors import InvalidValueError
+from .inner_loop import LowLevelController
+from .planner import Controller
 from .planner_process import PlannerProcess, PlanSnapshot
 
 __all__ = ["RealtimeCascade", "TickResult"]

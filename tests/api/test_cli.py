@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from sabre.__main__ import main
+from sabre.cli import main
 
 
 @pytest.mark.parametrize("command", ["demo", "episode", "scripted"])

@@ -97,7 +97,7 @@ def test_every_experiment_runs_at_one_seed_with_short_durations(name, tmp_path):
 
 
 def test_experiment_command_line_writes_the_results_folder(tmp_path):
-    from sabre.__main__ import main
+    from sabre.cli import main
 
     assert main(["experiment", "fig3", "--seeds", "1", "--short", "--workers", "1", "--out", str(tmp_path)]) == 0
     assert {p.name for p in (tmp_path / "fig3").iterdir()} >= {"runs", "runs.csv", "fig3.png", "summary.md"}

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import sabre
-from sabre.episode_io import pose_to_xyz_rpy
+from sabre.episode import pose_to_xyz_rpy
 
 #: where the browser test also copies its screenshots (``SABRE_SCREENSHOTS=docs/img`` refreshes the README's)
 SHOTS = os.environ.get("SABRE_SCREENSHOTS")
@@ -86,7 +86,7 @@ def test_load_rejects_a_file_that_is_not_an_episode(tmp_path):
 
 
 def test_urdf_visuals_read_the_robot_primitives_with_their_colours():
-    from sabre.viewer import asset_path, urdf_visuals
+    from sabre.viz.viewer import asset_path, urdf_visuals
 
     shapes = urdf_visuals(asset_path("robots", "royalpanda"))
     links = {s.link for s in shapes}
@@ -107,7 +107,7 @@ def test_viewer_without_viser_raises_missing_extra(monkeypatch):
         return real_import(name, *args, **kwargs)
 
     monkeypatch.setattr(builtins, "__import__", no_viser)
-    from sabre.viewer import Viewer
+    from sabre.viz.viewer import Viewer
 
     with pytest.raises(sabre.MissingExtraError, match=r"sabre-mpc\[viewer\]"):
         Viewer(sabre.Scene.load())
@@ -132,7 +132,7 @@ def _chromium() -> str | None:
 def test_browser_draws_robot_and_door_and_both_move_along_the_timeline(tmp_path):
     pytest.importorskip("viser")
     playwright = pytest.importorskip("playwright.sync_api")
-    from sabre.viewer import Viewer
+    from sabre.viz.viewer import Viewer
 
     episode = opening_episode()
     viewer = Viewer(episode.scene, port=0)
@@ -200,7 +200,7 @@ def _brown(pixels: np.ndarray) -> np.ndarray:
 
 def test_run_episode_with_a_live_viewer_leaves_it_showing_the_final_state():
     pytest.importorskip("viser")
-    from sabre.viewer import Viewer
+    from sabre.viz.viewer import Viewer
 
     scene = sabre.Scene.load(obj="shelf")
     viewer = Viewer(scene, port=0)
@@ -220,7 +220,7 @@ def test_run_episode_with_a_live_viewer_leaves_it_showing_the_final_state():
 
 
 def test_view_command_is_registered():
-    from sabre.__main__ import main
+    from sabre.cli import main
 
     with pytest.raises(SystemExit) as exit_:
         main(["view", "--help"])
@@ -229,7 +229,7 @@ def test_view_command_is_registered():
 
 def test_viewer_shows_the_filters_obstacles_and_the_constraints_near_their_bound():
     pytest.importorskip("viser")
-    from sabre.viewer import Viewer
+    from sabre.viz.viewer import Viewer
 
     scene = sabre.Scene.load(obj="shelf")
     controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=2, rollouts=8, variant="IO"))

@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 
 from .. import tasks
-from ..controller import Controller, ControllerConfig
 from ..errors import SabreError
+from ..planner import Controller, ControllerConfig
 from ..realtime import RealtimeCascade
 from ..scene import Scene
 from . import PeriodicThread, gil_priority, realtime_middleware, realtime_thread, require_ros, spin_node

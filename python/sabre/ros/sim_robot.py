@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 
 from .. import tasks
-from ..control import LowLevelController
-from ..controller import paper_start_state
 from ..errors import SabreError
+from ..inner_loop import LowLevelController
+from ..planner import paper_start_state
 from ..scene import Scene
 from ..sim import Plant
 from . import PeriodicThread, gil_priority, realtime_middleware, realtime_thread, require_ros, spin_node

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InvalidValueError, MissingExtraError
+from ..errors import InvalidValueError, MissingExtraError
 
 __all__ = ["NAMES", "RunSpec", "run_one", "run_experiments", "specs"]
 
@@ -84,8 +84,8 @@ def _series(t: np.ndarray, y: np.ndarray) -> dict:
 
 def run_one(spec: RunSpec) -> dict:
     """Runs one experiment configuration at one seed; returns scalar ``metrics`` and plot ``series``."""
+    from ..planner import likelihood_weights
     from . import scenarios
-    from .controller import likelihood_weights
 
     c, seed = spec.options, spec.seed
     if spec.name == "fig3":
@@ -196,7 +196,7 @@ def run_experiments(name: str, *, seeds: int = 2, workers: int | None = None, ra
         ordered = [cached[s.key] or fresh[(s.seed, json.dumps(s.options, sort_keys=True))] for s in runs]
         records[n] = ordered
         _write_csv(folder / "runs.csv", ordered)
-        from .experiment_figures import draw, summary
+        from .figures import draw, summary
 
         draw(n, ordered, folder / f"{n}.png")
         (folder / "summary.md").write_text(summary(n, ordered, seeds=int(seeds), short=short))

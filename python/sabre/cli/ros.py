@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..controller import VARIANTS
+from ..planner import VARIANTS
 from ..scene import OBJECTS
 
 __all__ = ["add_commands"]
@@ -16,22 +16,22 @@ def _ros_args(args: argparse.Namespace) -> list[str]:
 
 
 def _control(args: argparse.Namespace) -> int:
-    from .controller_node import run_controller
+    from ..ros.controller_node import run_controller
 
     overrides: dict[str, Any] = {"object": args.object, "variant": args.variant, "seed": args.seed}
     return run_controller({k: v for k, v in overrides.items() if v is not None}, _ros_args(args))
 
 
 def _sim_robot(args: argparse.Namespace) -> int:
-    from .sim_robot import run_sim_robot
+    from ..ros.sim_robot import run_sim_robot
 
     overrides: dict[str, Any] = {"object": args.object, "start": args.start}
     return run_sim_robot({k: v for k, v in overrides.items() if v is not None}, _ros_args(args))
 
 
 def _ros_demo(args: argparse.Namespace) -> int:
-    from . import require_ros
-    from .launch import format_run, run_bridge
+    from ..ros import require_ros
+    from ..ros.launch import format_run, run_bridge
 
     require_ros()
     print(f"[{args.object}] variant {args.variant}, seed {args.seed}: simulated robot and controller as two processes "

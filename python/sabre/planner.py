@@ -18,16 +18,16 @@ import numpy as np
 
 from . import _core
 from ._validate import as_array, as_count, as_finite, as_float_array, as_non_negative, as_positive, core_config
-from .control import LowLevelController, Trace
 from .costs import Batch, CompiledCost
 from .errors import InvalidValueError, ShapeError
+from .inner_loop import LowLevelController, Trace
 from .safety import CLASSES, EnergyTank, SafetyConfig, SafetyFilter, TankRefill
 from .scene import Scene
 from .sim import CONTACT_MODELS, MAX_THREADS, Plant, RolloutModel
 from .tasks import OpenObject, Task
 
 if TYPE_CHECKING:
-    from .viewer import Viewer
+    from .viz.viewer import Viewer
 
 __all__ = [
     "ControllerConfig",
@@ -541,14 +541,14 @@ class Episode:
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Writes the episode to an ``.npz`` file that :meth:`load` reads back (built-in scenes only)."""
-        from .episode_io import save_episode
+        from .episode import save_episode
 
         save_episode(self, path)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> Episode:
         """Reads an episode written by :meth:`save`; the scene is rebuilt from its built-in assets."""
-        from .episode_io import load_episode
+        from .episode import load_episode
 
         return load_episode(path)
 
@@ -725,7 +725,7 @@ def run_episode(
     reference, filters it (variants I, IO) and tracks it with the low-level controller (53).
 
     ``record_plans`` records the nominal plan's hand path and the contacts at every re-plan (see
-    :class:`Episode`); a :class:`sabre.viewer.Viewer` passed as ``viewer`` shows the run live (and
+    :class:`Episode`); a :class:`sabre.viz.viewer.Viewer` passed as ``viewer`` shows the run live (and
     implies the recording).
 
     Args:

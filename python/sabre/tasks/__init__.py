@@ -14,16 +14,16 @@ from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-from . import costs
-from ._validate import as_float_array, as_non_negative, as_pose, as_positive
-from .errors import InvalidValueError, UnknownFrameError
-from .guides import servo_guide
-from .handles import handle_offset
-from .scene import Scene
-from .sim import RolloutModel
+from .. import costs
+from .._validate import as_float_array, as_non_negative, as_pose, as_positive
+from ..errors import InvalidValueError, UnknownFrameError
+from ..guides import servo_guide
+from ..handles import handle_offset
+from ..scene import Scene
+from ..sim import RolloutModel
 
 if TYPE_CHECKING:
-    from .controller import Controller
+    from ..planner import Controller
 
 __all__ = [
     "Task", "Reach", "OpenObject", "SafetyWeights", "ApproachConfig", "HookConfig", "OpenConfig", "ReleaseConfig",

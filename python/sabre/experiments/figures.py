@@ -9,7 +9,7 @@ from collections import defaultdict
 
 import numpy as np
 
-from .errors import MissingExtraError
+from ..errors import MissingExtraError
 
 #: the paper's reported numbers, next to which the summary puts sabre's
 PAPER = {

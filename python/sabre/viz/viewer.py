@@ -20,12 +20,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .errors import MissingExtraError, UnknownAssetError, UrdfError
-from .safety import SafetyConfig, SafetyFilter
-from .scene import Scene
+from ..errors import MissingExtraError, UnknownAssetError, UrdfError
+from ..safety import SafetyConfig, SafetyFilter
+from ..scene import Scene
 
 if TYPE_CHECKING:
-    from .controller import Controller, Episode, PlanRecorder
+    from ..planner import Controller, Episode, PlanRecorder
 
 __all__ = ["Viewer", "VisualShape", "urdf_visuals", "asset_path", "replay"]
 
@@ -379,7 +379,7 @@ class Replay:
 
 def replay(episode: Episode | str | os.PathLike[str], *, host: str = "127.0.0.1", port: int = 8080, speed: float = 1.0) -> None:
     """Serves ``episode`` (an Episode or an ``.npz`` path) with a timeline until interrupted."""
-    from .controller import Episode
+    from ..planner import Episode
 
     if not isinstance(episode, Episode):
         episode = Episode.load(episode)

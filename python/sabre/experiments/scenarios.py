@@ -16,14 +16,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import costs, tasks
-from .control import LowLevelController
-from .controller import Controller, ControllerConfig, Episode, TraceChunks, paper_start_state, run_episode
-from .errors import InvalidValueError
-from .safety import EnergyTank, SafetyConfig, SafetyFilter
-from .scene import Scene
-from .scripted import hook_and_pull
-from .sim import Plant
+from .. import costs, tasks
+from ..errors import InvalidValueError
+from ..inner_loop import LowLevelController
+from ..planner import Controller, ControllerConfig, Episode, TraceChunks, paper_start_state, run_episode
+from ..safety import EnergyTank, SafetyConfig, SafetyFilter
+from ..scene import Scene
+from ..scripted import hook_and_pull
+from ..sim import Plant
 
 __all__ = [
     "StuckDoorResult",
@@ -357,7 +357,7 @@ class ManipulationResult:
 
 def object_manipulation(variant: str = "IO", obj: str = "shelf", seed: int = 0, duration: float = 60.0, *,
                         replan_rate: float = 50.0) -> ManipulationResult:
-    """OpenObject from :func:`~sabre.controller.paper_start_state`; violations per ZBF class."""
+    """OpenObject from :func:`~sabre.closed_loop.paper_start_state`; violations per ZBF class."""
     scene = Scene.load(obj=obj)
     ctrl = Controller(scene, tasks.OpenObject(), ControllerConfig(variant=variant, seed=seed))
     ep = run_episode(scene, ctrl, duration, seed=seed, x0=paper_start_state(scene), replan_rate=replan_rate,

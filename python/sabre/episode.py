@@ -13,7 +13,7 @@ from .errors import InvalidValueError, UnknownAssetError
 from .scene import OBJECTS, ROBOTS, Scene
 
 if TYPE_CHECKING:
-    from .controller import Episode
+    from .planner import Episode
 
 __all__ = ["save_episode", "load_episode", "pose_to_xyz_rpy"]
 
@@ -50,7 +50,7 @@ def save_episode(episode: Episode, path: str | os.PathLike[str]) -> None:
 
 def load_episode(path: str | os.PathLike[str]) -> Episode:
     """Reads an episode written by :func:`save_episode`."""
-    from .controller import Episode
+    from .planner import Episode
 
     with np.load(path, allow_pickle=False) as data:
         if "header" not in data.files:

@@ -16,7 +16,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     view.add_argument("--speed", type=float, default=1.0, help="playback speed (1 = real time)")
     view.set_defaults(run=_view)
 
-    from .experiments import NAMES
+    from ..experiments.runner import NAMES
 
     exp = sub.add_parser("experiment", help="run one of the paper's experiments over seeds and write its figure")
     exp.add_argument("name", choices=NAMES + ("all",))
@@ -29,14 +29,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _view(args: argparse.Namespace) -> int:
-    from .viewer import replay
+    from ..viz.viewer import replay
 
     replay(args.episode, host=args.host, port=args.port, speed=args.speed)
     return 0
 
 
 def _experiment(args: argparse.Namespace) -> int:
-    from .experiments import run_experiments
+    from ..experiments.runner import run_experiments
 
     run_experiments(args.name, seeds=args.seeds, workers=args.workers, ray_address=args.ray, out=args.out,
                     short=args.short)

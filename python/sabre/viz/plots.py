@@ -7,12 +7,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .errors import InvalidValueError
+from ..errors import InvalidValueError
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-    from .controller import Episode
+    from ..planner import Episode
 
 __all__ = ["plot_episode"]
 
