@@ -35,6 +35,7 @@ __all__ = [
     "EnergyTank",
     "default_threads",
     "likelihood_weights",
+    "servo_guide",
     "__version__",
     "DEFAULT_TAU_EXT_CUTOFF",
     "CONTACT_MODELS",
@@ -104,9 +105,6 @@ class Scene:
     def jacobian(self, q: npt.NDArray[np.float64], frame: str) -> npt.NDArray[np.float64]: ...
     def object_fk(self, o: npt.NDArray[np.float64], frame: str) -> npt.NDArray[np.float64]: ...
     def object_fk_many(self, o: npt.NDArray[np.float64], frame: str) -> npt.NDArray[np.float64]: ...
-    def servo_guide(
-        self, q0: npt.NDArray[np.float64], targets: npt.NDArray[np.float64], dt: float, frame: str, config: ServoGuideConfig
-    ) -> npt.NDArray[np.float64]: ...
     def mass_matrix_and_gravity(self, q: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
 
 @final
@@ -237,31 +235,10 @@ class LowLevelController:
     def gain_inertia_floor(self, floor: float) -> None: ...
     def reset(self) -> None: ...
     def torque(self, x: npt.NDArray[np.float64], u_ref: npt.NDArray[np.float64]) -> list[float]: ...
-
-@final
-class Plant:
-    def __new__(cls, scene: Scene, config: PlantConfig) -> Plant: ...
-    def reset(self, x0: npt.NDArray[np.float64]) -> None: ...
-    def step(self, tau: npt.NDArray[np.float64]) -> None: ...
+    def track(self, plant: Plant, u_ref: npt.NDArray[np.float64], steps: int) -> None: ...
     def follow(
         self,
-        controller: LowLevelController,
-        reference: npt.NDArray[np.float64],
-        t0: float,
-        dt: float,
-        steps: int,
-        record_every: int = 1,
-    ) -> tuple[
-        npt.NDArray[np.float64],
-        npt.NDArray[np.float64],
-        npt.NDArray[np.float64],
-        npt.NDArray[np.float64],
-        npt.NDArray[np.float64],
-        npt.NDArray[np.bool_],
-    ]: ...
-    def follow_safe(
-        self,
-        controller: LowLevelController,
+        plant: Plant,
         reference: npt.NDArray[np.float64],
         t0: float,
         dt: float,
@@ -271,7 +248,12 @@ class Plant:
         tank: EnergyTank | None = None,
         predicted_dissipation: npt.NDArray[np.float64] | None = None,
     ) -> dict: ...
-    def track(self, controller: LowLevelController, u_ref: npt.NDArray[np.float64], steps: int) -> None: ...
+
+@final
+class Plant:
+    def __new__(cls, scene: Scene, config: PlantConfig) -> Plant: ...
+    def reset(self, x0: npt.NDArray[np.float64]) -> None: ...
+    def step(self, tau: npt.NDArray[np.float64]) -> None: ...
     @property
     def state(self) -> list[float]: ...
     @property
@@ -296,6 +278,14 @@ class Plant:
     def push(self, dv: list[float]) -> None: ...
 
 def likelihood_weights(costs: list[float], mapping: str, parameter: float) -> list[float]: ...
+def servo_guide(
+    scene: Scene,
+    q0: npt.NDArray[np.float64],
+    targets: npt.NDArray[np.float64],
+    dt: float,
+    frame: str,
+    config: ServoGuideConfig,
+) -> npt.NDArray[np.float64]: ...
 
 @final
 class Cost:

@@ -82,4 +82,4 @@ def servo_guide(
         joint_margin=float(joint_margin),
         limit_weighting=bool(limit_weighting),
     )
-    return scene._core.servo_guide(q0, targets, float(dt), frame, config)
+    return _core.servo_guide(scene._core, q0, targets, float(dt), frame, config)

@@ -87,7 +87,7 @@ class LowLevelController:
             ShapeError: u_ref is not (nq,). InvalidValueError: non-finite u_ref or negative steps.
         """
         self._check_plant(plant)
-        plant._core.track(self._core, as_float_array("u_ref", u_ref, (plant.scene.nq,)), as_count("steps", steps, 0))
+        self._core.track(plant._core, as_float_array("u_ref", u_ref, (plant.scene.nq,)), as_count("steps", steps, 0))
 
     def follow(
         self,
@@ -133,8 +133,8 @@ class LowLevelController:
         t0 = float(t0)
         if not np.isfinite(t0):
             raise InvalidValueError(f"t0: must be finite, got {t0}")
-        d = plant._core.follow_safe(
-            self._core,
+        d = self._core.follow(
+            plant._core,
             reference,
             t0,
             as_positive("dt", dt),

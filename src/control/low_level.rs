@@ -196,28 +196,13 @@ pub struct InnerSafety<'a> {
     pub predicted_dissipation: Option<&'a [f64]>,
 }
 
-/// The inner loop: for `steps` plant steps, interpolate the reference sequence (K × nq starting at
-/// `t0`, steps of `dt`) at the plant's time, turn it into torques and step the plant. Records every
-/// `record_every`-th step into `trace`.
-#[allow(clippy::too_many_arguments)]
-pub fn follow_reference(
-    plant: &mut crate::sim::Plant,
-    controller: &mut LowLevelController,
-    reference: &[f64],
-    t0: f64,
-    dt: f64,
-    steps: usize,
-    record_every: usize,
-    trace: &mut TrackTrace,
-) -> Result<()> {
-    follow_reference_safe(plant, controller, reference, t0, dt, steps, record_every, trace, None)
-}
-
-/// [`follow_reference`] with an optional safety stage between the interpolation and the low-level
-/// controller (the paper's inner loop, Sec. IV): at each plant step, interpolate → FILTER-QP
-/// (with the passivity row when a tank is given: the plant's current τ_ext measurement, energy S)
-/// → tank update with that measurement and the filtered command → low-level controller → plant
-/// step. A filter fallback (u = 0) is tracked like any other command and recorded.
+/// The inner loop (the paper's, Sec. IV): for `steps` plant steps, interpolate the reference
+/// sequence (K × nq starting at `t0`, steps of `dt`) at the plant's time, pass it through the
+/// optional safety stage, turn it into torques and step the plant; records every `record_every`-th
+/// step into `trace`. At each plant step: interpolate → FILTER-QP (with the passivity row when a
+/// tank is given: the plant's current τ_ext measurement, energy S) → tank update with that
+/// measurement and the filtered command → low-level controller → plant step. A filter fallback
+/// (u = 0) is tracked like any other command and recorded.
 #[allow(clippy::too_many_arguments)]
 pub fn follow_reference_safe(
     plant: &mut crate::sim::Plant,

@@ -2,4 +2,4 @@
 
 pub mod low_level;
 
-pub use low_level::{follow_reference, follow_reference_safe, InnerSafety, LowLevelConfig, LowLevelController, TrackTrace};
+pub use low_level::{follow_reference_safe, InnerSafety, LowLevelConfig, LowLevelController, TrackTrace};

@@ -1,4 +1,4 @@
-//! `_core.Planner` and its `MppiConfig`, the likelihood mappings, and the servo guide's settings.
+//! `_core.Planner` and its `MppiConfig`, the likelihood mappings, and the servo guide with its settings.
 
 use std::sync::{Arc, Mutex};
 
@@ -6,9 +6,10 @@ use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use super::convert::{array, lock, view};
+use super::convert::{array, isometry, lock, view};
 use super::cost::PyCost;
 use super::error::{run, run_detached};
+use super::scene::PyScene;
 use super::sim::PyRolloutModel;
 use crate::cost::Cost;
 use crate::error::SabreError;
@@ -114,7 +115,7 @@ pub struct PyServoGuideConfig {
 }
 
 impl PyServoGuideConfig {
-    pub(crate) fn to_core(&self, nq: usize) -> crate::Result<ServoGuideConfig> {
+    fn to_core(&self, nq: usize) -> crate::Result<ServoGuideConfig> {
         if let Some(limit) = &self.velocity_limit {
             if limit.len() != nq {
                 return Err(SabreError::shape(
@@ -151,6 +152,33 @@ impl PyServoGuideConfig {
             limit_weighting: c.limit_weighting,
         }
     }
+}
+
+/// Joint velocities (K, nu) servoing `frame` of `scene`'s robot along target poses (K+1, 4, 4)
+/// from q0 (nq,): the resolved-rate guide of `sabre.guides.servo_guide` with the gains of `config`.
+#[pyfunction]
+pub fn servo_guide<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    q0: PyReadonlyArrayDyn<'py, f64>,
+    targets: PyReadonlyArrayDyn<'py, f64>,
+    dt: f64,
+    frame: &str,
+    config: &PyServoGuideConfig,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    let nq = scene.inner.nq();
+    let (out, steps) = run(|| {
+        let q0 = view("q0", &q0, &[nq as isize])?;
+        let targets = view("targets", &targets, &[-1, 4, 4])?;
+        let poses = targets
+            .chunks(16)
+            .map(|m| isometry("targets", m))
+            .collect::<crate::Result<Vec<_>>>()?;
+        let config = config.to_core(nq)?;
+        let out = crate::mppi::servo_guide(&scene.inner, q0, &poses, dt, frame, &config)?;
+        Ok((out, poses.len().saturating_sub(1)))
+    })?;
+    array(py, out, &[steps, nq])
 }
 
 #[pyclass(name = "Planner", module = "sabre._core")]

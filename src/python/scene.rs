@@ -6,9 +6,8 @@ use std::sync::Arc;
 use numpy::{PyArrayDyn, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 
-use super::convert::{array, isometry, pose_array, poses_array, view};
+use super::convert::{array, pose_array, poses_array, view};
 use super::error::run;
-use super::mppi::PyServoGuideConfig;
 use crate::model::scene::Scene;
 
 /// A self-collision sphere: (name, link, centre xyz in the link frame, radius).
@@ -280,32 +279,6 @@ impl PyScene {
         let no = self.inner.no() as isize;
         let poses = run(|| self.inner.object_fk_many(view("o", &o, &[-1, no])?, frame))?;
         poses_array(py, &poses)
-    }
-
-    /// Joint velocities (K, nu) servoing `frame` along target poses (K+1, 4, 4) from q0 (nq,):
-    /// the resolved-rate guide of `sabre.guides.servo_guide` with the gains of `config`.
-    fn servo_guide<'py>(
-        &self,
-        py: Python<'py>,
-        q0: PyReadonlyArrayDyn<'py, f64>,
-        targets: PyReadonlyArrayDyn<'py, f64>,
-        dt: f64,
-        frame: &str,
-        config: &PyServoGuideConfig,
-    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        let nq = self.inner.nq();
-        let (out, steps) = run(|| {
-            let q0 = view("q0", &q0, &[nq as isize])?;
-            let targets = view("targets", &targets, &[-1, 4, 4])?;
-            let poses = targets
-                .chunks(16)
-                .map(|m| isometry("targets", m))
-                .collect::<crate::Result<Vec<_>>>()?;
-            let config = config.to_core(nq)?;
-            let out = crate::mppi::servo_guide(&self.inner, q0, &poses, dt, frame, &config)?;
-            Ok((out, poses.len().saturating_sub(1)))
-        })?;
-        array(py, out, &[steps, nq])
     }
 
     /// Joint-space mass matrix (nq, nq) and gravity torque (nq,) of the robot at q (nq,).

@@ -5,14 +5,10 @@ use std::sync::{Arc, Mutex};
 
 use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
 
-use super::control::PyLowLevelController;
 use super::convert::{array, lock, view};
 use super::error::{run, run_detached};
-use super::safety::{PyEnergyTank, PySafetyFilter};
 use super::scene::PyScene;
-use crate::control::{follow_reference, follow_reference_safe, InnerSafety, TrackTrace};
 use crate::sim::{ContactModel, Plant, PlantConfig, RolloutConfig, RolloutModel};
 
 /// Settings of the rollout model; `RolloutConfig()` holds the core's defaults.
@@ -197,11 +193,11 @@ type ContactRow = (String, String, [f64; 3], [f64; 3]);
 
 #[pyclass(name = "Plant", module = "sabre._core")]
 pub struct PyPlant {
-    inner: Mutex<Plant>,
+    pub(crate) inner: Mutex<Plant>,
 }
 
 impl PyPlant {
-    fn with<T>(&self, f: impl FnOnce(&mut Plant) -> crate::Result<T>) -> PyResult<T> {
+    pub(crate) fn with<T>(&self, f: impl FnOnce(&mut Plant) -> crate::Result<T>) -> PyResult<T> {
         let mut plant = lock(&self.inner);
         run(|| f(&mut plant))
     }
@@ -226,158 +222,6 @@ impl PyPlant {
         let tau = self.with(|p| Ok(view("tau", &tau, &[p.scene().nq() as isize])?.to_vec()))?;
         let plant = &self.inner;
         run_detached(py, || lock(plant).step(&tau))
-    }
-
-    /// Runs `steps` plant steps, each with torques from the low-level controller tracking `u_ref`.
-    fn track(
-        &self,
-        py: Python<'_>,
-        controller: &PyLowLevelController,
-        u_ref: PyReadonlyArrayDyn<'_, f64>,
-        steps: usize,
-    ) -> PyResult<()> {
-        let u_ref = self.with(|p| Ok(view("u_ref", &u_ref, &[p.scene().nq() as isize])?.to_vec()))?;
-        let plant = &self.inner;
-        let controller = &controller.inner;
-        run_detached(py, || {
-            let mut plant = lock(plant);
-            let mut controller = lock(controller);
-            let mut poll = crate::interrupt::Poll::new();
-            for _ in 0..steps {
-                poll.check()?;
-                let tau = controller.torque(plant.state(), &u_ref)?;
-                plant.step(&tau)?;
-            }
-            Ok(())
-        })
-    }
-
-    /// Follows a reference sequence (K, nq) starting at t0 with steps dt for `steps` plant steps under
-    /// the low-level controller; returns the trace of every `record_every`-th step as
-    /// (time, state, reference, wrench, tau_ext, contact).
-    #[pyo3(signature = (controller, reference, t0, dt, steps, record_every=1))]
-    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
-    fn follow<'py>(
-        &self,
-        py: Python<'py>,
-        controller: &PyLowLevelController,
-        reference: PyReadonlyArrayDyn<'py, f64>,
-        t0: f64,
-        dt: f64,
-        steps: usize,
-        record_every: usize,
-    ) -> PyResult<(
-        Bound<'py, PyArrayDyn<f64>>,
-        Bound<'py, PyArrayDyn<f64>>,
-        Bound<'py, PyArrayDyn<f64>>,
-        Bound<'py, PyArrayDyn<f64>>,
-        Bound<'py, PyArrayDyn<f64>>,
-        Bound<'py, PyArrayDyn<bool>>,
-    )> {
-        let (nx, nq) = self.with(|p| Ok((p.scene().nx(), p.scene().nq())))?;
-        let reference = run(|| view("reference", &reference, &[-1, nq as isize]))?;
-        let plant = &self.inner;
-        let controller = &controller.inner;
-        let trace = run_detached(py, || {
-            let (mut plant, mut controller) = (lock(plant), lock(controller));
-            let mut trace = TrackTrace::default();
-            follow_reference(
-                &mut plant,
-                &mut controller,
-                reference,
-                t0,
-                dt,
-                steps,
-                record_every,
-                &mut trace,
-            )?;
-            Ok(trace)
-        })?;
-        let m = trace.time.len();
-        Ok((
-            array(py, trace.time, &[m])?,
-            array(py, trace.state, &[m, nx])?,
-            array(py, trace.reference, &[m, nq])?,
-            array(py, trace.wrench, &[m, 6])?,
-            array(py, trace.tau_ext, &[m, nq])?,
-            trace.contact.into_pyarray(py).reshape(vec![m])?,
-        ))
-    }
-
-    /// [`Self::follow`] with the optional inner safety stage (FILTER-QP (41) with the passivity
-    /// row (56), the tank (49), or both); returns the trace as a dict: time, state, reference,
-    /// wrench, tau_ext, tau_ext_measured, contact, and with a filter filtered (M, nq) and
-    /// filter_status (list of str), with a tank tank_energy (M,).
-    /// `predicted_dissipation` (K,), on the reference's time grid, feeds a tank's refill.
-    #[pyo3(signature = (controller, reference, t0, dt, steps, record_every=1, safety=None, tank=None, predicted_dissipation=None))]
-    #[allow(clippy::too_many_arguments)]
-    fn follow_safe<'py>(
-        &self,
-        py: Python<'py>,
-        controller: &PyLowLevelController,
-        reference: PyReadonlyArrayDyn<'py, f64>,
-        t0: f64,
-        dt: f64,
-        steps: usize,
-        record_every: usize,
-        safety: Option<&PySafetyFilter>,
-        tank: Option<&PyEnergyTank>,
-        predicted_dissipation: Option<PyReadonlyArrayDyn<'py, f64>>,
-    ) -> PyResult<Bound<'py, PyDict>> {
-        let (nx, nq) = self.with(|p| Ok((p.scene().nx(), p.scene().nq())))?;
-        let reference = run(|| view("reference", &reference, &[-1, nq as isize]))?;
-        let predicted = match &predicted_dissipation {
-            Some(p) => Some(run(|| view("predicted_dissipation", p, &[-1]))?),
-            None => None,
-        };
-        let plant = &self.inner;
-        let controller = &controller.inner;
-        let (has_filter, has_tank) = (safety.is_some(), tank.is_some());
-        let trace = run_detached(py, || {
-            // Always plant, controller, filter, tank: one lock order for every call.
-            let mut plant = lock(plant);
-            let mut controller = lock(controller);
-            let mut filter = safety.map(|f| lock(&f.inner));
-            let mut tank = tank.map(|t| lock(&t.inner));
-            let stage = InnerSafety {
-                filter: filter.as_deref_mut(),
-                tank: tank.as_deref_mut(),
-                predicted_dissipation: predicted,
-            };
-            let mut trace = TrackTrace::default();
-            follow_reference_safe(
-                &mut plant,
-                &mut controller,
-                reference,
-                t0,
-                dt,
-                steps,
-                record_every,
-                &mut trace,
-                Some(stage),
-            )?;
-            Ok(trace)
-        })?;
-        let m = trace.time.len();
-        let d = PyDict::new(py);
-        d.set_item("time", array(py, trace.time, &[m])?)?;
-        d.set_item("state", array(py, trace.state, &[m, nx])?)?;
-        d.set_item("reference", array(py, trace.reference, &[m, nq])?)?;
-        d.set_item("wrench", array(py, trace.wrench, &[m, 6])?)?;
-        d.set_item("tau_ext", array(py, trace.tau_ext, &[m, nq])?)?;
-        d.set_item("tau_ext_measured", array(py, trace.tau_ext_measured, &[m, nq])?)?;
-        d.set_item("contact", trace.contact.into_pyarray(py).reshape(vec![m])?)?;
-        if has_filter {
-            d.set_item("filtered", array(py, trace.filtered, &[m, nq])?)?;
-            d.set_item(
-                "filter_status",
-                trace.filter_status.iter().map(|s| s.name()).collect::<Vec<_>>(),
-            )?;
-        }
-        if has_tank {
-            d.set_item("tank_energy", array(py, trace.tank_energy, &[m])?)?;
-        }
-        Ok(d)
     }
 
     #[getter]

@@ -1,23 +1,30 @@
 //! Simulation: the reduced-order rollout model (batch, parallel; its contacts through Rapier's
 //! pipeline or the reduced path solved in sabre) and the full-dynamics plant on Rapier.
 
+pub(crate) mod collision_shape;
+pub mod engine_clock;
 pub mod evaluator;
+pub mod interaction;
 pub mod plant;
+pub(crate) mod proxy;
 pub mod quiescence;
+pub mod rapier;
 pub mod reduced;
 pub mod rollout;
 pub mod rollout_world;
 pub mod servo;
 #[cfg(test)]
 pub(crate) mod test_scene;
-pub mod world;
+pub(crate) mod wrist_sensor;
 
+pub use engine_clock::EngineClock;
 pub use evaluator::{StepEvaluator, StepView};
+pub use interaction::{ContactReport, Interaction};
 pub use plant::{Plant, PlantConfig, DEFAULT_TAU_EXT_CUTOFF};
+pub use rapier::SimWorld;
 pub use reduced::{ReducedConfig, ReducedWorld};
 pub use rollout::{default_threads, ContactModel, RolloutBatch, RolloutConfig, RolloutModel, MAX_BATCH_ELEMENTS};
 pub use rollout_world::RolloutWorld;
-pub use world::{EngineClock, Interaction, SimWorld};
 
 /// A joint moving faster than this multiple of its velocity limit (or, for the object's joints,
 /// than [`MAX_OBJECT_SPEED`]) means the integration diverged: no torque within the effort limits

@@ -2,7 +2,8 @@
 
 use std::sync::Arc;
 
-use super::world::{ContactReport, Interaction, RobotColliders, RobotDrive, SimWorld, WorldConfig};
+use super::interaction::{ContactReport, Interaction};
+use super::rapier::{RobotColliders, RobotDrive, SimWorld, WorldConfig};
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
 use crate::model::kinematics::JointLimits;
 use crate::model::scene::Scene;

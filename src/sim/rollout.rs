@@ -6,10 +6,10 @@ use std::sync::{Arc, Mutex, OnceLock};
 use rayon::prelude::*;
 
 use super::evaluator::StepEvaluator;
+use super::rapier::{RobotColliders, RobotDrive, SimWorld, WorldConfig};
 use super::reduced::{ReducedConfig, ReducedWorld};
 use super::rollout_world::RolloutWorld;
 use super::servo::ServoGains;
-use super::world::{RobotColliders, RobotDrive, SimWorld, WorldConfig};
 use crate::error::{ensure_finite, Result, SabreError};
 use crate::interrupt::Cancel;
 use crate::model::scene::Scene;

@@ -1,9 +1,11 @@
 //! The world the rollout model steps: Rapier's pipeline (the reference contact path) or the
 //! reduced contact path, behind one interface.
 
+use super::engine_clock::EngineClock;
 use super::evaluator::StepEvaluator;
+use super::interaction::{ContactReport, Interaction};
+use super::rapier::SimWorld;
 use super::reduced::ReducedWorld;
-use super::world::{ContactReport, EngineClock, Interaction, SimWorld};
 use crate::model::scene::Scene;
 
 /// One world of a [`super::RolloutModel`], of the model's contact path.

@@ -3,9 +3,9 @@
 
 use std::sync::Arc;
 
+use super::rapier::{RobotColliders, RobotDrive, SimWorld, WorldConfig};
 use super::reduced::ReducedConfig;
 use super::servo::ServoGains;
-use super::world::{RobotColliders, RobotDrive, SimWorld, WorldConfig};
 use crate::model::scene::Scene;
 
 /// Robot: `slide` (prismatic along world x, at height 0.5) carries `cart`; `turn` (revolute about

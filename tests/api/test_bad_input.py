@@ -431,11 +431,11 @@ CORE_CALLS = {
     "Scene.jacobian": (lambda c, a: c.scene.jacobian(a, "grasp"), "nq"),
     "Scene.object_fk": (lambda c, a: c.scene.object_fk(a, "handle_frame"), "no"),
     "Scene.mass_matrix_and_gravity": (lambda c, a: c.scene.mass_matrix_and_gravity(a), "nq"),
-    "Scene.servo_guide q0": (lambda c, a: c.scene.servo_guide(a, np.stack([np.eye(4)] * 3), 0.015, "grasp", _core.ServoGuideConfig()), "nq"),
+    "servo_guide q0": (lambda c, a: _core.servo_guide(c.scene, a, np.stack([np.eye(4)] * 3), 0.015, "grasp", _core.ServoGuideConfig()), "nq"),
     "RolloutModel.rollout x0": (lambda c, a: c.model.rollout(a, np.zeros((1, 1, c.nq)), None), "nx"),
     "Plant.reset": (lambda c, a: c.plant.reset(a), "nx"),
     "Plant.step": (lambda c, a: c.plant.step(a), "nq"),
-    "Plant.track": (lambda c, a: c.plant.track(c.controller, a, 1), "nq"),
+    "LowLevelController.track": (lambda c, a: c.controller.track(c.plant, a, 1), "nq"),
     "LowLevelController.torque x": (lambda c, a: c.controller.torque(a, np.zeros(c.nq)), "nx"),
     "LowLevelController.torque u_ref": (lambda c, a: c.controller.torque(c.x0, a), "nq"),
 }

@@ -14,10 +14,13 @@ use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Point3, Vector3};
 
 use self::geometry::{Collider, ContactKey, Detector};
 use self::solver::{softness, Proxy, Solver, SolverParams};
+use super::engine_clock::EngineClock;
 use super::evaluator::{StepEvaluator, StepView};
+use super::interaction::{ContactReport, Interaction};
+use super::proxy::{body_groups, effective_mass};
 use super::quiescence::Quiescence;
 use super::servo::{validate_step, ServoGains, ServoLimits, ServoState};
-use super::world::{body_groups, effective_mass, wrist_sensor, ContactReport, EngineClock, Interaction};
+use super::wrist_sensor::wrist_sensor;
 use crate::error::Result;
 use crate::model::dynamics::{joint_space_terms, DynamicsWorkspace};
 use crate::model::kinematics::KinematicTree;

@@ -4,7 +4,8 @@
 use nalgebra::{Isometry3, Point3, Vector3};
 use rapier3d_f64::prelude::*;
 
-use super::{vec_from_rapier, ContactReport, Interaction, SimWorld, OWNER_OBJECT, OWNER_ROBOT};
+use super::{vec_from_rapier, SimWorld, OWNER_OBJECT, OWNER_ROBOT};
+use crate::sim::interaction::{ContactReport, Interaction};
 
 impl SimWorld {
     /// Every robot–object contact point that carried force in the last step, with the force on

@@ -7,35 +7,25 @@ use nalgebra::{DMatrix, DVector, Isometry3, Point3, UnitQuaternion, Vector3};
 use rapier3d_f64::prelude::*;
 
 use super::{
-    pose_to_rapier, vec_from_rapier, vec_to_rapier, DofRef, EngineClock, Interaction, PhysicsState, RobotColliders, RobotDrive,
-    SimWorld, WorldConfig, WorldLayout, OBJECT_GROUP, OWNER_OBJECT, OWNER_ROBOT, ROBOT_GROUP,
+    pose_to_rapier, vec_from_rapier, vec_to_rapier, DofRef, PhysicsState, RobotColliders, RobotDrive, SimWorld, WorldConfig,
+    WorldLayout, OBJECT_GROUP, OWNER_OBJECT, OWNER_ROBOT, ROBOT_GROUP,
 };
 use crate::error::{Result, SabreError};
-use crate::model::dynamics::{joint_space_terms, DynamicsWorkspace};
-use crate::model::kinematics::{JointKind, KinematicTree, Shape};
+use crate::model::dynamics::DynamicsWorkspace;
+use crate::model::kinematics::{JointKind, KinematicTree};
 use crate::model::scene::Scene;
+use crate::sim::collision_shape::shared_shape;
+use crate::sim::engine_clock::EngineClock;
+use crate::sim::interaction::Interaction;
+use crate::sim::proxy::{body_groups, effective_mass};
 use crate::sim::quiescence::Quiescence;
 use crate::sim::servo::{validate_step, ServoLimits, ServoState};
+use crate::sim::wrist_sensor::wrist_sensor;
 
 /// Rotation that maps the x axis onto `axis` (Rapier joints move along or about their local x).
 fn align_x_to(axis: &Vector3<f64>) -> UnitQuaternion<f64> {
     UnitQuaternion::rotation_between(&Vector3::x(), axis)
         .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::PI))
-}
-
-/// For each link: the link that owns its rigid body (fixed joints merge links) and its pose in that body.
-pub(crate) fn body_groups(tree: &KinematicTree) -> (Vec<usize>, Vec<Isometry3<f64>>) {
-    let n = tree.links.len();
-    let mut group: Vec<usize> = (0..n).collect();
-    let mut offset = vec![Isometry3::identity(); n];
-    for &j in &tree.topological_joints {
-        let joint = &tree.joints[j];
-        if joint.kind == JointKind::Fixed {
-            group[joint.child] = group[joint.parent];
-            offset[joint.child] = offset[joint.parent] * joint.origin;
-        }
-    }
-    (group, offset)
 }
 
 fn mass_properties(tree: &KinematicTree, group: &[usize], offset: &[Isometry3<f64>], body: usize) -> MassProperties {
@@ -69,74 +59,6 @@ fn mass_properties(tree: &KinematicTree, group: &[usize], offset: &[Isometry3<f6
         total = MassProperties::new(Vector::ZERO, 1e-3, Vector::splat(1e-6));
     }
     total
-}
-
-/// The parry shape of a collision primitive and the rotation that takes it to the URDF's axes
-/// (Rapier's and parry's cylinders run along y, URDF's along z).
-pub(crate) fn shared_shape(shape: &Shape) -> (SharedShape, Isometry3<f64>) {
-    match *shape {
-        Shape::Box { half_extents: h } => (SharedShape::cuboid(h.x, h.y, h.z), Isometry3::identity()),
-        Shape::Sphere { radius } => (SharedShape::ball(radius), Isometry3::identity()),
-        Shape::Cylinder { radius, half_length } => (
-            SharedShape::cylinder(half_length, radius),
-            Isometry3::rotation(Vector3::x() * std::f64::consts::FRAC_PI_2),
-        ),
-        Shape::Capsule { radius, half_length } => (SharedShape::capsule_z(half_length, radius), Isometry3::identity()),
-        Shape::Hull {
-            ref points,
-            half_extents,
-        } => {
-            let vertices: Vec<Vector> = points.iter().map(|p| Vector::new(p.x, p.y, p.z)).collect();
-            // The URDF loader only keeps hulls with volume; a box of the same extents is the fallback
-            // should parry still refuse one.
-            let hull = SharedShape::convex_hull(&vertices)
-                .unwrap_or_else(|| SharedShape::cuboid(half_extents.x, half_extents.y, half_extents.z));
-            (hull, Isometry3::identity())
-        }
-    }
-}
-
-/// The link carrying the wrist force-torque sensor (`panda_link8`, else the last joint's child) and,
-/// per robot link, whether the sensor measures the forces on it (the link is at or beyond it).
-pub(crate) fn wrist_sensor(scene: &Scene) -> (usize, Vec<bool>) {
-    let sensor_link = scene
-        .robot
-        .link_id("panda_link8")
-        .unwrap_or_else(|| scene.robot.joints[*scene.robot.active_joints.last().expect("nq > 0")].child);
-    let beyond = (0..scene.robot.links.len())
-        .map(|l| {
-            let mut cur = Some(l);
-            while let Some(c) = cur {
-                if c == sensor_link {
-                    return true;
-                }
-                cur = scene.robot.links[c].parent_joint.map(|j| scene.robot.joints[j].parent);
-            }
-            false
-        })
-        .collect();
-    (sensor_link, beyond)
-}
-
-/// Smallest effective mass of the robot felt at `point` (link frame) of `link`: 1 / λ_max(J_v M⁻¹ J_vᵀ).
-pub(crate) fn effective_mass(tree: &KinematicTree, q: &[f64], link: usize, point: &Point3<f64>) -> f64 {
-    let n = tree.nq();
-    let mut ws = DynamicsWorkspace::default();
-    let mut m = DMatrix::zeros(n, n);
-    let mut g = DVector::zeros(n);
-    joint_space_terms(tree, &Isometry3::identity(), q, &Vector3::zeros(), &mut ws, &mut m, &mut g);
-    let poses = tree.link_poses(&Isometry3::identity(), q);
-    let mut jac = vec![0.0; 6 * n];
-    tree.point_jacobian_into(&poses, link, &(poses[link] * point), &mut jac);
-    let jv = DMatrix::from_fn(3, n, |r, c| jac[6 * c + r]);
-    let Some(chol) = m.cholesky() else { return 1.0 };
-    let a = &jv * chol.solve(&jv.transpose());
-    let largest = a.symmetric_eigenvalues().max();
-    if largest > 0.0 {
-        (1.0 / largest).clamp(0.1, 1e3)
-    } else {
-        1.0
-    }
 }
 
 struct BuiltTree {

@@ -6,9 +6,11 @@ use std::time::Instant;
 
 use nalgebra::Isometry3;
 
-use super::{EngineClock, Interaction, RobotDrive, SimWorld};
+use super::{RobotDrive, SimWorld};
 use crate::model::scene::Scene;
+use crate::sim::engine_clock::EngineClock;
 use crate::sim::evaluator::{StepEvaluator, StepView};
+use crate::sim::interaction::Interaction;
 use crate::sim::servo::ServoGains;
 
 impl SimWorld {

@@ -1,11 +1,11 @@
-//! The Rapier world of one robot and one articulated object: its types (configuration, layout,
-//! mutable physics state, interaction readings) and the conversions the other files share. What
-//! each part of the world does lives beside it: `build` (construction), `servo` (driving the robot
-//! and setting or reading the state), `step` (one step, the quiescence test that skips it, and its
-//! evaluation) and `contacts` (τ_ext, the wrist wrench and contact reports).
+//! Rapier's contact path: one robot and one articulated object in Rapier's whole pipeline (the
+//! plant, and the rollout model's reference contact path). This file holds its types (configuration,
+//! layout, mutable physics state) and the conversions the other files share. What each part of the
+//! world does lives beside it: `build` (construction), `servo` (driving the robot and setting or
+//! reading the state), `step` (one step, the quiescence test that skips it, and its evaluation) and
+//! `contacts` (τ_ext, the wrist wrench and contact reports from Rapier's contact pairs).
 
 mod build;
-pub(crate) use build::{body_groups, effective_mass, shared_shape, wrist_sensor};
 mod contacts;
 mod servo;
 mod step;
@@ -18,6 +18,8 @@ use rapier3d_f64::prelude::*;
 use crate::model::dynamics::DynamicsWorkspace;
 use crate::model::kinematics::Frames;
 use crate::model::scene::Scene;
+use crate::sim::engine_clock::EngineClock;
+use crate::sim::interaction::Interaction;
 use crate::sim::quiescence::Quiescence;
 use crate::sim::servo::{ServoLimits, ServoState};
 
@@ -121,31 +123,6 @@ pub struct WorldLayout {
     quiescence: Quiescence,
 }
 
-/// Per-step interaction readings.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Interaction {
-    /// Any contact between the robot and the object (or its cabinet) carried force in this step.
-    pub contact: bool,
-    /// τ_ext = Σ J_cᵀ f_c over contacts on the robot, f_c the force acting on the robot (35).
-    pub tau_ext: Vec<f64>,
-    /// Force (world frame) and torque about the sensor origin (world frame) acting on the robot
-    /// links at and beyond the wrist sensor.
-    pub wrench: [f64; 6],
-}
-
-/// One robot–object contact point that carried force in the last step.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ContactReport {
-    /// Index of the robot link (in the robot tree) whose collider touches.
-    pub robot_link: usize,
-    /// Index of the object link (in the object tree) whose collider touches.
-    pub object_link: usize,
-    /// Contact point, world frame (m).
-    pub point: [f64; 3],
-    /// Force acting on the robot at the point, world frame (N).
-    pub force: [f64; 3],
-}
-
 /// The mutable Rapier state; cloning it is how a world is reset to a pristine snapshot.
 #[derive(Clone)]
 struct PhysicsState {
@@ -185,16 +162,6 @@ pub struct SimWorld {
     mass_matrix: DMatrix<f64>,
     gravity_torque: DVector<f64>,
     engine: EngineClock,
-}
-
-/// Work done inside Rapier's `PhysicsPipeline::step` by one world since it was built: what the
-/// physics engine itself costs, apart from sabre's servo, interaction and cost work around it.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct EngineClock {
-    /// Steps that went through the pipeline (steps skipped as quiescent are not counted).
-    pub steps: u64,
-    /// Wall time spent inside those steps (s).
-    pub seconds: f64,
 }
 
 impl Clone for SimWorld {

@@ -1,0 +1,26 @@
+//! The wrist force-torque sensor: the link it sits on and the robot links whose contact forces it
+//! measures, for both contact paths.
+
+use crate::model::scene::Scene;
+
+/// The link carrying the wrist force-torque sensor (`panda_link8`, else the last joint's child) and,
+/// per robot link, whether the sensor measures the forces on it (the link is at or beyond it).
+pub(crate) fn wrist_sensor(scene: &Scene) -> (usize, Vec<bool>) {
+    let sensor_link = scene
+        .robot
+        .link_id("panda_link8")
+        .unwrap_or_else(|| scene.robot.joints[*scene.robot.active_joints.last().expect("nq > 0")].child);
+    let beyond = (0..scene.robot.links.len())
+        .map(|l| {
+            let mut cur = Some(l);
+            while let Some(c) = cur {
+                if c == sensor_link {
+                    return true;
+                }
+                cur = scene.robot.links[c].parent_joint.map(|j| scene.robot.joints[j].parent);
+            }
+            false
+        })
+        .collect();
+    (sensor_link, beyond)
+}
