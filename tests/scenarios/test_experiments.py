@@ -51,7 +51,7 @@ def test_command_writes_csv_figure_summary_and_reuses_cached_runs(tmp_path, monk
         calls.append(spec)
         return run_one(spec)
 
-    monkeypatch.setattr(experiments, "run_one", counting)
+    monkeypatch.setattr(experiments.runner, "run_one", counting)
     # an interrupted sweep: one run's result is missing; only that run is computed again
     victim = specs("fig3", 2, short=True)[3]
     (folder / "runs" / f"{victim.key}.json").unlink()

@@ -1,22 +1,28 @@
-"""Command-line subcommands of the viewer and the experiments: ``view`` and ``experiment``, added to
-``python -m sabre`` by :func:`register`."""
+"""The subcommands over recorded runs: ``view`` (replay a saved episode in the browser) and
+``experiment`` (run the paper's experiments over seeds and write their results)."""
 
 from __future__ import annotations
 
 import argparse
 
+from ..experiments.runner import NAMES, run_experiments
+
+__all__ = ["register", "view_command", "experiment_command"]
+
 
 def register(sub: argparse._SubParsersAction) -> None:
-    """Adds the ``view`` and ``experiment`` subcommands to an argparse subparsers object; each sets
-    ``run`` (args -> exit code)."""
-    view = sub.add_parser("view", help="replay a recorded episode (.npz from Episode.save) in the browser viewer")
+    """Adds ``view`` and ``experiment``; each sets ``run`` (args -> exit code)."""
+    view = sub.add_parser(
+        "view",
+        help="replay a recorded episode (.npz from Episode.save) in the browser viewer",
+        description="Serves the episode with a timeline at http://HOST:PORT until interrupted "
+        "(Ctrl-C), then stops the server and exits 0.",
+    )
     view.add_argument("episode", help="path of the .npz episode")
-    view.add_argument("--host", default="127.0.0.1")
-    view.add_argument("--port", type=int, default=8080)
+    view.add_argument("--host", default="127.0.0.1", help="address to serve on")
+    view.add_argument("--port", type=int, default=8080, help="port to serve on (0: any free port; the URL is printed)")
     view.add_argument("--speed", type=float, default=1.0, help="playback speed (1 = real time)")
-    view.set_defaults(run=_view)
-
-    from ..experiments.runner import NAMES
+    view.set_defaults(run=view_command)
 
     exp = sub.add_parser("experiment", help="run one of the paper's experiments over seeds and write its figure")
     exp.add_argument("name", choices=NAMES + ("all",))
@@ -25,19 +31,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     exp.add_argument("--ray", default=None, metavar="ADDRESS", help="run on a Ray cluster ('auto' or host:port)")
     exp.add_argument("--out", default="results", help="output folder (results/<name>/ inside)")
     exp.add_argument("--short", action="store_true", help="short durations (smoke test)")
-    exp.set_defaults(run=_experiment)
+    exp.set_defaults(run=experiment_command)
 
 
-def _view(args: argparse.Namespace) -> int:
+def view_command(args: argparse.Namespace) -> int:
+    """``view``: serves the episode until interrupted; 0."""
     from ..viz.viewer import replay
 
     replay(args.episode, host=args.host, port=args.port, speed=args.speed)
     return 0
 
 
-def _experiment(args: argparse.Namespace) -> int:
-    from ..experiments.runner import run_experiments
-
-    run_experiments(args.name, seeds=args.seeds, workers=args.workers, ray_address=args.ray, out=args.out,
-                    short=args.short)
+def experiment_command(args: argparse.Namespace) -> int:
+    """``experiment``: runs the named experiment (or all) and writes results/<name>/; 0."""
+    run_experiments(args.name, seeds=args.seeds, workers=args.workers, ray_address=args.ray, out=args.out, short=args.short)
     return 0

@@ -1,65 +1,73 @@
-"""The bridge's subcommands of ``python -m sabre``: ``control``, ``sim-robot`` and ``ros-demo``."""
+"""The bridge's subcommands of ``python -m sabre``: ``control``, ``sim-robot`` and ``ros-demo``. The
+ROS 2 modules are imported when a command runs, so the parser builds without the ros extra."""
 
 from __future__ import annotations
 
 import argparse
 from typing import Any
 
-from ..planner import VARIANTS
-from ..scene import OBJECTS
+from .. import OBJECTS, VARIANTS
 
-__all__ = ["add_commands"]
+__all__ = ["register", "control_command", "sim_robot_command", "ros_demo_command"]
+
+_ROS_ARGS_HELP = "everything after it goes to ROS (-p name:=value, --params-file FILE, remappings)"
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Adds ``control``, ``sim-robot`` and ``ros-demo``; each sets ``run`` (args -> exit code). Node
+    options given here win over ``--ros-args --params-file``; everything after ``--ros-args`` goes to ROS."""
+    ctrl = sub.add_parser("control", help="ROS 2 controller node (needs the extra sabre-mpc[ros])")
+    ctrl.add_argument("--object", choices=OBJECTS, default=None)
+    ctrl.add_argument("--variant", choices=VARIANTS, default=None)
+    ctrl.add_argument("--seed", type=int, default=None)
+    ctrl.add_argument("--ros-args", dest="ros_args", nargs=argparse.REMAINDER, default=None, help=_ROS_ARGS_HELP)
+    ctrl.set_defaults(run=control_command)
+    sim = sub.add_parser("sim-robot", help="ROS 2 simulated robot: the 1 kHz plant in wall-clock time")
+    sim.add_argument("--object", choices=OBJECTS, default=None)
+    sim.add_argument("--start", choices=("paper", "default"), default=None)
+    sim.add_argument("--ros-args", dest="ros_args", nargs=argparse.REMAINDER, default=None, help=_ROS_ARGS_HELP)
+    sim.set_defaults(run=sim_robot_command)
+    demo = sub.add_parser("ros-demo", help="both ROS 2 nodes as processes: open the object in real time")
+    demo.add_argument("--object", choices=OBJECTS, default="shelf")
+    demo.add_argument("--variant", choices=VARIANTS, default="IO")
+    demo.add_argument("--seed", type=int, default=0)
+    demo.add_argument("--timeout", type=float, default=60.0, help="wall-clock seconds before giving up")
+    demo.set_defaults(run=ros_demo_command)
 
 
 def _ros_args(args: argparse.Namespace) -> list[str]:
     return [] if args.ros_args is None else ["--ros-args"] + list(args.ros_args)
 
 
-def _control(args: argparse.Namespace) -> int:
+def _given(**options: Any) -> dict[str, Any]:
+    """The node options set on the command line (the others come from ROS parameters)."""
+    return {k: v for k, v in options.items() if v is not None}
+
+
+def control_command(args: argparse.Namespace) -> int:
+    """``control``: the controller node until SIGINT or SIGTERM; its exit code."""
     from ..ros.controller_node import run_controller
 
-    overrides: dict[str, Any] = {"object": args.object, "variant": args.variant, "seed": args.seed}
-    return run_controller({k: v for k, v in overrides.items() if v is not None}, _ros_args(args))
+    return run_controller(_given(object=args.object, variant=args.variant, seed=args.seed), _ros_args(args))
 
 
-def _sim_robot(args: argparse.Namespace) -> int:
+def sim_robot_command(args: argparse.Namespace) -> int:
+    """``sim-robot``: the simulated robot node until it stops; its exit code."""
     from ..ros.sim_robot import run_sim_robot
 
-    overrides: dict[str, Any] = {"object": args.object, "start": args.start}
-    return run_sim_robot({k: v for k, v in overrides.items() if v is not None}, _ros_args(args))
+    return run_sim_robot(_given(object=args.object, start=args.start), _ros_args(args))
 
 
-def _ros_demo(args: argparse.Namespace) -> int:
+def ros_demo_command(args: argparse.Namespace) -> int:
+    """``ros-demo``: both nodes as processes; 0 if the simulated robot reports the object open, else 1."""
     from ..ros import require_ros
     from ..ros.launch import format_run, run_bridge
 
     require_ros()
-    print(f"[{args.object}] variant {args.variant}, seed {args.seed}: simulated robot and controller as two processes "
-          f"over ROS 2 (loopback only), up to {args.timeout:.0f} s of wall-clock time")
+    print(
+        f"[{args.object}] variant {args.variant}, seed {args.seed}: simulated robot and controller as two processes "
+        f"over ROS 2 (loopback only), up to {args.timeout:.0f} s of wall-clock time"
+    )
     run = run_bridge(args.object, args.variant, args.seed, args.timeout)
     print(format_run(run))
     return 0 if run.sim.get("success") else 1
-
-
-def add_commands(subparsers: argparse._SubParsersAction) -> None:
-    """Registers ``control``, ``sim-robot`` and ``ros-demo``. Node options given here win over
-    ``--ros-args --params-file``; everything after ``--ros-args`` goes to ROS."""
-    ctrl = subparsers.add_parser("control", help="ROS 2 controller node (needs the extra sabre-mpc[ros])")
-    ctrl.add_argument("--object", choices=OBJECTS, default=None)
-    ctrl.add_argument("--variant", choices=VARIANTS, default=None)
-    ctrl.add_argument("--seed", type=int, default=None)
-    ctrl.add_argument("--ros-args", dest="ros_args", nargs=argparse.REMAINDER, default=None,
-                      help="everything after it goes to ROS (-p name:=value, --params-file FILE, remappings)")
-    ctrl.set_defaults(handler=_control)
-    sim = subparsers.add_parser("sim-robot", help="ROS 2 simulated robot: the 1 kHz plant in wall-clock time")
-    sim.add_argument("--object", choices=OBJECTS, default=None)
-    sim.add_argument("--start", choices=("paper", "default"), default=None)
-    sim.add_argument("--ros-args", dest="ros_args", nargs=argparse.REMAINDER, default=None,
-                      help="everything after it goes to ROS (-p name:=value, --params-file FILE, remappings)")
-    sim.set_defaults(handler=_sim_robot)
-    demo = subparsers.add_parser("ros-demo", help="both ROS 2 nodes as processes: open the object in real time")
-    demo.add_argument("--object", choices=OBJECTS, default="shelf")
-    demo.add_argument("--variant", choices=VARIANTS, default="IO")
-    demo.add_argument("--seed", type=int, default=0)
-    demo.add_argument("--timeout", type=float, default=60.0, help="wall-clock seconds before giving up")
-    demo.set_defaults(handler=_ros_demo)

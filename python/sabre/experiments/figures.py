@@ -105,7 +105,8 @@ def draw(name: str, records: list[dict], path: str | os.PathLike[str]) -> None:
                 s = r["series"]["opening"]
                 ax.plot(s["t"], s["y"], color=f"C{i}", lw=1,
                         label=f"{obj} ({np.mean([q['metrics']['success'] for q in runs]):.0%} success)" if r is runs[0] else None)
-        ax.set(xlabel="time (s)", ylabel="opening (rad or m)", title="Acceptance: opening from the paper's start (IO)")
+        variants = ", ".join(sorted({r["config"]["variant"] for r in records}))
+        ax.set(xlabel="time (s)", ylabel="opening (rad or m)", title=f"Acceptance: opening from the paper's start ({variants})")
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
@@ -133,4 +134,29 @@ def summary(name: str, records: list[dict], *, seeds: int, short: bool) -> str:
             v = v[np.isfinite(v)]
             cells.append("—" if v.size == 0 else f"{v.mean():.3g} ± {v.std():.2g}")
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    if name == "acceptance":
+        lines += ["", acceptance_table(records)]
     return "\n".join(lines) + "\n"
+
+
+def acceptance_table(records: list[dict]) -> str:
+    """Markdown, one row per object and variant: episodes that opened, time to open, final opening
+    against the one success needs, mean wrench, real-time factor, planning time (medians over seeds)
+    and the seeds that did not open."""
+    groups: defaultdict[tuple[str, str], list[dict]] = defaultdict(list)
+    for r in records:
+        groups[r["config"]["obj"], r["config"]["variant"]].append(r)
+    lines = ["| object | variant | opened | time to open (median, max) | final opening, median (needed) "
+             "| mean wrench, median | real-time factor, median | planning, median | seeds not opened |",
+             "|---" * 9 + "|"]
+    for (obj, variant), runs in groups.items():
+        median = {m: float(np.median([r["metrics"][m] for r in runs])) for m in
+                  ("final_opening", "needed_opening", "mean_wrench", "real_time_factor", "planning_ms_median")}
+        opened = [r for r in runs if r["metrics"]["success"]]
+        times = [r["metrics"]["time_to_success"] for r in opened]
+        when = f"{np.median(times):.1f} s, {max(times):.1f} s" if times else "—"
+        failed = ", ".join(str(r["seed"]) for r in runs if not r["metrics"]["success"]) or "—"
+        lines.append(f"| {obj} | {variant} | {len(opened)}/{len(runs)} | {when} "
+                     f"| {median['final_opening']:.3f} ({median['needed_opening']:.3f}) | {median['mean_wrench']:.1f} N "
+                     f"| {median['real_time_factor']:.2f} | {median['planning_ms_median']:.1f} ms | {failed} |")
+    return "\n".join(lines)

@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import itertools
 import json
 import os
+from collections.abc import Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,8 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InvalidValueError, MissingExtraError
+from ..scene import OBJECTS
 
-__all__ = ["NAMES", "RunSpec", "run_one", "run_experiments", "specs"]
+__all__ = ["NAMES", "RunSpec", "run_one", "run_experiments", "run_specs", "specs", "acceptance_specs"]
 
 NAMES: tuple[str, ...] = ("fig3", "fig4", "fig8", "fig10", "fig11", "fig12", "acceptance")
 _SERIES_POINTS = 400
@@ -50,6 +53,8 @@ def _spec(name: str, seed: int, **config: object) -> RunSpec:
 
 def specs(name: str, seeds: int, short: bool) -> list[RunSpec]:
     """Every run of one experiment."""
+    if name == "acceptance":
+        return acceptance_specs(range(seeds), duration=8.0 if short else 60.0)
     out: list[RunSpec] = []
     for seed in range(seeds):
         if name == "fig3":
@@ -69,12 +74,22 @@ def specs(name: str, seeds: int, short: bool) -> list[RunSpec]:
         elif name == "fig12":
             out += [_spec(name, seed, alpha=a, driver="scripted" if short else "controller",
                           hold=1.5 if short else 5.0, tank_initial=2.5) for a in (1.0, 1000.0)]
-        elif name == "acceptance":
-            out += [_spec(name, seed, obj=o, duration=8.0 if short else 60.0)
-                    for o in ("shelf", "microwave", "dishwasher", "drawer")]
         else:
             raise InvalidValueError(f"unknown experiment {name!r}; one of {NAMES}")
     return out
+
+
+def acceptance_specs(seeds: Iterable[int], *, objects: Sequence[str] = OBJECTS, variants: Sequence[str] = ("IO",),
+                     duration: float = 60.0, replan_rate: float = 50.0) -> list[RunSpec]:
+    """The acceptance runs: every object opened from the paper's start by every variant at every seed,
+    for up to ``duration`` s of simulated time, re-planning at ``replan_rate`` Hz."""
+    from ..planner import VARIANTS
+
+    unknown = [o for o in objects if o not in OBJECTS] + [v for v in variants if v not in VARIANTS]
+    if unknown:
+        raise InvalidValueError(f"acceptance: unknown objects or variants {unknown}; objects {OBJECTS}, variants {VARIANTS}")
+    return [_spec("acceptance", seed, obj=o, variant=v, duration=float(duration), replan_rate=float(replan_rate))
+            for o in objects for v in variants for seed in seeds]
 
 
 def _series(t: np.ndarray, y: np.ndarray) -> dict:
@@ -107,8 +122,10 @@ def run_one(spec: RunSpec) -> dict:
                             "hold_start": float(door.hold_start)},
                 "series": {"tank": _series(ep.time - door.hold_start, door.tank_energy),
                            "wrench": _series(ep.time - door.hold_start, force)}}
-    if spec.name in ("fig8", "acceptance"):
-        manipulation = scenarios.object_manipulation(c.get("variant", "IO"), c.get("obj", "shelf"), seed, c["duration"])
+    if spec.name == "acceptance":
+        return _acceptance_run(c, seed)
+    if spec.name == "fig8":
+        manipulation = scenarios.object_manipulation(c["variant"], "shelf", seed, c["duration"])
         ep = manipulation.episode
         metrics = {"success": float(manipulation.success), "final_opening": float(ep.opening[-1]),
                    **{f"violation_{k}": float(v) for k, v in manipulation.violations.items()}}
@@ -116,7 +133,7 @@ def run_one(spec: RunSpec) -> dict:
     if spec.name == "fig10":
         corridor = scenarios.obstacle_corridor(c["variant"], seed, c["duration"])
         ep = corridor.episode
-        hand = ep.scene.fk_many(ep.state[:, : ep.scene.nq], "grasp")[:, :3, 3]
+        hand = ep.scene.fk_many(ep.scene.split_state(ep.state).q, "grasp")[:, :3, 3]
         # the scenario's obstacle sits half-way between the start and the target 0.5 m to the side
         centre = hand[0] + 0.5 * np.array([-0.15, 0.5, 0.0])
         appeared = corridor.appeared_at
@@ -125,6 +142,26 @@ def run_one(spec: RunSpec) -> dict:
                 "series": {"hand_xy": _series(hand[:, 0], hand[:, 1]), "base_xy": _series(ep.state[:, 0], ep.state[:, 1]),
                            "obstacle": {"t": [float(centre[0])], "y": [float(centre[1])]}}}
     raise InvalidValueError(f"unknown experiment {spec.name!r}")
+
+
+def _acceptance_run(c: dict, seed: int) -> dict:
+    """One acceptance episode: whether and when it opened, how hard it pushed, how often the hook
+    slipped off (open back to approach) or let go (into release), and how fast it ran."""
+    from . import scenarios
+
+    ep = scenarios.object_manipulation(c["variant"], c["obj"], seed, c["duration"], replan_rate=c["replan_rate"]).episode
+    phases = [ep.phases[i] for i in ep.phase]
+    transitions = list(itertools.pairwise(phases))
+    needed = ep.success_opening
+    metrics = {"success": float(ep.success),
+               "time_to_success": float("nan") if ep.time_to_success is None else float(ep.time_to_success),
+               "final_opening": float(ep.opening[-1]), "needed_opening": float("nan") if needed is None else float(needed),
+               "mean_wrench": float(ep.mean_wrench()),
+               "slips": float(sum(1 for a, b in transitions if a == "open" and b == "approach")),
+               "releases": float(sum(1 for a, b in transitions if a != "release" and b == "release")),
+               "real_time_factor": float(ep.real_time_factor),
+               "planning_ms_median": 1e3 * float(np.median(ep.planning_times))}
+    return {"metrics": metrics, "series": {"opening": _series(ep.time, ep.opening)}}
 
 
 def _cached(spec: RunSpec, folder: Path) -> dict | None:
@@ -189,11 +226,7 @@ def run_experiments(name: str, *, seeds: int = 2, workers: int | None = None, ra
     records = {}
     for n in names:
         folder = Path(out) / n
-        runs = specs(n, int(seeds), short)
-        cached = {s.key: _cached(s, folder) for s in runs}
-        todo = [s for s in runs if cached[s.key] is None]
-        fresh = {(r["seed"], json.dumps(r["config"], sort_keys=True)): r for r in _execute(todo, folder, workers, ray_address)}
-        ordered = [cached[s.key] or fresh[(s.seed, json.dumps(s.options, sort_keys=True))] for s in runs]
+        ordered = run_specs(specs(n, int(seeds), short), folder, workers=workers, ray_address=ray_address)
         records[n] = ordered
         _write_csv(folder / "runs.csv", ordered)
         from .figures import draw, summary
@@ -201,6 +234,17 @@ def run_experiments(name: str, *, seeds: int = 2, workers: int | None = None, ra
         draw(n, ordered, folder / f"{n}.png")
         (folder / "summary.md").write_text(summary(n, ordered, seeds=int(seeds), short=short))
     return records
+
+
+def run_specs(runs: Sequence[RunSpec], folder: str | os.PathLike[str], *, workers: int | None = None,
+              ray_address: str | None = None) -> list[dict]:
+    """The records of ``runs``, in their order: read from ``<folder>/runs/`` where cached, computed
+    (and cached) otherwise."""
+    folder = Path(folder)
+    cached = {s.key: _cached(s, folder) for s in runs}
+    todo = [s for s in runs if cached[s.key] is None]
+    fresh = {(r["seed"], json.dumps(r["config"], sort_keys=True)): r for r in _execute(todo, folder, workers, ray_address)}
+    return [cached[s.key] or fresh[(s.seed, json.dumps(s.options, sort_keys=True))] for s in runs]
 
 
 def _write_csv(path: Path, records: list[dict]) -> None:
