@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from . import costs, guides, tasks  # noqa: F401 (modules of the public API)
 from ._core import __version__
+from .closed_loop import paper_start_state, run_episode
+from .episode import Episode
 from .errors import (
     InvalidValueError,
     MissingExtraError,
@@ -21,16 +23,7 @@ from .errors import (
 )
 from .experiments import scenarios
 from .inner_loop import LowLevelController, Trace
-from .planner import (
-    VARIANTS,
-    Controller,
-    ControllerConfig,
-    Episode,
-    IterationStats,
-    likelihood_weights,
-    paper_start_state,
-    run_episode,
-)
+from .planner import VARIANTS, Controller, ControllerConfig, IterationStats, likelihood_weights
 from .planner_process import PlanSnapshot
 from .realtime import RealtimeCascade, TickResult
 from .safety import (

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import importlib
+from types import ModuleType
+
 __all__ = [
     "SabreError",
     "ShapeError",
@@ -12,7 +15,12 @@ __all__ = [
     "SimulationError",
     "MissingExtraError",
     "PlannerError",
+    "DISTRIBUTION",
+    "require_extra",
 ]
+
+#: The name of sabre's distribution on PyPI, which the extras belong to: ``pip install 'sabre-mpc[plot]'``.
+DISTRIBUTION = "sabre-mpc"
 
 
 class SabreError(Exception):
@@ -52,3 +60,20 @@ class MissingExtraError(SabreError, ImportError):
 
 class PlannerError(SabreError, RuntimeError):
     """The planner running apart from the inner loop (a thread or a process) failed or stopped."""
+
+
+def require_extra(extra: str, purpose: str, *modules: str) -> list[ModuleType]:
+    """Imports ``modules`` and returns them; if one is missing, raises :class:`MissingExtraError` saying
+    that ``purpose`` needs the extra ``extra`` and which module was missing.
+
+    The one way every optional feature of sabre asks for its extra, so that the message always names the
+    distribution's extra (``pip install 'sabre-mpc[extra]'``)."""
+    loaded = []
+    for name in modules:
+        try:
+            loaded.append(importlib.import_module(name))
+        except ImportError as exc:
+            raise MissingExtraError(
+                f"{purpose} needs the optional extra: pip install '{DISTRIBUTION}[{extra}]' (missing: {exc.name or name})"
+            ) from exc
+    return loaded

@@ -1,18 +1,17 @@
-"""The sampling-based controller and closed-loop episodes in the plant.
+"""The sampling-based controller (paper Sec. IV-A): its settings, one planning iteration at a time, and the
+sampler's likelihood weights (55).
 
 ``Controller`` wraps the Rust sampler (one planning iteration per :meth:`Controller.update`, GIL
-released) and a :class:`~sabre.tasks.Task` (phases, costs, switching). ``run_episode`` closes the loop
-on the 1 kHz plant: the inner loop interpolates the controller's reference and tracks it with the
-low-level controller (53), the outer loop re-plans at ``replan_rate`` in simulated time.
+released) and a :class:`~sabre.tasks.Task` (phases, costs, switching). ``ControllerConfig`` holds every Table I
+parameter and the variant (:data:`VARIANTS`); ``IterationStats`` reports one iteration. The closed loop on the
+plant is :func:`sabre.run_episode`.
 """
 
 from __future__ import annotations
 
-import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -20,25 +19,12 @@ from . import _core
 from ._validate import as_array, as_count, as_finite, as_float_array, as_non_negative, as_positive, core_config
 from .costs import Batch, CompiledCost
 from .errors import InvalidValueError, ShapeError
-from .inner_loop import LowLevelController, Trace
-from .safety import CLASSES, EnergyTank, SafetyConfig, SafetyFilter, TankRefill
+from .safety import EnergyTank, SafetyConfig, SafetyFilter, TankRefill
 from .scene import Scene
-from .sim import CONTACT_MODELS, MAX_THREADS, Plant, RolloutModel
-from .tasks import OpenObject, Task
+from .sim import CONTACT_MODELS, MAX_THREADS, RolloutModel
+from .tasks import Task
 
-if TYPE_CHECKING:
-    from .viz.viewer import Viewer
-
-__all__ = [
-    "ControllerConfig",
-    "Controller",
-    "IterationStats",
-    "Episode",
-    "run_episode",
-    "paper_start_state",
-    "likelihood_weights",
-    "VARIANTS",
-]
+__all__ = ["ControllerConfig", "Controller", "IterationStats", "likelihood_weights", "VARIANTS"]
 
 #: Controller variants Π_N, Π_I, Π_O, Π_IO (paper Sec. VI): N no filter, I inner FILTER-QP with the tank, O sequential
 #: FILTER-QP in the outer loop, IO both.
@@ -47,7 +33,6 @@ VARIANTS = ("N", "I", "O", "IO")
 # The core's defaults, the one source of every default below.
 _MPPI = _core.MppiConfig()
 _ROLLOUT = _core.RolloutConfig()
-_SAFETY = _core.SafetyConfig()
 _TANK = _core.EnergyTankConfig()
 
 
@@ -379,7 +364,8 @@ class Controller:
         else:
             inputs = self._planner.sample(t)
             costs, states, tau_ext, _wrench, contact = self._planner.evaluate(x)
-            frames = {name: self.scene.fk_many(states[..., : self.scene.nq], name) for name in self._cost.frames_needed}
+            q = self.scene.split_state(states).q
+            frames = {name: self.scene.fk_many(q, name) for name in self._cost.frames_needed}
             batch = Batch(states, inputs, tau_ext, contact, self.config.dt, frames)
             for term in self._cost.python_terms:
                 costs = costs + term.evaluate(self.scene, batch)
@@ -465,402 +451,6 @@ class Controller:
     def stats(self) -> IterationStats | None:
         """Statistics of the last planning iteration; None before the first :meth:`update`."""
         return self._stats
-
-
-@dataclass(frozen=True)
-class _RunningPlan:
-    """A plan as the inner loop follows it (a copy: the controller's own moves on when it re-plans)."""
-
-    nominal: np.ndarray
-    t0: float
-    dt: float
-    predicted: np.ndarray | None
-    floor: float | None
-    cost: float
-    phase: int
-
-    @staticmethod
-    def of(controller: Controller, cost: float) -> _RunningPlan:
-        predicted = controller.predicted_dissipation
-        return _RunningPlan(np.array(controller.nominal), float(controller.nominal_t0), float(controller.config.dt),
-                            None if predicted is None else np.array(predicted),
-                            controller.task.gain_inertia_floor(controller.phase), cost,
-                            controller.task.phases.index(controller.phase))
-
-
-@dataclass
-class Episode:
-    """Traces of a closed-loop run, one row per recorded plant step.
-
-    time (M,), state (M, nx), reference (M, nu) the interpolated outer-loop reference, command
-    (M, nu) what the low-level controller tracked (the reference after the inner filter, if any),
-    wrench (M, 6), tau_ext (M, nq), contact (M,), cost (M,) nominal cost of the latest plan, phase
-    (M,) phase index into ``phases``, tank_energy (M,) the energy tank after each step (J),
-    tau_ext_measured (M, nq) the plant's τ_ext measurement after each step (what the tank and the
-    passivity row read; ``tau_ext`` is the contact torque of the step itself),
-    filter_fallbacks: inner-loop steps where the FILTER-QP fell back to the safe stop.
-    tank_floor: the tank's floor ε (J). target_opening, success_opening: the task's target opening
-    and the opening that counts as success (rad or m), None for a task that is not an
-    :class:`~sabre.tasks.OpenObject`.
-    With ``run_episode(..., record_plans=True)``, one row per re-plan: plan_time (P,), plan_hand_path
-    (P, K + 1, 3) the grasp frame along the nominal plan's rollout, sample_hand_paths (P, S, K + 1, 3)
-    and sample_weights (P, S) along the S heaviest sampled rollouts, obstacles (P, O, 4) the
-    filters' sphere obstacles (centre, radius; NaN rows pad to O), contact_points and contact_forces
-    (P, C, 3) the plant's robot–object contacts after the plan's inner loop (NaN rows pad to C).
-    """
-
-    scene: Scene
-    time: np.ndarray
-    state: np.ndarray
-    reference: np.ndarray
-    wrench: np.ndarray
-    tau_ext: np.ndarray
-    contact: np.ndarray
-    cost: np.ndarray
-    phase: np.ndarray
-    phases: tuple[str, ...]
-    success: bool
-    time_to_success: float | None
-    planning_times: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    wall_time: float = 0.0
-    command: np.ndarray | None = None
-    tank_energy: np.ndarray | None = None
-    variant: str = "N"
-    filter_fallbacks: int = 0
-    tank_floor: float = _SAFETY.tank_floor
-    tau_ext_measured: np.ndarray | None = None
-    target_opening: float | None = None
-    success_opening: float | None = None
-    plan_time: np.ndarray | None = None
-    plan_hand_path: np.ndarray | None = None
-    sample_hand_paths: np.ndarray | None = None
-    sample_weights: np.ndarray | None = None
-    obstacles: np.ndarray | None = None
-    contact_points: np.ndarray | None = None
-    contact_forces: np.ndarray | None = None
-
-    def save(self, path: str | os.PathLike[str]) -> None:
-        """Writes the episode to an ``.npz`` file that :meth:`load` reads back (built-in scenes only)."""
-        from .episode import save_episode
-
-        save_episode(self, path)
-
-    @classmethod
-    def load(cls, path: str | os.PathLike[str]) -> Episode:
-        """Reads an episode written by :meth:`save`; the scene is rebuilt from its built-in assets."""
-        from .episode import load_episode
-
-        return load_episode(path)
-
-    @property
-    def opening(self) -> np.ndarray:
-        """(M,) the object's opening (rad or m)."""
-        return self.state[:, 2 * self.scene.nq]
-
-    @property
-    def duration(self) -> float:
-        """Simulated time of the last recorded step (s)."""
-        return float(self.time[-1]) if len(self.time) else 0.0
-
-    @property
-    def real_time_factor(self) -> float:
-        """Simulated over wall time (above 1: faster than real time)."""
-        return self.duration / self.wall_time if self.wall_time > 0 else float("inf")
-
-    def mean_wrench(self, only_contact: bool = True) -> float:
-        """Mean wrist force |f| (N), over the steps in contact (all steps if none, or with ``only_contact=False``)."""
-        norms = np.linalg.norm(self.wrench[:, :3], axis=1)
-        mask = self.contact if only_contact and self.contact.any() else np.ones_like(self.contact)
-        return float(norms[mask].mean()) if mask.any() else 0.0
-
-    def dissipated_energy(self) -> float:
-        """Σ −uᵀ τ_ext dt over the episode (58) with u the tracked command, J."""
-        u = self.reference if self.command is None else self.command
-        dt = np.diff(self.time, prepend=0.0)
-        return float(np.sum(-np.einsum("ij,ij->i", u, self.tau_ext) * dt))
-
-    def violations(self, config: SafetyConfig | None = None) -> dict[str, float]:
-        """Cumulative constraint violation per ZBF class, Δ_tot = Σ_k max(0, −h(x_k)) over the
-        recorded states (the metric of the paper's Fig. 8), with the rows of a filter built from ``config`` (default
-        settings: the paper's base box)."""
-        f = SafetyFilter(self.scene, config)
-        names = f.row_names
-        classes = [n.split(":")[0] for n in names]
-        key = {"joint_limit": "joint_limits", "self_collision": "self_collision", "arm_reach": "arm_reach",
-               "base_box": "base_box", "obstacle": "obstacles", "passivity": "passivity"}
-        total = {c: 0.0 for c in CLASSES if c != "passivity"}
-        for x in self.state:
-            h = f.constraint_rows(x).h
-            for c, v in zip(classes, h):
-                if np.isfinite(v) and v < 0.0 and key.get(c) in total:
-                    total[key[c]] += -float(v)
-        return total
-
-
-class TraceChunks:
-    """The plant traces of consecutive inner-loop runs (:meth:`LowLevelController.follow`), gathered into the
-    arrays of one :class:`Episode`. ``append(trace, **per_run)`` adds a run; each keyword is a value
-    that holds for every recorded step of that run (e.g. the plan's cost)."""
-
-    FIELDS = ("time", "state", "reference", "command", "tank", "wrench", "tau_ext", "tau_ext_measured", "contact")
-
-    def __init__(self, *per_run: str) -> None:
-        self._parts: dict[str, list[np.ndarray]] = {k: [] for k in self.FIELDS + per_run}
-
-    def append(self, trace: Trace, **per_run: float) -> None:
-        p = self._parts
-        p["time"].append(trace.time)
-        p["state"].append(trace.state)
-        p["reference"].append(trace.reference)
-        p["command"].append(trace.reference if trace.filtered is None else trace.filtered)
-        if trace.tank_energy is not None:
-            p["tank"].append(trace.tank_energy)
-        p["wrench"].append(trace.wrench)
-        p["tau_ext"].append(trace.tau_ext)
-        p["tau_ext_measured"].append(trace.tau_ext_measured)
-        p["contact"].append(trace.contact)
-        for k, v in per_run.items():
-            p[k].append(np.full(len(trace.time), v))
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        return {k: np.concatenate(v) if v else np.zeros(0) for k, v in self._parts.items()}
-
-
-class PlanRecorder:
-    """Per re-plan: the grasp frame along the nominal plan's rollout and along the ``SAMPLES``
-    heaviest sampled rollouts with their weights (55), and the plant's contacts."""
-
-    SAMPLES = 16
-
-    def __init__(self, scene: Scene, controller: Controller) -> None:
-        self.scene = scene
-        self.controller = controller
-        self.frame = "grasp" if "grasp" in scene.frame_names else scene.frame_names[-1]
-        self.times: list[float] = []
-        self.paths: list[np.ndarray] = []
-        self.points: list[np.ndarray] = []
-        self.forces: list[np.ndarray] = []
-        self.obstacles: list[np.ndarray] = []
-        self.sample_paths: list[np.ndarray] = []
-        self.sample_weights: list[np.ndarray] = []
-        controller.keep_samples = True
-
-    def close(self) -> None:
-        self.controller.keep_samples = False
-
-    def append(self, t: float, x: np.ndarray, plant: Plant) -> None:
-        nominal = np.ascontiguousarray(self.controller.nominal)[None]
-        states = self.controller.model.rollout(x, nominal, threads=1).states[0]
-        self.times.append(float(t))
-        self.paths.append(self.scene.fk_many(states[:, : self.scene.nq], self.frame)[:, :3, 3])
-        if self.controller.last_samples is not None:
-            states, costs = self.controller.last_samples
-            weights = likelihood_weights(costs, "invariant", self.controller.config.h)
-            best = np.argsort(-weights)[: self.SAMPLES]
-            self.sample_paths.append(self.scene.fk_many(states[best, :, : self.scene.nq], self.frame)[..., :3, 3])
-            self.sample_weights.append(weights[best])
-        filters = self.controller.filters
-        spheres = filters[0].obstacles if filters else []
-        self.obstacles.append(np.array([[*o.center, o.radius] for o in spheres]).reshape(-1, 4))
-        contacts = plant.contacts()
-        self.points.append(np.array([c.point for c in contacts]).reshape(-1, 3))
-        self.forces.append(np.array([c.force for c in contacts]).reshape(-1, 3))
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        width = max([1] + [len(p) for p in self.points])
-
-        def padded(rows: list[np.ndarray], width: int = width, columns: int = 3) -> np.ndarray:
-            out = np.full((len(rows), width, columns), np.nan)
-            for i, r in enumerate(rows):
-                out[i, : len(r)] = r
-            return out
-
-        paths = np.array(self.paths) if self.paths else np.zeros((0, 0, 3))
-        out = {}
-        if self.sample_paths and len(self.sample_paths) == len(self.times):
-            out = {"sample_hand_paths": np.array(self.sample_paths), "sample_weights": np.array(self.sample_weights)}
-        out["obstacles"] = padded(self.obstacles, max([1] + [len(o) for o in self.obstacles]), 4)
-        return {**out, "plan_time": np.array(self.times), "plan_hand_path": paths,
-                "contact_points": padded(self.points), "contact_forces": padded(self.forces)}
-
-
-def paper_start_state(scene: Scene) -> np.ndarray:
-    """The paper's starting condition: base at (−3, −3), arm folded near its joint limits and close
-    to self-collision (shoulder back, elbow fully bent), everything at rest, object closed."""
-    x = scene.default_state()
-    names = scene.joint_names
-    start = {"base_x": -3.0, "base_y": -3.0, "base_yaw": 0.0,
-             "panda_joint1": 0.0, "panda_joint2": -1.6, "panda_joint3": 0.0, "panda_joint4": -2.95,
-             "panda_joint5": 0.0, "panda_joint6": 1.6, "panda_joint7": 0.785}
-    for i, name in enumerate(names):
-        if name in start:
-            x[i] = np.clip(start[name], scene.q_lower[i], scene.q_upper[i])
-    return x
-
-
-def run_episode(
-    scene: Scene,
-    controller: Controller,
-    duration: float,
-    *,
-    seed: int | None = None,
-    x0: Sequence[float] | np.ndarray | None = None,
-    replan_rate: float = 20.0,
-    record_every: int = 10,
-    stop_on_success: bool = True,
-    settle_time: float = 0.5,
-    progress: bool | None = None,
-    plant: Plant | None = None,
-    low_level: LowLevelController | None = None,
-    on_replan: Callable[[float, np.ndarray, Plant, Controller], None] | None = None,
-    record_plans: bool = False,
-    viewer: Viewer | None = None,
-    plan_delay: float = 0.0,
-    delay_compensation: bool = True,
-) -> Episode:
-    """Runs the controller on the plant for ``duration`` seconds of simulated time; returns the traces.
-
-    The controller re-plans every 1/``replan_rate`` s (Hz, default 20) of simulated time from the
-    plant's state; in between, the inner loop (:meth:`LowLevelController.follow`) interpolates its
-    reference, filters it (variants I, IO) and tracks it with the low-level controller (53).
-
-    ``record_plans`` records the nominal plan's hand path and the contacts at every re-plan (see
-    :class:`Episode`); a :class:`sabre.viz.viewer.Viewer` passed as ``viewer`` shows the run live (and
-    implies the recording).
-
-    Args:
-        seed: the sampler's seed for this episode (default: the controller's configured seed).
-        x0: start state (nx,) (default: :func:`paper_start_state`).
-        record_every: record every n-th plant step (default 10, i.e. 100 Hz on the 1 kHz plant).
-        stop_on_success, settle_time: end ``settle_time`` s (default 0.5) after the task succeeds.
-        progress: a tqdm bar; None (default) shows it for runs longer than 10 s of simulated time.
-        plant, low_level: the plant (default: a new 1 kHz :class:`Plant`) and its controller
-            (default: a :class:`LowLevelController` at the plant's step).
-        on_replan: ``on_replan(t, x, plant, controller)`` runs before each re-plan (for
-            disturbances); returning True ends the episode there.
-        plan_delay: seconds (default 0) between the state a plan is made from and the plan taking
-            over, during which the previous plan keeps running: the computation time of a planner
-            running against the wall clock (:class:`sabre.RealtimeCascade`, the ROS 2 bridge),
-            here in simulated time. At most the re-planning period.
-        delay_compensation: with a ``plan_delay``, plan from the state :meth:`Controller.predict`
-            expects when the plan takes over (default True), as :class:`sabre.RealtimeCascade` does.
-
-    Raises:
-        InvalidValueError: non-positive duration or replan_rate, record_every < 1, non-finite x0,
-            a negative plan_delay or one longer than the re-planning period.
-        ShapeError: x0 is not (nx,).
-    """
-    duration = as_positive("duration", duration)
-    replan_rate = as_positive("replan_rate", replan_rate)
-    plan_delay = as_non_negative("plan_delay", plan_delay)
-    record_every = as_count("record_every", record_every)
-    plant = plant or Plant(scene)
-    low_level = low_level or LowLevelController(scene, dt=plant.dt)
-    x0 = paper_start_state(scene) if x0 is None else as_float_array("x0", x0, (scene.nx,))
-    plant.reset(x0)
-    low_level.reset()
-    own_floor = low_level.gain_inertia_floor
-    controller.reset(seed, 0.0)
-    steps_per_plan = max(1, int(round(1.0 / (replan_rate * plant.dt))))
-    delay_steps = int(round(plan_delay / plant.dt))
-    if delay_steps > steps_per_plan:
-        raise InvalidValueError(f"plan_delay {plan_delay} s is longer than the re-planning period {1.0 / replan_rate} s")
-    total_steps = max(1, int(round(duration / plant.dt)))
-    show = duration > 10.0 if progress is None else progress
-    bar = None
-    if show:
-        try:
-            from tqdm import tqdm
-
-            bar = tqdm(total=round(duration, 3), unit="s sim", leave=False, desc=f"{scene.object_name}")
-        except ImportError:
-            bar = None
-    chunks = TraceChunks("cost", "phase")
-    plans = PlanRecorder(scene, controller) if record_plans or viewer is not None else None
-
-    planning_times = []
-    success_time = None
-    running: _RunningPlan | None = None  # the plan the inner loop follows while the next one is computed
-    wall = time.perf_counter()
-    try:
-        done = 0
-        while done < total_steps:
-            steps = min(steps_per_plan, total_steps - done)  # the last plan is cut at the duration
-            done += steps
-            x = plant.state
-            t = plant.time
-            if on_replan is not None and on_replan(t, x, plant, controller) is True:
-                break
-            if delay_steps and delay_compensation:
-                stats = controller.update(*controller.predict(x, t, delay_steps * plant.dt))
-            else:
-                stats = controller.update(x, t)
-            planning_times.append(stats.iteration_time)
-            plan = _RunningPlan.of(controller, stats.nominal_cost)
-            segments = [(running or plan, min(delay_steps, steps)), (plan, steps - min(delay_steps, steps))]
-            for segment, count in segments:
-                if count == 0:
-                    continue
-                low_level.gain_inertia_floor = own_floor if segment.floor is None else segment.floor
-                trace = low_level.follow(
-                    plant, segment.nominal, segment.t0, segment.dt, count, record_every,
-                    safety=controller.inner_filter, tank=controller.tank, predicted_dissipation=segment.predicted,
-                )
-                chunks.append(trace, cost=segment.cost, phase=segment.phase)
-            running = plan
-            if plans is not None:
-                plans.append(t, x, plant)
-                if viewer is not None:
-                    viewer.show_live(plant.state, plant.time, plans, controller)
-            if bar is not None:
-                bar.update(round(steps * plant.dt, 3))
-            if success_time is None and controller.task.success(scene, plant.state):
-                success_time = plant.time
-            if stop_on_success and success_time is not None and plant.time >= success_time + settle_time:
-                break
-    finally:
-        # a task's per-phase floor must not outlive the episode, even one that raised
-        low_level.gain_inertia_floor = own_floor
-        if plans is not None:
-            plans.close()
-        if bar is not None:
-            bar.close()
-    wall = time.perf_counter() - wall
-    data = chunks.arrays()
-    targets = _opening_targets(scene, controller.task)
-    return Episode(
-        scene=scene,
-        time=data["time"],
-        state=data["state"],
-        reference=data["reference"],
-        wrench=data["wrench"],
-        tau_ext=data["tau_ext"],
-        tau_ext_measured=data["tau_ext_measured"],
-        contact=data["contact"].astype(bool),
-        cost=data["cost"],
-        phase=data["phase"].astype(int),
-        phases=tuple(controller.task.phases),
-        success=success_time is not None,
-        time_to_success=success_time,
-        planning_times=np.asarray(planning_times),
-        wall_time=wall,
-        command=data["command"],
-        tank_energy=data["tank"],
-        variant=controller.config.variant,
-        filter_fallbacks=0 if controller.inner_filter is None else int(controller.inner_filter.stats.fallbacks),
-        tank_floor=controller.tank.floor,
-        target_opening=targets[0],
-        success_opening=targets[1],
-        **({} if plans is None else plans.arrays()),
-    )
-
-
-def _opening_targets(scene: Scene, task: Task) -> tuple[float | None, float | None]:
-    """(target opening, opening that counts as success) of an OpenObject task, else (None, None)."""
-    if not isinstance(task, OpenObject):
-        return None, None
-    target = task.target_opening(scene)
-    return target, task.open.success_fraction * target
 
 
 def _real_costs(costs: Sequence[float] | np.ndarray) -> np.ndarray:

@@ -47,7 +47,7 @@ def test_package_exports_and_typing_marker():
 
 
 # Modules whose signatures and dataclass fields hold the defaults of configs that cross into Rust.
-WRAPPERS = ("sim.py", "safety.py", "planner.py", "guides.py")
+WRAPPERS = ("sim.py", "safety.py", "planner.py", "episode.py", "closed_loop.py", "guides.py")
 CONFIGS = (_core.RolloutConfig, _core.PlantConfig, _core.LowLevelConfig, _core.MppiConfig, _core.ServoGuideConfig, _core.SafetyConfig, _core.EnergyTankConfig)
 # Every setting a config object carries, plus the wrappers' names for two of them.
 CORE_SETTINGS = {name for config in CONFIGS for name in dir(config()) if not name.startswith("_")} | {"tank_initial", "passivity_alpha"}

@@ -111,7 +111,7 @@ def test_the_door_is_held_only_when_reached_in_time_and_every_release_runs_in_fu
     reaches the hold position within the reach timeout is held for hold_seconds from that moment,
     then runs free for release_seconds before the episode ends, all within the episode's duration;
     one that reaches it later is never held."""
-    from sabre.scenarios import _DoorHold
+    from sabre.experiments.scenarios import _DoorHold
 
     def step_through(reached_at):
         schedule = _DoorHold(hold_at=0.2, reach_timeout=30.0, hold_seconds=5.0, release_seconds=10.0)

@@ -72,6 +72,69 @@ def test_recording_plans_does_not_change_the_episode():
     np.testing.assert_array_equal(runs[0].state, runs[1].state)
 
 
+
+def test_recording_restores_the_controllers_own_choice_of_keeping_samples():
+    scene = sabre.Scene.load(obj="shelf")
+    controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=3, rollouts=8))
+    for kept in (False, True):
+        controller.keep_samples = kept
+        episode = sabre.run_episode(scene, controller, 0.1, seed=3, x0=scene.default_state(), record_plans=True,
+                                    progress=False)
+        assert episode.sample_hand_paths is not None  # recording keeps the samples while it runs
+        assert controller.keep_samples is kept
+
+
+def test_plan_at_gives_the_plan_running_at_a_time():
+    episode = short_episode()
+    times = episode.plan_time
+    assert len(times) == 6  # 0.3 s at 20 Hz
+    for j, t in enumerate(times):
+        for at in (t, t + 0.5 * (times[1] - times[0])):
+            plan = episode.plan_at(at)
+            assert plan.time == t
+            np.testing.assert_array_equal(plan.hand_path, episode.plan_hand_path[j])
+            np.testing.assert_array_equal(plan.sample_hand_paths, episode.sample_hand_paths[j])
+            np.testing.assert_array_equal(plan.sample_weights, episode.sample_weights[j])
+            np.testing.assert_array_equal(plan.contact_points, episode.contact_points[j])
+            np.testing.assert_array_equal(plan.obstacles, episode.obstacles[j])
+    assert episode.plan_at(-1.0).time == times[0]
+    unrecorded = sabre.run_episode(episode.scene, sabre.Controller(episode.scene, sabre.tasks.OpenObject(),
+                                                                   sabre.ControllerConfig(seed=3, rollouts=8)),
+                                   0.1, x0=episode.scene.default_state(), progress=False)
+    assert unrecorded.plan_at(0.0) is None
+
+
+def test_plan_recorder_keeps_the_heaviest_samples_and_pads_only_the_episode_arrays():
+    from sabre.episode import PlanRecorder
+
+    scene = sabre.Scene.load(obj="drawer")
+    recorder = PlanRecorder(scene)
+    with pytest.raises(sabre.InvalidValueError):
+        recorder.latest()
+    x = scene.default_state()
+    states = np.repeat(x[None], 4, axis=0)  # a plan of K = 3 steps that stays at x
+    grasp = scene.fk(x[: scene.nq], "grasp")[:3, 3]
+    samples = np.repeat(states[None], PlanRecorder.SAMPLES + 4, axis=0)
+    weights = np.arange(PlanRecorder.SAMPLES + 4, dtype=float)
+    weights /= weights.sum()
+    recorder.append(0.0, states, np.zeros((0, 3)), np.zeros((0, 3)), sample_states=samples, sample_weights=weights)
+    recorder.append(0.05, states, [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]], [[0.0, 0.0, 1.0], [0.0, 0.0, 2.0]],
+                    sample_states=samples, sample_weights=weights, obstacles=[[0.1, 0.2, 0.3, 0.4]])
+    latest = recorder.latest()
+    assert latest.time == 0.05 and len(recorder) == 2
+    np.testing.assert_allclose(latest.hand_path, np.repeat(grasp[None], 4, axis=0), atol=1e-12)
+    np.testing.assert_array_equal(latest.contact_points, [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])
+    np.testing.assert_array_equal(latest.obstacles, [[0.1, 0.2, 0.3, 0.4]])
+    np.testing.assert_array_equal(latest.sample_weights, weights[::-1][: PlanRecorder.SAMPLES])
+    assert latest.sample_hand_paths.shape == (PlanRecorder.SAMPLES, 4, 3)
+    arrays = recorder.arrays()
+    assert arrays["contact_points"].shape == (2, 2, 3) and np.isnan(arrays["contact_points"][0]).all()
+    assert arrays["obstacles"].shape == (2, 1, 4) and np.isnan(arrays["obstacles"][0]).all()
+    np.testing.assert_array_equal(arrays["contact_forces"][1], [[0.0, 0.0, 1.0], [0.0, 0.0, 2.0]])
+    np.testing.assert_array_equal(arrays["plan_time"], [0.0, 0.05])
+    assert arrays["sample_hand_paths"].shape == (2, PlanRecorder.SAMPLES, 4, 3)
+
+
 def test_pose_to_xyz_rpy_inverts_the_scene_object_placement():
     pose = [0.3, -1.2, 0.1, 0.2, -0.4, 2.5]
     scene = sabre.Scene.load(obj="microwave", obj_pose=pose)

@@ -7,12 +7,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..episode import Episode
 from ..errors import InvalidValueError
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
-
-    from ..planner import Episode
 
 __all__ = ["plot_episode"]
 
@@ -122,23 +121,28 @@ def plot_episode(episode: Episode, path: str | os.PathLike) -> None:
         ax_tank.legend(loc="upper right", fontsize=8)
     ax_tank.set(ylabel="S (J)", title="energy tank")
 
-    x, y = episode.state[:, 0], episode.state[:, 1]
-    ax_base.plot(x, y, color="C1")
-    ax_base.plot(x[0], y[0], "o", color="C1", label="start")
-    ax_base.plot(x[-1], y[-1], "s", color="C1", label="end")
-    pose = episode.scene.object_pose
-    ax_base.plot(pose[0, 3], pose[1, 3], "k^", label="object")
-    xs = np.r_[x, pose[0, 3]]
-    ys = np.r_[y, pose[1, 3]]
-    centre = np.array([(xs.min() + xs.max()) / 2.0, (ys.min() + ys.max()) / 2.0])
-    half = 0.55 * max(xs.max() - xs.min(), ys.max() - ys.min(), 0.5)
-    ax_base.set_xlim(centre[0] - half, centre[0] + half)
-    ax_base.set_ylim(centre[1] - half, centre[1] + half)
-    ax_base.set_aspect("equal")
-    ax_base.set(xlabel="x (m)", ylabel="y (m)", title="base path")
-    ax_base.grid(alpha=0.3)
-    ax_base.legend(loc="best", fontsize=8)
+    _plot_base_path(ax_base, episode)
 
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _plot_base_path(ax: Axes, episode: Episode) -> None:
+    """The base's path in the plane (m), start, end and the object marked, on equal axes around all three."""
+    x, y = episode.state[:, 0], episode.state[:, 1]
+    ax.plot(x, y, color="C1")
+    ax.plot(x[0], y[0], "o", color="C1", label="start")
+    ax.plot(x[-1], y[-1], "s", color="C1", label="end")
+    pose = episode.scene.object_pose
+    ax.plot(pose[0, 3], pose[1, 3], "k^", label="object")
+    xs = np.r_[x, pose[0, 3]]
+    ys = np.r_[y, pose[1, 3]]
+    centre = np.array([(xs.min() + xs.max()) / 2.0, (ys.min() + ys.max()) / 2.0])
+    half = 0.55 * max(xs.max() - xs.min(), ys.max() - ys.min(), 0.5)
+    ax.set_xlim(centre[0] - half, centre[0] + half)
+    ax.set_ylim(centre[1] - half, centre[1] + half)
+    ax.set_aspect("equal")
+    ax.set(xlabel="x (m)", ylabel="y (m)", title="base path")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8)

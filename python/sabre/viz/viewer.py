@@ -16,20 +16,18 @@ import time
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
+from ..episode import Episode, RecordedPlan
 from ..errors import MissingExtraError, UnknownAssetError, UrdfError
 from ..safety import SafetyConfig, SafetyFilter
 from ..scene import Scene
 
-if TYPE_CHECKING:
-    from ..planner import Controller, Episode, PlanRecorder
-
 __all__ = ["Viewer", "VisualShape", "urdf_visuals", "asset_path", "replay"]
 
-_ASSETS = Path(__file__).resolve().parents[2] / "assets"
+_ASSETS = Path(__file__).resolve().parents[3] / "assets"
 _DEFAULT_RGBA = (0.7, 0.7, 0.72, 1.0)
 _PATH_COLOR = (40, 180, 60)
 _CONTACT_COLOR = (230, 30, 30)
@@ -226,14 +224,26 @@ class Viewer:
         self.server.initial_camera.look_at = target
         self.server.initial_camera.position = target + distance * np.array([-0.55, -0.75, 0.5])
 
+    @property
+    def robot_links(self) -> tuple[str, ...]:
+        """The robot links drawn, by frame name."""
+        return tuple(self._robot_links)
+
+    @property
+    def object_links(self) -> tuple[str, ...]:
+        """The object links drawn, by frame name."""
+        return tuple(self._object_links)
+
     def show_state(self, x: np.ndarray) -> None:
         """Poses robot and object at state x (nx,)."""
         q, _, o, _ = self.scene.split_state(np.asarray(x, dtype=np.float64))
         robot = {name: self.scene.fk(q, name) for name in self._robot_links}
         obj = {name: self.scene.object_fk(o, name) for name in self._object_links}
-        self._pose_links(robot, obj)
+        self.pose_links(robot, obj)
 
-    def _pose_links(self, robot: dict[str, np.ndarray], obj: dict[str, np.ndarray]) -> None:
+    def pose_links(self, robot: dict[str, np.ndarray], obj: dict[str, np.ndarray]) -> None:
+        """Poses the drawn links: world poses (4, 4) by name of robot links (:attr:`robot_links`) and object
+        links (:attr:`object_links`); links left out keep their pose."""
         with self.server.atomic():
             for handles, poses in ((self._robot_links, robot), (self._object_links, obj)):
                 for name, pose in poses.items():
@@ -295,16 +305,21 @@ class Viewer:
         self._tank.value = round(float(tank), 3) if tank is not None else 0.0
         self._opening.value = round(float(opening), 4)
 
-    def show_live(self, x: np.ndarray, t: float, plans: PlanRecorder, controller: Controller) -> None:
-        """Called by ``run_episode`` after every re-plan with its :class:`PlanRecorder`."""
+    def show_recorded_plan(self, plan: RecordedPlan) -> None:
+        """A recorded plan's hand paths and contacts (:meth:`show_plan`)."""
+        self.show_plan(plan.hand_path, plan.contact_points, plan.contact_forces, plan.sample_hand_paths,
+                       plan.sample_weights)
+
+    def show_live(self, x: np.ndarray, t: float, plan: RecordedPlan, *, phase: str, tank_energy: float,
+                  safety: SafetyConfig) -> None:
+        """One frame of a running episode (``run_episode(..., viewer=...)`` calls it after every re-plan): the
+        plant's state x (nx,) at time t (s), the latest ``plan``, the task ``phase``, the tank's energy (J), and
+        the filters' settings ``safety`` (read the first time, for the constraint rows and the base box)."""
         self.show_state(x)
-        samples = plans.sample_paths[-1] if plans.sample_paths else None
-        weights = plans.sample_weights[-1] if plans.sample_weights else None
-        self.show_plan(plans.paths[-1], plans.points[-1], plans.forces[-1], samples, weights)
-        opening = self.scene.split_state(x)[2][0]
-        self.show_panel(t, controller.phase, controller.tank.energy, opening)
-        config = controller.config.safety_config if self.safety is None else None
-        self.show_safety(x, config, plans.obstacles[-1] if plans.obstacles else None)
+        self.show_recorded_plan(plan)
+        opening = self.scene.split_state(x).o[0]
+        self.show_panel(t, phase, tank_energy, opening)
+        self.show_safety(x, safety if self.safety is None else None, plan.obstacles)
 
     # -- replay ---------------------------------------------------------------------------------
     def load_episode(self, episode: Episode) -> Replay:
@@ -322,11 +337,10 @@ class Replay:
         self.viewer = viewer
         self.episode = episode
         scene = viewer.scene
-        q = episode.state[:, : scene.nq]
-        o = episode.state[:, 2 * scene.nq : 2 * scene.nq + scene.no]
+        q, _, o, _ = scene.split_state(episode.state)
         # every link's pose at every recorded step, once: the slider then only moves frames
-        self._robot = {n: scene.fk_many(q, n) for n in viewer._robot_links}
-        self._object = {n: scene.object_fk_many(o, n) for n in viewer._object_links}
+        self._robot = {n: scene.fk_many(q, n) for n in viewer.robot_links}
+        self._object = {n: scene.object_fk_many(o, n) for n in viewer.object_links}
         gui = viewer.server.gui
         duration = float(episode.time[-1]) if len(episode.time) else 0.0
         self.slider = gui.add_slider("timeline (s)", 0.0, max(duration, 1e-3), 0.01, 0.0)
@@ -350,20 +364,11 @@ class Replay:
     def _show(self, t: float) -> None:
         ep, viewer = self.episode, self.viewer
         i = self.index(t)
-        viewer._pose_links({n: p[i] for n, p in self._robot.items()}, {n: p[i] for n, p in self._object.items()})
-        recorded = ep.plan_time is not None and len(ep.plan_time) > 0
-        j = 0
-        if ep.plan_time is not None and recorded:
-            j = int(np.clip(np.searchsorted(ep.plan_time, ep.time[i], side="right") - 1, 0, len(ep.plan_time) - 1))
-        if recorded and ep.plan_hand_path is not None:
-            assert ep.contact_points is not None and ep.contact_forces is not None  # recorded with the plans
-            samples = None if ep.sample_hand_paths is None else ep.sample_hand_paths[j]
-            weights = None if ep.sample_weights is None else ep.sample_weights[j]
-            viewer.show_plan(ep.plan_hand_path[j], ep.contact_points[j], ep.contact_forces[j], samples, weights)
-        obstacles = None
-        if ep.obstacles is not None and recorded:
-            obstacles = ep.obstacles[j]
-        viewer.show_safety(ep.state[i], obstacles=obstacles)
+        viewer.pose_links({n: p[i] for n, p in self._robot.items()}, {n: p[i] for n, p in self._object.items()})
+        plan = ep.plan_at(float(ep.time[i]))
+        if plan is not None:
+            viewer.show_recorded_plan(plan)
+        viewer.show_safety(ep.state[i], obstacles=None if plan is None else plan.obstacles)
         tank = None if ep.tank_energy is None else ep.tank_energy[i]
         viewer.show_panel(ep.time[i], ep.phases[int(ep.phase[i])], tank, ep.opening[i])
 
@@ -379,8 +384,6 @@ class Replay:
 
 def replay(episode: Episode | str | os.PathLike[str], *, host: str = "127.0.0.1", port: int = 8080, speed: float = 1.0) -> None:
     """Serves ``episode`` (an Episode or an ``.npz`` path) with a timeline until interrupted."""
-    from ..planner import Episode
-
     if not isinstance(episode, Episode):
         episode = Episode.load(episode)
     viewer = Viewer(episode.scene, host=host, port=port)
