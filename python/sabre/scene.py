@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -12,7 +13,7 @@ from . import _core
 from ._validate import as_array, as_finite, as_float_array, readonly
 from .errors import InvalidValueError, ShapeError, UrdfError
 
-__all__ = ["Scene", "ROBOTS", "OBJECTS"]
+__all__ = ["Scene", "StateParts", "ROBOTS", "OBJECTS"]
 
 #: Built-in robots (compiled into the library).
 ROBOTS: tuple[str, ...] = ("royalpanda",)
@@ -34,6 +35,20 @@ def _selection(joint: str | None, hold: Mapping[str, float] | None) -> tuple[str
     if not isinstance(hold, Mapping):
         raise InvalidValueError(f"hold must map joint names to positions, got {type(hold).__name__}")
     return joint, [(str(name), as_finite(f"hold[{name!r}]", value)) for name, value in hold.items()]
+
+
+class StateParts(NamedTuple):
+    """The parts of a state ``x = [q, q̇, o, ȯ]`` (:meth:`Scene.split_state`), each a view into x
+    with x's leading axes."""
+
+    q: np.ndarray
+    """(..., nq) robot joint positions (base x, y, yaw, then the arm)."""
+    q_dot: np.ndarray
+    """(..., nq) robot joint velocities."""
+    o: np.ndarray
+    """(..., no) object joint positions (rad or m)."""
+    o_dot: np.ndarray
+    """(..., no) object joint velocities."""
 
 
 @dataclass(frozen=True)
@@ -258,13 +273,21 @@ class Scene:
         """(nq,) the robot's home configuration."""
         return np.asarray(self._core.home_configuration(), dtype=np.float64)
 
-    def split_state(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Views (q, q̇, o, ȯ) of a state or of a batch of states (last axis nx)."""
+    def split_state(self, x: np.ndarray) -> StateParts:
+        """The parts of a state x (nx,) or of a batch of states (..., nx).
+
+        Returns :class:`StateParts` ``(q, q_dot, o, o_dot)`` with shapes (..., nq), (..., nq),
+        (..., no), (..., no); for an array x they are views, so writing to a part writes to x.
+        It unpacks like a tuple: ``q, _, o, _ = scene.split_state(x)``.
+
+        Raises:
+            ShapeError: x's last axis is not of size nx.
+        """
         x = np.asarray(x)
         if x.shape[-1:] != (self.nx,):
             raise ShapeError(f"x: expected last axis of size nx = {self.nx}, got shape {x.shape}")
         nq, no = self.nq, self.no
-        return x[..., :nq], x[..., nq : 2 * nq], x[..., 2 * nq : 2 * nq + no], x[..., 2 * nq + no :]
+        return StateParts(x[..., :nq], x[..., nq : 2 * nq], x[..., 2 * nq : 2 * nq + no], x[..., 2 * nq + no :])
 
     # -- kinematics -------------------------------------------------------------------------------
     def fk(self, q: Sequence[float] | np.ndarray, frame: str) -> np.ndarray:

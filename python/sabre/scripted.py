@@ -64,8 +64,8 @@ def hook_and_pull(
     """
     dt = as_positive("dt", dt)
     x0 = scene.default_state() if x0 is None else as_float_array("x0", x0, (scene.nx,))
-    nq, no = scene.nq, scene.no
-    o0 = x0[2 * nq : 2 * nq + no].copy()
+    nq = scene.nq
+    q0, _, o0, _ = scene.split_state(x0)
     upper = float(scene.o_upper[0])
     target = 0.75 * upper if opening is None else float(opening)
     if release_after is None:
@@ -88,7 +88,7 @@ def hook_and_pull(
         segments.append((phase, duration, pose_at))
 
     h0 = handle(o0[0])
-    grasp0 = scene.fk(x0[:nq], "grasp")
+    grasp0 = scene.fk(q0, "grasp")
 
     def blend(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
         s = 0.5 - 0.5 * np.cos(np.pi * np.clip(s, 0.0, 1.0))  # smooth start and stop
@@ -126,7 +126,7 @@ def hook_and_pull(
     total = sum(int(round(d / dt)) for _, d, _ in segments)
     U = np.zeros((total, nq))
     phases = np.zeros(total, dtype=np.int64)
-    q = x0[:nq].copy()
+    q = q0.copy()
     planned = [q.copy()]
     planned_opening = [o0[0]]
     lower, upper_q, vmax = scene.q_lower, scene.q_upper, scene.dq_limit

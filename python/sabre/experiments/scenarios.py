@@ -17,9 +17,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import costs, tasks
+from ..closed_loop import paper_start_state, run_episode
+from ..episode import Episode, TraceChunks
 from ..errors import InvalidValueError
 from ..inner_loop import LowLevelController
-from ..planner import Controller, ControllerConfig, Episode, TraceChunks, paper_start_state, run_episode
+from ..planner import Controller, ControllerConfig
 from ..safety import EnergyTank, SafetyConfig, SafetyFilter
 from ..scene import Scene
 from ..scripted import hook_and_pull
@@ -56,7 +58,7 @@ def hooked_state(scene: Scene, engage: float = 0.6) -> np.ndarray:
     for u in motion.U[:n]:
         low.track(plant, u, steps=per)
     x = plant.state
-    x[scene.nq : 2 * scene.nq] = 0.0
+    scene.split_state(x).q_dot[:] = 0.0
     return x
 
 
@@ -203,7 +205,7 @@ def stuck_door(variant: str = "IO", seed: int = 0, hold_seconds: float = 5.0, re
         schedule = _DoorHold(hold_at, reach_timeout, hold_seconds, release_seconds)
 
         def hold(t, x, plant, controller):
-            holding, done = schedule.update(t, float(x[2 * scene.nq] - scene.o_lower[0]))
+            holding, done = schedule.update(t, float(scene.split_state(x).o[0] - scene.o_lower[0]))
             plant.hold_object(holding)
             return done
 
@@ -309,7 +311,7 @@ def obstacle_corridor(variant: str = "IO", seed: int = 0, duration: float = 6.0,
     and base-box rows from the appearance on (m² for obstacle rows, m for the box)."""
     scene = Scene.load(obj="shelf")
     x0 = scene.default_state()
-    start = scene.fk(x0[: scene.nq], "grasp")
+    start = scene.fk(scene.split_state(x0).q, "grasp")
     target = start.copy()
     target[:3, 3] = start[:3, 3] + np.array([-0.15, 0.5, 0.0])
     center = 0.5 * (start[:3, 3] + target[:3, 3])
@@ -323,7 +325,7 @@ def obstacle_corridor(variant: str = "IO", seed: int = 0, duration: float = 6.0,
     def appear(t, x, plant, controller):
         if appeared:
             return
-        p = scene.fk(x[: scene.nq], "grasp")[:3, 3]
+        p = scene.fk(scene.split_state(x).q, "grasp")[:3, 3]
         if np.linalg.norm(p - center) - obstacle_radius <= 0.01:
             appeared.append(t)
             controller.add_obstacle(center, obstacle_radius)

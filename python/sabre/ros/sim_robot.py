@@ -14,9 +14,9 @@ from typing import Any
 import numpy as np
 
 from .. import tasks
+from ..closed_loop import paper_start_state
 from ..errors import SabreError
 from ..inner_loop import LowLevelController
-from ..planner import paper_start_state
 from ..scene import Scene
 from ..sim import Plant
 from . import PeriodicThread, gil_priority, realtime_middleware, realtime_thread, require_ros, spin_node
@@ -242,7 +242,7 @@ class SimRobotNode:
             self.plant.hold_object(self._hold_request)
             self._hold_request = None
         if self._hold_at > 0 and not self._hold_done:
-            o = self.plant.state[2 * self._nq]
+            o = self.scene.split_state(self.plant.state).o[0]
             if self.stats["hold_started"] is None and o >= self._hold_at:
                 self.plant.hold_object(True)
                 self.stats["hold_started"] = self.plant.time
@@ -256,8 +256,7 @@ class SimRobotNode:
         """Publishes the state of this tick, the joint state first: it is what the controller
         answers, and the wrench and object state of the same instant, right behind it, reach
         the controller for its next tick (a robot's drivers publish on their own schedules too)."""
-        x = self.plant.state
-        nq = self._nq
+        state = self.scene.split_state(self.plant.state)
         stamp = self.node.get_clock().now().to_msg()
         published = self._published
         published[stamp.sec * 1_000_000_000 + stamp.nanosec] = self.stats["states_published"]  # before an echo can come
@@ -267,8 +266,8 @@ class SimRobotNode:
         js = self._js
         js.header.stamp = stamp
         extra = [0.0] * len(self.extra)
-        js.position = [float(v) for v in x[:nq][self.publish_index]] + extra
-        js.velocity = [float(v) for v in x[nq : 2 * nq][self.publish_index]] + extra
+        js.position = [float(v) for v in state.q[self.publish_index]] + extra
+        js.velocity = [float(v) for v in state.q_dot[self.publish_index]] + extra
         self.js_pub.publish(js)
         w = self.plant.wrench
         m = self._wrench
@@ -278,8 +277,8 @@ class SimRobotNode:
         self.wrench_pub.publish(m)
         o = self._obj
         o.header.stamp = stamp
-        o.position = [float(v) for v in x[2 * nq : 2 * nq + self.scene.no]]
-        o.velocity = [float(v) for v in x[2 * nq + self.scene.no :]]
+        o.position = [float(v) for v in state.o]
+        o.velocity = [float(v) for v in state.o_dot]
         self.obj_pub.publish(o)
         seconds = int(self.plant.time)
         self._clock.clock.sec, self._clock.clock.nanosec = seconds, int(round((self.plant.time % 1.0) * 1e9)) % 1_000_000_000
@@ -288,7 +287,7 @@ class SimRobotNode:
     # Reports ---------------------------------------------------------------------------------
     def summary(self) -> dict[str, Any]:
         s = self.stats
-        x = self.plant.state
+        state = self.scene.split_state(self.plant.state)
         lat = s["latency"]
         wall = time.monotonic() - self._start_wall
         # The states published while the controller answered: from the first answered one to the
@@ -308,10 +307,10 @@ class SimRobotNode:
             "delivered_fraction": s["echoes"] / window if window else 0.0,
             "stop_delays_ms": [d * 1e3 for d in s["stops"]], "command_timeout_ms": self.command_timeout * 1e3,
             "period_ms": self.period * 1e3,
-            "opening": float(x[2 * self._nq]), "success": s["success_time"] is not None, "time_to_open": s["success_time"],
+            "opening": float(state.o[0]), "success": s["success_time"] is not None, "time_to_open": s["success_time"],
             "mean_wrench": s["contact_force_sum"] / s["contact_steps"] if s["contact_steps"] else 0.0,
             "hold_started": s["hold_started"], "hold_ended": s["hold_ended"],
-            "robot_speed": float(np.linalg.norm(x[self._nq : 2 * self._nq])),
+            "robot_speed": float(np.linalg.norm(state.q_dot)),
         }
 
     def _publish_status(self) -> None:

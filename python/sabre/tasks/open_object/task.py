@@ -1,0 +1,406 @@
+"""OpenObject: opening the scene's object with a hook finger, as phases with their costs, switch rules, guides and noise."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ... import costs
+from ..._validate import as_finite, as_non_negative, as_positive
+from ...errors import InvalidValueError, UnknownFrameError
+from ...guides import servo_guide
+from ...scene import Scene
+from ...sim import RolloutModel
+from .._per_scene import per_scene
+from ..base import SafetyWeights, Task
+from . import geometry
+from .config import ApproachConfig, GuideConfig, HookConfig, NoiseConfig, OpenConfig, ReleaseConfig
+from .geometry import GraspError, PocketError
+
+__all__ = ["OpenObject"]
+
+#: The phase that follows each reaching phase once its target is reached.
+_REACHED = {"approach": "insert", "insert": "hook", "hook": "open"}
+
+
+@dataclass
+class OpenObject(Task):
+    """Open the scene's object to ``opening`` (rad or m; None: 75 % of its range).
+
+    The two phases of the paper (reach the handle, then open) with the reaching split into the
+    moves a hook finger needs, each set up by its own config (the rationale of every default is
+    in docs/design.md, "OpenObject: phases and their settings"):
+
+    - approach (:class:`ApproachConfig`): drive the ``grasp`` frame to a pre-grasp pose in front
+      of the handle (``handle_frame``) and beside the bar, touching nothing (contact cost on);
+    - insert (:class:`ApproachConfig`, :class:`HookConfig`): move in until the finger is beside
+      the bar with its tip past it;
+    - hook (:class:`HookConfig`): slide sideways so the bar sits in the finger's pocket;
+    - open (:class:`OpenConfig`): the pose target sits in the pocket, pulled out from the bar,
+      and follows the handle as the object moves; the object cost (34) pulls toward the target;
+    - release (:class:`ReleaseConfig`): an object that opens by itself (a door past its balance
+      point) is let go: the finger leaves the pocket and the hand backs off.
+
+    ``noise`` (:class:`NoiseConfig`) shapes the sampling covariance per phase and ``guide``
+    (:class:`GuideConfig`) the reaching guides. ``horizon`` (s) is the controller's horizon T,
+    used by the power balance of :meth:`object_setpoint`; ``contact_weight`` weighs the contact
+    cost (30) while approaching and releasing; ``safety`` the terms every phase carries; ``extra``
+    is added to every phase's cost. Success: opening ≥ ``open.success_fraction`` of the target.
+
+    ``handle`` names the object frame or link to grasp: a frame without collision geometry (the
+    shipped objects' ``handle_frame``) is used as the handle frame as it is; a link with geometry
+    (anyone else's object) gets its handle frame inferred by :func:`sabre.handles.infer_handle_frame`.
+
+    Example: ``OpenObject(hook=HookConfig(backout=None))`` never restarts a backed-out hook;
+    ``OpenObject(handle="door_knob_link")`` opens an object whose handle is that link.
+
+    Raises:
+        InvalidValueError: a non-finite opening, a non-positive horizon, a negative contact weight.
+        TypeError: a group of the wrong type.
+    """
+
+    opening: float | None = None
+    horizon: float = 1.0
+    contact_weight: float = costs.Contact.weight
+    approach: ApproachConfig = field(default_factory=ApproachConfig)
+    hook: HookConfig = field(default_factory=HookConfig)
+    open: OpenConfig = field(default_factory=OpenConfig)
+    release: ReleaseConfig = field(default_factory=ReleaseConfig)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+    guide: GuideConfig = field(default_factory=GuideConfig)
+    safety: SafetyWeights = field(default_factory=SafetyWeights)
+    extra: costs.Cost = field(default_factory=costs.Cost)
+    handle: str = "handle_frame"
+
+    phases = ("approach", "insert", "hook", "open", "release")
+
+    # -- settings ---------------------------------------------------------------------------------
+    def __post_init__(self) -> None:
+        for name, kind in (("approach", ApproachConfig), ("hook", HookConfig), ("open", OpenConfig),
+                           ("release", ReleaseConfig), ("noise", NoiseConfig), ("guide", GuideConfig),
+                           ("safety", SafetyWeights)):
+            if not isinstance(getattr(self, name), kind):
+                raise TypeError(f"{name} must be a sabre.tasks.{kind.__name__}, got {type(getattr(self, name)).__name__}")
+        self.contact_weight = as_non_negative("contact_weight", self.contact_weight)
+        self.horizon = as_positive("horizon", self.horizon)
+        if self.opening is not None:
+            self.opening = as_finite("opening", self.opening)
+
+    def check(self, scene: Scene) -> None:
+        """The object must have one movable joint and the opening must lie within its travel; an
+        approach posture must have one entry per robot joint."""
+        swapped = " (are the robot and object files swapped?)" if scene.nq <= 1 < scene.no else ""
+        if scene.no != 1:
+            raise InvalidValueError(
+                f"OpenObject needs an object with one movable joint; {scene.object_name!r} has {scene.no}: "
+                f"{list(scene.object_joint_names)}{swapped}; pick the one to open with "
+                f"Scene.from_urdf(..., joint=<name>), which holds the others"
+            )
+        if "grasp" not in scene.frame_names:
+            raise UnknownFrameError(f"OpenObject needs the robot frame 'grasp'; the robot has: {', '.join(scene.frame_names)}")
+        geometry.handle_frame(scene, self.handle)  # the handle exists and its frame can be inferred
+        lower, upper = float(scene.o_lower[0]), float(scene.o_upper[0])
+        if self.opening is not None and not lower < self.opening <= upper:
+            raise InvalidValueError(f"opening {self.opening} is outside the object's travel ({lower}, {upper}]")
+        if self.approach.posture is not None and len(self.approach.posture) != scene.nq:
+            raise InvalidValueError(f"approach.posture has {len(self.approach.posture)} entries, the robot has {scene.nq} joints")
+
+    # -- targets and costs ------------------------------------------------------------------------
+    def target_opening(self, scene: Scene) -> float:
+        """The opening to reach (rad or m): ``opening``, or 75 % of the range."""
+        if self.opening is not None:
+            return float(self.opening)
+        return float(scene.o_lower[0] + 0.75 * (scene.o_upper[0] - scene.o_lower[0]))
+
+    def object_setpoint(self, scene: Scene) -> float:
+        """o* of the object cost (34): ``opening`` plus ``open.object_overshoot``.
+
+        The power cost (36) charges w_p·τ_r·ȯ per step for moving the object against its
+        resisting torque τ_r (friction, damping), and over a horizon T the object cost's pull
+        on the opening rate is worth W_o·(o* − o)·T per step. The two balance at
+        o* − o = w_p·τ_r / (W_o·T): with Table I weights and the shelf's 4 N·m friction, 0.47 rad
+        before o*. With o* at the requested opening the object would stall that far short of it,
+        so by default o* lies twice that gap beyond it (the object ends up a gap past the
+        opening, or at its limit).
+        """
+        if self.open.object_overshoot is not None:
+            return self.target_opening(scene) + float(self.open.object_overshoot)
+        speed = self.open.speeds[0] if self.open.speeds else 0.1
+        rate = speed / max(self.handle_travel(scene, float(scene.o_lower[0])), 1e-6)
+        resisting = float(scene.object_friction[0] + scene.object_damping[0] * rate)
+        gap = self.safety.power * resisting / (max(self.open.object_weight, 1e-12) * self.horizon)
+        return self.target_opening(scene) + 2.0 * gap
+
+    def lead(self, scene: Scene) -> float:
+        """How far ahead (rad or m) of the opening the open-phase pose target sits."""
+        return float(self.open.lead)
+
+    def grasp_offset(self, scene: Scene, phase: str) -> np.ndarray:
+        """(4, 4) pose of the grasp target in the handle frame for `phase`."""
+        offsets = {"approach": self.approach.pregrasp_offset, "insert": self.approach.insert_offset, "hook": self.hook.offset}
+        return geometry.grasp_offset(scene, self.handle, offsets.get(phase, self.open.offset), self.approach.pitch)
+
+    def posture_term(self, scene: Scene) -> costs.Cost:
+        """The posture cost of the approach (empty when ``approach.posture_weight`` is 0)."""
+        names = scene.joint_names
+        if self.approach.posture_weight <= 0.0:
+            return costs.Cost()
+        if self.approach.posture is not None:
+            target = np.asarray(self.approach.posture, dtype=float)
+            weights = np.where(np.arange(scene.nq) < 3, 0.0, self.approach.posture_weight)
+        elif all(f"panda_joint{i}" in names for i in (2, 4, 6)):
+            target = np.zeros(scene.nq)
+            weights = np.zeros(scene.nq)
+            for joint, value in (("panda_joint2", 1.0), ("panda_joint4", -1.2), ("panda_joint6", 2.9)):
+                i = names.index(joint)
+                target[i], weights[i] = value, self.approach.posture_weight
+        else:
+            return costs.Cost()
+        return costs.Cost([costs.Posture(target, weights)])
+
+    def cost(self, scene: Scene, phase: str) -> costs.Cost:
+        frame, offset = geometry.handle_frame(scene, self.handle)
+        target = offset @ self.grasp_offset(scene, phase)
+        pull_object = costs.ObjectState([self.object_setpoint(scene)], self.open.object_weight)
+        every_phase = self.safety.terms(scene) + self.extra
+        if phase == "release":
+            return pull_object + costs.Contact(self.contact_weight) + every_phase
+        if phase in ("approach", "insert", "hook"):
+            # The object cost also before the hook holds: a door that can open by itself (a dishwasher
+            # past its balance point, resting on the hand after a slip) should be let go, not held.
+            reach = costs.Cost([costs.TargetPose(target, "grasp", frame, self.approach.weight, self.approach.weight)])
+            if phase == "approach":
+                reach = reach + costs.Contact(self.contact_weight) + self.posture_term(scene)
+            return reach + pull_object + every_phase
+        hold = costs.TargetPose(target, "grasp", frame, weights=tuple(self.open.pose_weights),
+                                lead=self.lead(scene), lead_limit=self.target_opening(scene))
+        return hold + pull_object + every_phase
+
+    # -- where the hand and the handle are (see geometry) -----------------------------------------
+    def handle_pose(self, scene: Scene, o: Sequence[float] | np.ndarray) -> np.ndarray:
+        """(4, 4) world pose of the handle frame at object configuration o (no,)."""
+        return geometry.handle_pose(scene, self.handle, o)
+
+    def handle_poses(self, scene: Scene, o: np.ndarray) -> np.ndarray:
+        """(M, 4, 4) world poses of the handle frame at object configurations o (M, no)."""
+        return geometry.handle_poses(scene, self.handle, o)
+
+    def handle_travel(self, scene: Scene, o: float) -> float:
+        """Distance (m) the handle moves per unit of opening (rad or m) at opening o."""
+        return geometry.handle_travel(scene, self.handle, o)
+
+    def handle_speed(self, scene: Scene, x: np.ndarray) -> float:
+        """Speed (m/s) of the handle in the opening direction (negative while closing)."""
+        return geometry.handle_speed(scene, self.handle, x)
+
+    def handle_from_closed(self, scene: Scene, x: np.ndarray) -> float:
+        """Distance (m) of the handle from where it is with the object closed."""
+        return geometry.handle_from_closed(scene, self.handle, x)
+
+    def approach_error(self, scene: Scene, x: np.ndarray, phase: str = "insert") -> GraspError:
+        """Distance (m) and angle (rad) of the grasp frame from the target of `phase` at state x (nx,)."""
+        return geometry.approach_error(scene, self.handle, x, self.grasp_offset(scene, phase))
+
+    def pocket_error(self, scene: Scene, x: np.ndarray, phase: str) -> PocketError:
+        """(across, along) distance (m) of the grasp frame from the target of `phase`: across the
+        bar (handle frame y and z) and along it (x)."""
+        return geometry.pocket_error(scene, self.handle, x, self.grasp_offset(scene, phase))
+
+    def depth_error(self, scene: Scene, x: np.ndarray, phase: str) -> float:
+        """Signed distance (m) of the grasp frame from the target of `phase` along the handle
+        frame's z axis (into the door): negative while the finger is still short of it."""
+        return geometry.depth_error(scene, self.handle, x, self.grasp_offset(scene, phase))
+
+    def lateral_error(self, scene: Scene, x: np.ndarray) -> float:
+        """Sideways offset (m) of the grasp frame from its open-phase target, along the handle
+        frame's y axis: how far the bar has moved toward leaving the finger's pocket."""
+        return geometry.lateral_error(scene, self.handle, x, self.open.offset[1])
+
+    def release_path(self, scene: Scene, x: np.ndarray, steps: int, dt: float) -> np.ndarray:
+        """(steps + 1, 4, 4) grasp-frame targets that let go of the handle at ``release.speed``
+        (:func:`sabre.tasks.open_object.geometry.release_path`): a finger within
+        ``open.slip_distance`` of the pocket leaves the way it came in (across the bar to the insert
+        offset's sideways position, then back to the pre-grasp offset's depth), riding on the handle;
+        then the hand backs off ``release.distance`` along :meth:`release_direction`."""
+        return geometry.release_path(
+            scene, self.handle, x, steps, dt,
+            entry_side=float(self.approach.insert_offset[1]), entry_depth=float(self.approach.pregrasp_offset[2]),
+            hooked_within=self.open.slip_distance, speed=self.release.speed, distance=self.release.distance,
+        )
+
+    def release_direction(self, scene: Scene, x: np.ndarray) -> np.ndarray:
+        """(3,) unit direction in which the hand backs off when releasing: away from the door and,
+        for a hinged door, out of its sweep."""
+        return geometry.release_direction(scene, self.handle, x)
+
+    def opening_of(self, scene: Scene, x: np.ndarray) -> float:
+        """The object's opening (rad or m) at state x."""
+        return float(scene.split_state(x).o[0])
+
+    # -- what the object and the finger are doing -------------------------------------------------
+    def self_opening(self, scene: Scene, x: np.ndarray) -> bool:
+        """Whether the object, left alone at rest, opens further by itself (a dishwasher door past
+        its balance point): the rollout model run for ``release.probe`` s from x with the robot and
+        the object at rest and the robot moved 5 m away from the object, checked against
+        ``release.rate``."""
+        if self.success(scene, x) or self.opening_of(scene, x) >= scene.o_upper[0] - 1e-3:
+            return False
+        model = per_scene(scene, "probe model", RolloutModel)
+        free = np.array(x, dtype=np.float64)
+        q, q_dot, _, o_dot = scene.split_state(free)
+        away = q[:2] - scene.object_pose[:2, 3]
+        norm = float(np.linalg.norm(away))
+        q[:2] = scene.object_pose[:2, 3] + 5.0 * (away / norm if norm > 1e-9 else np.array([-1.0, 0.0]))
+        q_dot[:] = 0.0
+        o_dot[:] = 0.0  # from rest: a drawer still coasting from a pull does not open by itself
+        steps = max(1, int(round(self.release.probe / model.dt)))
+        end = model.rollout(free, np.zeros((1, steps, scene.nu))).states[0, -1]
+        return float(scene.split_state(end).o_dot[0]) > self.release.rate
+
+    def pulling(self, scene: Scene, x: np.ndarray) -> bool:
+        """Whether the finger already pulls the object open before the hook test passed: the
+        handle opens faster than ``hook.drag_speed`` (m/s) while the grasp frame is within the open
+        phase's slip bounds (the bar sits in the pocket, just not where the hook target put it),
+        and the handle is at least ``hook.drag_distance`` (m) from closed. An object that opens by
+        itself is caught by ``self_opening`` first."""
+        if self.hook.drag_speed <= 0.0:
+            return False
+        if self.handle_from_closed(scene, x) < self.hook.drag_distance:
+            return False
+        if self.handle_speed(scene, x) <= self.hook.drag_speed:
+            return False
+        return not self._slipped(scene, x)
+
+    def backed_out(self, scene: Scene, x: np.ndarray) -> bool:
+        """Whether the finger, hooking an object already opened, has backed out in front of the bar
+        without moving it: the grasp frame more than ``hook.backout`` (m) short of the hook target's
+        depth, the handle at least ``hook.drag_distance`` (m) from closed (as for ``pulling``) and opening
+        no faster than ``hook.drag_speed`` (m/s). A finger that catches the bar with its tip often drags
+        a free door open that way until the bar slides into the pocket (``pulling``), and on a closed
+        door that is how the drag starts; a door that was opened and does not move now (held, or
+        stuck) only takes the tank's energy for the catch."""
+        if self.hook.backout is None or self.depth_error(scene, x, "hook") >= -self.hook.backout:
+            return False
+        if self.handle_from_closed(scene, x) < self.hook.drag_distance:
+            return False
+        return self.handle_speed(scene, x) <= self.hook.drag_speed
+
+    def running_ahead(self, scene: Scene, x: np.ndarray) -> bool:
+        """Whether the object opens by itself faster than ``release.runaway_speed`` (m/s at the handle), as
+        a dishwasher door does past its balance point. The hand then rides along (its finger sits
+        in the door's path) instead of starting over from the approach."""
+        return self.handle_speed(scene, x) > self.release.runaway_speed
+
+    def _slipped(self, scene: Scene, x: np.ndarray) -> bool:
+        """Whether the bar has left the finger's pocket: the grasp frame beyond ``open.slip_distance``
+        of its open-phase target or beyond ``open.slip_lateral`` sideways of it."""
+        dp = self.approach_error(scene, x, "open").distance
+        return dp > self.open.slip_distance or abs(self.lateral_error(scene, x)) > self.open.slip_lateral
+
+    # -- phase switching ----------------------------------------------------------------------------
+    def next_phase(self, scene: Scene, x: np.ndarray, t: float, phase: str) -> str:
+        if phase == "release":
+            return "release" if self.self_opening(scene, x) else "approach"
+        if phase == "open":
+            return self._while_opening(scene, x)
+        if phase not in _REACHED:
+            return phase
+        if self.opening_of(scene, x) > 0.0 and self.self_opening(scene, x):
+            return "release"
+        if self._reached(scene, x, phase):
+            return _REACHED[phase]
+        if phase in ("insert", "hook") and self.pulling(scene, x):
+            return "open"
+        if phase == "hook" and self.backed_out(scene, x):
+            return "approach"
+        return phase
+
+    def _reached(self, scene: Scene, x: np.ndarray, phase: str) -> bool:
+        """Whether the grasp frame is close enough to the target of the reaching `phase` to move on."""
+        error = self.approach_error(scene, x, phase)
+        if error.angle >= self.approach.switch_angle:
+            return False
+        if phase == "approach":
+            return error.distance < 2.0 * self.approach.switch_position
+        pocket = self.pocket_error(scene, x, phase)
+        if pocket.along >= self.hook.along_tolerance:
+            return False
+        if phase == "hook":
+            return pocket.across < self.hook.tolerance
+        depth = self.hook.insert_depth_tolerance
+        deep = depth is None or abs(self.depth_error(scene, x, phase)) < depth
+        return pocket.across < self.approach.switch_position and deep
+
+    def _while_opening(self, scene: Scene, x: np.ndarray) -> str:
+        """The phase after one of opening: releasing a door that opens by itself (holding it only
+        makes the arm follow it down into its joint limits), starting over when the bar has left
+        the pocket and the object is not running ahead of the hand, else opening on."""
+        if self.success(scene, x):
+            return "open"
+        if self.self_opening(scene, x):
+            return "release"
+        if self._slipped(scene, x) and not self.running_ahead(scene, x):
+            return "approach"
+        return "open"
+
+    # -- sampling: guides and noise -----------------------------------------------------------------
+    def guides(self, scene: Scene, x: np.ndarray, phase: str, steps: int, dt: float) -> np.ndarray | None:
+        if phase == "release":
+            return self._release_guide(scene, x, steps, dt)
+        if phase == "open":
+            return self._opening_guides(scene, x, steps, dt)
+        return self._reaching_guide(scene, x, phase, steps, dt)
+
+    def _release_guide(self, scene: Scene, x: np.ndarray, steps: int, dt: float) -> np.ndarray | None:
+        """A servo along :meth:`release_path` (1, steps, nu), or None with ``release.speed`` 0."""
+        if self.release.speed <= 0.0:
+            return None
+        targets = self.release_path(scene, x, steps, dt)
+        q = scene.split_state(x).q
+        guide = servo_guide(scene, q, targets, dt, gain=self.guide.gain, max_linear=2.0 * self.release.speed, max_angular=1.0)
+        return guide[None]
+
+    def _reaching_guide(self, scene: Scene, x: np.ndarray, phase: str, steps: int, dt: float) -> np.ndarray | None:
+        """A servo toward the target of the reaching `phase` (1, steps, nu), or None with ``guide.speed`` 0."""
+        if self.guide.speed <= 0.0:
+            return None
+        q, _, o, _ = scene.split_state(x)
+        target = self.handle_pose(scene, o) @ self.grasp_offset(scene, phase)
+        speed = self.guide.speed if phase == "approach" else self.guide.fine_speed
+        targets = np.broadcast_to(target, (steps + 1, 4, 4))
+        return servo_guide(scene, q, targets, dt, gain=self.guide.gain, max_linear=speed, max_angular=4.0 * speed)[None]
+
+    def _opening_guides(self, scene: Scene, x: np.ndarray, steps: int, dt: float) -> np.ndarray | None:
+        """Servos (M, steps, nu) that follow the handle along its path at ``open.speeds`` (and at
+        the object's own pace when it opens faster), or None without speeds."""
+        if not self.open.speeds:
+            return None
+        q, _, o, o_dot = scene.split_state(x)
+        offset = self.grasp_offset(scene, "open")
+        travel = self.handle_travel(scene, float(o[0]))
+        end = min(self.object_setpoint(scene), scene.o_upper[0])
+        speeds = list(self.open.speeds)
+        own = float(o_dot[0]) * travel
+        if own > max(speeds):
+            speeds.insert(0, own)  # follow the object at its own pace
+        out = []
+        for speed in speeds:
+            rate = speed / max(travel, 1e-6)
+            openings = np.minimum(o[0] + rate * dt * np.arange(steps + 1), max(end, o[0]))
+            targets = self.handle_poses(scene, openings[:, None]) @ offset
+            out.append(servo_guide(scene, q, targets, dt, gain=self.guide.gain, max_linear=2.0 * speed + 0.05, max_angular=2.0))
+        return np.stack(out)
+
+    def gain_inertia_floor(self, phase: str) -> float | None:
+        return self.open.gain_inertia_floor if phase == "open" else None
+
+    def noise_scale(self, scene: Scene, x: np.ndarray, phase: str) -> float:
+        if phase in ("open", "release"):
+            return self.noise.open
+        d = self.approach_error(scene, x, phase).distance
+        return float(np.clip((d / self.noise.distance) ** 2, self.noise.floor, 1.0))
+
+    def success(self, scene: Scene, x: np.ndarray) -> bool:
+        return self.opening_of(scene, x) >= self.open.success_fraction * self.target_opening(scene)
