@@ -9,7 +9,7 @@ from collections import defaultdict
 
 import numpy as np
 
-from ..errors import MissingExtraError
+from ..errors import require_extra
 
 #: the paper's reported numbers, next to which the summary puts sabre's
 PAPER = {
@@ -37,13 +37,9 @@ def _mean_std(runs: list[dict], series: str, grid: np.ndarray) -> tuple[np.ndarr
 
 def draw(name: str, records: list[dict], path: str | os.PathLike[str]) -> None:
     """Writes the experiment's figure to ``path``."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError as err:
-        raise MissingExtraError("figures need matplotlib: pip install 'sabre-mpc[experiments]'") from err
+    (matplotlib,) = require_extra("experiments", "the experiments' figures", "matplotlib")
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(6.4, 3.8))
     if name == "fig3":
         for i, (mapping, runs) in enumerate(_group(records, "mapping").items()):

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InvalidValueError, MissingExtraError
+from ..errors import InvalidValueError, require_extra
 from ..scene import OBJECTS
 
 __all__ = ["NAMES", "RunSpec", "run_one", "run_experiments", "run_specs", "specs", "acceptance_specs"]
@@ -182,17 +182,12 @@ def _store(spec: RunSpec, folder: Path, result: dict) -> dict:
 
 
 def _execute(todo: list[RunSpec], folder: Path, workers: int | None, ray_address: str | None) -> list[dict]:
-    try:
-        from tqdm import tqdm
-    except ImportError as err:
-        raise MissingExtraError("experiments need tqdm: pip install 'sabre-mpc[experiments]'") from err
+    (tqdm_module,) = require_extra("experiments", "the experiments", "tqdm")
+    tqdm = tqdm_module.tqdm
     done = []
     bar = tqdm(total=len(todo), desc=folder.name, unit="run")
     if ray_address is not None:
-        try:
-            import ray
-        except ImportError as err:
-            raise MissingExtraError("--ray needs Ray: pip install 'sabre-mpc[experiments]'") from err
+        (ray,) = require_extra("experiments", "--ray", "ray")
         if not ray.is_initialized():
             ray.init(address=ray_address, ignore_reinit_error=True, log_to_driver=False)
         remote = ray.remote(run_one)

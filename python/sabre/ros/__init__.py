@@ -3,8 +3,8 @@ robot node around the 1 kHz :class:`sabre.Plant`, the object-state estimator and
 both (``python -m sabre control | sim-robot | ros-demo``); see docs/ros2.md.
 
 Needs the optional extra ``sabre-mpc[ros]`` (ROS 2 from pip wheels, no system ROS). ``import
-sabre`` works without it; the node modules raise :class:`RosUnavailableError` (a
-:class:`sabre.MissingExtraError`) naming the extra. The estimator and the message conversions are
+sabre`` works without it; the node modules raise :class:`sabre.MissingExtraError` naming the
+extra. The estimator and the message conversions are
 plain NumPy and import without ROS.
 """
 
@@ -19,37 +19,22 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from ..errors import MissingExtraError
+from ..errors import DISTRIBUTION, require_extra
 
-__all__ = ["RosUnavailableError", "require_ros", "spin_node", "make_executor", "realtime_thread", "realtime_middleware",
+__all__ = ["require_ros", "spin_node", "make_executor", "realtime_thread", "realtime_middleware",
            "gil_priority", "MIDDLEWARE_PROFILE", "PeriodicThread", "ROS_EXTRA"]
 
-ROS_EXTRA = "sabre-mpc[ros]"
-
-
-class RosUnavailableError(MissingExtraError):
-    """The ROS 2 Python packages (rclpy and the message packages) are not installed."""
+ROS_EXTRA = f"{DISTRIBUTION}[ros]"
 
 
 def require_ros():
     """Imports and returns ``rclpy`` after choosing the DDS implementation the extra installs
-    (Fast DDS, unless ``RMW_IMPLEMENTATION`` is already set); raises :class:`RosUnavailableError`
+    (Fast DDS, unless ``RMW_IMPLEMENTATION`` is already set); raises :class:`sabre.MissingExtraError`
     naming the extra when the wheels are missing."""
     os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
-    try:
-        import diagnostic_msgs.msg  # noqa: F401
-        import geometry_msgs.msg  # noqa: F401
-        import hdrh.histogram  # noqa: F401
-        import rclpy
-        import rosgraph_msgs.msg  # noqa: F401
-        import sensor_msgs.msg  # noqa: F401
-        import std_msgs.msg  # noqa: F401
-        import threadpoolctl  # noqa: F401
-    except ImportError as exc:
-        raise RosUnavailableError(
-            f"the ROS 2 bridge needs the optional extra: pip install '{ROS_EXTRA}' "
-            f"(ROS 2 from pip wheels; missing: {exc.name or exc})") from exc
-    return rclpy
+    modules = ("diagnostic_msgs.msg", "geometry_msgs.msg", "hdrh.histogram", "rosgraph_msgs.msg", "sensor_msgs.msg",
+               "std_msgs.msg", "threadpoolctl", "rclpy")
+    return require_extra("ros", "the ROS 2 bridge (ROS 2 from pip wheels)", *modules)[-1]
 
 
 #: Seconds between the interpreter's GIL hand-overs in a bridge process (see :func:`spin_node`).

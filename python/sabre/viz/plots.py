@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..episode import Episode
-from ..errors import InvalidValueError
+from ..errors import InvalidValueError, require_extra
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -20,10 +20,7 @@ _PHASE_COLOURS = ("#dbe9f6", "#fde2c8", "#e3f1dc", "#f3dcef", "#f6f2c8", "#e0e0e
 
 
 def _pyplot():
-    try:
-        import matplotlib
-    except ImportError as e:
-        raise ImportError("sabre.plot_episode needs matplotlib: pip install 'sabre[plot]'") from e
+    (matplotlib,) = require_extra("plot", "sabre.plot_episode", "matplotlib")
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -67,7 +64,7 @@ def plot_episode(episode: Episode, path: str | os.PathLike) -> None:
     The time panels shade each task phase and name it where it begins.
 
     Raises:
-        ImportError: matplotlib is missing (install the ``plot`` extra).
+        MissingExtraError: matplotlib is missing (install the ``plot`` extra).
         InvalidValueError: the episode has no recorded steps.
     """
     if len(episode.time) == 0:

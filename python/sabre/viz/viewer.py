@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from ..episode import Episode, RecordedPlan
-from ..errors import MissingExtraError, UnknownAssetError, UrdfError
+from ..errors import UnknownAssetError, UrdfError, require_extra
 from ..safety import SafetyConfig, SafetyFilter
 from ..scene import Scene
 
@@ -37,11 +37,7 @@ _FORCE_SCALE = 0.01  # m of arrow per N of contact force
 
 
 def _viser():
-    try:
-        import trimesh
-        import viser
-    except ImportError as err:
-        raise MissingExtraError("the viewer needs viser and trimesh: pip install 'sabre-mpc[viewer]'") from err
+    viser, trimesh = require_extra("viewer", "the viewer", "viser", "trimesh")
     return viser, trimesh
 
 
