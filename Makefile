@@ -1,28 +1,59 @@
 # sabre — `make demo` and `make test` set everything up from a fresh clone.
+#
+# What goes into .venv comes from pyproject.toml: the published extras (through `maturin develop --extras`) and
+# the development groups (`pip install --group`, PEP 735). Each set has its own stamp, so `make demo` after
+# `make test` installs nothing and `make test` after `make demo` adds only what the tests need.
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
-STAMP := $(VENV)/.deps-stamp
+PIP := $(PY) -m pip install --quiet
+MATURIN := $(VENV)/bin/maturin develop --release --quiet
 export VIRTUAL_ENV := $(CURDIR)/$(VENV)
 
-.PHONY: all venv build demo test test-setup test-rust test-python lint lint-rust lint-python bench bench-rust bench-python clean
+# the extras the tests exercise (the tests import them or skip without them)
+TEST_EXTRAS := plot,viewer,meshes,experiments,mujoco,ros
+
+BASE_STAMP := $(VENV)/.stamp-base
+DEMO_STAMP := $(VENV)/.stamp-demo
+TEST_STAMP := $(VENV)/.stamp-test
+LINT_STAMP := $(VENV)/.stamp-lint
+BENCH_STAMP := $(VENV)/.stamp-bench
+
+.PHONY: all venv build demo test test-setup test-rust test-python lint lint-rust lint-python lint-ruff lint-format lint-types \
+	lint-length bench bench-rust bench-python clean
 
 all: build
 
-$(STAMP): pyproject.toml
-	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet "maturin>=1.5,<2" "numpy>=1.24" "pytest>=7" "matplotlib>=3.7" "tqdm>=4.60" "mujoco>=3.1" "osqp>=0.6" \
-		"ruff>=0.5" "mypy>=1.10" \
-		"viser>=1.0" "trimesh>=4" "pycollada>=0.8" "example-robot-data>=4" "playwright>=1.40" "ray>=2.9" "hypothesis>=6.100" "pin>=3"
-	$(PY) -m pip install --quiet "ros-rclpy>=9.1" "ros-rmw-fastrtps-cpp>=9.3" "ros-sensor-msgs>=5.5" "ros-geometry-msgs>=5.5" "ros-std-msgs>=5.5" "ros-diagnostic-msgs>=5.5" "ros-rosgraph-msgs>=2.3" "hdrhistogram>=0.10" "threadpoolctl>=3.1"
-	touch $(STAMP)
+# The venv, a pip that reads dependency groups (25.1 or later) and maturin.
+$(BASE_STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PIP) "pip>=25.1"
+	$(PIP) --group build
+	touch $@
 
-venv: $(STAMP)
+# The package (release build of the extension, editable) with the plot extra: all the demo needs.
+$(DEMO_STAMP): $(BASE_STAMP)
+	$(MATURIN) --extras plot
+	touch $@
 
-# Release build of the extension, installed into the venv in editable mode.
-build: venv
-	$(VENV)/bin/maturin develop --release --quiet
+$(TEST_STAMP): $(DEMO_STAMP)
+	$(PIP) --group test
+	$(MATURIN) --extras $(TEST_EXTRAS)
+	touch $@
+
+$(LINT_STAMP): $(BASE_STAMP)
+	$(PIP) --group lint
+	touch $@
+
+$(BENCH_STAMP): $(BASE_STAMP)
+	$(PIP) --group bench
+	touch $@
+
+venv: $(BASE_STAMP)
+
+# Rebuilds the extension in place after a change to the Rust code (the editable install is the stamp's).
+build: $(DEMO_STAMP)
+	$(MATURIN) --skip-install
 
 demo: build
 	$(PY) -m sabre demo
@@ -35,22 +66,35 @@ test-rust:
 test-setup:
 	(command -v chromium && command -v check_urdf) >/dev/null || (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium liburdfdom-tools)
 
-test-python: build test-setup
+test-python: $(TEST_STAMP) build test-setup
 	$(PY) -m pytest -q tests
 
 test: test-rust test-python
 
 # `make -k lint` reports every tool's findings instead of stopping at the first.
-lint-rust: venv
+# clippy with the python feature builds PyO3 against the venv's interpreter.
+lint-rust: $(BASE_STAMP)
 	cargo fmt --check
 	cargo clippy --all-targets -- -D warnings
 	cargo clippy --all-targets --features python -- -D warnings
 
-# The stub check compares python/sabre/_core.pyi with the built extension.
-lint-python: build
+lint-ruff: $(LINT_STAMP)
 	$(VENV)/bin/ruff check .
+
+lint-format: $(LINT_STAMP)
+	$(VENV)/bin/ruff format --check .
+
+# mypy reads the plot extra's types (the demo stamp); the stub check compares python/sabre/_core.pyi with the
+# built extension.
+lint-types: $(LINT_STAMP) build
 	$(PY) -m mypy python/sabre
 	$(PY) -m mypy.stubtest sabre._core
+
+# python/sabre's functions stay within 80 lines unless a `# long:` comment says why.
+lint-length: $(BASE_STAMP)
+	$(PY) tools/function_length.py python/sabre
+
+lint-python: lint-ruff lint-format lint-types lint-length
 
 lint: lint-rust lint-python
 
@@ -59,7 +103,7 @@ bench-rust:
 	cargo bench --bench planning
 	cargo bench --bench safety
 
-bench-python: build
+bench-python: $(BENCH_STAMP) build
 	$(PY) benches/compare_mujoco.py
 	$(PY) benches/compare_planning.py
 	$(PY) benches/compare_osqp.py

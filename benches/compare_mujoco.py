@@ -21,11 +21,11 @@ nominal contact sequence, the fraction of steps with robot-object contact and th
 in each simulator (MuJoCo's contacts are counted by stepping the nominal sequence with mj_step,
 since rollout does not report them), plus the same for the whole pull phase of the script, and
 the joint-space divergence of the free-motion batch. The scene differences are listed in
-benches/mujoco_scene.py. The numbers are also written to benches/results/compare_mujoco.json.
+support/mujoco_scene.py. The numbers are also written to benches/results/compare_mujoco.json.
 
 Besides the specified MuJoCo model (velocity servos, "MuJoCo"; the ratio sabre/MuJoCo is the
 headline), a reference variant "MuJoCo+I" with integral servo actuators (the PI structure of
-sabre's servo; see mujoco_scene.py) is timed and compared too, because without integral action
+sabre's servo; see support/mujoco_scene.py) is timed and compared too, because without integral action
 MuJoCo's arm yields to the door's resistance during long pulls. Skip it with --no-integral-variant.
 """
 
@@ -46,79 +46,30 @@ import numpy as np
 
 import sabre
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from mujoco_scene import build_mujoco_model
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository root, for support/
+from support.mujoco_scene import (
+    STATE_SPEC,
+    TIMESTEP,
+    build_mujoco_model,
+    mujoco_controls,
+    mujoco_state,
+    mujoco_step_through,
+    qpos_slice,
+)
 
 N = 40
 K = 66
 THREADS = 2
-DT = 0.015
+DT = TIMESTEP  # the MuJoCo scene's step, also sabre's dt here
 FREE_SIGMA = 0.3  # rad/s or m/s
 CONTACT_NOISE_SIGMA = 0.05  # rad/s or m/s
 WARMUP = 3
-STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
 RESULTS = Path(__file__).resolve().parent / "results" / "compare_mujoco.json"
 
 
 # --------------------------------------------------------------------------------------------
-# MuJoCo side: state conversion, controls, step-by-step contact counting, timed rollouts
+# MuJoCo side: timed rollouts
 # --------------------------------------------------------------------------------------------
-
-
-def mujoco_state(model: mujoco.MjModel, data: mujoco.MjData, scene: sabre.Scene, x: np.ndarray) -> np.ndarray:
-    """MuJoCo's full physics state for sabre's x = [q, q̇, o, ȯ]: qpos = [q, o], qvel = [q̇, ȯ], and
-    (integral servo variant only) each integrator actuator's activation = its joint's position."""
-    nq, no = scene.nq, scene.no
-    mujoco.mj_resetData(model, data)
-    data.qpos[:nq] = x[:nq]
-    data.qpos[nq:] = x[2 * nq : 2 * nq + no]
-    data.qvel[:nq] = x[nq : 2 * nq]
-    data.qvel[nq:] = x[2 * nq + no :]
-    for a in range(model.nu):
-        if model.actuator_actadr[a] >= 0:
-            data.act[model.actuator_actadr[a]] = data.qpos[model.jnt_qposadr[model.actuator_trnid[a, 0]]]
-    mujoco.mj_forward(model, data)
-    state = np.empty(mujoco.mj_stateSize(model, STATE_SPEC))
-    mujoco.mj_getState(model, data, state, STATE_SPEC)
-    return state
-
-
-def mujoco_controls(model: mujoco.MjModel, U: np.ndarray) -> np.ndarray:
-    """Joint velocity commands as MuJoCo controls: the variant with integral actuators takes u twice."""
-    reps = model.nu // U.shape[-1]
-    return np.ascontiguousarray(np.concatenate([U] * reps, axis=-1))
-
-
-def qpos_slice(model: mujoco.MjModel) -> slice:
-    """Where qpos sits in a full-physics state vector (right after the time)."""
-    start = mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_TIME)
-    return slice(start, start + model.nq)
-
-
-def mujoco_step_through(
-    model: mujoco.MjModel, data: mujoco.MjData, state0: np.ndarray, U: np.ndarray, object_qpos: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """Steps U (K, nq) with mj_step; returns (object opening after each step, contact flag per step).
-
-    A step counts as "in contact" when a contact carries a positive normal force; every contact
-    pair of the model is robot-object by construction (contype/conaffinity).
-    """
-    mujoco.mj_resetData(model, data)  # no warm start left over from earlier runs, as in rollout
-    mujoco.mj_setState(model, data, state0, STATE_SPEC)
-    ctrl = mujoco_controls(model, U)
-    opening = np.empty(len(U))
-    contact = np.zeros(len(U), dtype=bool)
-    force = np.zeros(6)
-    for k in range(len(U)):
-        data.ctrl[:] = ctrl[k]
-        mujoco.mj_step(model, data)
-        for c in range(data.ncon):
-            mujoco.mj_contactForce(model, data, c, force)
-            if force[0] > 1e-9:
-                contact[k] = True
-                break
-        opening[k] = data.qpos[object_qpos]
-    return opening, contact
 
 
 class MujocoRunner:

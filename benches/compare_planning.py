@@ -7,7 +7,7 @@ closed-loop real-time factor.
 A sabre planning iteration samples N = 40 sequences of K = 67 steps, rolls them out in parallel with
 the task's cost evaluated at every step, and updates the policy (`Controller.update`). The peer is
 what a MuJoCo-based sampler would pay for its rollouts alone: `mujoco.rollout` of the same N × K
-batch on the equivalent scene (benches/mujoco_scene.py), 2 threads, per-step states, cost not
+batch on the equivalent scene (support/mujoco_scene.py), 2 threads, per-step states, cost not
 included. Both are timed alternately in one process, from three starts: the default state (free
 space), the state with the hook on the handle (contact; the open phase planned from rest), and the
 closed loop's own re-plan while it pulls the shelf door (the open phase recorded in
@@ -34,9 +34,8 @@ import numpy as np
 
 import sabre
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from compare_mujoco import mujoco_controls, mujoco_state
-from mujoco_scene import build_mujoco_model
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository root, for support/
+from support.mujoco_scene import build_mujoco_model, mujoco_controls, mujoco_state
 
 THREADS = 2
 

@@ -13,12 +13,9 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from pathlib import Path
 
 import sabre
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from compare_planning import hooked_state
+from compare_planning import hooked_state  # a sibling script: Python puts the script's folder on sys.path
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,13 +1,13 @@
 """Acceptance across processes: every object opened through the ROS 2 bridge in wall-clock real time,
 against `run_episode` of the same seed, plus the stuck door through the bridge.
 
-    python benches/ros_acceptance.py --seeds 5 --out results/ros_acceptance.md
+    .venv/bin/python experiments/ros_acceptance.py --seeds 5 --out results/ros_acceptance.md
 
 Each run starts the simulated robot and the controller as two processes on a private, machine-local
 ROS 2 domain (`sabre.ros.launch.run_bridge`: ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and a free
 ROS_DOMAIN_ID per run), the planner as fast as the machine allows, from the paper's start. The same
 seed and variant also run in `run_episode` (simulated time, re-planning at 50 Hz) for the time to open.
-Goals (issue 19): at least 4 of 5 per object and variant; time to open within 1.5× of run_episode's;
+Goals: at least 4 of 5 per object and variant; time to open within 1.5× of run_episode's;
 state-to-command latency p99 at most 1 ms; at least 99.5 % of the 1 kHz commands back; the stuck door
 (held 5 s) through the bridge keeps IO's tank above its floor.
 """
@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"tank minimum {stuck.get('tank_min', float('nan')):.3f} J, "
                   f"floor {stuck.get('tank_floor', float('nan')):.3f} J, "
                   f"filter fallbacks {stuck.get('filter_fallbacks')}."]
-    command = "python benches/ros_acceptance.py " + " ".join(sys.argv[1:] if argv is None else argv)
+    command = "python experiments/ros_acceptance.py " + " ".join(sys.argv[1:] if argv is None else argv)
     report = "\n".join([f"Command: `{command}`; wall time {time.perf_counter() - started:.0f} s.", ""] + lines) + "\n"
     print(report)
     if args.out is not None:

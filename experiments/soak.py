@@ -1,12 +1,12 @@
 """Soak: many consecutive episodes in one process (random object, placement, variant and fault), watching
 for leaks (peak RSS, OS threads), NaN, filter fallbacks and tank floor violations.
 
-    python benches/soak.py --episodes 200 --duration 4 --out results/soak.md
+    .venv/bin/python experiments/soak.py --episodes 200 --duration 4 --out results/soak.md
 
 Each episode: a random object of the four, placed at a random offset and yaw, a random variant
 (N, I, O, IO), started from the pre-grasp pose (the hooked state for the stuck door) and one fault:
 none, the stuck door (held for the middle third of the episode), a sphere obstacle dropped beside
-the hand, or an impulsive push of the arm joints. Goals (issue 23): RSS growth under 5 % between the
+the hand, or an impulsive push of the arm joints. Goals: RSS growth under 5 % between the
 end of the warm-up (the first 10 % of episodes) and the end, a constant thread count, zero NaN,
 zero tank floor violations. Filter fallbacks are counted and reported.
 """
@@ -110,7 +110,7 @@ def main(argv: list[str] | None = None) -> int:
     lines = [
         f"# Soak: {args.episodes} episodes of {args.duration} s in one process",
         "",
-        f"Command: `python benches/soak.py --episodes {args.episodes} --duration {args.duration} --seed {args.seed}`",
+        f"Command: `python experiments/soak.py --episodes {args.episodes} --duration {args.duration} --seed {args.seed}`",
         f"Wall time: {time.perf_counter() - started:.0f} s. Faults: "
         + ", ".join(f"{k} {v}" for k, v in sorted(faults.items())),
         "",

@@ -1,6 +1,6 @@
 """Stuck door (the paper's Fig. 11 scenario) over many seeds: wrench, tank and whether the bar was kept.
 
-    python benches/stuck_door_seeds.py --variant IO --seeds 0 20
+    .venv/bin/python experiments/stuck_door_seeds.py --variant IO --seeds 0 20
 
 Runs ``sabre.scenarios.stuck_door(variant, seed)`` for each seed and prints one JSON line per run:
 the mean wrench while the door is held, the lowest tank energy and its floor, the opening in the

@@ -1,4 +1,5 @@
-"""A MuJoCo scene equivalent to sabre's reduced-order rollout model, built from the same URDF files.
+"""A MuJoCo scene equivalent to sabre's reduced-order rollout model, built from the same URDF files,
+and sabre's states and commands carried into it (`mujoco_state`, `mujoco_controls`, `mujoco_step_through`).
 
 `build_mujoco_model(scene_name)` parses ``assets/robots/royalpanda.urdf`` and
 ``assets/objects/<scene_name>.urdf`` with ``xml.etree`` (the robot's custom ``<sabre>`` block is
@@ -83,7 +84,8 @@ import numpy as np
 
 import sabre
 
-__all__ = ["build_mujoco_model", "mjcf_text", "ASSETS"]
+__all__ = ["ASSETS", "STATE_SPEC", "TIMESTEP", "build_mujoco_model", "mjcf_text", "mujoco_controls", "mujoco_state",
+           "mujoco_step_through", "qpos_slice"]
 
 ASSETS = Path(__file__).resolve().parents[1] / "assets"
 
@@ -91,6 +93,7 @@ SERVO_BANDWIDTH = 40.0  # 1/s, sabre.RolloutModel default
 SERVO_INTEGRAL_GAIN = 400.0  # 1/s^2, sabre.RolloutModel default (only with servo_integral=True)
 CONTACT_FRICTION = 0.2  # sabre.RolloutModel default
 TIMESTEP = 0.015
+STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS  # the state vector mujoco.rollout reads and writes
 
 ROBOT_CONTYPE, ROBOT_CONAFFINITY = 1, 2
 OBJECT_CONTYPE, OBJECT_CONAFFINITY = 2, 1
@@ -397,6 +400,67 @@ def build_mujoco_model(
     if names != expected or model.nq != scene.nq + scene.no or model.nv != scene.nq + scene.no:
         raise RuntimeError(f"MuJoCo joint order {names} does not match sabre's {expected}")
     return model
+
+
+# --------------------------------------------------------------------------------------------
+# sabre's states and commands in the MuJoCo model
+# --------------------------------------------------------------------------------------------
+
+
+def mujoco_state(model: mujoco.MjModel, data: mujoco.MjData, scene: sabre.Scene, x: np.ndarray) -> np.ndarray:
+    """MuJoCo's full physics state for sabre's x = [q, q̇, o, ȯ]: qpos = [q, o], qvel = [q̇, ȯ], and
+    (integral servo variant only) each integrator actuator's activation = its joint's position."""
+    nq, no = scene.nq, scene.no
+    mujoco.mj_resetData(model, data)
+    data.qpos[:nq] = x[:nq]
+    data.qpos[nq:] = x[2 * nq : 2 * nq + no]
+    data.qvel[:nq] = x[nq : 2 * nq]
+    data.qvel[nq:] = x[2 * nq + no :]
+    for a in range(model.nu):
+        if model.actuator_actadr[a] >= 0:
+            data.act[model.actuator_actadr[a]] = data.qpos[model.jnt_qposadr[model.actuator_trnid[a, 0]]]
+    mujoco.mj_forward(model, data)
+    state = np.empty(mujoco.mj_stateSize(model, STATE_SPEC))
+    mujoco.mj_getState(model, data, state, STATE_SPEC)
+    return state
+
+
+def mujoco_controls(model: mujoco.MjModel, U: np.ndarray) -> np.ndarray:
+    """Joint velocity commands as MuJoCo controls: the variant with integral actuators takes u twice."""
+    reps = model.nu // U.shape[-1]
+    return np.ascontiguousarray(np.concatenate([U] * reps, axis=-1))
+
+
+def qpos_slice(model: mujoco.MjModel) -> slice:
+    """Where qpos sits in a full-physics state vector (right after the time)."""
+    start = mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_TIME)
+    return slice(start, start + model.nq)
+
+
+def mujoco_step_through(
+    model: mujoco.MjModel, data: mujoco.MjData, state0: np.ndarray, U: np.ndarray, object_qpos: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Steps U (K, nq) with mj_step; returns (object opening after each step, contact flag per step).
+
+    A step counts as "in contact" when a contact carries a positive normal force; every contact
+    pair of the model is robot-object by construction (contype/conaffinity).
+    """
+    mujoco.mj_resetData(model, data)  # no warm start left over from earlier runs, as in rollout
+    mujoco.mj_setState(model, data, state0, STATE_SPEC)
+    ctrl = mujoco_controls(model, U)
+    opening = np.empty(len(U))
+    contact = np.zeros(len(U), dtype=bool)
+    force = np.zeros(6)
+    for k in range(len(U)):
+        data.ctrl[:] = ctrl[k]
+        mujoco.mj_step(model, data)
+        for c in range(data.ncon):
+            mujoco.mj_contactForce(model, data, c, force)
+            if force[0] > 1e-9:
+                contact[k] = True
+                break
+        opening[k] = data.qpos[object_qpos]
+    return opening, contact
 
 
 if __name__ == "__main__":  # print the MJCF for inspection

@@ -1,11 +1,17 @@
-"""Shared fixtures for the Python tests."""
+"""Shared fixtures for the Python tests; the repository root on sys.path for support/."""
 
 from __future__ import annotations
+
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 import sabre
+
+# The repository root, so tests import support/ (what tests, benches and experiments share).
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
 @pytest.fixture(scope="session")

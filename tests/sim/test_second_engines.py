@@ -1,30 +1,24 @@
 """Second engines: the FILTER-QP against OSQP, the rollout model's door against MuJoCo.
 
-The scenes, cases and solver set-ups are the benchmarks' own (``benches/compare_osqp.py``,
-``benches/compare_mujoco.py``, ``benches/mujoco_scene.py``), so the numbers the benchmarks print
-and what these tests assert come from the same code.
+The scenes, cases and solver set-ups are the ones the benchmarks time (``support/filter_qp.py``,
+``support/mujoco_scene.py``, shared with ``benches/compare_osqp.py`` and ``benches/compare_mujoco.py``),
+so the numbers the benchmarks print and what these tests assert come from the same code.
 """
 
 from __future__ import annotations
-
-import sys
-from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
 
 import sabre
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benches"))
-import compare_mujoco
-import compare_osqp
-from mujoco_scene import build_mujoco_model
+from support import filter_qp
+from support.mujoco_scene import TIMESTEP, build_mujoco_model, mujoco_state, mujoco_step_through
 
 
 @pytest.fixture(scope="module")
 def osqp_cases(scene):
-    return compare_osqp.cases(scene, np.random.default_rng(3))
+    return filter_qp.cases(scene, np.random.default_rng(3))
 
 
 @pytest.mark.filterwarnings("ignore::PendingDeprecationWarning")  # osqp announces a future default
@@ -32,13 +26,13 @@ def osqp_cases(scene):
 def test_filter_qp_agrees_with_osqp_within_1e_4_on_every_case(scene, osqp_cases, screening):
     """Clarabel behind SafetyFilter.filter and OSQP (eps 1e-7, polished) on the exported QP give
     the same filtered command within 1e-4 rad/s on the free, binding, inner-loop and random cases."""
-    sabre_filter = compare_osqp.make_filter(scene, screening)
-    exporter = compare_osqp.make_filter(scene, True)
+    sabre_filter = filter_qp.make_filter(scene, screening)
+    exporter = filter_qp.make_filter(scene, True)
     qps = {name: [exporter.qp_matrices(x, u, tau_ext=t, tank_energy=s) for x, u, t, s in inputs] for name, inputs in osqp_cases.items()}
-    solver = compare_osqp.OsqpFilter([qp for qs in qps.values() for qp in qs])
+    solver = filter_qp.OsqpFilter([qp for qs in qps.values() for qp in qs])
     worst: dict[str, float] = {}
     binding_rows = 0
-    with compare_osqp.c_stdout_silenced():
+    with filter_qp.c_stdout_silenced():
         for name, inputs in osqp_cases.items():
             worst[name] = 0.0
             for (x, u, tau, s), qp in zip(inputs, qps[name]):
@@ -66,11 +60,11 @@ def test_task_metric_filter_agrees_with_osqp(scene, osqp_cases, screening):
     config = sabre.SafetyConfig(screening=screening, task_weight=100.0)
     f = sabre.SafetyFilter(scene, config)
     exporter = sabre.SafetyFilter(scene, config)
-    for obstacle in compare_osqp.make_filter(scene, True).obstacles:
+    for obstacle in filter_qp.make_filter(scene, True).obstacles:
         f.add_obstacle(obstacle.center, obstacle.radius)
         exporter.add_obstacle(obstacle.center, obstacle.radius)
     worst, changed = 0.0, 0
-    with compare_osqp.c_stdout_silenced():
+    with filter_qp.c_stdout_silenced():
         for name, inputs in osqp_cases.items():
             for x, u, tau, s in inputs[:40]:
                 qp = exporter.qp_matrices(x, u, tau_ext=tau, tank_energy=s)
@@ -90,8 +84,8 @@ def test_task_metric_filter_agrees_with_osqp(scene, osqp_cases, screening):
 def scripted_pull(obj: str):
     """sabre's state at the start of the scripted pull (hook on the handle) and the pull's commands."""
     scene = sabre.Scene.load("royalpanda", obj)
-    model = sabre.RolloutModel(scene, compare_mujoco.DT)
-    motion = sabre.hook_and_pull(scene, dt=compare_mujoco.DT)
+    model = sabre.RolloutModel(scene, TIMESTEP)
+    motion = sabre.hook_and_pull(scene, dt=TIMESTEP)
     start = int(np.flatnonzero(motion.phases == 3)[0])
     approach = model.rollout(scene.default_state(), motion.U[None, :start], threads=1)
     assert not approach.failed[0]
@@ -105,14 +99,14 @@ def test_scripted_pull_opening_agrees_with_mujoco(obj, tolerance):
     """The opening along the whole scripted pull (333 steps of 15 ms) in sabre's rollout model and
     in MuJoCo's model of the same URDFs with PI velocity servos (the structure of sabre's servo).
     Tolerance: 0.05 rad of a 1.18 rad swing for the shelf door, 1 cm of 41 cm for the drawer; the
-    scenes differ in contact model and servo coupling (see benches/mujoco_scene.py), not in what
+    scenes differ in contact model and servo coupling (see support/mujoco_scene.py), not in what
     the pull does to the object."""
     scene, model, x0, pull, planned = scripted_pull(obj)
     opening_sabre = model.rollout(x0, pull[None], threads=1).states[0, 1:, 2 * scene.nq]
     mj = build_mujoco_model(obj, scene, servo_integral=True)
     data = mujoco.MjData(mj)
-    state0 = compare_mujoco.mujoco_state(mj, data, scene, x0)
-    opening_mujoco, contact = compare_mujoco.mujoco_step_through(mj, data, state0, pull, scene.nq)
+    state0 = mujoco_state(mj, data, scene, x0)
+    opening_mujoco, contact = mujoco_step_through(mj, data, state0, pull, scene.nq)
     # the pull really opens the object in both, to about what the script planned
     assert opening_sabre[-1] > 0.9 * planned and opening_mujoco[-1] > 0.9 * planned
     assert contact.mean() > 0.5

@@ -1,6 +1,7 @@
-//! Rapier's f32 build against its f64 build on the rollout model's in-contact work (issue 20's
-//! evaluation; not part of sabre's build): the proxies' placements along eight in-contact rollouts
-//! replayed through Rapier's whole pipeline in each, the object the shelf's door as a multibody.
+//! Rapier's f32 build against its f64 build on the rollout model's in-contact work (whether f32
+//! would speed up the contact step; not part of sabre's build): the proxies' placements along eight
+//! in-contact rollouts replayed through Rapier's whole pipeline in each, the object the shelf's door
+//! as a multibody.
 //!
 //!     cargo run --release --manifest-path benches/rapier_f32/Cargo.toml
 //!     cargo run --release --manifest-path benches/rapier_f32/Cargo.toml --features simd8

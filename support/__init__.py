@@ -1,0 +1,1 @@
+"""What tests, benches and experiments share (scenes for second engines, generated objects); not part of the installed package."""
