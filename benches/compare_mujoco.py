@@ -75,9 +75,7 @@ RESULTS = Path(__file__).resolve().parent / "results" / "compare_mujoco.json"
 class MujocoRunner:
     """One batch on a persistent `mujoco.rollout.Rollout` pool: inputs, MjData and output buffer made once."""
 
-    def __init__(
-        self, pool: mujoco.rollout.Rollout, model: mujoco.MjModel, init_state: np.ndarray, control: np.ndarray
-    ) -> None:
+    def __init__(self, pool: mujoco.rollout.Rollout, model: mujoco.MjModel, init_state: np.ndarray, control: np.ndarray) -> None:
         self.pool = pool
         self.model = model
         self.data = [mujoco.MjData(model) for _ in range(THREADS)]
@@ -283,10 +281,7 @@ def main(argv: list[str] | None = None) -> int:
         timing = results["batches"][bname]["timing"]
         for name in sims:
             t = timing[name]
-            print(
-                f"{bname:<12} {name:<9} {t['median_ms']:9.2f} {t['min_ms']:7.2f} {t['max_ms']:7.2f} "
-                f"{t['steps_per_s']:10.0f}"
-            )
+            print(f"{bname:<12} {name:<9} {t['median_ms']:9.2f} {t['min_ms']:7.2f} {t['max_ms']:7.2f} {t['steps_per_s']:10.0f}")
         ratios = [f"sabre/{name} steps/s = {timing[f'ratio_sabre_over_{name}_steps_per_s']:.2f}" for name in mj_models]
         print(f"{'':12} {'; '.join(ratios)}")
     if "MuJoCo+I" in mj_models:

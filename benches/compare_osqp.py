@@ -45,8 +45,10 @@ def main() -> None:
     }
     solver = OsqpFilter([qp for qs in qps.values() for qp in qs])
 
-    print(f"FILTER-QP: {len(screened.row_names)} ZBF rows + {2 * scene.nq} input bounds; "
-          f"Clarabel (sabre) vs OSQP {osqp.__version__}")
+    print(
+        f"FILTER-QP: {len(screened.row_names)} ZBF rows + {2 * scene.nq} input bounds; "
+        f"Clarabel (sabre) vs OSQP {osqp.__version__}"
+    )
     header = (
         f"{'case':<12} {'calls':>5} {'sabre':>9} {'(core)':>8} {'sabre full':>10} {'OSQP':>9} {'(OSQP)':>8} "
         f"{'OSQP/sabre':>10} {'OSQP/full':>9} {'max |du|':>9} {'rows':>5}"

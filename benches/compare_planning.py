@@ -65,10 +65,14 @@ def main(argv: list[str] | None = None) -> int:
     runner = mujoco.rollout.Rollout(nthread=THREADS)
     rng = np.random.default_rng(0)
 
-    print(f"sabre {sabre.__version__} ({args.contact_model} contact path) vs MuJoCo {mujoco.__version__}: planning "
-          f"iteration, N={n} x K={k}, {THREADS} threads, median of {args.repeats} alternating rounds")
-    print(f"{'start':<10} {'sabre iteration (ms)':>22} {'mujoco.rollout (ms)':>21} {'ratio':>7} "
-          f"{'contact step (ms)':>18} {'share':>6}")
+    print(
+        f"sabre {sabre.__version__} ({args.contact_model} contact path) vs MuJoCo {mujoco.__version__}: planning "
+        f"iteration, N={n} x K={k}, {THREADS} threads, median of {args.repeats} alternating rounds"
+    )
+    print(
+        f"{'start':<10} {'sabre iteration (ms)':>22} {'mujoco.rollout (ms)':>21} {'ratio':>7} "
+        f"{'contact step (ms)':>18} {'share':>6}"
+    )
     recorded = json.loads((Path(__file__).resolve().parent / "data" / "shelf_open_phase.json").read_text())
     starts = [("free", scene.default_state()), ("contact", hooked_state(scene))]
     if args.object == recorded["object"]:
@@ -85,6 +89,7 @@ def main(argv: list[str] | None = None) -> int:
         t_sim = 0.0
         sabre_times, mujoco_times, engine_ms, engine_share = [], [], [], []
         for round_ in range(args.repeats + 3):
+
             def run_sabre() -> float:
                 nonlocal t_sim
                 if label == "open":  # noqa: B023 (called within this iteration)
@@ -125,11 +130,16 @@ def main(argv: list[str] | None = None) -> int:
     # Re-plan i happens at i / rate; the phase it planned for is the one recorded just after it.
     plan_times = np.arange(times.size) * episode.duration / times.size
     phases = np.asarray(episode.phase)[np.searchsorted(episode.time, plan_times).clip(0, episode.time.size - 1)]
-    per_phase = ", ".join(f"{name} {np.median(times[phases == i]):.1f} ms ({np.count_nonzero(phases == i)})"
-                          for i, name in enumerate(episode.phases) if np.any(phases == i))
-    print(f"closed loop: {episode.duration:.1f} s simulated in {episode.wall_time:.1f} s "
-          f"(real-time factor {episode.real_time_factor:.2f}, plant at 1 kHz, re-planning at {args.replan_rate:g} Hz, "
-          f"{'opened' if episode.success else 'NOT opened'})")
+    per_phase = ", ".join(
+        f"{name} {np.median(times[phases == i]):.1f} ms ({np.count_nonzero(phases == i)})"
+        for i, name in enumerate(episode.phases)
+        if np.any(phases == i)
+    )
+    print(
+        f"closed loop: {episode.duration:.1f} s simulated in {episode.wall_time:.1f} s "
+        f"(real-time factor {episode.real_time_factor:.2f}, plant at 1 kHz, re-planning at {args.replan_rate:g} Hz, "
+        f"{'opened' if episode.success else 'NOT opened'})"
+    )
     print(f"median planning iteration per phase (re-plans): {per_phase}")
     return 0
 

@@ -41,9 +41,23 @@ LINE = re.compile(r"^\s*([0-9.]+)%\s+(\S+)\s+\[[.k]\]\s+(.*?)\s*(?:-\s+-\s*)?$")
 
 def breakdown(perf_data: str) -> dict[str, float]:
     report = subprocess.run(
-        ["perf", "report", "-i", perf_data, "--no-children", "--sort", "dso,symbol", "--stdio", "-g", "none",
-         "--percent-limit", "0"],
-        capture_output=True, text=True, check=True,
+        [
+            "perf",
+            "report",
+            "-i",
+            perf_data,
+            "--no-children",
+            "--sort",
+            "dso,symbol",
+            "--stdio",
+            "-g",
+            "none",
+            "--percent-limit",
+            "0",
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
     ).stdout
     shares: dict[str, float] = defaultdict(float)
     for line in report.splitlines():

@@ -36,8 +36,10 @@ def main(argv: list[str] | None = None) -> int:
         engine += controller.stats.engine_time
         rollout += controller.stats.rollout_time
     wall = time.perf_counter() - started
-    print(f"{args.iterations} in-contact iterations: {1e3 * wall / args.iterations:.2f} ms each; "
-          f"contact step {100 * engine / (2 * rollout):.0f} % of the workers' rollout time")
+    print(
+        f"{args.iterations} in-contact iterations: {1e3 * wall / args.iterations:.2f} ms each; "
+        f"contact step {100 * engine / (2 * rollout):.0f} % of the workers' rollout time"
+    )
     return 0
 
 

@@ -77,15 +77,18 @@ def run(role: str, seconds: float, profile: bool) -> None:
     while thread.is_alive():
         executor.spin_once(timeout_sec=0.05)
     ms = np.array(latency[500:]) * 1e3
-    print(f"{len(latency)} answers; round trip p50 {np.percentile(ms, 50):.3f} ms, p99 {np.percentile(ms, 99):.3f} ms, "
-          f"max {ms.max():.2f} ms")
+    print(
+        f"{len(latency)} answers; round trip p50 {np.percentile(ms, 50):.3f} ms, p99 {np.percentile(ms, 99):.3f} ms, "
+        f"max {ms.max():.2f} ms"
+    )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seconds", type=float, default=10.0)
-    parser.add_argument("--no-profile", action="store_true",
-                        help="without sabre's Fast DDS profile (the receive threads under normal scheduling)")
+    parser.add_argument(
+        "--no-profile", action="store_true", help="without sabre's Fast DDS profile (the receive threads under normal scheduling)"
+    )
     parser.add_argument("--role", choices=("source", "echo"), default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.role is not None:

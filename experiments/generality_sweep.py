@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
-    specs = [random_spec(rng, i) for i in range(args.first + args.objects)][args.first:]
+    specs = [random_spec(rng, i) for i in range(args.first + args.objects)][args.first :]
     started = time.perf_counter()
     outcomes: dict[str, Counter] = {v: Counter() for v in args.variants}
     rows = []
@@ -80,12 +80,18 @@ def main(argv: list[str] | None = None) -> int:
             outcome, when = run_one(spec, variant, args.duration)
             outcomes[variant][outcome] += 1
             rows.append((spec, variant, outcome, when))
-            print(f"object {spec.index} ({spec.kind}, w {spec.width:.2f}, h {spec.handle_height:.2f}, "
-                  f"{'vertical' if spec.vertical_bar else 'horizontal'} {spec.bar_shape}) {variant}: {outcome}"
-                  + (f" at {when:.1f} s" if when is not None else ""), file=sys.stderr, flush=True)
+            print(
+                f"object {spec.index} ({spec.kind}, w {spec.width:.2f}, h {spec.handle_height:.2f}, "
+                f"{'vertical' if spec.vertical_bar else 'horizontal'} {spec.bar_shape}) {variant}: {outcome}"
+                + (f" at {when:.1f} s" if when is not None else ""),
+                file=sys.stderr,
+                flush=True,
+            )
     failures = ("could not reach", "could not hook", "slipped", "stalled at a joint limit", "tank spent", "stalled")
-    command = (f"python experiments/generality_sweep.py --objects {args.objects} --first {args.first} "
-               f"--duration {args.duration:g} --variants {' '.join(args.variants)} --seed {args.seed}")
+    command = (
+        f"python experiments/generality_sweep.py --objects {args.objects} --first {args.first} "
+        f"--duration {args.duration:g} --variants {' '.join(args.variants)} --seed {args.seed}"
+    )
     lines = [
         f"Command: `{command}`; wall time {time.perf_counter() - started:.0f} s.",
         "",

@@ -52,21 +52,36 @@ def main(argv: list[str] | None = None) -> int:
                 s, c = run.sim, run.controller
                 reference = reference_time(obj, variant, seed, args.timeout)
                 opened = bool(s.get("success"))
-                runs.append({
-                    "opened": opened, "time": s.get("time_to_open"), "reference": reference,
-                    "p50": s.get("latency_p50_ms", float("nan")), "p99": s.get("latency_p99_ms", float("nan")),
-                    "delivered": s.get("delivered_fraction", 0.0), "late_ticks": s.get("late_ticks", 0),
-                    "planner_hz": c.get("planner_rate_hz", float("nan")),
-                })
-                print(f"{obj} {variant} seed {seed}: opened {opened} in {s.get('time_to_open')} s "
-                      f"(run_episode {reference}), latency p99 {runs[-1]['p99']:.2f} ms, "
-                      f"delivered {100 * runs[-1]['delivered']:.2f} %", file=sys.stderr, flush=True)
+                runs.append(
+                    {
+                        "opened": opened,
+                        "time": s.get("time_to_open"),
+                        "reference": reference,
+                        "p50": s.get("latency_p50_ms", float("nan")),
+                        "p99": s.get("latency_p99_ms", float("nan")),
+                        "delivered": s.get("delivered_fraction", 0.0),
+                        "late_ticks": s.get("late_ticks", 0),
+                        "planner_hz": c.get("planner_rate_hz", float("nan")),
+                    }
+                )
+                print(
+                    f"{obj} {variant} seed {seed}: opened {opened} in {s.get('time_to_open')} s "
+                    f"(run_episode {reference}), latency p99 {runs[-1]['p99']:.2f} ms, "
+                    f"delivered {100 * runs[-1]['delivered']:.2f} %",
+                    file=sys.stderr,
+                    flush=True,
+                )
             ratios = [r["time"] / r["reference"] for r in runs if r["opened"] and r["reference"]]
             rows.append((obj, variant, runs, ratios))
     stuck = None
     if args.hold > 0:
-        run = run_bridge("shelf", "IO", 0, timeout=args.timeout + args.hold,
-                         sim_params={"hold_at_opening": 0.3, "hold_duration": args.hold, "stop_on_success": True})
+        run = run_bridge(
+            "shelf",
+            "IO",
+            0,
+            timeout=args.timeout + args.hold,
+            sim_params={"hold_at_opening": 0.3, "hold_duration": args.hold, "stop_on_success": True},
+        )
         stuck = run.controller
 
     lines += [
@@ -84,10 +99,13 @@ def main(argv: list[str] | None = None) -> int:
             f"| {statistics.median(r['planner_hz'] for r in runs):.0f} |"
         )
     if stuck is not None:
-        lines += ["", f"Stuck door through the bridge (shelf, IO, held {args.hold:g} s at 30 % of the range): "
-                  f"tank minimum {stuck.get('tank_min', float('nan')):.3f} J, "
-                  f"floor {stuck.get('tank_floor', float('nan')):.3f} J, "
-                  f"filter fallbacks {stuck.get('filter_fallbacks')}."]
+        lines += [
+            "",
+            f"Stuck door through the bridge (shelf, IO, held {args.hold:g} s at 30 % of the range): "
+            f"tank minimum {stuck.get('tank_min', float('nan')):.3f} J, "
+            f"floor {stuck.get('tank_floor', float('nan')):.3f} J, "
+            f"filter fallbacks {stuck.get('filter_fallbacks')}.",
+        ]
     command = "python experiments/ros_acceptance.py " + " ".join(sys.argv[1:] if argv is None else argv)
     report = "\n".join([f"Command: `{command}`; wall time {time.perf_counter() - started:.0f} s.", ""] + lines) + "\n"
     print(report)

@@ -1,6 +1,6 @@
 """Runs the paper's Sec. VI-A scenarios for the controller variants and prints a markdown table.
 
-    .venv/bin/python experiments/scenarios.py --seeds 1 --duration 5
+.venv/bin/python experiments/scenarios.py --seeds 1 --duration 5
 """
 
 from __future__ import annotations
@@ -29,26 +29,35 @@ def main() -> None:
         for v in ("N", "IO"):
             every = [S.stuck_door(v, s, args.hold, args.release, driver=driver) for s in seeds]
             rs = [r for r in every if r.held]  # a door never brought to the hold position has no stuck period
-            print(f"| stuck door | {driver}/{v} | held / mean wrench stuck (N) / tank min (J) / opening after release | "
-                  f"{len(rs)} of {len(every)} / {np.mean([r.mean_wrench_stuck for r in rs]):.1f} / "
-                  f"{np.mean([r.tank_min for r in rs]):.2f} / {np.mean([r.opening_after_release for r in rs]):.3f} |")
+            print(
+                f"| stuck door | {driver}/{v} | held / mean wrench stuck (N) / tank min (J) / opening after release | "
+                f"{len(rs)} of {len(every)} / {np.mean([r.mean_wrench_stuck for r in rs]):.1f} / "
+                f"{np.mean([r.tank_min for r in rs]):.2f} / {np.mean([r.opening_after_release for r in rs]):.3f} |"
+            )
         for a in (1.0, 1000.0):
             rs = [S.tank_chattering(a, s, args.hold, 0.1, driver=driver) for s in seeds]
-            print(f"| chattering | {driver}/IO α={a:g} | within 0.5 J of the floor: "
-                  "s / peak dissipation (W) / power variation (W/s) / tank min (J) | "
-                  f"{np.mean([r.floor_power.seconds for r in rs]):.2f} / "
-                  f"{np.mean([r.floor_power.peak_dissipation for r in rs]):.2f} / "
-                  f"{np.mean([r.floor_power.variation_per_s for r in rs]):.2f} / {np.mean([r.tank_min for r in rs]):.4f} |")
+            print(
+                f"| chattering | {driver}/IO α={a:g} | within 0.5 J of the floor: "
+                "s / peak dissipation (W) / power variation (W/s) / tank min (J) | "
+                f"{np.mean([r.floor_power.seconds for r in rs]):.2f} / "
+                f"{np.mean([r.floor_power.peak_dissipation for r in rs]):.2f} / "
+                f"{np.mean([r.floor_power.variation_per_s for r in rs]):.2f} / {np.mean([r.tank_min for r in rs]):.4f} |"
+            )
     for v in ("N", "IO"):
         rs = [S.obstacle_corridor(v, s, args.duration) for s in seeds]
-        print(f"| corridor | {v} | Σ cartesian violation / reached / obstacle appeared | "
-              f"{sum(r.cartesian_violation for r in rs):.4f} / {sum(r.reached for r in rs)}/{len(rs)} / "
-              f"{sum(r.appeared_at is not None for r in rs)}/{len(rs)} |")
+        print(
+            f"| corridor | {v} | Σ cartesian violation / reached / obstacle appeared | "
+            f"{sum(r.cartesian_violation for r in rs):.4f} / {sum(r.reached for r in rs)}/{len(rs)} / "
+            f"{sum(r.appeared_at is not None for r in rs)}/{len(rs)} |"
+        )
     for v in ("N", "O", "IO"):
         rs = [S.object_manipulation(v, "shelf", s, args.duration) for s in seeds]
         viol = {k: np.mean([r.violations[k] for r in rs]) for k in rs[0].violations}
-        print(f"| manipulation shelf | {v} | success / violations | {sum(r.success for r in rs)}/{len(rs)} / "
-              + ", ".join(f"{k} {val:.3g}" for k, val in viol.items()) + " |")
+        print(
+            f"| manipulation shelf | {v} | success / violations | {sum(r.success for r in rs)}/{len(rs)} / "
+            + ", ".join(f"{k} {val:.3g}" for k, val in viol.items())
+            + " |"
+        )
     print(f"\n{time.perf_counter() - start:.0f} s wall")
 
 

@@ -80,8 +80,16 @@ def episode(rng: np.random.Generator, index: int, duration: float) -> dict:
     if variant in ("I", "IO"):
         below_floor = int(np.sum(ep.tank_energy < ep.tank_floor - 1e-6))
     nan = int(sum(not np.all(np.isfinite(a)) for a in (ep.state, ep.command, ep.wrench, ep.tank_energy)))
-    return {"object": obj, "variant": variant, "fault": fault, "nan": nan, "fallbacks": ep.filter_fallbacks,
-            "below_floor": below_floor, "success": ep.success, "wall": ep.wall_time}
+    return {
+        "object": obj,
+        "variant": variant,
+        "fault": fault,
+        "nan": nan,
+        "fallbacks": ep.filter_fallbacks,
+        "below_floor": below_floor,
+        "success": ep.success,
+        "wall": ep.wall_time,
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -100,8 +108,12 @@ def main(argv: list[str] | None = None) -> int:
         rss.append(rss_mib())
         thread_counts.append(threads())
         if (i + 1) % 10 == 0 or i + 1 == args.episodes:
-            print(f"{i + 1}/{args.episodes} episodes, RSS {rss[-1]:.1f} MiB, threads {thread_counts[-1]}, "
-                  f"{time.perf_counter() - started:.0f} s", file=sys.stderr, flush=True)
+            print(
+                f"{i + 1}/{args.episodes} episodes, RSS {rss[-1]:.1f} MiB, threads {thread_counts[-1]}, "
+                f"{time.perf_counter() - started:.0f} s",
+                file=sys.stderr,
+                flush=True,
+            )
     growth = (rss[-1] - rss[warmup - 1]) / rss[warmup - 1] * 100.0
     nan = sum(r["nan"] for r in rows)
     below = sum(r["below_floor"] for r in rows)
@@ -111,14 +123,13 @@ def main(argv: list[str] | None = None) -> int:
         f"# Soak: {args.episodes} episodes of {args.duration} s in one process",
         "",
         f"Command: `python experiments/soak.py --episodes {args.episodes} --duration {args.duration} --seed {args.seed}`",
-        f"Wall time: {time.perf_counter() - started:.0f} s. Faults: "
-        + ", ".join(f"{k} {v}" for k, v in sorted(faults.items())),
+        f"Wall time: {time.perf_counter() - started:.0f} s. Faults: " + ", ".join(f"{k} {v}" for k, v in sorted(faults.items())),
         "",
         "| measure | value | goal |",
         "|---|---|---|",
         f"| RSS after warm-up ({warmup} episodes) → end | {rss[warmup - 1]:.1f} → {rss[-1]:.1f} MiB ({growth:+.2f} %) | < 5 % |",
         f"| OS threads after warm-up → end (min–max) | {thread_counts[warmup - 1]} → {thread_counts[-1]} "
-        f"({min(thread_counts[warmup - 1:])}–{max(thread_counts[warmup - 1:])}) | constant |",
+        f"({min(thread_counts[warmup - 1 :])}–{max(thread_counts[warmup - 1 :])}) | constant |",
         f"| episodes with NaN in a trace | {nan} | 0 |",
         f"| tank samples below the floor (I, IO) | {below} | 0 |",
         f"| filter fallbacks (all episodes) | {fallbacks} | reported |",
@@ -128,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(report)
-    ok = growth < 5.0 and nan == 0 and below == 0 and len(set(thread_counts[warmup - 1:])) == 1
+    ok = growth < 5.0 and nan == 0 and below == 0 and len(set(thread_counts[warmup - 1 :])) == 1
     return 0 if ok else 1
 
 

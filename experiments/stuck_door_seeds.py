@@ -26,8 +26,17 @@ def run(variant: str, seed: int) -> dict:
     hold = (ep.time >= r.hold_start) & (ep.time <= r.hold_start + r.hold_seconds)
     lost = bool(np.any(phases[hold] != "open")) if r.held else None
     rehooked = bool(np.any(phases[ep.time > r.hold_start + r.hold_seconds] == "open")) if lost else None
-    return {"seed": seed, "held": r.held, "hold_start": r.hold_start, "wrench": r.mean_wrench_stuck, "tank_min": r.tank_min,
-            "floor": r.tank_floor, "opening_after": r.opening_after_release, "lost_bar": lost, "rehooked": rehooked}
+    return {
+        "seed": seed,
+        "held": r.held,
+        "hold_start": r.hold_start,
+        "wrench": r.mean_wrench_stuck,
+        "tank_min": r.tank_min,
+        "floor": r.tank_floor,
+        "opening_after": r.opening_after_release,
+        "lost_bar": lost,
+        "rehooked": rehooked,
+    }
 
 
 def main() -> None:
@@ -42,9 +51,11 @@ def main() -> None:
     held = [r for r in rows if r["held"]]
     if held:
         wrench = [r["wrench"] for r in held]
-        print(f"{args.variant}: held {len(held)}/{len(rows)}, wrench mean {statistics.mean(wrench):.1f} N "
-              f"(median {statistics.median(wrench):.1f} N), lowest tank {min(r['tank_min'] for r in rows):.4f} J, "
-              f"bar lost in {sum(bool(r['lost_bar']) for r in held)}, hooked again in {sum(bool(r['rehooked']) for r in held)}")
+        print(
+            f"{args.variant}: held {len(held)}/{len(rows)}, wrench mean {statistics.mean(wrench):.1f} N "
+            f"(median {statistics.median(wrench):.1f} N), lowest tank {min(r['tank_min'] for r in rows):.4f} J, "
+            f"bar lost in {sum(bool(r['lost_bar']) for r in held)}, hooked again in {sum(bool(r['rehooked']) for r in held)}"
+        )
 
 
 if __name__ == "__main__":

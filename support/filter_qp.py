@@ -107,8 +107,17 @@ class OsqpFilter:
         assert A.nnz == len(self.rows) and np.array_equal(A.indices, self.rows), "explicit zeros must stay in the pattern"
         self.solver = osqp.OSQP()
         self.solver.setup(
-            self.P, first.q, A, np.full(len(first.b), -np.inf), first.b,
-            eps_abs=1e-7, eps_rel=1e-7, polishing=True, warm_starting=True, verbose=False, max_iter=20000,
+            self.P,
+            first.q,
+            A,
+            np.full(len(first.b), -np.inf),
+            first.b,
+            eps_abs=1e-7,
+            eps_rel=1e-7,
+            polishing=True,
+            warm_starting=True,
+            verbose=False,
+            max_iter=20000,
         )
         self.nu = first.nu
 

@@ -84,8 +84,17 @@ import numpy as np
 
 import sabre
 
-__all__ = ["ASSETS", "STATE_SPEC", "TIMESTEP", "build_mujoco_model", "mjcf_text", "mujoco_controls", "mujoco_state",
-           "mujoco_step_through", "qpos_slice"]
+__all__ = [
+    "ASSETS",
+    "STATE_SPEC",
+    "TIMESTEP",
+    "build_mujoco_model",
+    "mjcf_text",
+    "mujoco_controls",
+    "mujoco_state",
+    "mujoco_step_through",
+    "qpos_slice",
+]
 
 ASSETS = Path(__file__).resolve().parents[1] / "assets"
 
@@ -198,8 +207,11 @@ def _capsule_caps(collisions: list[ET.Element]) -> dict[int, set[int]]:
         for cap in (np.asarray(xyz) + half * axis, np.asarray(xyz) - half * axis):
             for k, other in enumerate(collisions):
                 s = other.find("geometry")[0]
-                if (s.tag == "sphere" and abs(float(s.get("radius")) - radius) <= 1e-9
-                        and np.linalg.norm(np.asarray(_origin(other)[0]) - cap) <= 1e-6):
+                if (
+                    s.tag == "sphere"
+                    and abs(float(s.get("radius")) - radius) <= 1e-9
+                    and np.linalg.norm(np.asarray(_origin(other)[0]) - cap) <= 1e-6
+                ):
                     caps.add(k)
                     break
         if len(caps) == 2:
@@ -263,7 +275,7 @@ def _joint_xml(joint: ET.Element, indent: str, robot: bool) -> str:
     if robot and limit is not None and limit.get("effort") is not None:
         effort = float(limit.get("effort"))
         attrs.append(f'actuatorfrcrange="{-effort:.12g} {effort:.12g}"')
-    return f'{indent}<joint {" ".join(attrs)}/>\n'
+    return f"{indent}<joint {' '.join(attrs)}/>\n"
 
 
 def _body_tree_xml(
@@ -381,9 +393,7 @@ def mjcf_text(
     )
 
 
-def build_mujoco_model(
-    scene_name: str, scene: sabre.Scene | None = None, *, servo_integral: bool = False
-) -> mujoco.MjModel:
+def build_mujoco_model(scene_name: str, scene: sabre.Scene | None = None, *, servo_integral: bool = False) -> mujoco.MjModel:
     """Compiles the MuJoCo equivalent of ``sabre.Scene.load("royalpanda", scene_name)`` with the
     rollout model's physics (see the module docstring for what is equal and what differs).
 

@@ -74,17 +74,21 @@ def random_spec(rng: np.random.Generator, index: int) -> ObjectSpec:
 
 
 def _box(name: str, xyz: tuple[float, float, float], size: tuple[float, float, float]) -> str:
-    return (f'<collision name="{name}"><origin xyz="{xyz[0]:.4f} {xyz[1]:.4f} {xyz[2]:.4f}"/>'
-            f'<geometry><box size="{size[0]:.4f} {size[1]:.4f} {size[2]:.4f}"/></geometry></collision>'
-            f'<visual name="{name}"><origin xyz="{xyz[0]:.4f} {xyz[1]:.4f} {xyz[2]:.4f}"/>'
-            f'<geometry><box size="{size[0]:.4f} {size[1]:.4f} {size[2]:.4f}"/></geometry></visual>')
+    return (
+        f'<collision name="{name}"><origin xyz="{xyz[0]:.4f} {xyz[1]:.4f} {xyz[2]:.4f}"/>'
+        f'<geometry><box size="{size[0]:.4f} {size[1]:.4f} {size[2]:.4f}"/></geometry></collision>'
+        f'<visual name="{name}"><origin xyz="{xyz[0]:.4f} {xyz[1]:.4f} {xyz[2]:.4f}"/>'
+        f'<geometry><box size="{size[0]:.4f} {size[1]:.4f} {size[2]:.4f}"/></geometry></visual>'
+    )
 
 
 def _inertial(mass: float, xyz: tuple[float, float, float], size: tuple[float, float, float]) -> str:
     a, b, c = size
     ixx, iyy, izz = mass / 12 * (b * b + c * c), mass / 12 * (a * a + c * c), mass / 12 * (a * a + b * b)
-    return (f'<inertial><origin xyz="{xyz[0]:.4f} {xyz[1]:.4f} {xyz[2]:.4f}"/><mass value="{mass:.4f}"/>'
-            f'<inertia ixx="{ixx:.6g}" ixy="0" ixz="0" iyy="{iyy:.6g}" iyz="0" izz="{izz:.6g}"/></inertial>')
+    return (
+        f'<inertial><origin xyz="{xyz[0]:.4f} {xyz[1]:.4f} {xyz[2]:.4f}"/><mass value="{mass:.4f}"/>'
+        f'<inertia ixx="{ixx:.6g}" ixy="0" ixz="0" iyy="{iyy:.6g}" iyz="0" izz="{izz:.6g}"/></inertial>'
+    )
 
 
 def _bar_stl(size: tuple[float, float, float]) -> str:
@@ -115,20 +119,27 @@ def object_urdf(spec: ObjectSpec) -> str:
         mass = 5.8 * spec.mass_scale
         panel_xyz = (0.008, -s * w / 2, 0.0)
         moving = _inertial(mass, panel_xyz, (0.016, w, panel_h)) + _box("panel", panel_xyz, (0.016, w, panel_h))
-        joint = (f'<joint name="hinge_{i}" type="revolute"><parent link="body_{i}"/><child link="leaf_{i}"/>'
-                 f'<origin xyz="0 {s * w / 2:.4f} {h:.4f}"/><axis xyz="0 0 {-s:.0f}"/>'
-                 f'<limit lower="0" upper="1.57" effort="50" velocity="2"/>'
-                 f'<dynamics damping="{2.0 * spec.damping_scale:.3f}" friction="{4.0 * spec.friction_scale:.3f}"/></joint>')
+        joint = (
+            f'<joint name="hinge_{i}" type="revolute"><parent link="body_{i}"/><child link="leaf_{i}"/>'
+            f'<origin xyz="0 {s * w / 2:.4f} {h:.4f}"/><axis xyz="0 0 {-s:.0f}"/>'
+            f'<limit lower="0" upper="1.57" effort="50" velocity="2"/>'
+            f'<dynamics damping="{2.0 * spec.damping_scale:.3f}" friction="{4.0 * spec.friction_scale:.3f}"/></joint>'
+        )
         grip_y = -s * (w - 0.04)
     else:
         mass = 3.0 * spec.mass_scale
         front, tray = (0.008, 0.0, 0.0), (0.19, 0.0, -panel_h / 2 + 0.02)
-        moving = (_inertial(mass, (0.1, 0.0, -0.05), (0.35, w - 0.04, panel_h))
-                  + _box("front", front, (0.016, w, panel_h)) + _box("tray", tray, (0.35, w - 0.04, 0.01)))
-        joint = (f'<joint name="slide_{i}" type="prismatic"><parent link="body_{i}"/><child link="leaf_{i}"/>'
-                 f'<origin xyz="0 0 {h:.4f}"/><axis xyz="-1 0 0"/>'
-                 f'<limit lower="0" upper="0.35" effort="100" velocity="1"/>'
-                 f'<dynamics damping="{2.0 * spec.damping_scale:.3f}" friction="{0.5 * spec.friction_scale:.3f}"/></joint>')
+        moving = (
+            _inertial(mass, (0.1, 0.0, -0.05), (0.35, w - 0.04, panel_h))
+            + _box("front", front, (0.016, w, panel_h))
+            + _box("tray", tray, (0.35, w - 0.04, 0.01))
+        )
+        joint = (
+            f'<joint name="slide_{i}" type="prismatic"><parent link="body_{i}"/><child link="leaf_{i}"/>'
+            f'<origin xyz="0 0 {h:.4f}"/><axis xyz="-1 0 0"/>'
+            f'<limit lower="0" upper="0.35" effort="100" velocity="1"/>'
+            f'<dynamics damping="{2.0 * spec.damping_scale:.3f}" friction="{0.5 * spec.friction_scale:.3f}"/></joint>'
+        )
         grip_y = 0.0
     length = 0.17
     if spec.vertical_bar:
@@ -139,14 +150,21 @@ def object_urdf(spec: ObjectSpec) -> str:
         bar = _box("bar", (0.0, 0.0, 0.0), bar_size)
     elif spec.bar_shape == "mesh":
         path = _bar_stl(bar_size)
-        bar = (f'<collision name="bar"><geometry><mesh filename="{path}"/></geometry></collision>'
-               f'<visual name="bar"><geometry><mesh filename="{path}"/></geometry></visual>')
+        bar = (
+            f'<collision name="bar"><geometry><mesh filename="{path}"/></geometry></collision>'
+            f'<visual name="bar"><geometry><mesh filename="{path}"/></geometry></visual>'
+        )
     else:
-        bar = (f'<collision name="bar"><origin xyz="0 0 0" rpy="{rpy}"/><geometry><cylinder radius="0.006" length="{length}"/>'
-               f'</geometry></collision><visual name="bar"><origin xyz="0 0 0" rpy="{rpy}"/><geometry>'
-               f'<cylinder radius="0.006" length="{length}"/></geometry></visual>')
-    grip = _inertial(0.1, (0.013, 0.0, 0.0), (0.06, 0.02, 0.17)) + bar + "".join(
-        _box(f"standoff_{k}", xyz, (0.056, 0.01, 0.01)) for k, xyz in enumerate(standoffs))
+        bar = (
+            f'<collision name="bar"><origin xyz="0 0 0" rpy="{rpy}"/><geometry><cylinder radius="0.006" length="{length}"/>'
+            f'</geometry></collision><visual name="bar"><origin xyz="0 0 0" rpy="{rpy}"/><geometry>'
+            f'<cylinder radius="0.006" length="{length}"/></geometry></visual>'
+        )
+    grip = (
+        _inertial(0.1, (0.013, 0.0, 0.0), (0.06, 0.02, 0.17))
+        + bar
+        + "".join(_box(f"standoff_{k}", xyz, (0.056, 0.01, 0.01)) for k, xyz in enumerate(standoffs))
+    )
     return f"""<?xml version="1.0"?>
 <robot name="generated_{spec.kind}_{i}">
   <link name="world"/>

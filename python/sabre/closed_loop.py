@@ -34,9 +34,18 @@ def paper_start_state(scene: Scene) -> np.ndarray:
     to self-collision (shoulder back, elbow fully bent), everything at rest, object closed."""
     x = scene.default_state()
     names = scene.joint_names
-    start = {"base_x": -3.0, "base_y": -3.0, "base_yaw": 0.0,
-             "panda_joint1": 0.0, "panda_joint2": -1.6, "panda_joint3": 0.0, "panda_joint4": -2.95,
-             "panda_joint5": 0.0, "panda_joint6": 1.6, "panda_joint7": 0.785}
+    start = {
+        "base_x": -3.0,
+        "base_y": -3.0,
+        "base_yaw": 0.0,
+        "panda_joint1": 0.0,
+        "panda_joint2": -1.6,
+        "panda_joint3": 0.0,
+        "panda_joint4": -2.95,
+        "panda_joint5": 0.0,
+        "panda_joint6": 1.6,
+        "panda_joint7": 0.785,
+    }
     for i, name in enumerate(names):
         if name in start:
             x[i] = np.clip(start[name], scene.q_lower[i], scene.q_upper[i])
@@ -110,8 +119,17 @@ def run_episode(
     low_level.reset()
     controller.reset(seed, 0.0)
     bar = _progress_bar(scene, duration, duration > 10.0 if progress is None else progress)
-    loop = _ClosedLoop(scene, controller, plant, low_level, delay_steps=delay_steps, record_every=record_every,
-                       delay_compensation=delay_compensation, record_plans=record_plans or viewer is not None, viewer=viewer)
+    loop = _ClosedLoop(
+        scene,
+        controller,
+        plant,
+        low_level,
+        delay_steps=delay_steps,
+        record_every=record_every,
+        delay_compensation=delay_compensation,
+        record_plans=record_plans or viewer is not None,
+        viewer=viewer,
+    )
     total_steps = max(1, int(round(duration / plant.dt)))
     return loop.run(total_steps, steps_per_plan, on_replan, stop_on_success, settle_time, bar)
 
@@ -142,19 +160,34 @@ class _RunningPlan:
     @staticmethod
     def of(controller: Controller, cost: float) -> _RunningPlan:
         predicted = controller.predicted_dissipation
-        return _RunningPlan(np.array(controller.nominal), float(controller.nominal_t0), float(controller.config.dt),
-                            None if predicted is None else np.array(predicted),
-                            controller.task.gain_inertia_floor(controller.phase), cost,
-                            controller.task.phases.index(controller.phase))
+        return _RunningPlan(
+            np.array(controller.nominal),
+            float(controller.nominal_t0),
+            float(controller.config.dt),
+            None if predicted is None else np.array(predicted),
+            controller.task.gain_inertia_floor(controller.phase),
+            cost,
+            controller.task.phases.index(controller.phase),
+        )
 
 
 class _ClosedLoop:
     """The state of one :func:`run_episode` between re-plans: the plant and its inner loop, the plan the inner loop
     follows while the next one is computed, and the recorders of the episode."""
 
-    def __init__(self, scene: Scene, controller: Controller, plant: Plant, low_level: LowLevelController, *,
-                 delay_steps: int, record_every: int, delay_compensation: bool, record_plans: bool,
-                 viewer: Viewer | None) -> None:
+    def __init__(
+        self,
+        scene: Scene,
+        controller: Controller,
+        plant: Plant,
+        low_level: LowLevelController,
+        *,
+        delay_steps: int,
+        record_every: int,
+        delay_compensation: bool,
+        record_plans: bool,
+        viewer: Viewer | None,
+    ) -> None:
         self.scene, self.controller, self.plant, self.low_level = scene, controller, plant, low_level
         self.delay_steps, self.record_every, self.delay_compensation = delay_steps, record_every, delay_compensation
         self.viewer = viewer
@@ -168,9 +201,15 @@ class _ClosedLoop:
         self.success_time: float | None = None
         self.running: _RunningPlan | None = None
 
-    def run(self, total_steps: int, steps_per_plan: int,
-            on_replan: Callable[[float, np.ndarray, Plant, Controller], None] | None,
-            stop_on_success: bool, settle_time: float, bar: Any) -> Episode:
+    def run(
+        self,
+        total_steps: int,
+        steps_per_plan: int,
+        on_replan: Callable[[float, np.ndarray, Plant, Controller], None] | None,
+        stop_on_success: bool,
+        settle_time: float,
+        bar: Any,
+    ) -> Episode:
         """Re-plans every ``steps_per_plan`` plant steps and follows each plan until ``total_steps``, ``on_replan``
         returning True, or ``settle_time`` s after success; returns the episode."""
         plant = self.plant
@@ -218,8 +257,15 @@ class _ClosedLoop:
                 continue
             self.low_level.gain_inertia_floor = self.own_floor if segment.floor is None else segment.floor
             trace = self.low_level.follow(
-                self.plant, segment.nominal, segment.t0, segment.dt, count, self.record_every,
-                safety=self.controller.inner_filter, tank=self.controller.tank, predicted_dissipation=segment.predicted,
+                self.plant,
+                segment.nominal,
+                segment.t0,
+                segment.dt,
+                count,
+                self.record_every,
+                safety=self.controller.inner_filter,
+                tank=self.controller.tank,
+                predicted_dissipation=segment.predicted,
             )
             self.chunks.append(trace, cost=segment.cost, phase=segment.phase)
         self.running = plan
@@ -231,8 +277,14 @@ class _ClosedLoop:
         _record_plan(self.plans, self.controller, x, t, self.plant)
         if self.viewer is not None:
             controller = self.controller
-            self.viewer.show_live(self.plant.state, self.plant.time, self.plans.latest(), phase=controller.phase,
-                                  tank_energy=controller.tank.energy, safety=controller.config.safety_config)
+            self.viewer.show_live(
+                self.plant.state,
+                self.plant.time,
+                self.plans.latest(),
+                phase=controller.phase,
+                tank_energy=controller.tank.energy,
+                safety=controller.config.safety_config,
+            )
 
     def note_success(self) -> None:
         """Notes the time the task first succeeds."""
@@ -284,9 +336,15 @@ def _record_plan(plans: PlanRecorder, controller: Controller, x: np.ndarray, t: 
     filters = controller.filters
     spheres = filters[0].obstacles if filters else []
     contacts = plant.contacts()
-    plans.append(t, states, np.array([c.point for c in contacts]).reshape(-1, 3),
-                 np.array([c.force for c in contacts]).reshape(-1, 3), sample_states=sample_states,
-                 sample_weights=weights, obstacles=np.array([[*o.center, o.radius] for o in spheres]).reshape(-1, 4))
+    plans.append(
+        t,
+        states,
+        np.array([c.point for c in contacts]).reshape(-1, 3),
+        np.array([c.force for c in contacts]).reshape(-1, 3),
+        sample_states=sample_states,
+        sample_weights=weights,
+        obstacles=np.array([[*o.center, o.radius] for o in spheres]).reshape(-1, 4),
+    )
 
 
 def _opening_targets(scene: Scene, task: Task) -> tuple[float | None, float | None]:
@@ -295,4 +353,3 @@ def _opening_targets(scene: Scene, task: Task) -> tuple[float | None, float | No
         return None, None
     target = task.target_opening(scene)
     return target, task.open.success_fraction * target
-

@@ -144,8 +144,14 @@ class Episode:
         f = SafetyFilter(self.scene, config)
         names = f.row_names
         classes = [n.split(":")[0] for n in names]
-        key = {"joint_limit": "joint_limits", "self_collision": "self_collision", "arm_reach": "arm_reach",
-               "base_box": "base_box", "obstacle": "obstacles", "passivity": "passivity"}
+        key = {
+            "joint_limit": "joint_limits",
+            "self_collision": "self_collision",
+            "arm_reach": "arm_reach",
+            "base_box": "base_box",
+            "obstacle": "obstacles",
+            "passivity": "passivity",
+        }
         total = {c: 0.0 for c in CLASSES if c != "passivity"}
         for x in self.state:
             h = f.constraint_rows(x).h
@@ -250,15 +256,17 @@ class PlanRecorder:
             best = np.argsort(-np.asarray(sample_weights))[: self.SAMPLES]
             samples = self._hand_path(np.asarray(sample_states)[best])
             weights = np.asarray(sample_weights, dtype=np.float64)[best]
-        self._plans.append(RecordedPlan(
-            time=float(t),
-            hand_path=self._hand_path(np.asarray(plan_states)),
-            sample_hand_paths=samples,
-            sample_weights=weights,
-            obstacles=np.zeros((0, 4)) if obstacles is None else np.asarray(obstacles, dtype=np.float64).reshape(-1, 4),
-            contact_points=np.asarray(contact_points, dtype=np.float64).reshape(-1, 3),
-            contact_forces=np.asarray(contact_forces, dtype=np.float64).reshape(-1, 3),
-        ))
+        self._plans.append(
+            RecordedPlan(
+                time=float(t),
+                hand_path=self._hand_path(np.asarray(plan_states)),
+                sample_hand_paths=samples,
+                sample_weights=weights,
+                obstacles=np.zeros((0, 4)) if obstacles is None else np.asarray(obstacles, dtype=np.float64).reshape(-1, 4),
+                contact_points=np.asarray(contact_points, dtype=np.float64).reshape(-1, 3),
+                contact_forces=np.asarray(contact_forces, dtype=np.float64).reshape(-1, 3),
+            )
+        )
 
     def latest(self) -> RecordedPlan:
         """The last recorded plan. Raises InvalidValueError before the first :meth:`append`."""
@@ -280,34 +288,58 @@ class PlanRecorder:
 
         out = {}
         if plans and all(p.sample_hand_paths is not None for p in plans):
-            out = {"sample_hand_paths": np.array([p.sample_hand_paths for p in plans]),
-                   "sample_weights": np.array([p.sample_weights for p in plans])}
+            out = {
+                "sample_hand_paths": np.array([p.sample_hand_paths for p in plans]),
+                "sample_weights": np.array([p.sample_weights for p in plans]),
+            }
         out["obstacles"] = padded([p.obstacles for p in plans], 4)
         paths = np.array([p.hand_path for p in plans]) if plans else np.zeros((0, 0, 3))
-        return {**out, "plan_time": np.array([p.time for p in plans]), "plan_hand_path": paths,
-                "contact_points": padded([p.contact_points for p in plans], 3),
-                "contact_forces": padded([p.contact_forces for p in plans], 3)}
+        return {
+            **out,
+            "plan_time": np.array([p.time for p in plans]),
+            "plan_hand_path": paths,
+            "contact_points": padded([p.contact_points for p in plans], 3),
+            "contact_forces": padded([p.contact_forces for p in plans], 3),
+        }
 
 
 # -- the episode file -----------------------------------------------------------------------------------------
 _FORMAT = "sabre-episode/1"
-_SCALARS = ("phases", "success", "time_to_success", "wall_time", "variant", "filter_fallbacks", "tank_floor",
-            "target_opening", "success_opening")
+_SCALARS = (
+    "phases",
+    "success",
+    "time_to_success",
+    "wall_time",
+    "variant",
+    "filter_fallbacks",
+    "tank_floor",
+    "target_opening",
+    "success_opening",
+)
 
 
 def save_episode(episode: Episode, path: str | os.PathLike[str]) -> None:
     """Writes ``episode`` to ``path`` (``.npz``); only scenes built by :meth:`Scene.load` can be saved."""
     scene = episode.scene
     if scene.robot_name not in ROBOTS or scene.object_name not in OBJECTS:
-        raise UnknownAssetError(f"Episode.save: scene {scene.robot_name}/{scene.object_name} is not built from "
-                                f"built-in assets; only those can be rebuilt on load")
-    header = {"format": _FORMAT, "robot": scene.robot_name, "object": scene.object_name,
-              "object_pose": pose_to_xyz_rpy(scene.object_pose).tolist()}
+        raise UnknownAssetError(
+            f"Episode.save: scene {scene.robot_name}/{scene.object_name} is not built from "
+            f"built-in assets; only those can be rebuilt on load"
+        )
+    header = {
+        "format": _FORMAT,
+        "robot": scene.robot_name,
+        "object": scene.object_name,
+        "object_pose": pose_to_xyz_rpy(scene.object_pose).tolist(),
+    }
     for name in _SCALARS:
         value = getattr(episode, name)
         header[name] = list(value) if isinstance(value, tuple) else value
-    arrays = {f.name: np.asarray(getattr(episode, f.name)) for f in fields(episode)
-              if f.name != "scene" and f.name not in _SCALARS and getattr(episode, f.name) is not None}
+    arrays = {
+        f.name: np.asarray(getattr(episode, f.name))
+        for f in fields(episode)
+        if f.name != "scene" and f.name not in _SCALARS and getattr(episode, f.name) is not None
+    }
     arrays["header"] = np.array(json.dumps(header))
     np.savez_compressed(path, **arrays)  # type: ignore[arg-type]  # numpy's stub types **kwds as bool
 

@@ -79,9 +79,20 @@ def _read(block: np.ndarray, tries: int = 1000) -> tuple[float, np.ndarray] | No
     return None
 
 
-def _planner_main(factory: Callable[[], Any], state_raw: Any, plan_raw: Any, dims: tuple[int, int, int],
-                  commands: Any, errors: Any, stop: Any, min_period: float, t0: float, nice: int, idle: bool,
-                  compensate: bool) -> None:
+def _planner_main(
+    factory: Callable[[], Any],
+    state_raw: Any,
+    plan_raw: Any,
+    dims: tuple[int, int, int],
+    commands: Any,
+    errors: Any,
+    stop: Any,
+    min_period: float,
+    t0: float,
+    nice: int,
+    idle: bool,
+    compensate: bool,
+) -> None:
     """The planner process: build the controller, then plan on the newest shared state until told
     to stop, with ``compensate`` from the state predicted when the plan will take over (the last
     iteration's time from reading the state to handing the plan over). SIGINT is the parent's to
@@ -128,9 +139,16 @@ def _planner_main(factory: Callable[[], Any], state_raw: Any, plan_raw: Any, dim
             floor = controller.task.gain_inertia_floor(controller.phase)
             predicted = controller.predicted_dissipation
             nominal = np.asarray(controller.nominal, dtype=np.float64)
-            header = [float(controller.nominal_t0), float(controller.config.dt), np.nan if floor is None else float(floor),
-                      float(phases.index(controller.phase)), float(stats.iteration_time), float(stats.iteration),
-                      0.0 if predicted is None else 1.0, 0.0]
+            header = [
+                float(controller.nominal_t0),
+                float(controller.config.dt),
+                np.nan if floor is None else float(floor),
+                float(phases.index(controller.phase)),
+                float(stats.iteration_time),
+                float(stats.iteration),
+                0.0 if predicted is None else 1.0,
+                0.0,
+            ]
             values: list[tuple[int, Any]] = [(_T0, header), (_PLAN_HEADER, nominal[:steps, :nu])]
             if predicted is not None:
                 values.append((_PLAN_HEADER + steps * nu, np.asarray(predicted, dtype=np.float64)[:steps]))
@@ -156,9 +174,20 @@ class PlannerProcess:
     from reading the state to handing its plan over, which the inner loop spent on the previous plan.
     """
 
-    def __init__(self, factory: Callable[[], Any], *, nx: int, steps: int, nu: int, phases: tuple[str, ...],
-                 min_replan_period: float, nice: int, idle: bool = False, compensate: bool = True,
-                 start_timeout: float = 120.0) -> None:
+    def __init__(
+        self,
+        factory: Callable[[], Any],
+        *,
+        nx: int,
+        steps: int,
+        nu: int,
+        phases: tuple[str, ...],
+        min_replan_period: float,
+        nice: int,
+        idle: bool = False,
+        compensate: bool = True,
+        start_timeout: float = 120.0,
+    ) -> None:
         self._factory = factory
         self._dims = (int(nx), int(steps), int(nu))
         self._phases = tuple(phases)
@@ -193,9 +222,24 @@ class PlannerProcess:
         self.share_state(x0, t0)
         self._stop.clear()
         self._process = self._ctx.Process(
-            target=_planner_main, name="sabre-planner", daemon=True,
-            args=(self._factory, self._state_raw, self._plan_raw, self._dims, self._commands, self._errors,
-                  self._stop, self._min_period, float(t0), self._nice, self._idle, self._compensate))
+            target=_planner_main,
+            name="sabre-planner",
+            daemon=True,
+            args=(
+                self._factory,
+                self._state_raw,
+                self._plan_raw,
+                self._dims,
+                self._commands,
+                self._errors,
+                self._stop,
+                self._min_period,
+                float(t0),
+                self._nice,
+                self._idle,
+                self._compensate,
+            ),
+        )
         # The planner's Python side makes many small NumPy calls; BLAS threads of its own would spin
         # between them on the cores its rollouts (and the inner loop) need. A spawned process reads
         # the variable when it imports NumPy; one the user set is left alone.
@@ -205,8 +249,10 @@ class PlannerProcess:
             self._process.start()
         except Exception as exc:  # pickling the factory, or the OS refusing a process
             self._process = None
-            raise PlannerError(f"cannot start the planner process (the factory must be picklable: a module-level "
-                               f"function or a functools.partial of one): {type(exc).__name__}: {exc}") from exc
+            raise PlannerError(
+                f"cannot start the planner process (the factory must be picklable: a module-level "
+                f"function or a functools.partial of one): {type(exc).__name__}: {exc}"
+            ) from exc
         finally:
             if blas is None:
                 del os.environ["OPENBLAS_NUM_THREADS"]
@@ -219,8 +265,10 @@ class PlannerProcess:
                 return snapshot
             if not self._process.is_alive() or time.monotonic() > deadline:
                 self.stop()
-                raise PlannerError("the planner process did not deliver a first plan"
-                                   + ("" if self._process is None else f" (exit code {self._process.exitcode})"))
+                raise PlannerError(
+                    "the planner process did not deliver a first plan"
+                    + ("" if self._process is None else f" (exit code {self._process.exitcode})")
+                )
             time.sleep(0.002)
 
     def share_state(self, x: np.ndarray, t: float) -> None:
@@ -246,10 +294,15 @@ class PlannerProcess:
         floor = float(block[_FLOOR])
         predicted = block[_PLAN_HEADER + steps * nu :] if block[_HAS_PRED] != 0.0 else None
         self._snapshot = PlanSnapshot(
-            nominal=block[_PLAN_HEADER : _PLAN_HEADER + steps * nu].reshape(steps, nu), t0=float(block[_T0]),
-            dt=float(block[_DT]), predicted=None if predicted is None else predicted.copy(),
-            floor=None if np.isnan(floor) else floor, phase=self._phases[int(block[_PHASE])],
-            iteration_time=float(block[_ITER_TIME]), iterations=int(block[_ITERS]))
+            nominal=block[_PLAN_HEADER : _PLAN_HEADER + steps * nu].reshape(steps, nu),
+            t0=float(block[_T0]),
+            dt=float(block[_DT]),
+            predicted=None if predicted is None else predicted.copy(),
+            floor=None if np.isnan(floor) else floor,
+            phase=self._phases[int(block[_PHASE])],
+            iteration_time=float(block[_ITER_TIME]),
+            iterations=int(block[_ITERS]),
+        )
         self._seen = seq
         return self._snapshot
 

@@ -68,9 +68,18 @@ class RealtimeCascade:
     the measured one. ``run_episode(plan_delay=...)`` reproduces the delay in simulated time.
     """
 
-    def __init__(self, controller: Controller, *, low_level: LowLevelController | None = None, inner_dt: float = 0.001,
-                 min_replan_period: float = 0.0, planner_process: Callable[[], Controller] | None = None,
-                 planner_nice: int = 10, planner_idle: bool = False, delay_compensation: bool = True) -> None:
+    def __init__(
+        self,
+        controller: Controller,
+        *,
+        low_level: LowLevelController | None = None,
+        inner_dt: float = 0.001,
+        min_replan_period: float = 0.0,
+        planner_process: Callable[[], Controller] | None = None,
+        planner_nice: int = 10,
+        planner_idle: bool = False,
+        delay_compensation: bool = True,
+    ) -> None:
         if not isinstance(controller, Controller):
             raise TypeError(f"controller must be a sabre.Controller, got {type(controller).__name__}")
         if planner_process is not None and not callable(planner_process):
@@ -125,10 +134,17 @@ class RealtimeCascade:
         if self._factory is not None:
             self.iterations = 0
             c = self.controller
-            self._process = PlannerProcess(self._factory, nx=c.scene.nx, steps=c.config.horizon_steps, nu=c.scene.nu,
-                                           phases=tuple(c.task.phases), min_replan_period=self.min_replan_period,
-                                           nice=self._planner_nice, idle=self._planner_idle,
-                                           compensate=self.delay_compensation)
+            self._process = PlannerProcess(
+                self._factory,
+                nx=c.scene.nx,
+                steps=c.config.horizon_steps,
+                nu=c.scene.nu,
+                phases=tuple(c.task.phases),
+                min_replan_period=self.min_replan_period,
+                nice=self._planner_nice,
+                idle=self._planner_idle,
+                compensate=self.delay_compensation,
+            )
             for name, args in self._obstacle_log:
                 self._process.call(name, *args)
             try:
@@ -309,8 +325,9 @@ class RealtimeCascade:
             plan = self._plan
         return None if plan is None else plan[1]
 
-    def tick(self, x: Sequence[float] | np.ndarray, tau_ext: Sequence[float] | np.ndarray, t: float,
-             dt: float | None = None) -> TickResult:
+    def tick(
+        self, x: Sequence[float] | np.ndarray, tau_ext: Sequence[float] | np.ndarray, t: float, dt: float | None = None
+    ) -> TickResult:
         """One inner-loop step from the measured state x (nx,) and external torques τ_ext (nq,)
         at time t: reference → FILTER-QP with the tank (variants I, IO) → tank (refilled as in
         :class:`~sabre.TankRefill` when the controller's tank has a refill) → low-level torque.

@@ -20,8 +20,17 @@ from .scene import Scene
 from .sim import RolloutModel
 
 __all__ = [
-    "CLASSES", "SafetyConfig", "SafetyFilter", "FilterResult", "SequenceResult", "FilterStats", "ConstraintRows",
-    "QPMatrices", "EnergyTank", "TankRefill", "Obstacle",
+    "CLASSES",
+    "SafetyConfig",
+    "SafetyFilter",
+    "FilterResult",
+    "SequenceResult",
+    "FilterStats",
+    "ConstraintRows",
+    "QPMatrices",
+    "EnergyTank",
+    "TankRefill",
+    "Obstacle",
 ]
 
 # The core's defaults, the one source of every default below.
@@ -472,8 +481,13 @@ class TankRefill:
         as_positive("time_constant", self.time_constant)
 
     def _core_config(self) -> _core.TankRefillConfig:
-        return core_config(_core.TankRefillConfig, max_rate=float(self.max_rate), tolerance=float(self.tolerance),
-                           relative_tolerance=float(self.relative_tolerance), time_constant=float(self.time_constant))
+        return core_config(
+            _core.TankRefillConfig,
+            max_rate=float(self.max_rate),
+            tolerance=float(self.tolerance),
+            relative_tolerance=float(self.relative_tolerance),
+            time_constant=float(self.time_constant),
+        )
 
 
 class EnergyTank:

@@ -180,8 +180,13 @@ class Scene:
     def object_collisions(self) -> tuple[CollisionShape, ...]:
         """The object's collision primitives, each with its link and pose in that link's frame."""
         return tuple(
-            CollisionShape(link=link, kind=kind, size=tuple(size), pose=readonly(np.asarray(pose, dtype=float).reshape(4, 4)),
-                           points=readonly(np.asarray(points, dtype=float).reshape(-1, 3)))
+            CollisionShape(
+                link=link,
+                kind=kind,
+                size=tuple(size),
+                pose=readonly(np.asarray(pose, dtype=float).reshape(4, 4)),
+                points=readonly(np.asarray(points, dtype=float).reshape(-1, 3)),
+            )
             for link, kind, size, pose, points in self._core.object_collisions()
         )
 

@@ -108,6 +108,7 @@ def hook_and_pull(
     add(0, approach_time, lambda s: blend(grasp0, _offset(h0, pre_insert), s))
     add(1, 1.2, lambda s: blend(_offset(h0, pre_insert), _offset(h0, inserted), s))
     add(2, 0.8, lambda s: blend(_offset(h0, inserted), _offset(h0, hooked), s))
+
     def opening_profile(s: float) -> float:
         return o0[0] + (target - o0[0]) * (0.5 - 0.5 * np.cos(np.pi * np.clip(s, 0, 1)))
 

@@ -171,6 +171,7 @@ class ContactPoint:
     force: np.ndarray
     """(3,) force acting on the robot at the point (N)."""
 
+
 class Plant:
     """The stand-in for the real robot: full rigid-body dynamics of robot and object in Rapier.
 
@@ -232,6 +233,7 @@ class Plant:
             ShapeError: tau is not (nq,). InvalidValueError: non-finite tau.
         """
         self._core.step(as_float_array("tau", tau, (self.scene.nq,)))
+
     @property
     def state(self) -> np.ndarray:
         """(nx,) current state [q, q̇, o, ȯ]."""

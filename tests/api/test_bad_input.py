@@ -60,9 +60,19 @@ def check(excinfo, cls, *also):
 
 # name -> (call(objs, value), expected length given objs, a valid value given objs, None is valid)
 TARGETS = {
-    "Scene.fk(q)": (lambda o, v: o.scene.fk(v, "grasp"), lambda o: o.scene.nq, lambda o: o.scene.default_state()[: o.scene.nq], False),
+    "Scene.fk(q)": (
+        lambda o, v: o.scene.fk(v, "grasp"),
+        lambda o: o.scene.nq,
+        lambda o: o.scene.default_state()[: o.scene.nq],
+        False,
+    ),
     "Scene.jacobian(q)": (lambda o, v: o.scene.jacobian(v, "grasp"), lambda o: o.scene.nq, lambda o: np.zeros(o.scene.nq), False),
-    "Scene.object_fk(o)": (lambda o, v: o.scene.object_fk(v, "handle_frame"), lambda o: o.scene.no, lambda o: np.full(o.scene.no, 0.3), False),
+    "Scene.object_fk(o)": (
+        lambda o, v: o.scene.object_fk(v, "handle_frame"),
+        lambda o: o.scene.no,
+        lambda o: np.full(o.scene.no, 0.3),
+        False,
+    ),
     "Scene.mass_matrix(q)": (lambda o, v: o.scene.mass_matrix(v), lambda o: o.scene.nq, lambda o: np.zeros(o.scene.nq), False),
     "RolloutModel.rollout(x0)": (
         lambda o, v: o.model.rollout(v, np.zeros((1, 2, o.scene.nu))),
@@ -72,7 +82,12 @@ TARGETS = {
     ),
     "Plant.reset(x0)": (lambda o, v: o.plant.reset(v), lambda o: o.scene.nx, lambda o: o.scene.default_state(), True),
     "Plant.step(tau)": (lambda o, v: o.plant.step(v), lambda o: o.scene.nq, lambda o: np.zeros(o.scene.nq), False),
-    "LowLevelController.track(u_ref)": (lambda o, v: o.controller.track(o.plant, v, 1), lambda o: o.scene.nq, lambda o: np.zeros(o.scene.nq), False),
+    "LowLevelController.track(u_ref)": (
+        lambda o, v: o.controller.track(o.plant, v, 1),
+        lambda o: o.scene.nq,
+        lambda o: np.zeros(o.scene.nq),
+        False,
+    ),
     "LowLevelController.torque(x)": (
         lambda o, v: o.controller.torque(v, np.zeros(o.scene.nq)),
         lambda o: o.scene.nx,
@@ -85,7 +100,12 @@ TARGETS = {
         lambda o: np.zeros(o.scene.nq),
         False,
     ),
-    "Scene.load(obj_pose)": (lambda o, v: sabre.Scene.load("royalpanda", "shelf", obj_pose=v), lambda o: 6, lambda o: np.array([1.0, 0, 0, 0, 0, 0]), True),
+    "Scene.load(obj_pose)": (
+        lambda o, v: sabre.Scene.load("royalpanda", "shelf", obj_pose=v),
+        lambda o: 6,
+        lambda o: np.array([1.0, 0, 0, 0, 0, 0]),
+        True,
+    ),
     "Scene.from_urdf(obj_pose)": (
         lambda o, v: sabre.Scene.from_urdf(ROBOT_PATH, SHELF_PATH, obj_pose=v),
         lambda o: 6,
@@ -325,7 +345,9 @@ FRAME_CALLS = {
     "object_fk robot frame": lambda s: s.object_fk(np.zeros(s.no), "grasp"),
     "object_fk unknown": lambda s: s.object_fk(np.zeros(s.no), "knob"),
     "object_fk_many unknown": lambda s: s.object_fk_many(np.zeros((3, s.no)), "knob"),
-    "servo_guide unknown": lambda s: sabre.guides.servo_guide(s, np.zeros(s.nq), np.stack([np.eye(4)] * 3), 0.015, frame="gripper"),
+    "servo_guide unknown": lambda s: sabre.guides.servo_guide(
+        s, np.zeros(s.nq), np.stack([np.eye(4)] * 3), 0.015, frame="gripper"
+    ),
 }
 
 
@@ -383,7 +405,10 @@ URDF_FILE_CASES = {
     ),
     "floating joint": lambda t: (ROBOT_PATH, _write(t, "floating.urdf", SHELF.replace('type="revolute"', 'type="floating"'))),
     "planar joint": lambda t: (ROBOT_PATH, _write(t, "planar.urdf", SHELF.replace('type="revolute"', 'type="planar"'))),
-    "joint to unknown link": lambda t: (ROBOT_PATH, _write(t, "link.urdf", SHELF.replace('<child link="door"/>', '<child link="dooor"/>'))),
+    "joint to unknown link": lambda t: (
+        ROBOT_PATH,
+        _write(t, "link.urdf", SHELF.replace('<child link="door"/>', '<child link="dooor"/>')),
+    ),
     "no movable joint": lambda t: (ROBOT_PATH, _write(t, "fixed.urdf", SHELF.replace('type="revolute"', 'type="fixed"'))),
 }
 
@@ -431,7 +456,10 @@ CORE_CALLS = {
     "Scene.jacobian": (lambda c, a: c.scene.jacobian(a, "grasp"), "nq"),
     "Scene.object_fk": (lambda c, a: c.scene.object_fk(a, "handle_frame"), "no"),
     "Scene.mass_matrix_and_gravity": (lambda c, a: c.scene.mass_matrix_and_gravity(a), "nq"),
-    "servo_guide q0": (lambda c, a: _core.servo_guide(c.scene, a, np.stack([np.eye(4)] * 3), 0.015, "grasp", _core.ServoGuideConfig()), "nq"),
+    "servo_guide q0": (
+        lambda c, a: _core.servo_guide(c.scene, a, np.stack([np.eye(4)] * 3), 0.015, "grasp", _core.ServoGuideConfig()),
+        "nq",
+    ),
     "RolloutModel.rollout x0": (lambda c, a: c.model.rollout(a, np.zeros((1, 1, c.nq)), None), "nx"),
     "Plant.reset": (lambda c, a: c.plant.reset(a), "nx"),
     "Plant.step": (lambda c, a: c.plant.step(a), "nq"),
@@ -713,14 +741,16 @@ def test_open_object_rejects_a_settings_group_of_the_wrong_type():
         sabre.tasks.OpenObject(hook=sabre.tasks.OpenConfig())
 
 
-
 @pytest.mark.parametrize(
     "spec, field",
     [
         ({"kind": "contact"}, "weight"),
         ({"kind": "contact", "weight": float("inf")}, "weight"),
         ({"kind": "power", "weight": "heavy", "p_max": 0.0}, "weight"),
-        ({"kind": "pose", "frame": "grasp", "target": np.eye(4).ravel().tolist(), "object_frame": None, "weights": [1.0] * 5}, "weights"),
+        (
+            {"kind": "pose", "frame": "grasp", "target": np.eye(4).ravel().tolist(), "object_frame": None, "weights": [1.0] * 5},
+            "weights",
+        ),
         ({"kind": "base_box", "lower": [0.0, 0.0], "upper": [1.0], "weight": 1.0, "weight_slope": 1.0}, "upper"),
         ({"weight": 1.0}, "kind"),
     ],

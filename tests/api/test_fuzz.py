@@ -89,8 +89,11 @@ def test_energy_tank(initial, floor, tau, dt):
 
 
 @FUZZ
-@given(costs_=hnp.arrays(np.float64, st.integers(1, 50), elements=any_float),
-       mapping=st.sampled_from(["naive", "baseline", "invariant", "other"]), parameter=any_float)
+@given(
+    costs_=hnp.arrays(np.float64, st.integers(1, 50), elements=any_float),
+    mapping=st.sampled_from(["naive", "baseline", "invariant", "other"]),
+    parameter=any_float,
+)
 def test_likelihood_weights(costs_, mapping, parameter):
     w = finite_or_sabre_error(lambda: sabre.likelihood_weights(costs_, mapping, parameter))
     if w is not None:
@@ -129,11 +132,27 @@ def test_cost_terms(lower, upper, radius, spacing):
             pass
 
 
-URDF_PIECES = st.sampled_from([
-    '<robot name="r">', "</robot>", '<link name="a"/>', '<link name="b">', "</link>", '<joint name="j" type="revolute">',
-    "</joint>", '<parent link="a"/>', '<child link="b"/>', '<limit lower="-1" upper="1" effort="1" velocity="1"/>',
-    '<origin xyz="nan 0 0"/>', '<inertial><mass value="-1"/></inertial>', "<a>", "</a>", "<", "&amp;", "\x00",
-])
+URDF_PIECES = st.sampled_from(
+    [
+        '<robot name="r">',
+        "</robot>",
+        '<link name="a"/>',
+        '<link name="b">',
+        "</link>",
+        '<joint name="j" type="revolute">',
+        "</joint>",
+        '<parent link="a"/>',
+        '<child link="b"/>',
+        '<limit lower="-1" upper="1" effort="1" velocity="1"/>',
+        '<origin xyz="nan 0 0"/>',
+        '<inertial><mass value="-1"/></inertial>',
+        "<a>",
+        "</a>",
+        "<",
+        "&amp;",
+        "\x00",
+    ]
+)
 
 
 @FUZZ

@@ -88,8 +88,12 @@ def test_a_plant_step_longer_than_the_stable_range_is_refused(scene, dt):
 def test_coordinates_beyond_the_model_range_are_refused_not_nan(scene):
     q = scene.default_state()[: scene.nq]
     q[3] = 1e155
-    for call in (lambda: scene.fk(q, "grasp"), lambda: scene.jacobian(q, "grasp"), lambda: scene.mass_matrix(q),
-                 lambda: scene.fk_many(q[None, :], "grasp")):
+    for call in (
+        lambda: scene.fk(q, "grasp"),
+        lambda: scene.jacobian(q, "grasp"),
+        lambda: scene.mass_matrix(q),
+        lambda: scene.fk_many(q[None, :], "grasp"),
+    ):
         with pytest.raises(InvalidValueError, match="range"):
             call()
 
@@ -135,8 +139,9 @@ def test_ctrl_c_interrupts_a_long_core_call(what):
 
 def test_run_episode_simulates_the_duration_asked_for_not_a_whole_plan(scene):
     controller = sabre.Controller(scene, sabre.tasks.OpenObject(), small_config())
-    episode = sabre.run_episode(scene, controller, duration=0.05, replan_rate=1.0, x0=scene.default_state(),
-                                record_every=1, progress=False)
+    episode = sabre.run_episode(
+        scene, controller, duration=0.05, replan_rate=1.0, x0=scene.default_state(), record_every=1, progress=False
+    )
     assert episode.time[-1] == pytest.approx(0.05, abs=1e-9)
 
 
@@ -227,8 +232,12 @@ def _pose(**change):
 
 @pytest.mark.parametrize(
     "pose, says",
-    [(_pose(m30=0.1), "bottom row"), (_pose(m33=2.0), "bottom row"), (_pose(m00=2.0), "rotation"),
-     (np.diag([1.0, 1.0, -1.0, 1.0]), "rotation")],
+    [
+        (_pose(m30=0.1), "bottom row"),
+        (_pose(m33=2.0), "bottom row"),
+        (_pose(m00=2.0), "rotation"),
+        (np.diag([1.0, 1.0, -1.0, 1.0]), "rotation"),
+    ],
     ids=["shear row", "scaled w", "scaled axis", "reflection"],
 )
 def test_a_pose_that_is_not_a_rigid_transform_is_refused_when_the_term_is_made(pose, says):
@@ -246,8 +255,11 @@ def test_a_rotated_translated_pose_is_accepted():
 
 @pytest.mark.parametrize(
     "make",
-    [lambda: costs.JointLimits(lower=[0.0, 1.0], upper=[1.0, 0.5]), lambda: costs.BaseBox(lower=(1.0, -1.0), upper=(0.0, 1.0)),
-     lambda: costs.Obstacles(centers=[[0.0, 0.0, 1.0]], radii=[-0.1])],
+    [
+        lambda: costs.JointLimits(lower=[0.0, 1.0], upper=[1.0, 0.5]),
+        lambda: costs.BaseBox(lower=(1.0, -1.0), upper=(0.0, 1.0)),
+        lambda: costs.Obstacles(centers=[[0.0, 0.0, 1.0]], radii=[-0.1]),
+    ],
     ids=["joint limits inverted", "base box inverted", "negative radius"],
 )
 def test_inverted_bounds_and_negative_radii_are_refused_when_the_term_is_made(make):
@@ -276,7 +288,10 @@ def test_nan_costs_from_a_python_term_warn_and_weigh_zero(scene):
 
 
 def test_open_object_fields_that_cannot_work_on_the_scene_fail_when_the_controller_is_built(scene):
-    for task in (sabre.tasks.OpenObject(opening=5.0), sabre.tasks.OpenObject(approach=sabre.tasks.ApproachConfig(posture=(0.0, 1.0)))):
+    for task in (
+        sabre.tasks.OpenObject(opening=5.0),
+        sabre.tasks.OpenObject(approach=sabre.tasks.ApproachConfig(posture=(0.0, 1.0))),
+    ):
         with pytest.raises(InvalidValueError):
             sabre.Controller(scene, task, small_config())
 

@@ -31,7 +31,9 @@ def _stub_names() -> dict[str, set[str]]:
 def test_stub_matches_the_compiled_module():
     stub = _stub_names()
     classes = {name for name, obj in vars(_core).items() if inspect.isclass(obj) and not name.startswith("_")}
-    functions = {name for name, obj in vars(_core).items() if callable(obj) and not inspect.isclass(obj) and not name.startswith("_")}
+    functions = {
+        name for name, obj in vars(_core).items() if callable(obj) and not inspect.isclass(obj) and not name.startswith("_")
+    }
     assert classes == set(stub) - {""}
     assert functions == stub[""]
     for name in classes:
@@ -48,9 +50,20 @@ def test_package_exports_and_typing_marker():
 
 # Modules whose signatures and dataclass fields hold the defaults of configs that cross into Rust.
 WRAPPERS = ("sim.py", "safety.py", "planner.py", "episode.py", "closed_loop.py", "guides.py")
-CONFIGS = (_core.RolloutConfig, _core.PlantConfig, _core.LowLevelConfig, _core.MppiConfig, _core.ServoGuideConfig, _core.SafetyConfig, _core.EnergyTankConfig)
+CONFIGS = (
+    _core.RolloutConfig,
+    _core.PlantConfig,
+    _core.LowLevelConfig,
+    _core.MppiConfig,
+    _core.ServoGuideConfig,
+    _core.SafetyConfig,
+    _core.EnergyTankConfig,
+)
 # Every setting a config object carries, plus the wrappers' names for two of them.
-CORE_SETTINGS = {name for config in CONFIGS for name in dir(config()) if not name.startswith("_")} | {"tank_initial", "passivity_alpha"}
+CORE_SETTINGS = {name for config in CONFIGS for name in dir(config()) if not name.startswith("_")} | {
+    "tank_initial",
+    "passivity_alpha",
+}
 
 
 def _literal_defaults(path: Path) -> list[str]:
@@ -60,7 +73,7 @@ def _literal_defaults(path: Path) -> list[str]:
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
             args = node.args
             positional = args.posonlyargs + args.args
-            pairs = list(zip(positional[len(positional) - len(args.defaults):], args.defaults))
+            pairs = list(zip(positional[len(positional) - len(args.defaults) :], args.defaults))
             pairs += [(a, d) for a, d in zip(args.kwonlyargs, args.kw_defaults) if d is not None]
             found += [f"{path.name}:{node.name}({a.arg})" for a, d in pairs if a.arg in CORE_SETTINGS and _is_number(d)]
         elif isinstance(node, ast.ClassDef):
@@ -87,7 +100,18 @@ def test_wrapper_defaults_are_not_written_as_numbers(module):
 def test_python_defaults_reach_the_core_unchanged():
     safety = sabre.SafetyConfig()._core_config()
     core = _core.SafetyConfig()
-    for name in ("gamma", "penalty", "margin", "enabled", "base_box", "tank_floor", "max_obstacles", "max_iterations", "tolerance", "screening"):
+    for name in (
+        "gamma",
+        "penalty",
+        "margin",
+        "enabled",
+        "base_box",
+        "tank_floor",
+        "max_obstacles",
+        "max_iterations",
+        "tolerance",
+        "screening",
+    ):
         assert getattr(safety, name) == getattr(core, name), name
     # Table I: Σ = 0.5 on the three base inputs, 1.0 on the seven arm joints.
     assert sabre.ControllerConfig().sigma_for(10) == [0.5, 0.5, 0.5] + [1.0] * 7

@@ -113,8 +113,17 @@ def test_run_episode_applies_the_task_gain_floor_per_phase_and_restores_the_cont
     plant = sabre.Plant(scene)
     low = sabre.LowLevelController(scene, dt=plant.dt, gain_inertia_floor=0.01)
     seen = []
-    sabre.run_episode(scene, controller, 0.2, x0=scene.default_state(), replan_rate=20.0, plant=plant, low_level=low,
-                      progress=False, on_replan=lambda t, x, p, c: seen.append((round(t, 6), low.gain_inertia_floor)))
+    sabre.run_episode(
+        scene,
+        controller,
+        0.2,
+        x0=scene.default_state(),
+        replan_rate=20.0,
+        plant=plant,
+        low_level=low,
+        progress=False,
+        on_replan=lambda t, x, p, c: seen.append((round(t, 6), low.gain_inertia_floor)),
+    )
     # Each entry is read before the re-plan at t, so it is the floor of the plan made at t − 0.05.
     assert seen == [(0.0, 0.01), (0.05, 0.01), (0.1, 0.01), (0.15, 0.2)]
     assert low.gain_inertia_floor == 0.01
@@ -127,8 +136,17 @@ def test_run_episode_applies_the_task_gain_floor_per_phase_and_restores_the_cont
 
     controller = sabre.Controller(scene, task, sabre.ControllerConfig(rollouts=8, seed=0))
     with pytest.raises(RuntimeError, match="stopped by the test"):
-        sabre.run_episode(scene, controller, 0.3, x0=scene.default_state(), replan_rate=20.0, plant=plant, low_level=low,
-                          progress=False, on_replan=stop_late)
+        sabre.run_episode(
+            scene,
+            controller,
+            0.3,
+            x0=scene.default_state(),
+            replan_rate=20.0,
+            plant=plant,
+            low_level=low,
+            progress=False,
+            on_replan=stop_late,
+        )
     assert low.gain_inertia_floor == 0.01
     with pytest.raises(InvalidValueError):
         low.gain_inertia_floor = -1.0
@@ -160,7 +178,9 @@ def test_iteration_stats_report_the_sequential_filter_only_with_the_outer_loop(s
     are set, and the sequential time is part of the iteration time."""
     x = scene.default_state()
     for variant, outer in (("N", False), ("O", True)):
-        controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(variant=variant, rollouts=8, seed=1))
+        controller = sabre.Controller(
+            scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(variant=variant, rollouts=8, seed=1)
+        )
         assert controller.stats is None
         stats = controller.update(x, 0.0)
         assert isinstance(stats, sabre.IterationStats) and controller.stats is stats
@@ -191,8 +211,9 @@ def test_realtime_tick_refills_the_tank_only_while_the_measured_power_matches_th
     equals the plan's predicted port power refills the tank; ten times that power does not."""
     refilled = {}
     for factor in (1.0, 10.0):
-        controller = sabre.Controller(scene, sabre.tasks.OpenObject(),
-                                      sabre.ControllerConfig(variant="IO", rollouts=8, horizon=0.3, seed=0, threads=1))
+        controller = sabre.Controller(
+            scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(variant="IO", rollouts=8, horizon=0.3, seed=0, threads=1)
+        )
         x = scene.default_state()
         with sabre.RealtimeCascade(controller, min_replan_period=10.0) as rt:
             rt.start(x)
@@ -233,7 +254,8 @@ def test_predict_puts_the_planning_state_near_where_the_plant_is_when_the_plan_t
         follower = sabre.Plant(scene)
         follower.reset(x)  # its clock starts at 0: the plan is shifted by t
         sabre.LowLevelController(scene, dt=follower.dt).follow(
-            follower, controller.nominal, controller.nominal_t0 - t, controller.config.dt, int(round((at - t) / follower.dt)))
+            follower, controller.nominal, controller.nominal_t0 - t, controller.config.dt, int(round((at - t) / follower.dt))
+        )
         moved = np.abs(follower.state[:nq] - x[:nq]).max()
         assert moved > 0.02
         assert np.abs(predicted[:nq] - follower.state[:nq]).max() < 0.25 * moved

@@ -334,7 +334,10 @@ def _se3_log(t: np.ndarray) -> np.ndarray:
     return np.r_[v_inv @ p, w]
 
 
-@pytest.mark.parametrize("opening, lead, limit, expected", [(0.1, 0.0, 10.0, 0.1), (0.1, 0.2, 10.0, 0.3), (0.1, 0.2, 0.25, 0.25), (0.4, 0.2, 0.25, 0.4)])
+@pytest.mark.parametrize(
+    "opening, lead, limit, expected",
+    [(0.1, 0.0, 10.0, 0.1), (0.1, 0.2, 10.0, 0.3), (0.1, 0.2, 0.25, 0.25), (0.4, 0.2, 0.25, 0.4)],
+)
 def test_pose_target_leads_along_the_articulation(scene, opening, lead, limit, expected):
     """The pose cost of a one-step horizon from rest equals ‖log(T⁻¹ T*)‖²_W with T* the handle
     frame at the leading opening (capped at the limit unless already past it)."""
@@ -384,7 +387,8 @@ def test_open_object_walks_through_its_phases_and_recovers_from_a_slip(scene):
     assert task.next_phase(scene, slipped, 0.0, "open") == "approach"
     # Far away, Σ is used as configured; the schedule shrinks it quadratically with the distance.
     assert task.noise_scale(scene, scene.default_state(), "approach") == pytest.approx(
-        min(1.0, (task.approach_error(scene, scene.default_state(), "approach").distance / task.noise.distance) ** 2))
+        min(1.0, (task.approach_error(scene, scene.default_state(), "approach").distance / task.noise.distance) ** 2)
+    )
 
 
 def _urdf_box_corners(urdf, link, collision, frame_joint):
@@ -431,7 +435,10 @@ def test_inserting_ends_only_once_the_hook_tip_is_behind_the_bar(scene):
     assert task.pocket_error(scene, short, "insert").across < task.approach.switch_position
     assert nearest < bar_back
     assert task.next_phase(scene, short, 0.0, "insert") == "insert"
-    assert sabre.tasks.OpenObject(hook=sabre.tasks.HookConfig(insert_depth_tolerance=None)).next_phase(scene, short, 0.0, "insert") == "hook"
+    assert (
+        sabre.tasks.OpenObject(hook=sabre.tasks.HookConfig(insert_depth_tolerance=None)).next_phase(scene, short, 0.0, "insert")
+        == "hook"
+    )
 
 
 def test_a_finger_that_backs_out_in_front_of_a_held_bar_while_hooking_starts_over(scene):
@@ -590,7 +597,9 @@ def test_servo_guide_tracks_a_moving_target_on_the_kinematics(scene, hooked):
     cos = (np.trace(targets[-1][:3, :3].T @ final[:3, :3]) - 1.0) / 2.0
     assert np.arccos(np.clip(cos, -1.0, 1.0)) < 0.02
     # Without the feed-forward term (a target that jumps to the end) the servo lags behind.
-    lagging = servo_guide(scene, x[: scene.nq], np.broadcast_to(targets[-1], targets.shape), dt, gain=0.5, max_linear=1.0, max_angular=2.0)
+    lagging = servo_guide(
+        scene, x[: scene.nq], np.broadcast_to(targets[-1], targets.shape), dt, gain=0.5, max_linear=1.0, max_angular=2.0
+    )
     q_lag = x[: scene.nq] + dt * lagging.sum(axis=0)
     assert np.linalg.norm(scene.fk(q_lag, "grasp")[:3, 3] - targets[-1][:3, 3]) > 0.02
 
@@ -616,7 +625,10 @@ def test_open_object_guides_follow_the_handle(scene, hooked):
     end = task.approach_error(scene, x_end, "approach")
     distance_end, angle_end = end.distance, end.angle
     assert distance_end < distance - 0.05 and angle_end < 0.5 * angle
-    assert sabre.tasks.OpenObject(guide=sabre.tasks.GuideConfig(speed=0.0)).guides(scene, scene.default_state(), "approach", k, dt) is None
+    assert (
+        sabre.tasks.OpenObject(guide=sabre.tasks.GuideConfig(speed=0.0)).guides(scene, scene.default_state(), "approach", k, dt)
+        is None
+    )
 
 
 def test_object_setpoint_clears_the_power_balance(scene):
@@ -629,7 +641,9 @@ def test_object_setpoint_clears_the_power_balance(scene):
     resisting = 4.0 + 2.0 * task.open.speeds[0] / travel  # shelf friction 4 N·m, damping 2
     gap = 10.0 * resisting / (100.0 * 1.0)
     assert task.object_setpoint(scene) == pytest.approx(task.target_opening(scene) + 2 * gap, rel=1e-3)
-    assert sabre.tasks.OpenObject(open=sabre.tasks.OpenConfig(object_overshoot=0.1)).object_setpoint(scene) == pytest.approx(task.target_opening(scene) + 0.1)
+    assert sabre.tasks.OpenObject(open=sabre.tasks.OpenConfig(object_overshoot=0.1)).object_setpoint(scene) == pytest.approx(
+        task.target_opening(scene) + 0.1
+    )
 
 
 def test_base_clearance_keeps_the_base_out_of_a_falling_door():
@@ -707,7 +721,9 @@ def test_a_door_that_falls_open_is_released_not_held():
     handle = task.handle_pose(scene, x[2 * nq : 2 * nq + 1])
     target = handle @ task.grasp_offset(scene, "open")
     for _ in range(3):
-        servo = guides.servo_guide(scene, x[:nq], np.repeat(target[None], 301, axis=0), 0.02, gain=3.0, max_linear=0.5, max_angular=1.0)
+        servo = guides.servo_guide(
+            scene, x[:nq], np.repeat(target[None], 301, axis=0), 0.02, gain=3.0, max_linear=0.5, max_angular=1.0
+        )
         x[:nq] += 0.02 * servo.sum(axis=0)
     start = scene.fk(x[:nq], "grasp")
     np.testing.assert_allclose(np.linalg.solve(handle, start), task.grasp_offset(scene, "open"), atol=1e-3)
@@ -725,8 +741,12 @@ def test_a_door_that_falls_open_is_released_not_held():
     assert 0 < out < 66
     path = task.release_path(scene, x, 66, 0.015)
     in_handle = np.linalg.solve(handle, path)
-    np.testing.assert_allclose(in_handle[:out, 1, 3], relative[1, 3] + np.sign(sideways) * np.minimum(travel[:out], abs(sideways)), atol=1e-12)
-    np.testing.assert_allclose(in_handle[:out, 2, 3], relative[2, 3] - np.clip(travel[:out] - abs(sideways), 0.0, clear), atol=1e-12)
+    np.testing.assert_allclose(
+        in_handle[:out, 1, 3], relative[1, 3] + np.sign(sideways) * np.minimum(travel[:out], abs(sideways)), atol=1e-12
+    )
+    np.testing.assert_allclose(
+        in_handle[:out, 2, 3], relative[2, 3] - np.clip(travel[:out] - abs(sideways), 0.0, clear), atol=1e-12
+    )
     np.testing.assert_allclose(path[:, :3, :3], np.broadcast_to(start[:3, :3], (67, 3, 3)), atol=1e-12)
     corner = relative.copy()
     corner[1, 3] += sideways

@@ -26,8 +26,9 @@ def test_first_plan_from_the_process_equals_the_same_controllers_plan_in_this_pr
         assert cascade.plan_start == pytest.approx(reference.nominal_t0)
         assert cascade.phase == reference.phase
         np.testing.assert_allclose(cascade.reference(cascade.plan_start), reference.nominal[0], rtol=0, atol=1e-12)
-        np.testing.assert_allclose(cascade.reference(cascade.plan_start + 2 * reference.config.dt), reference.nominal[2],
-                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            cascade.reference(cascade.plan_start + 2 * reference.config.dt), reference.nominal[2], rtol=0, atol=1e-12
+        )
     assert not cascade.running
 
 
@@ -175,8 +176,7 @@ def test_the_planner_process_runs_niced_and_under_sched_idle_when_asked(idle):
     """planner_nice adds niceness to the process and planner_idle puts it under SCHED_IDLE, as the
     OS reports for its main thread; the id is gone once the cascade stops."""
     factory = functools.partial(planner_factories.open_shelf, "IO", 3)
-    cascade = sabre.RealtimeCascade(factory(), planner_process=factory, min_replan_period=10.0, planner_nice=7,
-                                    planner_idle=idle)
+    cascade = sabre.RealtimeCascade(factory(), planner_process=factory, min_replan_period=10.0, planner_nice=7, planner_idle=idle)
     x0 = sabre.paper_start_state(cascade.controller.scene)
     assert cascade.planner_pid is None
     with cascade.start(x0):

@@ -17,6 +17,7 @@ def test_a_value_is_made_once_per_scene_and_key() -> None:
         def build(scene: sabre.Scene) -> list[str]:
             made.append((scene.object_name, name))
             return [name]
+
         return build
 
     a = per_scene(first, ("test", "a"), make("a"))
@@ -39,4 +40,3 @@ def test_a_scene_is_freed_after_an_open_object_task_used_it() -> None:
     del scene
     gc.collect()
     assert alive() is None
-

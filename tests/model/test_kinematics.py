@@ -112,14 +112,46 @@ def test_mass_matrix_is_symmetric_positive_definite(scene, random_q):
 # Object geometry from assets/objects/README.md (object frame): hinge point and axis, or drawer axis;
 # handle_frame position when closed and at the upper limit.
 OBJECTS = {
-    "shelf": dict(origin=[0, 0.1475, 0.75], axis=[0, 0, -1], revolute=True, upper=1.57, vertical=True,
-                  closed=[-0.061, -0.1175, 0.75], open=[-0.265, 0.208, 0.75], z_open=[0, -1, 0]),
-    "microwave": dict(origin=[0, 0.15, 0.95], axis=[0, 0, -1], revolute=True, upper=1.57, vertical=True,
-                      closed=[-0.061, -0.12, 0.95], open=[-0.270, 0.211, 0.95], z_open=[0, -1, 0]),
-    "dishwasher": dict(origin=[0, 0, 0.07], axis=[0, -1, 0], revolute=True, upper=1.57, vertical=False,
-                       closed=[-0.061, 0, 0.58], open=[-0.510, 0, 0.009], z_open=[0, 0, 1]),
-    "drawer": dict(origin=[0, 0, 0.70], axis=[-1, 0, 0], revolute=False, upper=0.55, vertical=False,
-                   closed=[-0.061, 0, 0.70], open=[-0.611, 0, 0.70], z_open=[1, 0, 0]),
+    "shelf": dict(
+        origin=[0, 0.1475, 0.75],
+        axis=[0, 0, -1],
+        revolute=True,
+        upper=1.57,
+        vertical=True,
+        closed=[-0.061, -0.1175, 0.75],
+        open=[-0.265, 0.208, 0.75],
+        z_open=[0, -1, 0],
+    ),
+    "microwave": dict(
+        origin=[0, 0.15, 0.95],
+        axis=[0, 0, -1],
+        revolute=True,
+        upper=1.57,
+        vertical=True,
+        closed=[-0.061, -0.12, 0.95],
+        open=[-0.270, 0.211, 0.95],
+        z_open=[0, -1, 0],
+    ),
+    "dishwasher": dict(
+        origin=[0, 0, 0.07],
+        axis=[0, -1, 0],
+        revolute=True,
+        upper=1.57,
+        vertical=False,
+        closed=[-0.061, 0, 0.58],
+        open=[-0.510, 0, 0.009],
+        z_open=[0, 0, 1],
+    ),
+    "drawer": dict(
+        origin=[0, 0, 0.70],
+        axis=[-1, 0, 0],
+        revolute=False,
+        upper=0.55,
+        vertical=False,
+        closed=[-0.061, 0, 0.70],
+        open=[-0.611, 0, 0.70],
+        z_open=[1, 0, 0],
+    ),
 }
 POSE = np.array([1.3, -0.25, 0.05, 0.0, 0.0, 0.4])  # a placement other than the default
 

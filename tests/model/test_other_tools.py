@@ -52,8 +52,14 @@ json.dump(out, sys.stdout)
 def pinocchio(path: Path, frame: str, q: np.ndarray) -> tuple[dict, str]:
     if importlib.util.find_spec("pinocchio") is None:
         pytest.fail("Pinocchio (pip: pin) is a test dependency: make test installs it")
-    run = subprocess.run([sys.executable, "-c", PINOCCHIO], input=json.dumps({"path": str(path), "frame": frame, "q": q.tolist()}),
-                         capture_output=True, text=True, timeout=120, check=False)
+    run = subprocess.run(
+        [sys.executable, "-c", PINOCCHIO],
+        input=json.dumps({"path": str(path), "frame": frame, "q": q.tolist()}),
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert run.returncode == 0, run.stderr
     return json.loads(run.stdout), run.stderr
 
@@ -72,8 +78,11 @@ def test_urdfdom_check_urdf_reports_no_error(path: Path) -> None:
 @pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.name)
 def test_pinocchio_loads_every_shipped_urdf_with_its_collision_geometry(path: Path) -> None:
     robot = path.parent.name == "robots"
-    scene = (sabre.Scene.from_urdf(path, ASSETS / "objects" / "shelf.urdf") if robot
-             else sabre.Scene.from_urdf(ASSETS / "robots" / "royalpanda.urdf", path))
+    scene = (
+        sabre.Scene.from_urdf(path, ASSETS / "objects" / "shelf.urdf")
+        if robot
+        else sabre.Scene.from_urdf(ASSETS / "robots" / "royalpanda.urdf", path)
+    )
     names = scene.joint_names if robot else scene.object_joint_names
     root = root_link(path)
     out, stderr = pinocchio(path, root, np.zeros((1, len(names))))

@@ -59,7 +59,7 @@ def run_probe(env_changes: dict[str, str | None]) -> dict:
         out = subprocess.run([sys.executable, "-c", THREADS], capture_output=True, text=True, timeout=120, env=env)
     assert out.returncode == 0, out.stdout + out.stderr
     line = next(ln for ln in out.stdout.splitlines() if ln.startswith("RESULT "))
-    return json.loads(line[len("RESULT "):]) | {"output": out.stdout + out.stderr}
+    return json.loads(line[len("RESULT ") :]) | {"output": out.stdout + out.stderr}
 
 
 def test_the_profile_puts_the_message_path_threads_and_only_them_under_sched_fifo():
@@ -95,8 +95,10 @@ def test_a_users_profile_or_another_middleware_is_left_alone(monkeypatch, tmp_pa
 
 def test_with_a_users_profile_the_receive_threads_keep_normal_scheduling(tmp_path):
     own = tmp_path / "mine.xml"
-    own.write_text('<?xml version="1.0" encoding="UTF-8" ?><dds xmlns="http://www.eprosima.com"><profiles>'
-                   '<participant profile_name="mine" is_default_profile="true"><rtps/></participant></profiles></dds>')
+    own.write_text(
+        '<?xml version="1.0" encoding="UTF-8" ?><dds xmlns="http://www.eprosima.com"><profiles>'
+        '<participant profile_name="mine" is_default_profile="true"><rtps/></participant></profiles></dds>'
+    )
     result = run_probe({"FASTDDS_DEFAULT_PROFILES_FILE": str(own)})
     assert not result["chosen"] and result["profile"] == str(own)
     assert "Error" not in result["output"], result["output"]

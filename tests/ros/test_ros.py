@@ -94,10 +94,12 @@ def test_estimator_tracks_the_plants_articulation_during_hook_and_pull(obj):
 
 
 def test_using_the_bridge_without_ros_raises_a_sabre_error_naming_the_extra():
-    code = ("import sys; sys.modules['rclpy'] = None\n"
-            "import sabre, sabre.ros\n"
-            "assert 'rclpy' not in [m for m in sys.modules if sys.modules[m] is not None]\n"
-            "try:\n    sabre.ros.require_ros()\nexcept sabre.SabreError as e:\n    print('ERR', e)\n")
+    code = (
+        "import sys; sys.modules['rclpy'] = None\n"
+        "import sabre, sabre.ros\n"
+        "assert 'rclpy' not in [m for m in sys.modules if sys.modules[m] is not None]\n"
+        "try:\n    sabre.ros.require_ros()\nexcept sabre.SabreError as e:\n    print('ERR', e)\n"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "ERR" in out.stdout and "sabre-mpc[ros]" in out.stdout
@@ -125,9 +127,13 @@ class Probe:
         self.lock = threading.Lock()
         self.messages: dict[str, list] = {"joint_states": [], "echo": [], "arm": [], "diagnostics": [], "sim_status": []}
         self.JointState, self.WrenchStamped = JointState, WrenchStamped
-        for key, typ, topic in (("joint_states", JointState, "/joint_states"), ("echo", JointState, "/sabre/command"),
-                                ("arm", Float64MultiArray, "/forward_velocity_controller/commands"),
-                                ("diagnostics", DiagnosticArray, "/diagnostics"), ("sim_status", DiagnosticArray, "/sabre/sim/status")):
+        for key, typ, topic in (
+            ("joint_states", JointState, "/joint_states"),
+            ("echo", JointState, "/sabre/command"),
+            ("arm", Float64MultiArray, "/forward_velocity_controller/commands"),
+            ("diagnostics", DiagnosticArray, "/diagnostics"),
+            ("sim_status", DiagnosticArray, "/sabre/sim/status"),
+        ):
             self.node.create_subscription(typ, topic, self._recorder(key), 50)
         self.js_pub = self.node.create_publisher(JointState, "/joint_states", 10)
         self.obj_pub = self.node.create_publisher(JointState, "/sabre/object/joint_states", 10)
@@ -142,6 +148,7 @@ class Probe:
         def record(msg):
             with self.lock:
                 self.messages[key].append((time.monotonic(), msg))
+
         return record
 
     def _spin(self):
@@ -236,8 +243,10 @@ def test_malformed_joint_states_get_a_logged_rejection_and_a_zero_command_and_fr
         return last
 
     # until the controller plans and answers valid states with its command
-    probe.wait_for(lambda: run_valid(50) and any(np.any(np.asarray(m.velocity) != 0.0) for _, m in probe.get("echo")),
-                   "non-zero commands from the controller")
+    probe.wait_for(
+        lambda: run_valid(50) and any(np.any(np.asarray(m.velocity) != 0.0) for _, m in probe.get("echo")),
+        "non-zero commands from the controller",
+    )
     for label, position, velocity, joint_names in (
         ("wrong length", x[: nq - 1], x[nq : 2 * nq - 1], names[:-1] + ["unknown_joint"]),
         ("NaN", np.where(np.arange(nq) == 4, math.nan, x[:nq]), x[nq : 2 * nq], names),
@@ -251,16 +260,20 @@ def test_malformed_joint_states_get_a_logged_rejection_and_a_zero_command_and_fr
     assert ctrl.output().count("joint state rejected") >= 1
 
     # withholding the state: the watchdog zeroes the command; fresh states resume it
-    probe.wait_for(lambda: (probe.status("diagnostics", "sabre/controller") or {}).get("state_stale") == "true",
-                   "the controller to flag the state stale")
+    probe.wait_for(
+        lambda: (probe.status("diagnostics", "sabre/controller") or {}).get("state_stale") == "true",
+        "the controller to flag the state stale",
+    )
     status = probe.status("diagnostics", "sabre/controller")
     ages = json.loads(status["stale_zero_age_ms"])
     assert ages and ages[-1] >= 50.0  # never before state_timeout
     _, last_echo = probe.get("echo")[-1]
     assert np.all(np.asarray(last_echo.velocity) == 0.0)
     before = len(probe.get("echo"))
-    probe.wait_for(lambda: run_valid(20) and any(np.any(np.asarray(m.velocity) != 0.0) for _, m in probe.get("echo")[before:]),
-                   "non-zero commands after fresh state")
+    probe.wait_for(
+        lambda: run_valid(20) and any(np.any(np.asarray(m.velocity) != 0.0) for _, m in probe.get("echo")[before:]),
+        "non-zero commands after fresh state",
+    )
     ctrl.stop()
     assert ctrl.process.returncode == 0
     summary = ctrl.summary()
@@ -284,22 +297,30 @@ def test_closed_loop_with_permuted_joint_order_moves_the_hand_toward_the_handle_
     domain, probe, processes = bridge
     scene = sabre.Scene.load(obj="shelf")
     order = list(reversed(scene.joint_names))
-    sim = start_node("sim-robot", domain.id, ["--object", "shelf"],
-                     {"publish_order": order, "extra_joints": ["gripper_left", "gripper_right"], "command_timeout": 0.05})
+    sim = start_node(
+        "sim-robot",
+        domain.id,
+        ["--object", "shelf"],
+        {"publish_order": order, "extra_joints": ["gripper_left", "gripper_right"], "command_timeout": 0.05},
+    )
     processes.append(sim)
     ctrl = start_node("control", domain.id, ["--object", "shelf", "--variant", "IO"])
     processes.append(ctrl)
     first = probe.wait_for(lambda: probe.get("joint_states"), "joint states from the sim robot")[0][1]
     assert list(first.name) == order + ["gripper_left", "gripper_right"]
     start = grasp_to_handle(scene, first, 0.0)
-    probe.wait_for(lambda: grasp_to_handle(scene, probe.get("joint_states")[-1][1], 0.0) < start - 0.3,
-                   "the hand to close 0.3 m on the handle")
+    probe.wait_for(
+        lambda: grasp_to_handle(scene, probe.get("joint_states")[-1][1], 0.0) < start - 0.3,
+        "the hand to close 0.3 m on the handle",
+    )
     assert (probe.status("diagnostics", "sabre/controller") or {}).get("rejected") == "0"
     print(f"grasp to handle {start:.3f} m -> {grasp_to_handle(scene, probe.get('joint_states')[-1][1], 0.0):.3f} m")
 
     ctrl.kill()
-    status = probe.wait_for(lambda: (lambda s: s if s and json.loads(s["stop_delays_ms"]) else None)(
-        probe.status("sim_status", "sabre/sim_robot")), "the sim robot to stop")
+    status = probe.wait_for(
+        lambda: (lambda s: s if s and json.loads(s["stop_delays_ms"]) else None)(probe.status("sim_status", "sabre/sim_robot")),
+        "the sim robot to stop",
+    )
     delays = json.loads(status["stop_delays_ms"])
     print("stop delays (ms)", delays)
     assert delays[-1] <= 50.0 + 1.0 + 1e-6
@@ -314,8 +335,10 @@ def test_controller_zeroes_its_commands_when_the_sim_robot_dies(bridge):
     processes.append(ctrl)
     probe.wait_for(lambda: any(np.any(np.asarray(m.data) != 0.0) for _, m in probe.get("arm")), "non-zero arm commands")
     sim.kill()
-    probe.wait_for(lambda: (probe.status("diagnostics", "sabre/controller") or {}).get("state_stale") == "true",
-                   "the controller to flag the state stale")
+    probe.wait_for(
+        lambda: (probe.status("diagnostics", "sabre/controller") or {}).get("state_stale") == "true",
+        "the controller to flag the state stale",
+    )
     probe.wait_for(lambda: np.all(np.asarray(probe.get("arm")[-1][1].data) == 0.0), "a zero arm command")
     status = probe.status("diagnostics", "sabre/controller")
     assert json.loads(status["stale_zero_age_ms"])[-1] >= 50.0
@@ -353,8 +376,12 @@ def test_the_sim_robot_counts_an_answer_per_state_it_names_over_the_states_publi
         made_up.header.stamp = stamp_of(1.0 + 0.001 * k)
         echo_pub.publish(made_up)
     n = len(answered)
-    status = probe.wait_for(lambda: (lambda s: s if s and int(s["echoes"]) == n and int(s["unmatched_echoes"]) == 3 else None)(
-        probe.status("sim_status", "sabre/sim_robot")), "the sim robot's count of the answers")
+    status = probe.wait_for(
+        lambda: (lambda s: s if s and int(s["echoes"]) == n and int(s["unmatched_echoes"]) == 3 else None)(
+            probe.status("sim_status", "sabre/sim_robot")
+        ),
+        "the sim robot's count of the answers",
+    )
     window = int(status["answered_window"])
     span_ticks = (answered[-1] - answered[0]) / 0.001 + 1  # the sim robot publishes a state per 1 ms tick
     print(f"{n} answers, window {window} states, span {span_ticks:.0f} ms, published {status['states_published']}")

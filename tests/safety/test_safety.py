@@ -41,7 +41,14 @@ def random_state(scene, rng) -> np.ndarray:
 
 def test_config_defaults_follow_table_one_and_validate(scene):
     c = sabre.SafetyConfig()
-    assert dict(c.penalty) == {"joint_limits": 10.0, "self_collision": 100.0, "arm_reach": 100.0, "base_box": 100.0, "obstacles": 100.0, "passivity": 100.0}
+    assert dict(c.penalty) == {
+        "joint_limits": 10.0,
+        "self_collision": 100.0,
+        "arm_reach": 100.0,
+        "base_box": 100.0,
+        "obstacles": 100.0,
+        "passivity": 100.0,
+    }
     assert c.passivity_alpha == 1.0 and c.tank_floor == 2.0 and c.base_box == (-2.0, 2.0, -2.0, 2.0)
     c = sabre.SafetyConfig(gamma={"joint_limits": 20.0}, enabled={"obstacles": False}, base_box=None)
     assert c.gamma["joint_limits"] == 20.0 and c.gamma["self_collision"] == 10.0

@@ -18,7 +18,7 @@ INITIAL = 4.0  # J: less than the pull costs, so that the fixed budget runs out
 def pull():
     scene = sabre.Scene.load()
     motion = sabre.hook_and_pull(scene, scene.default_state())
-    U = np.asarray(motion.U[int(np.argmax(motion.phases == 3)):], dtype=float)
+    U = np.asarray(motion.U[int(np.argmax(motion.phases == 3)) :], dtype=float)
     x0 = scenarios.hooked_state(scene)
     rollout = sabre.RolloutModel(scene, motion.dt).rollout(x0, U[None], threads=1)
     predicted = -np.einsum("kj,kj->k", rollout.tau_ext[0], U)
@@ -32,8 +32,17 @@ def run(pull, refill: bool, held: bool):
     plant.reset(x0)
     plant.hold_object(held)
     tank = sabre.EnergyTank(INITIAL, 2.0, refill=sabre.TankRefill() if refill else None)
-    trace = low.follow(plant, U, 0.0, dt, int(SECONDS / plant.dt), 1, safety=sabre.SafetyFilter(scene), tank=tank,
-                       predicted_dissipation=predicted if refill else None)
+    trace = low.follow(
+        plant,
+        U,
+        0.0,
+        dt,
+        int(SECONDS / plant.dt),
+        1,
+        safety=sabre.SafetyFilter(scene),
+        tank=tank,
+        predicted_dissipation=predicted if refill else None,
+    )
     wrench = float(np.linalg.norm(trace.wrench[:, :3], axis=1).mean())
     return tank, trace, float(plant.state[2 * scene.nq]), wrench
 
@@ -82,8 +91,9 @@ def test_io_controllers_refill_by_default_and_n_only_keeps_the_books():
     scene = sabre.Scene.load()
     io = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(variant="IO", rollouts=8, horizon=0.15))
     n = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(variant="N", rollouts=8, horizon=0.15))
-    paper = sabre.Controller(scene, sabre.tasks.OpenObject(),
-                             sabre.ControllerConfig(variant="IO", rollouts=8, horizon=0.15, tank_refill=None))
+    paper = sabre.Controller(
+        scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(variant="IO", rollouts=8, horizon=0.15, tank_refill=None)
+    )
     assert io.tank.refill_config == sabre.TankRefill()
     assert n.tank.refill_config is None and paper.tank.refill_config is None
     x = scene.default_state()

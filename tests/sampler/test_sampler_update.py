@@ -76,7 +76,9 @@ def shifted(seq: np.ndarray, steps: float) -> np.ndarray:
     return np.stack([np.interp(s, np.arange(k), seq[:, d]) for d in range(seq.shape[1])], axis=1)
 
 
-def expected_update(nominal: np.ndarray, inputs: np.ndarray, c: np.ndarray, config: sabre.ControllerConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def expected_update(
+    nominal: np.ndarray, inputs: np.ndarray, c: np.ndarray, config: sabre.ControllerConfig
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The updated nominal, the unclipped gradient estimate Σ_l w_l (u_l − μ) and the smoothed
     nominal before its projection onto the bounds."""
     w = invariant_weights(c, config.h)
@@ -88,14 +90,27 @@ def expected_update(nominal: np.ndarray, inputs: np.ndarray, c: np.ndarray, conf
     return np.clip(smoothed, -LIMIT, LIMIT), gradient, smoothed
 
 
-def expected_nominal(nominal: np.ndarray, inputs: np.ndarray, c: np.ndarray, config: sabre.ControllerConfig) -> tuple[np.ndarray, np.ndarray]:
+def expected_nominal(
+    nominal: np.ndarray, inputs: np.ndarray, c: np.ndarray, config: sabre.ControllerConfig
+) -> tuple[np.ndarray, np.ndarray]:
     """The updated nominal and the unclipped gradient estimate."""
     return expected_update(nominal, inputs, c, config)[:2]
 
 
 def make_controller(scene: sabre.Scene, choose, **overrides) -> tuple[sabre.Controller, ChosenCosts]:
-    settings = dict(rollouts=ROLLOUTS, horizon=HORIZON, dt=DT, step_size=0.7, gradient_clip=0.2, keep_fraction=0.3,
-                    smoothing_window=WINDOW, smoothing_order=ORDER, input_limit=(LIMIT,) * scene.nu, seed=3, threads=1)
+    settings = dict(
+        rollouts=ROLLOUTS,
+        horizon=HORIZON,
+        dt=DT,
+        step_size=0.7,
+        gradient_clip=0.2,
+        keep_fraction=0.3,
+        smoothing_window=WINDOW,
+        smoothing_order=ORDER,
+        input_limit=(LIMIT,) * scene.nu,
+        seed=3,
+        threads=1,
+    )
     settings.update(overrides)
     task = ChosenCosts(choose)
     return sabre.Controller(scene, task, sabre.ControllerConfig(**settings)), task
@@ -210,8 +225,13 @@ def test_second_batch_holds_shifted_nominal_zero_and_best_previous_samples(scene
     order = sorted(np.flatnonzero(w > 0), key=lambda i: (-w[i], i))[:keep]
     assert len(order) == keep == 6
     for slot, i in enumerate(order):
-        np.testing.assert_allclose(second[2 + slot], shifted(first[i], steps), rtol=0, atol=1e-12,
-                                   err_msg=f"slot {2 + slot} should hold previous sample {i}")
+        np.testing.assert_allclose(
+            second[2 + slot],
+            shifted(first[i], steps),
+            rtol=0,
+            atol=1e-12,
+            err_msg=f"slot {2 + slot} should hold previous sample {i}",
+        )
     # the rest are fresh draws around the shifted nominal, inside the bounds
     fresh = second[2 + keep :]
     assert np.all(np.abs(fresh) <= LIMIT)

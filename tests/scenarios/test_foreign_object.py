@@ -15,8 +15,14 @@ from sabre import tasks
 from sabre.handles import infer_handle_frame
 
 ASSETS = Path(__file__).resolve().parents[2] / "assets"
-RENAMES = {"cabinet": "carcass_link", "door": "leaf", "drawer": "tray", "handle": "pull_bar", "articulation": "hinge",
-           "handle_joint": "bar_mount"}
+RENAMES = {
+    "cabinet": "carcass_link",
+    "door": "leaf",
+    "drawer": "tray",
+    "handle": "pull_bar",
+    "articulation": "hinge",
+    "handle_joint": "bar_mount",
+}
 
 
 def foreign_urdf(obj: str) -> str:
@@ -30,8 +36,13 @@ def foreign_urdf(obj: str) -> str:
             if element.tag in ("link", "joint", "parent", "child") and element.get(key) in RENAMES:
                 element.set(key, RENAMES[element.get(key)])
     root.insert(0, ET.fromstring('<link name="world"/>'))
-    root.insert(1, ET.fromstring('<joint name="world_to_carcass" type="fixed"><parent link="world"/>'
-                                 '<child link="carcass_link"/><origin xyz="0 0 0"/></joint>'))
+    root.insert(
+        1,
+        ET.fromstring(
+            '<joint name="world_to_carcass" type="fixed"><parent link="world"/>'
+            '<child link="carcass_link"/><origin xyz="0 0 0"/></joint>'
+        ),
+    )
     return ET.tostring(root, encoding="unicode")
 
 
@@ -98,8 +109,9 @@ def test_a_two_door_cabinet_needs_the_joint_to_open_and_lists_both():
 
 def test_the_held_door_stays_where_it_was_held_while_the_other_opens():
     both = sabre.Scene.from_urdf(ASSETS / "robots" / "royalpanda.urdf", DOUBLE, DOUBLE_POSE)
-    left = sabre.Scene.from_urdf(ASSETS / "robots" / "royalpanda.urdf", DOUBLE, DOUBLE_POSE, joint="left_hinge",
-                                 hold={"right_hinge": 0.4})
+    left = sabre.Scene.from_urdf(
+        ASSETS / "robots" / "royalpanda.urdf", DOUBLE, DOUBLE_POSE, joint="left_hinge", hold={"right_hinge": 0.4}
+    )
     for o in (0.0, 0.8, 1.5):
         for frame in ("left_pull", "right_pull"):
             np.testing.assert_allclose(left.object_fk([o], frame), both.object_fk([o, 0.4], frame), atol=1e-12)

@@ -40,7 +40,8 @@ def test_the_inferred_handle_frame_is_the_generated_bar(spec):
     np.testing.assert_allclose(pose[:3, 2], into, atol=1e-6)
     along = np.array([0.0, 0.0, 1.0]) if spec.vertical_bar else np.array([-s, c, 0.0])
     assert abs(pose[:3, 0] @ along) == pytest.approx(1.0, abs=1e-6)
-    controller = sabre.Controller(scene, sabre.tasks.OpenObject(handle=spec.handle_link),
-                                  sabre.ControllerConfig(rollouts=8, horizon=0.15, threads=1))
+    controller = sabre.Controller(
+        scene, sabre.tasks.OpenObject(handle=spec.handle_link), sabre.ControllerConfig(rollouts=8, horizon=0.15, threads=1)
+    )
     controller.update(scene.default_state(), 0.0)
     assert np.all(np.isfinite(controller.nominal))

@@ -81,10 +81,24 @@ def test_power_sign_changes_per_s_counts_the_flips_of_a_known_power_trace(scene)
     command[:, 0] = 1.0
     energy = np.where(np.arange(m) < 600, 2.2, 5.0)
     zeros = np.zeros((m, nq))
-    ep = sabre.Episode(scene=scene, time=time, state=np.zeros((m, scene.nx)), reference=command, wrench=np.zeros((m, 6)),
-                       tau_ext=zeros, contact=np.zeros(m, bool), cost=np.zeros(m), phase=np.zeros(m, int), phases=("main",),
-                       success=False, time_to_success=None, command=command, tank_energy=energy, tank_floor=2.0,
-                       tau_ext_measured=tau)
+    ep = sabre.Episode(
+        scene=scene,
+        time=time,
+        state=np.zeros((m, scene.nx)),
+        reference=command,
+        wrench=np.zeros((m, 6)),
+        tau_ext=zeros,
+        contact=np.zeros(m, bool),
+        cost=np.zeros(m),
+        phase=np.zeros(m, int),
+        phases=("main",),
+        success=False,
+        time_to_success=None,
+        command=command,
+        tank_energy=energy,
+        tank_floor=2.0,
+        tau_ext_measured=tau,
+    )
     power = scenarios.tank_power(ep)
     np.testing.assert_array_equal(power[1:], tau[:-1, 0])
     # independent count: sign flips between consecutive near-floor steps, both outside the deadband

@@ -58,7 +58,11 @@ class Recorded(tasks.Task):
 
 @pytest.mark.parametrize("python_terms", [False, True], ids=["rust_cost", "rust_and_python_cost"])
 def test_failed_rollouts_get_infinite_cost_zero_weight_and_a_finite_command(scene, python_terms):
-    task = Recorded(scene) if python_terms else tasks.Reach(frame="grasp", target_pose=scene.fk(scene.default_state()[: scene.nq], "grasp"))
+    task = (
+        Recorded(scene)
+        if python_terms
+        else tasks.Reach(frame="grasp", target_pose=scene.fk(scene.default_state()[: scene.nq], "grasp"))
+    )
     config = sabre.ControllerConfig(rollouts=12, horizon=0.3, seed=1, threads=1)
     controller = sabre.Controller(scene, task, config)
     controller.update(scene.default_state(), 0.0)

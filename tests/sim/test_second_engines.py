@@ -28,7 +28,10 @@ def test_filter_qp_agrees_with_osqp_within_1e_4_on_every_case(scene, osqp_cases,
     the same filtered command within 1e-4 rad/s on the free, binding, inner-loop and random cases."""
     sabre_filter = filter_qp.make_filter(scene, screening)
     exporter = filter_qp.make_filter(scene, True)
-    qps = {name: [exporter.qp_matrices(x, u, tau_ext=t, tank_energy=s) for x, u, t, s in inputs] for name, inputs in osqp_cases.items()}
+    qps = {
+        name: [exporter.qp_matrices(x, u, tau_ext=t, tank_energy=s) for x, u, t, s in inputs]
+        for name, inputs in osqp_cases.items()
+    }
     solver = filter_qp.OsqpFilter([qp for qs in qps.values() for qp in qs])
     worst: dict[str, float] = {}
     binding_rows = 0
@@ -70,8 +73,18 @@ def test_task_metric_filter_agrees_with_osqp(scene, osqp_cases, screening):
                 qp = exporter.qp_matrices(x, u, tau_ext=tau, tank_energy=s)
                 assert not np.allclose(qp.P[: qp.nu, : qp.nu], np.diag(np.diag(qp.P[: qp.nu, : qp.nu])))
                 solver = osqp.OSQP()
-                solver.setup(sp.csc_matrix(np.triu(qp.P)), qp.q, sp.csc_matrix(qp.A), np.full(len(qp.b), -np.inf), qp.b,
-                             eps_abs=1e-9, eps_rel=1e-9, polishing=True, verbose=False, max_iter=200000)
+                solver.setup(
+                    sp.csc_matrix(np.triu(qp.P)),
+                    qp.q,
+                    sp.csc_matrix(qp.A),
+                    np.full(len(qp.b), -np.inf),
+                    qp.b,
+                    eps_abs=1e-9,
+                    eps_rel=1e-9,
+                    polishing=True,
+                    verbose=False,
+                    max_iter=200000,
+                )
                 ref = solver.solve()
                 assert ref.info.status == "solved", f"OSQP: {ref.info.status} in case {name}"
                 r = f.filter(x, u, tau_ext=tau, tank_energy=s)

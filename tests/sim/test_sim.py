@@ -383,7 +383,9 @@ def test_the_contact_forces_of_either_path_are_the_plants_and_the_reduced_one_no
     dishwasher's force by half)."""
     scene, motion = scenes[name], motions[name]
     pull = motion.phases == 3
-    models = {m: sabre.RolloutModel(scene, contact_model=m).rollout(scene.default_state(), motion.U[None]) for m in sabre.CONTACT_MODELS}
+    models = {
+        m: sabre.RolloutModel(scene, contact_model=m).rollout(scene.default_state(), motion.U[None]) for m in sabre.CONTACT_MODELS
+    }
     if name == "dishwasher":  # past its balance point the door falls: compare while it is pulled
         pull &= models["rapier"].states[0, 1:, OPENING] < 0.4
     plant = sabre.Plant(scene, tau_ext_cutoff=None)
@@ -420,7 +422,9 @@ def test_contact_model_choices_and_their_errors(scenes):
         sabre.RolloutModel(scene, multibody_robot=True)
     model = sabre.RolloutModel(scene, multibody_robot=True, contact_model="rapier")
     assert model.rollout(scene.default_state(), np.zeros((1, 3, NQ))).states.shape == (1, 4, scene.nx)
-    controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(contact_model="rapier", rollouts=8, horizon=0.15))
+    controller = sabre.Controller(
+        scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(contact_model="rapier", rollouts=8, horizon=0.15)
+    )
     assert controller.model.contact_model == "rapier"
 
 

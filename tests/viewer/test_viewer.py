@@ -19,8 +19,7 @@ SHOTS = os.environ.get("SABRE_SCREENSHOTS")
 def short_episode(obj: str = "shelf", duration: float = 0.3) -> sabre.Episode:
     scene = sabre.Scene.load(obj=obj)
     controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=3, rollouts=8))
-    return sabre.run_episode(scene, controller, duration, seed=3, x0=scene.default_state(), record_plans=True,
-                             progress=False)
+    return sabre.run_episode(scene, controller, duration, seed=3, x0=scene.default_state(), record_plans=True, progress=False)
 
 
 def test_episode_save_load_round_trips_every_array_and_scalar(tmp_path):
@@ -30,13 +29,33 @@ def test_episode_save_load_round_trips_every_array_and_scalar(tmp_path):
     loaded = sabre.Episode.load(path)
     assert loaded.scene.object_name == "drawer" and loaded.scene.robot_name == episode.scene.robot_name
     np.testing.assert_array_equal(loaded.scene.object_pose, episode.scene.object_pose)
-    for name in ("time", "state", "reference", "command", "wrench", "tau_ext", "contact", "cost", "phase",
-                 "tank_energy", "planning_times", "plan_time", "plan_hand_path", "contact_points", "contact_forces",
-                 "sample_hand_paths", "sample_weights"):
+    for name in (
+        "time",
+        "state",
+        "reference",
+        "command",
+        "wrench",
+        "tau_ext",
+        "contact",
+        "cost",
+        "phase",
+        "tank_energy",
+        "planning_times",
+        "plan_time",
+        "plan_hand_path",
+        "contact_points",
+        "contact_forces",
+        "sample_hand_paths",
+        "sample_weights",
+    ):
         np.testing.assert_array_equal(getattr(loaded, name), getattr(episode, name), err_msg=name)
     assert loaded.contact.dtype == bool
     assert (loaded.phases, loaded.success, loaded.time_to_success, loaded.variant) == (
-        episode.phases, episode.success, episode.time_to_success, episode.variant)
+        episode.phases,
+        episode.success,
+        episode.time_to_success,
+        episode.variant,
+    )
     assert loaded.dissipated_energy() == episode.dissipated_energy()
 
 
@@ -67,10 +86,10 @@ def test_recording_plans_does_not_change_the_episode():
     runs = []
     for record in (False, True):
         controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=3, rollouts=8))
-        runs.append(sabre.run_episode(scene, controller, 0.3, seed=3, x0=scene.default_state(), record_plans=record,
-                                      progress=False))
+        runs.append(
+            sabre.run_episode(scene, controller, 0.3, seed=3, x0=scene.default_state(), record_plans=record, progress=False)
+        )
     np.testing.assert_array_equal(runs[0].state, runs[1].state)
-
 
 
 def test_recording_restores_the_controllers_own_choice_of_keeping_samples():
@@ -78,8 +97,7 @@ def test_recording_restores_the_controllers_own_choice_of_keeping_samples():
     controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=3, rollouts=8))
     for kept in (False, True):
         controller.keep_samples = kept
-        episode = sabre.run_episode(scene, controller, 0.1, seed=3, x0=scene.default_state(), record_plans=True,
-                                    progress=False)
+        episode = sabre.run_episode(scene, controller, 0.1, seed=3, x0=scene.default_state(), record_plans=True, progress=False)
         assert episode.sample_hand_paths is not None  # recording keeps the samples while it runs
         assert controller.keep_samples is kept
 
@@ -98,9 +116,13 @@ def test_plan_at_gives_the_plan_running_at_a_time():
             np.testing.assert_array_equal(plan.contact_points, episode.contact_points[j])
             np.testing.assert_array_equal(plan.obstacles, episode.obstacles[j])
     assert episode.plan_at(-1.0).time == times[0]
-    unrecorded = sabre.run_episode(episode.scene, sabre.Controller(episode.scene, sabre.tasks.OpenObject(),
-                                                                   sabre.ControllerConfig(seed=3, rollouts=8)),
-                                   0.1, x0=episode.scene.default_state(), progress=False)
+    unrecorded = sabre.run_episode(
+        episode.scene,
+        sabre.Controller(episode.scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=3, rollouts=8)),
+        0.1,
+        x0=episode.scene.default_state(),
+        progress=False,
+    )
     assert unrecorded.plan_at(0.0) is None
 
 
@@ -118,8 +140,15 @@ def test_plan_recorder_keeps_the_heaviest_samples_and_pads_only_the_episode_arra
     weights = np.arange(PlanRecorder.SAMPLES + 4, dtype=float)
     weights /= weights.sum()
     recorder.append(0.0, states, np.zeros((0, 3)), np.zeros((0, 3)), sample_states=samples, sample_weights=weights)
-    recorder.append(0.05, states, [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]], [[0.0, 0.0, 1.0], [0.0, 0.0, 2.0]],
-                    sample_states=samples, sample_weights=weights, obstacles=[[0.1, 0.2, 0.3, 0.4]])
+    recorder.append(
+        0.05,
+        states,
+        [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]],
+        [[0.0, 0.0, 1.0], [0.0, 0.0, 2.0]],
+        sample_states=samples,
+        sample_weights=weights,
+        obstacles=[[0.1, 0.2, 0.3, 0.4]],
+    )
     latest = recorder.latest()
     assert latest.time == 0.05 and len(recorder) == 2
     np.testing.assert_allclose(latest.hand_path, np.repeat(grasp[None], 4, axis=0), atol=1e-12)
@@ -181,8 +210,9 @@ def opening_episode() -> sabre.Episode:
     follows it, so both are drawn in different places at the start and at the end."""
     scene = sabre.Scene.load(obj="shelf")
     controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=0))
-    episode = sabre.run_episode(scene, controller, 5.0, seed=0, x0=sabre.scenarios.hooked_state(scene),
-                                record_plans=True, progress=False)
+    episode = sabre.run_episode(
+        scene, controller, 5.0, seed=0, x0=sabre.scenarios.hooked_state(scene), record_plans=True, progress=False
+    )
     assert episode.opening[-1] - episode.opening[0] > 0.3, "the recorded door must swing for this test"
     return episode
 
@@ -202,9 +232,17 @@ def test_browser_draws_robot_and_door_and_both_move_along_the_timeline(tmp_path)
     try:
         timeline = viewer.load_episode(episode)
         with playwright.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=_chromium(), headless=True,
-                                        args=["--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-                                              "--ignore-gpu-blocklist", "--no-sandbox"])
+            browser = p.chromium.launch(
+                executable_path=_chromium(),
+                headless=True,
+                args=[
+                    "--use-gl=angle",
+                    "--use-angle=swiftshader",
+                    "--enable-unsafe-swiftshader",
+                    "--ignore-gpu-blocklist",
+                    "--no-sandbox",
+                ],
+            )
             page = browser.new_page(viewport={"width": 900, "height": 560})
             page.goto(f"http://127.0.0.1:{viewer.port}/")
             page.wait_for_selector("canvas", timeout=60_000)
@@ -270,8 +308,9 @@ def test_run_episode_with_a_live_viewer_leaves_it_showing_the_final_state():
     try:
         controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=1, rollouts=8))
         plant = sabre.Plant(scene)
-        episode = sabre.run_episode(scene, controller, 0.2, seed=1, x0=scene.default_state(), viewer=viewer,
-                                    plant=plant, progress=False)
+        episode = sabre.run_episode(
+            scene, controller, 0.2, seed=1, x0=scene.default_state(), viewer=viewer, plant=plant, progress=False
+        )
         final = plant.state
         hand = viewer._robot_links["panda_link7"]
         np.testing.assert_allclose(hand.position, scene.fk(final[: scene.nq], "panda_link7")[:3, 3], atol=1e-6)

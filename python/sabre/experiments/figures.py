@@ -40,16 +40,27 @@ def draw(name: str, records: list[dict], path: str | os.PathLike[str]) -> None:
     (matplotlib,) = require_extra("experiments", "the experiments' figures", "matplotlib")
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     fig, ax = plt.subplots(figsize=(6.4, 3.8))
     if name == "fig3":
         for i, (mapping, runs) in enumerate(_group(records, "mapping").items()):
             for scale, scaled in _group(runs, "scale").items():
                 w = scaled[0]["series"]["weights"]
                 ess = np.mean([r["metrics"]["effective_samples"] for r in scaled])
-                ax.plot(w["t"], w["y"], color=f"C{i}", ls="-" if scale == 1.0 else "--", marker=".",
-                        label=f"{mapping}, costs ×{scale:g} (ESS {ess:.1f})")
-        ax.set(xlabel="rollout, by increasing cost", ylabel="normalised weight", yscale="symlog",
-               title="Fig. 3: likelihood weight mappings")
+                ax.plot(
+                    w["t"],
+                    w["y"],
+                    color=f"C{i}",
+                    ls="-" if scale == 1.0 else "--",
+                    marker=".",
+                    label=f"{mapping}, costs ×{scale:g} (ESS {ess:.1f})",
+                )
+        ax.set(
+            xlabel="rollout, by increasing cost",
+            ylabel="normalised weight",
+            yscale="symlog",
+            title="Fig. 3: likelihood weight mappings",
+        )
         ax.set_yscale("symlog", linthresh=1e-3)
     elif name in ("fig4", "fig11", "fig12"):
         key = {"fig4": "variant", "fig11": "variant", "fig12": "alpha"}[name]
@@ -67,8 +78,11 @@ def draw(name: str, records: list[dict], path: str | os.PathLike[str]) -> None:
             ax.axhline(2.0, color="k", ls="--", lw=0.8, label="floor ε")
         ax.axvline(0.0, color="grey", ls=":", lw=0.8)
         ylabel = "wrist force |f| (N)" if series == "wrench" else "tank energy (J)"
-        title = {"fig4": "Fig. 4: tank energy, worst case", "fig11": "Fig. 11: wrench on the stuck door (mean ± std)",
-                 "fig12": "Fig. 12: tank energy for α = 1 and α = 1000"}[name]
+        title = {
+            "fig4": "Fig. 4: tank energy, worst case",
+            "fig11": "Fig. 11: wrench on the stuck door (mean ± std)",
+            "fig12": "Fig. 12: tank energy for α = 1 and α = 1000",
+        }[name]
         ax.set(xlabel="time from the hold (s)", ylabel=ylabel, title=title)
     elif name == "fig8":
         groups = _group(records, "variant")
@@ -77,8 +91,9 @@ def draw(name: str, records: list[dict], path: str | os.PathLike[str]) -> None:
         for i, (variant, runs) in enumerate(groups.items()):
             vals = np.array([[r["metrics"][c] for c in classes] for r in runs])
             ax.bar(np.arange(len(classes)) + i * width, vals.mean(axis=0), width, yerr=vals.std(axis=0), label=variant)
-        ax.set_xticks(np.arange(len(classes)) + 0.4 - width / 2, [c.removeprefix("violation_") for c in classes],
-                      rotation=20, fontsize=8)
+        ax.set_xticks(
+            np.arange(len(classes)) + 0.4 - width / 2, [c.removeprefix("violation_") for c in classes], rotation=20, fontsize=8
+        )
         # the classes differ by orders of magnitude (the base box from a start outside it, joint
         # limits within the slack): linear near zero, logarithmic above, so every bar shows
         ax.set_yscale("symlog", linthresh=1e-4)
@@ -87,8 +102,12 @@ def draw(name: str, records: list[dict], path: str | os.PathLike[str]) -> None:
         for variant, runs in _group(records, "variant").items():
             for j, r in enumerate(runs):
                 s = r["series"]["hand_xy"]
-                ax.plot(s["t"], s["y"], color=f"C{list(_group(records, 'variant')).index(variant)}",
-                        label=f"{variant} hand" if j == 0 else None)
+                ax.plot(
+                    s["t"],
+                    s["y"],
+                    color=f"C{list(_group(records, 'variant')).index(variant)}",
+                    label=f"{variant} hand" if j == 0 else None,
+                )
         obstacle = records[0]["series"]["obstacle"]
         ax.add_patch(plt.Circle((obstacle["t"][0], obstacle["y"][0]), 0.08, color="grey", alpha=0.5, label="obstacle (r = 8 cm)"))
         appeared = [r["metrics"]["appeared_at"] for r in records if np.isfinite(r["metrics"]["appeared_at"])]
@@ -99,8 +118,13 @@ def draw(name: str, records: list[dict], path: str | os.PathLike[str]) -> None:
         for i, (obj, runs) in enumerate(groups.items()):
             for r in runs:
                 s = r["series"]["opening"]
-                ax.plot(s["t"], s["y"], color=f"C{i}", lw=1,
-                        label=f"{obj} ({np.mean([q['metrics']['success'] for q in runs]):.0%} success)" if r is runs[0] else None)
+                ax.plot(
+                    s["t"],
+                    s["y"],
+                    color=f"C{i}",
+                    lw=1,
+                    label=f"{obj} ({np.mean([q['metrics']['success'] for q in runs]):.0%} success)" if r is runs[0] else None,
+                )
         variants = ", ".join(sorted({r["config"]["variant"] for r in records}))
         ax.set(xlabel="time (s)", ylabel="opening (rad or m)", title=f"Acceptance: opening from the paper's start ({variants})")
     ax.legend(fontsize=8)
@@ -118,11 +142,17 @@ def summary(name: str, records: list[dict], *, seeds: int, short: bool) -> str:
         for k, v in r["metrics"].items():
             rows[label][k].append(v)
     metrics = sorted({k for r in records for k in r["metrics"]})
-    lines = [f"# {name}", "",
-             f"`python -m sabre experiment {name} --seeds {seeds}{' --short' if short else ''}` on "
-             f"{datetime.date.today().isoformat()}, {platform.node()} ({platform.machine()}, {platform.python_version()})",
-             "", f"Paper: {PAPER[name]}.", "",
-             "| configuration | " + " | ".join(metrics) + " |", "|---" * (len(metrics) + 1) + "|"]
+    lines = [
+        f"# {name}",
+        "",
+        f"`python -m sabre experiment {name} --seeds {seeds}{' --short' if short else ''}` on "
+        f"{datetime.date.today().isoformat()}, {platform.node()} ({platform.machine()}, {platform.python_version()})",
+        "",
+        f"Paper: {PAPER[name]}.",
+        "",
+        "| configuration | " + " | ".join(metrics) + " |",
+        "|---" * (len(metrics) + 1) + "|",
+    ]
     for label, values in rows.items():
         cells = []
         for m in metrics:
@@ -142,17 +172,23 @@ def acceptance_table(records: list[dict]) -> str:
     groups: defaultdict[tuple[str, str], list[dict]] = defaultdict(list)
     for r in records:
         groups[r["config"]["obj"], r["config"]["variant"]].append(r)
-    lines = ["| object | variant | opened | time to open (median, max) | final opening, median (needed) "
-             "| mean wrench, median | real-time factor, median | planning, median | seeds not opened |",
-             "|---" * 9 + "|"]
+    lines = [
+        "| object | variant | opened | time to open (median, max) | final opening, median (needed) "
+        "| mean wrench, median | real-time factor, median | planning, median | seeds not opened |",
+        "|---" * 9 + "|",
+    ]
     for (obj, variant), runs in groups.items():
-        median = {m: float(np.median([r["metrics"][m] for r in runs])) for m in
-                  ("final_opening", "needed_opening", "mean_wrench", "real_time_factor", "planning_ms_median")}
+        median = {
+            m: float(np.median([r["metrics"][m] for r in runs]))
+            for m in ("final_opening", "needed_opening", "mean_wrench", "real_time_factor", "planning_ms_median")
+        }
         opened = [r for r in runs if r["metrics"]["success"]]
         times = [r["metrics"]["time_to_success"] for r in opened]
         when = f"{np.median(times):.1f} s, {max(times):.1f} s" if times else "—"
         failed = ", ".join(str(r["seed"]) for r in runs if not r["metrics"]["success"]) or "—"
-        lines.append(f"| {obj} | {variant} | {len(opened)}/{len(runs)} | {when} "
-                     f"| {median['final_opening']:.3f} ({median['needed_opening']:.3f}) | {median['mean_wrench']:.1f} N "
-                     f"| {median['real_time_factor']:.2f} | {median['planning_ms_median']:.1f} ms | {failed} |")
+        lines.append(
+            f"| {obj} | {variant} | {len(opened)}/{len(runs)} | {when} "
+            f"| {median['final_opening']:.3f} ({median['needed_opening']:.3f}) | {median['mean_wrench']:.1f} N "
+            f"| {median['real_time_factor']:.2f} | {median['planning_ms_median']:.1f} ms | {failed} |"
+        )
     return "\n".join(lines)

@@ -58,8 +58,11 @@ def specs(name: str, seeds: int, short: bool) -> list[RunSpec]:
     out: list[RunSpec] = []
     for seed in range(seeds):
         if name == "fig3":
-            out += [_spec(name, seed, mapping=m, parameter=p, scale=k) for m, p in
-                    (("naive", 0.2), ("baseline", 0.2), ("invariant", 10.0)) for k in (1.0, 1000.0)]
+            out += [
+                _spec(name, seed, mapping=m, parameter=p, scale=k)
+                for m, p in (("naive", 0.2), ("baseline", 0.2), ("invariant", 10.0))
+                for k in (1.0, 1000.0)
+            ]
         elif name == "fig4":
             out.append(_spec(name, seed, variant="IO", driver="scripted", hold=3.0 if short else 5.0))
         elif name == "fig8":
@@ -68,19 +71,43 @@ def specs(name: str, seeds: int, short: bool) -> list[RunSpec]:
             out += [_spec(name, seed, variant=v, duration=4.0 if short else 6.0) for v in ("N", "IO")]
         elif name == "fig11":
             # short: the scripted pull with the tank starting near its floor, so that it binds within the hold
-            out += [_spec(name, seed, variant=v, driver="scripted" if short else "controller",
-                          hold=3.0 if short else 5.0, release=0.5 if short else 10.0,
-                          tank_initial=2.5 if short else 10.0) for v in ("N", "IO")]
+            out += [
+                _spec(
+                    name,
+                    seed,
+                    variant=v,
+                    driver="scripted" if short else "controller",
+                    hold=3.0 if short else 5.0,
+                    release=0.5 if short else 10.0,
+                    tank_initial=2.5 if short else 10.0,
+                )
+                for v in ("N", "IO")
+            ]
         elif name == "fig12":
-            out += [_spec(name, seed, alpha=a, driver="scripted" if short else "controller",
-                          hold=1.5 if short else 5.0, tank_initial=2.5) for a in (1.0, 1000.0)]
+            out += [
+                _spec(
+                    name,
+                    seed,
+                    alpha=a,
+                    driver="scripted" if short else "controller",
+                    hold=1.5 if short else 5.0,
+                    tank_initial=2.5,
+                )
+                for a in (1.0, 1000.0)
+            ]
         else:
             raise InvalidValueError(f"unknown experiment {name!r}; one of {NAMES}")
     return out
 
 
-def acceptance_specs(seeds: Iterable[int], *, objects: Sequence[str] = OBJECTS, variants: Sequence[str] = ("IO",),
-                     duration: float = 60.0, replan_rate: float = 50.0) -> list[RunSpec]:
+def acceptance_specs(
+    seeds: Iterable[int],
+    *,
+    objects: Sequence[str] = OBJECTS,
+    variants: Sequence[str] = ("IO",),
+    duration: float = 60.0,
+    replan_rate: float = 50.0,
+) -> list[RunSpec]:
     """The acceptance runs: every object opened from the paper's start by every variant at every seed,
     for up to ``duration`` s of simulated time, re-planning at ``replan_rate`` Hz."""
     from ..planner import VARIANTS
@@ -88,8 +115,12 @@ def acceptance_specs(seeds: Iterable[int], *, objects: Sequence[str] = OBJECTS, 
     unknown = [o for o in objects if o not in OBJECTS] + [v for v in variants if v not in VARIANTS]
     if unknown:
         raise InvalidValueError(f"acceptance: unknown objects or variants {unknown}; objects {OBJECTS}, variants {VARIANTS}")
-    return [_spec("acceptance", seed, obj=o, variant=v, duration=float(duration), replan_rate=float(replan_rate))
-            for o in objects for v in variants for seed in seeds]
+    return [
+        _spec("acceptance", seed, obj=o, variant=v, duration=float(duration), replan_rate=float(replan_rate))
+        for o in objects
+        for v in variants
+        for seed in seeds
+    ]
 
 
 def _series(t: np.ndarray, y: np.ndarray) -> dict:
@@ -107,28 +138,47 @@ def run_one(spec: RunSpec) -> dict:
         # the same rollouts with costs scaled by `scale`: (55) gives the same weights, exp(−λJ) does not
         costs = c["scale"] * np.sort(np.random.default_rng(seed).gamma(2.0, 5.0, size=64) + 10.0)
         w = likelihood_weights(costs, c["mapping"], c["parameter"])
-        ess = float(1.0 / np.sum(w ** 2)) if w.sum() > 0 else 0.0
-        return {"metrics": {"effective_samples": ess, "max_weight": float(w.max())},
-                "series": {"weights": {"t": list(range(len(w))), "y": w.tolist()}}}
+        ess = float(1.0 / np.sum(w**2)) if w.sum() > 0 else 0.0
+        return {
+            "metrics": {"effective_samples": ess, "max_weight": float(w.max())},
+            "series": {"weights": {"t": list(range(len(w))), "y": w.tolist()}},
+        }
     if spec.name in ("fig4", "fig11", "fig12"):
         variant = c.get("variant", "IO")
-        door = scenarios.stuck_door(variant, seed, c["hold"], c.get("release", 0.5), alpha=c.get("alpha", 1.0),
-                                    driver=c["driver"], tank_initial=c.get("tank_initial", 10.0))
+        door = scenarios.stuck_door(
+            variant,
+            seed,
+            c["hold"],
+            c.get("release", 0.5),
+            alpha=c.get("alpha", 1.0),
+            driver=c["driver"],
+            tank_initial=c.get("tank_initial", 10.0),
+        )
         ep = door.episode
         force = np.linalg.norm(ep.wrench[:, :3], axis=1)
-        return {"metrics": {"mean_wrench_stuck": float(door.mean_wrench_stuck), "tank_min": float(door.tank_min),
-                            "opening_after_release": float(door.opening_after_release),
-                            "power_sign_changes_per_s": float(door.power_sign_changes_per_s),
-                            "hold_start": float(door.hold_start)},
-                "series": {"tank": _series(ep.time - door.hold_start, door.tank_energy),
-                           "wrench": _series(ep.time - door.hold_start, force)}}
+        return {
+            "metrics": {
+                "mean_wrench_stuck": float(door.mean_wrench_stuck),
+                "tank_min": float(door.tank_min),
+                "opening_after_release": float(door.opening_after_release),
+                "power_sign_changes_per_s": float(door.power_sign_changes_per_s),
+                "hold_start": float(door.hold_start),
+            },
+            "series": {
+                "tank": _series(ep.time - door.hold_start, door.tank_energy),
+                "wrench": _series(ep.time - door.hold_start, force),
+            },
+        }
     if spec.name == "acceptance":
         return _acceptance_run(c, seed)
     if spec.name == "fig8":
         manipulation = scenarios.object_manipulation(c["variant"], "shelf", seed, c["duration"])
         ep = manipulation.episode
-        metrics = {"success": float(manipulation.success), "final_opening": float(ep.opening[-1]),
-                   **{f"violation_{k}": float(v) for k, v in manipulation.violations.items()}}
+        metrics = {
+            "success": float(manipulation.success),
+            "final_opening": float(ep.opening[-1]),
+            **{f"violation_{k}": float(v) for k, v in manipulation.violations.items()},
+        }
         return {"metrics": metrics, "series": {"opening": _series(ep.time, ep.opening)}}
     if spec.name == "fig10":
         corridor = scenarios.obstacle_corridor(c["variant"], seed, c["duration"])
@@ -137,10 +187,18 @@ def run_one(spec: RunSpec) -> dict:
         # the scenario's obstacle sits half-way between the start and the target 0.5 m to the side
         centre = hand[0] + 0.5 * np.array([-0.15, 0.5, 0.0])
         appeared = corridor.appeared_at
-        return {"metrics": {"cartesian_violation": float(corridor.cartesian_violation), "reached": float(corridor.reached),
-                            "appeared_at": float("nan") if appeared is None else float(appeared)},
-                "series": {"hand_xy": _series(hand[:, 0], hand[:, 1]), "base_xy": _series(ep.state[:, 0], ep.state[:, 1]),
-                           "obstacle": {"t": [float(centre[0])], "y": [float(centre[1])]}}}
+        return {
+            "metrics": {
+                "cartesian_violation": float(corridor.cartesian_violation),
+                "reached": float(corridor.reached),
+                "appeared_at": float("nan") if appeared is None else float(appeared),
+            },
+            "series": {
+                "hand_xy": _series(hand[:, 0], hand[:, 1]),
+                "base_xy": _series(ep.state[:, 0], ep.state[:, 1]),
+                "obstacle": {"t": [float(centre[0])], "y": [float(centre[1])]},
+            },
+        }
     raise InvalidValueError(f"unknown experiment {spec.name!r}")
 
 
@@ -153,14 +211,17 @@ def _acceptance_run(c: dict, seed: int) -> dict:
     phases = [ep.phases[i] for i in ep.phase]
     transitions = list(itertools.pairwise(phases))
     needed = ep.success_opening
-    metrics = {"success": float(ep.success),
-               "time_to_success": float("nan") if ep.time_to_success is None else float(ep.time_to_success),
-               "final_opening": float(ep.opening[-1]), "needed_opening": float("nan") if needed is None else float(needed),
-               "mean_wrench": float(ep.mean_wrench()),
-               "slips": float(sum(1 for a, b in transitions if a == "open" and b == "approach")),
-               "releases": float(sum(1 for a, b in transitions if a != "release" and b == "release")),
-               "real_time_factor": float(ep.real_time_factor),
-               "planning_ms_median": 1e3 * float(np.median(ep.planning_times))}
+    metrics = {
+        "success": float(ep.success),
+        "time_to_success": float("nan") if ep.time_to_success is None else float(ep.time_to_success),
+        "final_opening": float(ep.opening[-1]),
+        "needed_opening": float("nan") if needed is None else float(needed),
+        "mean_wrench": float(ep.mean_wrench()),
+        "slips": float(sum(1 for a, b in transitions if a == "open" and b == "approach")),
+        "releases": float(sum(1 for a, b in transitions if a != "release" and b == "release")),
+        "real_time_factor": float(ep.real_time_factor),
+        "planning_ms_median": 1e3 * float(np.median(ep.planning_times)),
+    }
     return {"metrics": metrics, "series": {"opening": _series(ep.time, ep.opening)}}
 
 
@@ -211,8 +272,15 @@ def _execute(todo: list[RunSpec], folder: Path, workers: int | None, ray_address
     return done
 
 
-def run_experiments(name: str, *, seeds: int = 2, workers: int | None = None, ray_address: str | None = None,
-                    out: str | os.PathLike[str] = "results", short: bool = False) -> dict[str, list[dict]]:
+def run_experiments(
+    name: str,
+    *,
+    seeds: int = 2,
+    workers: int | None = None,
+    ray_address: str | None = None,
+    out: str | os.PathLike[str] = "results",
+    short: bool = False,
+) -> dict[str, list[dict]]:
     """Runs ``name`` (one of :data:`NAMES` or "all") over ``seeds`` seeds, reusing cached runs, and
     writes ``<out>/<name>/runs.csv``, ``<name>.png`` and ``summary.md``. Returns the run records."""
     if int(seeds) < 1:
@@ -231,8 +299,9 @@ def run_experiments(name: str, *, seeds: int = 2, workers: int | None = None, ra
     return records
 
 
-def run_specs(runs: Sequence[RunSpec], folder: str | os.PathLike[str], *, workers: int | None = None,
-              ray_address: str | None = None) -> list[dict]:
+def run_specs(
+    runs: Sequence[RunSpec], folder: str | os.PathLike[str], *, workers: int | None = None, ray_address: str | None = None
+) -> list[dict]:
     """The records of ``runs``, in their order: read from ``<folder>/runs/`` where cached, computed
     (and cached) otherwise."""
     folder = Path(folder)
@@ -250,5 +319,6 @@ def _write_csv(path: Path, records: list[dict]) -> None:
         writer = csv.writer(f)
         writer.writerow(["seed", *config_keys, *metric_keys])
         for r in records:
-            writer.writerow([r["seed"], *(r["config"].get(k, "") for k in config_keys),
-                             *(r["metrics"].get(k, "") for k in metric_keys)])
+            writer.writerow(
+                [r["seed"], *(r["config"].get(k, "") for k in config_keys), *(r["metrics"].get(k, "") for k in metric_keys)]
+            )

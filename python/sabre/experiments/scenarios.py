@@ -146,12 +146,26 @@ def _scripted_episode(scene, variant, safety, x0, hold_seconds, release_seconds,
         chunks.append(low.follow(plant, U, 0.0, motion.dt, int(round(chunk / plant.dt)), 1, safety=inner, tank=tank))
         t = plant.time
     d = chunks.arrays()
-    return Episode(scene=scene, time=d["time"], state=d["state"], reference=d["reference"], wrench=d["wrench"],
-                   tau_ext=d["tau_ext"], tau_ext_measured=d["tau_ext_measured"], contact=d["contact"].astype(bool),
-                   cost=np.zeros(len(d["time"])),
-                   phase=np.zeros(len(d["time"]), dtype=int), phases=("pull",), success=False, time_to_success=None,
-                   command=d["command"], tank_energy=d["tank"], variant=variant,
-                   filter_fallbacks=0 if inner is None else int(inner.stats.fallbacks), tank_floor=tank.floor)
+    return Episode(
+        scene=scene,
+        time=d["time"],
+        state=d["state"],
+        reference=d["reference"],
+        wrench=d["wrench"],
+        tau_ext=d["tau_ext"],
+        tau_ext_measured=d["tau_ext_measured"],
+        contact=d["contact"].astype(bool),
+        cost=np.zeros(len(d["time"])),
+        phase=np.zeros(len(d["time"]), dtype=int),
+        phases=("pull",),
+        success=False,
+        time_to_success=None,
+        command=d["command"],
+        tank_energy=d["tank"],
+        variant=variant,
+        filter_fallbacks=0 if inner is None else int(inner.stats.fallbacks),
+        tank_floor=tank.floor,
+    )
 
 
 # -- stuck door --------------------------------------------------------------------------------
@@ -177,9 +191,20 @@ class StuckDoorResult:
     floor_power: FloorPower
 
 
-def stuck_door(variant: str = "IO", seed: int = 0, hold_seconds: float = 5.0, release_seconds: float = 10.0,
-               obj: str = "shelf", alpha: float = 1.0, *, driver: str = "controller", replan_rate: float = 50.0,
-               tank_initial: float = 10.0, reach_timeout: float = 40.0, hold_at: float = 0.2) -> StuckDoorResult:
+def stuck_door(
+    variant: str = "IO",
+    seed: int = 0,
+    hold_seconds: float = 5.0,
+    release_seconds: float = 10.0,
+    obj: str = "shelf",
+    alpha: float = 1.0,
+    *,
+    driver: str = "controller",
+    replan_rate: float = 50.0,
+    tank_initial: float = 10.0,
+    reach_timeout: float = 40.0,
+    hold_at: float = 0.2,
+) -> StuckDoorResult:
     """The door is held for hold_seconds while the robot pulls on it, then released.
 
     driver "controller" (the paper's experiment): the sampling-based controller opens the object
@@ -209,8 +234,17 @@ def stuck_door(variant: str = "IO", seed: int = 0, hold_seconds: float = 5.0, re
             plant.hold_object(holding)
             return done
 
-        ep = run_episode(scene, ctrl, schedule.duration, seed=seed, replan_rate=replan_rate, record_every=1,
-                         stop_on_success=False, progress=False, on_replan=hold)
+        ep = run_episode(
+            scene,
+            ctrl,
+            schedule.duration,
+            seed=seed,
+            replan_rate=replan_rate,
+            record_every=1,
+            stop_on_success=False,
+            progress=False,
+            on_replan=hold,
+        )
         was_held = schedule.start is not None
         hold_start = schedule.start if schedule.start is not None else float(ep.time[-1])
     else:
@@ -219,9 +253,15 @@ def stuck_door(variant: str = "IO", seed: int = 0, hold_seconds: float = 5.0, re
     norms = np.linalg.norm(ep.wrench[:, :3], axis=1)
     i_rel = int(np.nonzero(stuck)[0][-1]) if stuck.any() else len(ep.time) - 1
     return StuckDoorResult(
-        episode=ep, variant=variant, driver=driver, hold_seconds=hold_seconds, held=was_held, hold_start=float(hold_start),
+        episode=ep,
+        variant=variant,
+        driver=driver,
+        hold_seconds=hold_seconds,
+        held=was_held,
+        hold_start=float(hold_start),
         mean_wrench_stuck=float(norms[stuck].mean()) if stuck.any() else float("nan"),
-        tank_energy=np.asarray(ep.tank_energy), tank_floor=float(ep.tank_floor),
+        tank_energy=np.asarray(ep.tank_energy),
+        tank_floor=float(ep.tank_floor),
         tank_min=float(np.min(ep.tank_energy)),
         opening_after_release=float(ep.opening[-1] - ep.opening[i_rel]) if was_held else float("nan"),
         power_sign_changes_per_s=power_sign_changes_per_s(ep, stuck),
@@ -264,13 +304,26 @@ class ChatteringResult:
     floor_power: FloorPower
 
 
-def tank_chattering(alpha: float, seed: int = 0, hold_seconds: float = 5.0, release_seconds: float = 0.5, *,
-                    driver: str = "controller", obj: str = "shelf", tank_initial: float = 10.0) -> ChatteringResult:
+def tank_chattering(
+    alpha: float,
+    seed: int = 0,
+    hold_seconds: float = 5.0,
+    release_seconds: float = 0.5,
+    *,
+    driver: str = "controller",
+    obj: str = "shelf",
+    tank_initial: float = 10.0,
+) -> ChatteringResult:
     """The stuck door with variant IO and passivity rate α; α = 1000 should chatter at the floor.
     A ``tank_initial`` just above the floor (2 J) reaches it sooner."""
     r = stuck_door("IO", seed, hold_seconds, release_seconds, obj, alpha, driver=driver, tank_initial=tank_initial)
-    return ChatteringResult(episode=r.episode, alpha=float(alpha), power_sign_changes_per_s=r.power_sign_changes_per_s,
-                            tank_min=r.tank_min, floor_power=r.floor_power)
+    return ChatteringResult(
+        episode=r.episode,
+        alpha=float(alpha),
+        power_sign_changes_per_s=r.power_sign_changes_per_s,
+        tank_min=r.tank_min,
+        floor_power=r.floor_power,
+    )
 
 
 # -- obstacle corridor -------------------------------------------------------------------------
@@ -303,8 +356,9 @@ class CorridorResult:
 CORRIDOR = (-0.5, 0.5, -0.1, 0.1)
 
 
-def obstacle_corridor(variant: str = "IO", seed: int = 0, duration: float = 6.0, *, replan_rate: float = 20.0,
-                      obstacle_radius: float = 0.08) -> CorridorResult:
+def obstacle_corridor(
+    variant: str = "IO", seed: int = 0, duration: float = 6.0, *, replan_rate: float = 20.0, obstacle_radius: float = 0.08
+) -> CorridorResult:
     """Reach a grasp target 0.5 m to the side with the base confined to :data:`CORRIDOR`; a sphere
     obstacle sits half-way on the straight path and appears (filters + sampler cost) when the grasp
     frame comes within 1 cm of its surface. cartesian_violation: Σ_k max(0, −h) over the obstacle
@@ -316,8 +370,12 @@ def obstacle_corridor(variant: str = "IO", seed: int = 0, duration: float = 6.0,
     target[:3, 3] = start[:3, 3] + np.array([-0.15, 0.5, 0.0])
     center = 0.5 * (start[:3, 3] + target[:3, 3])
     box = CORRIDOR
-    task = _CorridorReach(target_pose=target, extra=costs.Cost([costs.BaseBox((box[0], box[2]), (box[1], box[3]))]),
-                          obstacle_center=tuple(center), obstacle_radius=obstacle_radius)
+    task = _CorridorReach(
+        target_pose=target,
+        extra=costs.Cost([costs.BaseBox((box[0], box[2]), (box[1], box[3]))]),
+        obstacle_center=tuple(center),
+        obstacle_radius=obstacle_radius,
+    )
     safety = SafetyConfig(base_box=box)
     ctrl = Controller(scene, task, ControllerConfig(variant=variant, safety=safety, seed=seed))
     appeared: list[float] = []
@@ -331,8 +389,18 @@ def obstacle_corridor(variant: str = "IO", seed: int = 0, duration: float = 6.0,
             controller.add_obstacle(center, obstacle_radius)
             controller.set_phase("obstacle", t)
 
-    ep = run_episode(scene, ctrl, duration, seed=seed, x0=x0, replan_rate=replan_rate, record_every=10,
-                     stop_on_success=False, progress=False, on_replan=appear)
+    ep = run_episode(
+        scene,
+        ctrl,
+        duration,
+        seed=seed,
+        x0=x0,
+        replan_rate=replan_rate,
+        record_every=10,
+        stop_on_success=False,
+        progress=False,
+        on_replan=appear,
+    )
     t_app = appeared[0] if appeared else None
     check = SafetyFilter(scene, safety)
     check.add_obstacle(center, obstacle_radius)
@@ -357,11 +425,13 @@ class ManipulationResult:
     violations: dict
 
 
-def object_manipulation(variant: str = "IO", obj: str = "shelf", seed: int = 0, duration: float = 60.0, *,
-                        replan_rate: float = 50.0) -> ManipulationResult:
+def object_manipulation(
+    variant: str = "IO", obj: str = "shelf", seed: int = 0, duration: float = 60.0, *, replan_rate: float = 50.0
+) -> ManipulationResult:
     """OpenObject from :func:`~sabre.closed_loop.paper_start_state`; violations per ZBF class."""
     scene = Scene.load(obj=obj)
     ctrl = Controller(scene, tasks.OpenObject(), ControllerConfig(variant=variant, seed=seed))
-    ep = run_episode(scene, ctrl, duration, seed=seed, x0=paper_start_state(scene), replan_rate=replan_rate,
-                     record_every=10, progress=False)
+    ep = run_episode(
+        scene, ctrl, duration, seed=seed, x0=paper_start_state(scene), replan_rate=replan_rate, record_every=10, progress=False
+    )
     return ManipulationResult(episode=ep, variant=variant, obj=obj, success=bool(ep.success), violations=ep.violations())

@@ -21,8 +21,17 @@ from typing import Any
 
 from ..errors import DISTRIBUTION, require_extra
 
-__all__ = ["require_ros", "spin_node", "make_executor", "realtime_thread", "realtime_middleware",
-           "gil_priority", "MIDDLEWARE_PROFILE", "PeriodicThread", "ROS_EXTRA"]
+__all__ = [
+    "require_ros",
+    "spin_node",
+    "make_executor",
+    "realtime_thread",
+    "realtime_middleware",
+    "gil_priority",
+    "MIDDLEWARE_PROFILE",
+    "PeriodicThread",
+    "ROS_EXTRA",
+]
 
 ROS_EXTRA = f"{DISTRIBUTION}[ros]"
 
@@ -32,8 +41,16 @@ def require_ros():
     (Fast DDS, unless ``RMW_IMPLEMENTATION`` is already set); raises :class:`sabre.MissingExtraError`
     naming the extra when the wheels are missing."""
     os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
-    modules = ("diagnostic_msgs.msg", "geometry_msgs.msg", "hdrh.histogram", "rosgraph_msgs.msg", "sensor_msgs.msg",
-               "std_msgs.msg", "threadpoolctl", "rclpy")
+    modules = (
+        "diagnostic_msgs.msg",
+        "geometry_msgs.msg",
+        "hdrh.histogram",
+        "rosgraph_msgs.msg",
+        "sensor_msgs.msg",
+        "std_msgs.msg",
+        "threadpoolctl",
+        "rclpy",
+    )
     return require_extra("ros", "the ROS 2 bridge (ROS 2 from pip wheels)", *modules)[-1]
 
 
@@ -93,8 +110,14 @@ class PeriodicThread:
     real-time ``priority`` where permitted (see :func:`gil_priority`). An exception in ``work``
     goes to ``on_error`` and the thread carries on."""
 
-    def __init__(self, period: float, work: Callable[[], None], name: str,
-                 on_error: Callable[[Exception], None] | None = None, priority: int = 0) -> None:
+    def __init__(
+        self,
+        period: float,
+        work: Callable[[], None],
+        name: str,
+        on_error: Callable[[Exception], None] | None = None,
+        priority: int = 0,
+    ) -> None:
         self._priority = int(priority)
         self._period = float(period)
         self._work = work
@@ -151,8 +174,7 @@ def make_executor(rclpy: Any) -> Any:
     return EventsExecutor()
 
 
-def spin_node(node: Any, shutdown: Callable[[], dict[str, Any]], done: threading.Event | None = None,
-              priority: int = 0) -> None:
+def spin_node(node: Any, shutdown: Callable[[], dict[str, Any]], done: threading.Event | None = None, priority: int = 0) -> None:
     """Spins ``node.node`` (built after ``rclpy.init``), at real-time ``priority`` if permitted
     (:func:`realtime_thread`; 0: normal), until SIGINT or
     SIGTERM, ``done`` or rclpy's shutdown; then calls ``shutdown`` and prints its summary as one
@@ -165,7 +187,8 @@ def spin_node(node: Any, shutdown: Callable[[], dict[str, Any]], done: threading
     if priority > 0 and not realtime_thread(priority):
         node.node.get_logger().warning(
             f"real-time priority {priority} not permitted (needs CAP_SYS_NICE or an rtprio limit): "
-            "the 1 kHz callbacks compete with the planner for the cores")
+            "the 1 kHz callbacks compete with the planner for the cores"
+        )
     # The nodes' long-lived objects (modules, scene, controller) leave the collector's scans: a
     # full collection on the 1 kHz path then walks only what was made since, not milliseconds' worth.
     gc.collect()

@@ -64,10 +64,14 @@ class ControllerNode:
         self.scene = self.controller.scene
         self.task = self.controller.task
         config = self.controller.config
-        self.cascade = RealtimeCascade(self.controller, min_replan_period=float(p["min_replan_period"]),
-                                       planner_process=factory if p["planner_process"] else None,
-                                       planner_nice=int(p["planner_nice"]), planner_idle=bool(p["planner_idle"]),
-                                       delay_compensation=bool(p["delay_compensation"]))
+        self.cascade = RealtimeCascade(
+            self.controller,
+            min_replan_period=float(p["min_replan_period"]),
+            planner_process=factory if p["planner_process"] else None,
+            planner_nice=int(p["planner_nice"]),
+            planner_idle=bool(p["planner_idle"]),
+            delay_compensation=bool(p["delay_compensation"]),
+        )
         # joint_names: the robot's names for sabre's joints, in sabre's order (Scene.joint_names)
         names = list(p["joint_names"]) or list(self.scene.joint_names)
         if len(names) != self.scene.nq:
@@ -102,9 +106,19 @@ class ControllerNode:
         self._last_tank = float(self.controller.tank.energy)
         self._min_tank = self._last_tank
         self._obstacles: list[tuple[int | None, tuple[float, ...]]] = []
-        self.stats: dict[str, Any] = {"ticks": 0, "rejected": 0, "zero_commands": 0, "stale_events": 0, "plan_stale": 0,
-                                      "wrench_stale": 0, "stale_zero_age": [], "compute": Durations(), "state_age": Durations(),
-                                      "phase_changes": 0, "recent_phases": collections.deque(maxlen=100)}
+        self.stats: dict[str, Any] = {
+            "ticks": 0,
+            "rejected": 0,
+            "zero_commands": 0,
+            "stale_events": 0,
+            "plan_stale": 0,
+            "wrench_stale": 0,
+            "stale_zero_age": [],
+            "compute": Durations(),
+            "state_age": Durations(),
+            "phase_changes": 0,
+            "recent_phases": collections.deque(maxlen=100),
+        }
         self._phase = self.controller.phase
         self._running = True
         self._planner_started: float | None = None
@@ -126,15 +140,20 @@ class ControllerNode:
         if p["object_state_topic"]:
             self.node.create_subscription(JointState, p["object_state_topic"], self._on_object, 10)
         self.node.create_subscription(Float64MultiArray, p["obstacle_topic"], self._on_obstacles, 10)
-        self._status = PeriodicThread(1.0 / float(p["status_rate"]), self._publish_status, "sabre-status",
-                                      lambda exc: self.node.get_logger().error(f"status not published: {exc}"),
-                                      priority=gil_priority(int(p["realtime_priority"])))
+        self._status = PeriodicThread(
+            1.0 / float(p["status_rate"]),
+            self._publish_status,
+            "sabre-status",
+            lambda exc: self.node.get_logger().error(f"status not published: {exc}"),
+            priority=gil_priority(int(p["realtime_priority"])),
+        )
         self._watchdog = threading.Thread(target=self._watch, name="sabre-state-watchdog", daemon=True)
         self._watchdog.start()
         self._status.start()
         self.node.get_logger().info(
             f"sabre controller: {p['object']} variant {p['variant']}, joints {list(self.scene.joint_names)}, "
-            f"object state from {p['object_state_topic'] or 'the hand-pose estimator'}")
+            f"object state from {p['object_state_topic'] or 'the hand-pose estimator'}"
+        )
 
     # Inputs ----------------------------------------------------------------------------------
     def _on_wrench(self, msg: Any) -> None:
@@ -178,7 +197,7 @@ class ControllerNode:
                         self.cascade.remove_obstacle(previous)
                     oid = self.cascade.add_obstacle(row[:3], row[3])
                 kept.append((oid, row))
-            for oid, _ in self._obstacles[len(rows):]:
+            for oid, _ in self._obstacles[len(rows) :]:
                 if oid is not None:
                     self.cascade.remove_obstacle(oid)
             self._obstacles = kept
@@ -329,19 +348,29 @@ class ControllerNode:
         compute = self.stats["compute"]
         fallbacks = self.controller.inner_filter.stats.fallbacks if self.controller.inner_filter is not None else 0
         return {
-            "node": "controller", "ticks": self.stats["ticks"], "rejected": self.stats["rejected"],
-            "zero_commands": self.stats["zero_commands"], "stale_events": self.stats["stale_events"],
+            "node": "controller",
+            "ticks": self.stats["ticks"],
+            "rejected": self.stats["rejected"],
+            "zero_commands": self.stats["zero_commands"],
+            "stale_events": self.stats["stale_events"],
             "stale_zero_age_ms": [a * 1e3 for a in self.stats["stale_zero_age"]],
-            "plan_stale": self.stats["plan_stale"], "wrench_stale": self.stats["wrench_stale"],
-            "planner_iterations": self.cascade.iterations, "planner_rate_hz": self._planner_rate(),
-            "tick_compute_p50_ms": compute.percentile_ms(50), "tick_compute_p99_ms": compute.percentile_ms(99),
+            "plan_stale": self.stats["plan_stale"],
+            "wrench_stale": self.stats["wrench_stale"],
+            "planner_iterations": self.cascade.iterations,
+            "planner_rate_hz": self._planner_rate(),
+            "tick_compute_p50_ms": compute.percentile_ms(50),
+            "tick_compute_p99_ms": compute.percentile_ms(99),
             "state_age_p50_ms": self.stats["state_age"].percentile_ms(50),
             "state_age_p99_ms": self.stats["state_age"].percentile_ms(99),
             "state_age_p999_ms": self.stats["state_age"].percentile_ms(99.9),
             "state_age_max_ms": self.stats["state_age"].max_ms(),
-            "tick_compute_p999_ms": compute.percentile_ms(99.9), "tick_compute_max_ms": compute.max_ms(),
-            "tank_energy": self._last_tank, "tank_min": self._min_tank, "tank_floor": self.controller.tank.floor,
-            "filter_fallbacks": int(fallbacks), "phase": self.cascade.phase,
+            "tick_compute_p999_ms": compute.percentile_ms(99.9),
+            "tick_compute_max_ms": compute.max_ms(),
+            "tank_energy": self._last_tank,
+            "tank_min": self._min_tank,
+            "tank_floor": self.controller.tank.floor,
+            "filter_fallbacks": int(fallbacks),
+            "phase": self.cascade.phase,
             "phase_changes": self.stats["phase_changes"],
             "recent_phases": [[round(t, 3), phase] for t, phase in self.stats["recent_phases"]],  # the last 100
             "planner_process": self.cascade.planner_in_process,
@@ -356,19 +385,28 @@ class ControllerNode:
         s = self.summary()
         plan_start = self.cascade.plan_start
         values = {
-            "phase": s["phase"], "tank_energy": f"{s['tank_energy']:.4f}", "tank_floor": f"{s['tank_floor']:.4f}",
+            "phase": s["phase"],
+            "tank_energy": f"{s['tank_energy']:.4f}",
+            "tank_floor": f"{s['tank_floor']:.4f}",
             "plan_age": "nan" if plan_start is None or self._last_t is None else f"{self._last_t - plan_start:.4f}",
-            "filter_status": self._last_status, "filter_fallbacks": str(s["filter_fallbacks"]),
+            "filter_status": self._last_status,
+            "filter_fallbacks": str(s["filter_fallbacks"]),
             "iteration_time": f"{self.cascade.iteration_time:.5f}",
-            "planner_rate": f"{s['planner_rate_hz']:.2f}", "ticks": str(s["ticks"]), "rejected": str(s["rejected"]),
-            "stale_events": str(s["stale_events"]), "state_stale": str(stale).lower(),
+            "planner_rate": f"{s['planner_rate_hz']:.2f}",
+            "ticks": str(s["ticks"]),
+            "rejected": str(s["rejected"]),
+            "stale_events": str(s["stale_events"]),
+            "state_stale": str(stale).lower(),
             "stale_zero_age_ms": json.dumps(s["stale_zero_age_ms"]),
             "estimator_hooked": "n/a" if self.estimator is None else str(self.estimator.hooked).lower(),
         }
-        status = DiagnosticStatus(name="sabre/controller", hardware_id=self.scene.robot_name,
-                                  level=DiagnosticStatus.WARN if stale else DiagnosticStatus.OK,
-                                  message="state stale: commanding zero" if stale else "running",
-                                  values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        status = DiagnosticStatus(
+            name="sabre/controller",
+            hardware_id=self.scene.robot_name,
+            level=DiagnosticStatus.WARN if stale else DiagnosticStatus.OK,
+            message="state stale: commanding zero" if stale else "running",
+            values=[KeyValue(key=k, value=v) for k, v in values.items()],
+        )
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.node.get_clock().now().to_msg()
         self.status_pub.publish(msg)

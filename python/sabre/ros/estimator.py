@@ -41,9 +41,19 @@ class ObjectStateEstimator:
     the last known state holds at rest. ȯ is the difference quotient low-passed at
     ``rate_cutoff`` Hz."""
 
-    def __init__(self, scene: Scene, initial: np.ndarray | None = None, *, hand_frame: str = "grasp",
-                 handle_frame: str = "handle_frame", hook_distance: float = 0.08, release_distance: float = 0.04,
-                 contact_force: float = 0.2, release_time: float = 0.5, rate_cutoff: float = 5.0) -> None:
+    def __init__(
+        self,
+        scene: Scene,
+        initial: np.ndarray | None = None,
+        *,
+        hand_frame: str = "grasp",
+        handle_frame: str = "handle_frame",
+        hook_distance: float = 0.08,
+        release_distance: float = 0.04,
+        contact_force: float = 0.2,
+        release_time: float = 0.5,
+        rate_cutoff: float = 5.0,
+    ) -> None:
         if scene.no != 1:
             raise InvalidValueError(f"the estimator handles single-joint objects, this one has {scene.no} joints")
         if hand_frame not in scene.frame_names:
@@ -123,5 +133,6 @@ class ObjectStateEstimator:
                 self._od = float(self._rate_filter.update(np.array([raw]), dt)[0]) if dt > 0 else self._od
                 self._o = o
             self._residual = residual
-        return ObjectEstimate(position=np.array([self._o]), velocity=np.array([self._od]), hooked=self.hooked,
-                              residual=self._residual)
+        return ObjectEstimate(
+            position=np.array([self._o]), velocity=np.array([self._od]), hooked=self.hooked, residual=self._residual
+        )

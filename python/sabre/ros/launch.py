@@ -56,12 +56,14 @@ def ros_environment(domain_id: int) -> dict[str, str]:
     """The environment for a bridge process: discovery kept on this machine, a private domain,
     Fast DDS, unbuffered output."""
     env = dict(os.environ)
-    env.update({
-        "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
-        "ROS_DOMAIN_ID": str(int(domain_id)),
-        "RMW_IMPLEMENTATION": env.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp"),
-        "PYTHONUNBUFFERED": "1",
-    })
+    env.update(
+        {
+            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+            "ROS_DOMAIN_ID": str(int(domain_id)),
+            "RMW_IMPLEMENTATION": env.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp"),
+            "PYTHONUNBUFFERED": "1",
+        }
+    )
     return env
 
 
@@ -81,7 +83,7 @@ class NodeProcess:
         """The node's ``SABRE_SUMMARY`` line, once it has exited."""
         for line in reversed(self.output().splitlines()):
             if line.startswith("SABRE_SUMMARY "):
-                return json.loads(line[len("SABRE_SUMMARY "):])
+                return json.loads(line[len("SABRE_SUMMARY ") :])
         return None
 
     def stop(self, timeout: float = 20.0) -> int:
@@ -126,13 +128,21 @@ class BridgeRun:
     logs: dict[str, str] = field(default_factory=dict)
 
 
-def run_bridge(obj: str = "shelf", variant: str = "IO", seed: int = 0, timeout: float = 60.0, *,
-               sim_params: dict[str, Any] | None = None, controller_params: dict[str, Any] | None = None) -> BridgeRun:
+def run_bridge(
+    obj: str = "shelf",
+    variant: str = "IO",
+    seed: int = 0,
+    timeout: float = 60.0,
+    *,
+    sim_params: dict[str, Any] | None = None,
+    controller_params: dict[str, Any] | None = None,
+) -> BridgeRun:
     """Starts the simulated robot and the controller, waits until the robot reports the object
     open (plus its settle time) or ``timeout`` s of wall time, stops both with SIGINT."""
     with Domain() as domain:
-        sim = start_node("sim-robot", domain.id, ["--object", obj],
-                         {"stop_on_success": True, "duration": float(timeout), **(sim_params or {})})
+        sim = start_node(
+            "sim-robot", domain.id, ["--object", obj], {"stop_on_success": True, "duration": float(timeout), **(sim_params or {})}
+        )
         ctrl = start_node("control", domain.id, ["--object", obj, "--variant", variant, "--seed", str(seed)], controller_params)
         try:
             deadline = time.monotonic() + timeout + 60.0
@@ -143,8 +153,13 @@ def run_bridge(obj: str = "shelf", variant: str = "IO", seed: int = 0, timeout: 
         finally:
             ctrl.kill()
             sim.kill()
-        return BridgeRun(sim=sim.summary() or {}, controller=ctrl.summary() or {}, sim_exit=sim_exit,
-                         controller_exit=controller_exit, logs={"sim-robot": sim.output(), "control": ctrl.output()})
+        return BridgeRun(
+            sim=sim.summary() or {},
+            controller=ctrl.summary() or {},
+            sim_exit=sim_exit,
+            controller_exit=controller_exit,
+            logs={"sim-robot": sim.output(), "control": ctrl.output()},
+        )
 
 
 def format_run(run: BridgeRun) -> str:

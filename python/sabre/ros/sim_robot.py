@@ -80,12 +80,28 @@ class SimRobotNode:
         self._stopped = True
         self._running = True
         self.stats: dict[str, Any] = {
-            "ticks": 0, "loops": 0, "late_ticks": 0, "skipped_ticks": 0, "overrun_loops": 0, "states_published": 0,
-            "arm_commands": 0, "base_commands": 0, "rejected_commands": 0, "echoes": 0, "late_echoes": 0,
-            "unmatched_echoes": 0, "first_answered": None, "last_answered": None,
-            "latency": Durations(), "stops": [], "loop_work": Durations(), "success_time": None,
-            "contact_force_sum": 0.0, "contact_steps": 0,
-            "hold_started": None, "hold_ended": None,
+            "ticks": 0,
+            "loops": 0,
+            "late_ticks": 0,
+            "skipped_ticks": 0,
+            "overrun_loops": 0,
+            "states_published": 0,
+            "arm_commands": 0,
+            "base_commands": 0,
+            "rejected_commands": 0,
+            "echoes": 0,
+            "late_echoes": 0,
+            "unmatched_echoes": 0,
+            "first_answered": None,
+            "last_answered": None,
+            "latency": Durations(),
+            "stops": [],
+            "loop_work": Durations(),
+            "success_time": None,
+            "contact_force_sum": 0.0,
+            "contact_steps": 0,
+            "hold_started": None,
+            "hold_ended": None,
         }
         self._hold_at = float(p["hold_at_opening"]) * float(scene.o_upper[0] - scene.o_lower[0]) + float(scene.o_lower[0])
         self._hold_done = False
@@ -112,9 +128,13 @@ class SimRobotNode:
         self.node.create_subscription(JointState, p["command_echo_topic"], self._on_echo, qos)
         self.node.create_subscription(Bool, p["hold_topic"], self._on_hold, qos)
         self.node.create_subscription(Float64MultiArray, p["set_obstacles_topic"], self._on_set_obstacles, qos)
-        self._status = PeriodicThread(1.0 / float(p["status_rate"]), self._publish_status, "sabre-status",
-                                      lambda exc: self.node.get_logger().error(f"status not published: {exc}"),
-                                      priority=gil_priority(int(p["realtime_priority"]) - 10))
+        self._status = PeriodicThread(
+            1.0 / float(p["status_rate"]),
+            self._publish_status,
+            "sabre-status",
+            lambda exc: self.node.get_logger().error(f"status not published: {exc}"),
+            priority=gil_priority(int(p["realtime_priority"]) - 10),
+        )
         self._thread = threading.Thread(target=self._loop, name="sabre-sim-robot", daemon=True)
         self.done = threading.Event()
         self.error: Exception | None = None
@@ -129,8 +149,9 @@ class SimRobotNode:
         v = np.asarray(msg.data, dtype=np.float64)
         if v.shape != self._arm_cmd.shape or not np.all(np.isfinite(v)):
             self.stats["rejected_commands"] += 1
-            self.node.get_logger().error(f"arm command rejected: need {len(self._arm_cmd)} finite values, got {list(v)}",
-                                         throttle_duration_sec=1.0)
+            self.node.get_logger().error(
+                f"arm command rejected: need {len(self._arm_cmd)} finite values, got {list(v)}", throttle_duration_sec=1.0
+            )
             return
         self._arm_cmd = v
         self._arm_recv = time.monotonic()
@@ -246,8 +267,9 @@ class SimRobotNode:
             if self.stats["hold_started"] is None and o >= self._hold_at:
                 self.plant.hold_object(True)
                 self.stats["hold_started"] = self.plant.time
-            elif (self.stats["hold_started"] is not None
-                  and self.plant.time - self.stats["hold_started"] >= float(self.params["hold_duration"])):
+            elif self.stats["hold_started"] is not None and self.plant.time - self.stats["hold_started"] >= float(
+                self.params["hold_duration"]
+            ):
                 self.plant.hold_object(False)
                 self.stats["hold_ended"] = self.plant.time
                 self._hold_done = True
@@ -294,22 +316,39 @@ class SimRobotNode:
         # last (before it, the controller was starting; after it, it had stopped)
         window = 0 if s["first_answered"] is None else s["last_answered"] - s["first_answered"] + 1
         return {
-            "node": "sim_robot", "object": self.scene.object_name, "sim_time": self.plant.time, "wall_time": wall,
-            "ticks": s["ticks"], "late_ticks": s["late_ticks"], "skipped_ticks": s["skipped_ticks"],
-            "overrun_loops": s["overrun_loops"], "loops": s["loops"],
-            "loop_work_p50_ms": s["loop_work"].percentile_ms(50), "loop_work_p99_ms": s["loop_work"].percentile_ms(99),
-            "states_published": s["states_published"], "arm_commands": s["arm_commands"],
-            "base_commands": s["base_commands"], "rejected_commands": s["rejected_commands"],
-            "echoes": s["echoes"], "late_echoes": s["late_echoes"],
-            "latency_p50_ms": lat.percentile_ms(50), "latency_p99_ms": lat.percentile_ms(99), "latency_max_ms": lat.max_ms(),
+            "node": "sim_robot",
+            "object": self.scene.object_name,
+            "sim_time": self.plant.time,
+            "wall_time": wall,
+            "ticks": s["ticks"],
+            "late_ticks": s["late_ticks"],
+            "skipped_ticks": s["skipped_ticks"],
+            "overrun_loops": s["overrun_loops"],
+            "loops": s["loops"],
+            "loop_work_p50_ms": s["loop_work"].percentile_ms(50),
+            "loop_work_p99_ms": s["loop_work"].percentile_ms(99),
+            "states_published": s["states_published"],
+            "arm_commands": s["arm_commands"],
+            "base_commands": s["base_commands"],
+            "rejected_commands": s["rejected_commands"],
+            "echoes": s["echoes"],
+            "late_echoes": s["late_echoes"],
+            "latency_p50_ms": lat.percentile_ms(50),
+            "latency_p99_ms": lat.percentile_ms(99),
+            "latency_max_ms": lat.max_ms(),
             "latency_percentiles_ms": {q: lat.percentile_ms(q) for q in (50, 90, 95, 98, 99, 99.5, 99.9)},
-            "answered_window": window, "unmatched_echoes": s["unmatched_echoes"],
+            "answered_window": window,
+            "unmatched_echoes": s["unmatched_echoes"],
             "delivered_fraction": s["echoes"] / window if window else 0.0,
-            "stop_delays_ms": [d * 1e3 for d in s["stops"]], "command_timeout_ms": self.command_timeout * 1e3,
+            "stop_delays_ms": [d * 1e3 for d in s["stops"]],
+            "command_timeout_ms": self.command_timeout * 1e3,
             "period_ms": self.period * 1e3,
-            "opening": float(state.o[0]), "success": s["success_time"] is not None, "time_to_open": s["success_time"],
+            "opening": float(state.o[0]),
+            "success": s["success_time"] is not None,
+            "time_to_open": s["success_time"],
             "mean_wrench": s["contact_force_sum"] / s["contact_steps"] if s["contact_steps"] else 0.0,
-            "hold_started": s["hold_started"], "hold_ended": s["hold_ended"],
+            "hold_started": s["hold_started"],
+            "hold_ended": s["hold_ended"],
             "robot_speed": float(np.linalg.norm(state.q_dot)),
         }
 
@@ -317,13 +356,31 @@ class SimRobotNode:
         from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
         s = self.summary()
-        keys = ("sim_time", "ticks", "late_ticks", "skipped_ticks", "states_published", "arm_commands", "echoes",
-                "answered_window", "unmatched_echoes", "delivered_fraction", "latency_p50_ms", "latency_p99_ms",
-                "opening", "success", "robot_speed")
-        status = DiagnosticStatus(name="sabre/sim_robot", hardware_id="sim", level=DiagnosticStatus.OK,
-                                  message="stopped: commands stale" if self._stopped else "following commands",
-                                  values=[KeyValue(key=k, value=json.dumps(s[k])) for k in keys]
-                                  + [KeyValue(key="stop_delays_ms", value=json.dumps(s["stop_delays_ms"]))])
+        keys = (
+            "sim_time",
+            "ticks",
+            "late_ticks",
+            "skipped_ticks",
+            "states_published",
+            "arm_commands",
+            "echoes",
+            "answered_window",
+            "unmatched_echoes",
+            "delivered_fraction",
+            "latency_p50_ms",
+            "latency_p99_ms",
+            "opening",
+            "success",
+            "robot_speed",
+        )
+        status = DiagnosticStatus(
+            name="sabre/sim_robot",
+            hardware_id="sim",
+            level=DiagnosticStatus.OK,
+            message="stopped: commands stale" if self._stopped else "following commands",
+            values=[KeyValue(key=k, value=json.dumps(s[k])) for k in keys]
+            + [KeyValue(key="stop_delays_ms", value=json.dumps(s["stop_delays_ms"]))],
+        )
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.node.get_clock().now().to_msg()
         self.status_pub.publish(msg)

@@ -22,6 +22,16 @@ from .open_object import (
 )
 
 __all__ = [
-    "Task", "Reach", "OpenObject", "SafetyWeights", "ApproachConfig", "HookConfig", "OpenConfig", "ReleaseConfig",
-    "NoiseConfig", "GuideConfig", "GraspError", "PocketError",
+    "Task",
+    "Reach",
+    "OpenObject",
+    "SafetyWeights",
+    "ApproachConfig",
+    "HookConfig",
+    "OpenConfig",
+    "ReleaseConfig",
+    "NoiseConfig",
+    "GuideConfig",
+    "GraspError",
+    "PocketError",
 ]

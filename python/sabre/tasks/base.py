@@ -38,11 +38,13 @@ class SafetyWeights:
 
     def terms(self, scene: Scene) -> costs.Cost:
         """The safety cost terms for the scene (arm reach and base clearance where the scene has them)."""
-        out = costs.Cost([
-            costs.JointLimits(self.joint_limit, self.joint_limit_slope),
-            costs.SelfCollision(self.self_collision, self.self_collision_slope),
-            costs.Power(self.power, self.p_max),
-        ])
+        out = costs.Cost(
+            [
+                costs.JointLimits(self.joint_limit, self.joint_limit_slope),
+                costs.SelfCollision(self.self_collision, self.self_collision_slope),
+                costs.Power(self.power, self.p_max),
+            ]
+        )
         if scene.arm_reach is not None:
             out = out + costs.ArmReach(weight=self.reach, weight_slope=self.reach_slope)
         if (self.base_clearance > 0.0 or self.base_clearance_slope > 0.0) and self.base_link in scene.frame_names:

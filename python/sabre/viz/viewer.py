@@ -99,9 +99,11 @@ def _origin(element: ET.Element | None) -> np.ndarray:
     xyz = [float(v) for v in element.get("xyz", "0 0 0").split()]
     roll, pitch, yaw = (float(v) for v in element.get("rpy", "0 0 0").split())
     cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
-    pose[:3, :3] = [[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                    [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                    [-sp, cp * sr, cp * cr]]
+    pose[:3, :3] = [
+        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+        [-sp, cp * sr, cp * cr],
+    ]
     pose[:3, 3] = xyz
     return pose
 
@@ -179,16 +181,18 @@ class Viewer:
         self.port = self.server.get_port()
         self._meshes = panda_mesh_folder() if panda_meshes else None
         self._robot_links = self._add_links(trimesh, "robot", asset_path("robots", scene.robot_name), scene.frame_names)
-        self._object_links = self._add_links(trimesh, "object", asset_path("objects", scene.object_name),
-                                             scene.object_frame_names)
+        self._object_links = self._add_links(
+            trimesh, "object", asset_path("objects", scene.object_name), scene.object_frame_names
+        )
         self.server.scene.add_grid("/ground", width=12.0, height=12.0, cell_size=0.5)
         gui = self.server.gui
         self._time = gui.add_number("time (s)", 0.0, step=0.001, disabled=True)
         self._phase = gui.add_text("phase", "", disabled=True)
         self._tank = gui.add_number("tank energy (J)", 0.0, step=0.001, disabled=True)
         self._opening = gui.add_number("opening", 0.0, step=0.0001, disabled=True)
-        self._active = gui.add_text("near constraints", "", disabled=True,
-                                    hint="safety rows within 5 cm (or 0.05 rad, m²) of their bound at this state")
+        self._active = gui.add_text(
+            "near constraints", "", disabled=True, hint="safety rows within 5 cm (or 0.05 rad, m²) of their bound at this state"
+        )
         self.safety: SafetyFilter | None = None
         self._shown_obstacles = 0
         self._lock = threading.Lock()
@@ -210,8 +214,13 @@ class Viewer:
                 handles[shape.link] = self.server.scene.add_frame(f"/{prefix}/{shape.link}", show_axes=False)
             mesh = _mesh(trimesh, shape)
             rgb = tuple(int(255 * c) for c in shape.rgba[:3])
-            self.server.scene.add_mesh_simple(f"/{prefix}/{shape.link}/visual{i}", mesh.vertices, mesh.faces,
-                                              color=rgb, opacity=None if shape.rgba[3] >= 1.0 else shape.rgba[3])
+            self.server.scene.add_mesh_simple(
+                f"/{prefix}/{shape.link}/visual{i}",
+                mesh.vertices,
+                mesh.faces,
+                color=rgb,
+                opacity=None if shape.rgba[3] >= 1.0 else shape.rgba[3],
+            )
         return handles
 
     def look_at(self, target: np.ndarray, distance: float = 4.0) -> None:
@@ -246,9 +255,14 @@ class Viewer:
                     handles[name].position = pose[:3, 3]
                     handles[name].wxyz = _wxyz(pose[:3, :3])
 
-    def show_plan(self, hand_path: np.ndarray | None, points: np.ndarray | None = None,
-                  forces: np.ndarray | None = None, samples: np.ndarray | None = None,
-                  weights: np.ndarray | None = None) -> None:
+    def show_plan(
+        self,
+        hand_path: np.ndarray | None,
+        points: np.ndarray | None = None,
+        forces: np.ndarray | None = None,
+        samples: np.ndarray | None = None,
+        weights: np.ndarray | None = None,
+    ) -> None:
         """The nominal plan's hand path (K, 3) as a polyline, the sampled rollouts' hand paths
         (S, K, 3) coloured by their weights (S,) from blue (light) to orange (heavy), contact points
         (C, 3) and their forces on the robot (C, 3, N) as arrows; NaN rows are ignored."""
@@ -258,8 +272,9 @@ class Viewer:
             colours = np.outer(1.0 - share, _LIGHT) + np.outer(share, _HEAVY)
             segments = np.concatenate([np.stack([p[:-1], p[1:]], axis=1) for p in samples])
             per_segment = np.repeat(colours, samples.shape[1] - 1, axis=0)
-            scene.add_line_segments("/plan/samples", segments, np.repeat(per_segment[:, None], 2, axis=1).astype(np.uint8),
-                                    thickness=0.004)
+            scene.add_line_segments(
+                "/plan/samples", segments, np.repeat(per_segment[:, None], 2, axis=1).astype(np.uint8), thickness=0.004
+            )
         if hand_path is not None and len(hand_path) > 1:
             segments = np.stack([hand_path[:-1], hand_path[1:]], axis=1)
             scene.add_line_segments("/plan/nominal", segments, _PATH_COLOR, thickness=0.012)
@@ -271,8 +286,7 @@ class Viewer:
                 tips = pts + _FORCE_SCALE * forces[keep]
                 scene.add_line_segments("/contact/forces", np.stack([pts, tips], axis=1), _CONTACT_COLOR, thickness=0.01)
 
-    def show_safety(self, x: np.ndarray, config: SafetyConfig | None = None,
-                    obstacles: np.ndarray | None = None) -> None:
+    def show_safety(self, x: np.ndarray, config: SafetyConfig | None = None, obstacles: np.ndarray | None = None) -> None:
         """The base box of ``config`` (default: the paper's) on the ground, sphere obstacles (O, 4:
         centre, radius; NaN rows ignored), and the names of the safety rows near their bound at x."""
         if self.safety is None or config is not None:
@@ -281,8 +295,9 @@ class Viewer:
             if box is not None:
                 x0, x1, y0, y1 = box
                 corners = np.array([[x0, y0, 0.01], [x1, y0, 0.01], [x1, y1, 0.01], [x0, y1, 0.01]])
-                self.server.scene.add_line_segments("/safety/base_box", np.stack([corners, np.roll(corners, -1, 0)], 1),
-                                                    (200, 120, 0), thickness=0.02)
+                self.server.scene.add_line_segments(
+                    "/safety/base_box", np.stack([corners, np.roll(corners, -1, 0)], 1), (200, 120, 0), thickness=0.02
+                )
         h = np.asarray(self.safety.constraint_rows(x).h)
         near = [n for n, v in zip(self.safety.row_names, h) if np.isfinite(v) and v < 0.05]
         self._active.value = ", ".join(near[:6]) + (f" (+{len(near) - 6})" if len(near) > 6 else "")
@@ -291,8 +306,9 @@ class Viewer:
             for i in range(self._shown_obstacles):
                 self.server.scene.remove_by_name(f"/safety/obstacle{i}")
             for i, o in enumerate(keep):
-                self.server.scene.add_icosphere(f"/safety/obstacle{i}", radius=float(o[3]), color=(150, 150, 150),
-                                                opacity=0.5, position=o[:3])
+                self.server.scene.add_icosphere(
+                    f"/safety/obstacle{i}", radius=float(o[3]), color=(150, 150, 150), opacity=0.5, position=o[:3]
+                )
             self._shown_obstacles = len(keep)
 
     def show_panel(self, t: float, phase: str, tank: float | None, opening: float) -> None:
@@ -303,11 +319,11 @@ class Viewer:
 
     def show_recorded_plan(self, plan: RecordedPlan) -> None:
         """A recorded plan's hand paths and contacts (:meth:`show_plan`)."""
-        self.show_plan(plan.hand_path, plan.contact_points, plan.contact_forces, plan.sample_hand_paths,
-                       plan.sample_weights)
+        self.show_plan(plan.hand_path, plan.contact_points, plan.contact_forces, plan.sample_hand_paths, plan.sample_weights)
 
-    def show_live(self, x: np.ndarray, t: float, plan: RecordedPlan, *, phase: str, tank_energy: float,
-                  safety: SafetyConfig) -> None:
+    def show_live(
+        self, x: np.ndarray, t: float, plan: RecordedPlan, *, phase: str, tank_energy: float, safety: SafetyConfig
+    ) -> None:
         """One frame of a running episode (``run_episode(..., viewer=...)`` calls it after every re-plan): the
         plant's state x (nx,) at time t (s), the latest ``plan``, the task ``phase``, the tank's energy (J), and
         the filters' settings ``safety`` (read the first time, for the constraint rows and the base box)."""

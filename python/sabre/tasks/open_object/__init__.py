@@ -7,6 +7,13 @@ from .geometry import GraspError, PocketError
 from .task import OpenObject
 
 __all__ = [
-    "OpenObject", "ApproachConfig", "HookConfig", "OpenConfig", "ReleaseConfig", "NoiseConfig", "GuideConfig",
-    "GraspError", "PocketError",
+    "OpenObject",
+    "ApproachConfig",
+    "HookConfig",
+    "OpenConfig",
+    "ReleaseConfig",
+    "NoiseConfig",
+    "GuideConfig",
+    "GraspError",
+    "PocketError",
 ]

@@ -18,9 +18,21 @@ from ...scene import Scene
 from .._per_scene import per_scene
 
 __all__ = [
-    "GraspError", "PocketError", "handle_frame", "handle_pose", "handle_poses", "grasp_offset", "approach_error",
-    "pocket_error", "depth_error", "lateral_error", "handle_travel", "handle_speed", "handle_from_closed",
-    "release_path", "release_direction",
+    "GraspError",
+    "PocketError",
+    "handle_frame",
+    "handle_pose",
+    "handle_poses",
+    "grasp_offset",
+    "approach_error",
+    "pocket_error",
+    "depth_error",
+    "lateral_error",
+    "handle_travel",
+    "handle_speed",
+    "handle_from_closed",
+    "release_path",
+    "release_direction",
 ]
 
 
@@ -143,8 +155,17 @@ def handle_from_closed(scene: Scene, handle: str, x: np.ndarray) -> float:
 
 
 def release_path(
-    scene: Scene, handle: str, x: np.ndarray, steps: int, dt: float, *,
-    entry_side: float, entry_depth: float, hooked_within: float, speed: float, distance: float,
+    scene: Scene,
+    handle: str,
+    x: np.ndarray,
+    steps: int,
+    dt: float,
+    *,
+    entry_side: float,
+    entry_depth: float,
+    hooked_within: float,
+    speed: float,
+    distance: float,
 ) -> np.ndarray:
     """(steps + 1, 4, 4) grasp-frame targets that let go of the handle, at ``speed`` (m/s).
 

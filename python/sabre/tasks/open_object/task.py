@@ -78,9 +78,15 @@ class OpenObject(Task):
 
     # -- settings ---------------------------------------------------------------------------------
     def __post_init__(self) -> None:
-        for name, kind in (("approach", ApproachConfig), ("hook", HookConfig), ("open", OpenConfig),
-                           ("release", ReleaseConfig), ("noise", NoiseConfig), ("guide", GuideConfig),
-                           ("safety", SafetyWeights)):
+        for name, kind in (
+            ("approach", ApproachConfig),
+            ("hook", HookConfig),
+            ("open", OpenConfig),
+            ("release", ReleaseConfig),
+            ("noise", NoiseConfig),
+            ("guide", GuideConfig),
+            ("safety", SafetyWeights),
+        ):
             if not isinstance(getattr(self, name), kind):
                 raise TypeError(f"{name} must be a sabre.tasks.{kind.__name__}, got {type(getattr(self, name)).__name__}")
         self.contact_weight = as_non_negative("contact_weight", self.contact_weight)
@@ -174,8 +180,14 @@ class OpenObject(Task):
             if phase == "approach":
                 reach = reach + costs.Contact(self.contact_weight) + self.posture_term(scene)
             return reach + pull_object + every_phase
-        hold = costs.TargetPose(target, "grasp", frame, weights=tuple(self.open.pose_weights),
-                                lead=self.lead(scene), lead_limit=self.target_opening(scene))
+        hold = costs.TargetPose(
+            target,
+            "grasp",
+            frame,
+            weights=tuple(self.open.pose_weights),
+            lead=self.lead(scene),
+            lead_limit=self.target_opening(scene),
+        )
         return hold + pull_object + every_phase
 
     # -- where the hand and the handle are (see geometry) -----------------------------------------
@@ -225,9 +237,16 @@ class OpenObject(Task):
         offset's sideways position, then back to the pre-grasp offset's depth), riding on the handle;
         then the hand backs off ``release.distance`` along :meth:`release_direction`."""
         return geometry.release_path(
-            scene, self.handle, x, steps, dt,
-            entry_side=float(self.approach.insert_offset[1]), entry_depth=float(self.approach.pregrasp_offset[2]),
-            hooked_within=self.open.slip_distance, speed=self.release.speed, distance=self.release.distance,
+            scene,
+            self.handle,
+            x,
+            steps,
+            dt,
+            entry_side=float(self.approach.insert_offset[1]),
+            entry_depth=float(self.approach.pregrasp_offset[2]),
+            hooked_within=self.open.slip_distance,
+            speed=self.release.speed,
+            distance=self.release.distance,
         )
 
     def release_direction(self, scene: Scene, x: np.ndarray) -> np.ndarray:
