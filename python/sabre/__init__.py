@@ -6,10 +6,11 @@ this package is the public API.
 
 from __future__ import annotations
 
-from . import costs, guides, tasks  # noqa: F401 (modules of the public API)
+from . import assets, costs, guides, tasks  # noqa: F401 (modules of the public API)
 from ._core import __version__
 from .closed_loop import paper_start_state, run_episode
 from .episode import Episode
+from .estimation import LowPass, ObjectEstimate, ObjectStateEstimator, tau_ext_from_wrench
 from .errors import (
     InvalidValueError,
     MissingExtraError,
@@ -22,9 +23,10 @@ from .errors import (
     UrdfError,
 )
 from .experiments import scenarios
-from .inner_loop import LowLevelController, Trace
+from .inner_loop import LowLevelController, PlanSnapshot, Trace
+from .mujoco import MujocoPlant
 from .planner import VARIANTS, Controller, ControllerConfig, IterationStats, likelihood_weights
-from .planner_process import PlanSnapshot
+from .plants import PlantInterface
 from .realtime import RealtimeCascade, TickResult
 from .safety import (
     ConstraintRows,
@@ -56,6 +58,8 @@ __all__ = [
     "RolloutResult",
     "CONTACT_MODELS",
     "Plant",
+    "PlantInterface",
+    "MujocoPlant",
     "Trace",
     "ContactPoint",
     "LowLevelController",
@@ -71,6 +75,7 @@ __all__ = [
     "TankRefill",
     "default_threads",
     "costs",
+    "assets",
     "tasks",
     "scenarios",
     "Controller",
@@ -83,6 +88,10 @@ __all__ = [
     "likelihood_weights",
     "ScriptedMotion",
     "hook_and_pull",
+    "LowPass",
+    "tau_ext_from_wrench",
+    "ObjectEstimate",
+    "ObjectStateEstimator",
     "SabreError",
     "ShapeError",
     "InvalidValueError",
