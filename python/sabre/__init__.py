@@ -10,7 +10,6 @@ from . import assets, costs, guides, tasks  # noqa: F401 (modules of the public 
 from ._core import __version__
 from .closed_loop import paper_start_state, run_episode
 from .episode import Episode
-from .estimation import LowPass, ObjectEstimate, ObjectStateEstimator, tau_ext_from_wrench
 from .errors import (
     InvalidValueError,
     MissingExtraError,
@@ -22,6 +21,7 @@ from .errors import (
     UnknownFrameError,
     UrdfError,
 )
+from .estimation import LowPass, ObjectEstimate, ObjectStateEstimator, tau_ext_from_wrench
 from .experiments import scenarios
 from .inner_loop import LowLevelController, PlanSnapshot, Trace
 from .mujoco import MujocoPlant
