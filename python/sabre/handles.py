@@ -37,8 +37,10 @@ _ROUND_SAMPLES = 64
 _ANGLES = 2.0 * np.pi * np.arange(_ROUND_SAMPLES) / _ROUND_SAMPLES
 _CIRCLE = np.stack([np.cos(_ANGLES), np.sin(_ANGLES), np.zeros(_ROUND_SAMPLES)], axis=1)
 _SPHERE = np.concatenate(
-    [np.stack([np.cos(lat) * _CIRCLE[:, 0], np.cos(lat) * _CIRCLE[:, 1], np.full(_ROUND_SAMPLES, np.sin(lat))], axis=1)
-     for lat in np.linspace(-np.pi / 2, np.pi / 2, 9)]
+    [
+        np.stack([np.cos(lat) * _CIRCLE[:, 0], np.cos(lat) * _CIRCLE[:, 1], np.full(_ROUND_SAMPLES, np.sin(lat))], axis=1)
+        for lat in np.linspace(-np.pi / 2, np.pi / 2, 9)
+    ]
 )
 #: A bar is at least this many times as long as it is thick, seen from the front.
 _BAR_ASPECT = 2.0
@@ -170,9 +172,7 @@ def infer_handle_frame(scene: Scene, link: str) -> np.ndarray:
     front = points[out >= out.max() - thickness - 1e-9]
     along, across = front @ axis, front @ side
     centre = (
-        0.5 * (along.min() + along.max()) * axis
-        + 0.5 * (across.min() + across.max()) * side
-        - (out.max() - 0.5 * thickness) * z
+        0.5 * (along.min() + along.max()) * axis + 0.5 * (across.min() + across.max()) * side - (out.max() - 0.5 * thickness) * z
     )
     if abs(axis @ UP) >= np.sqrt(0.5):
         x = axis if axis @ UP > 0.0 else -axis

@@ -192,7 +192,9 @@ class Scene:
         """A scene from URDF text; ``joint``, ``hold``, ``handle`` and ``density`` as in
         :meth:`from_urdf` (relative mesh paths resolve against the working directory and
         ``SABRE_MESH_PATH``, ``package://`` only through the package paths)."""
-        core = _core.Scene.from_urdf_strings(robot_urdf, obj_urdf, _pose(obj_pose), *_selection(joint, hold, handle), _density(density))
+        core = _core.Scene.from_urdf_strings(
+            robot_urdf, obj_urdf, _pose(obj_pose), *_selection(joint, hold, handle), _density(density)
+        )
         return _warn_assumed(cls(core))
 
     # -- sizes and names ----------------------------------------------------------------------
