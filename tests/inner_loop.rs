@@ -51,7 +51,8 @@ fn following_a_plan_is_one_tick_and_one_plant_step_per_step() {
             j => 0.1 * ((i / nq) as f64 * 0.3 + j as f64).sin(),
         })
         .collect();
-    let predicted: Vec<f64> = (0..k).map(|i| 0.5 + 0.05 * i as f64).collect();
+    // About the dissipation the push measures, so that the refill runs.
+    let predicted: Vec<f64> = (0..k).map(|i| 20.0 + 0.5 * i as f64).collect();
     let t0 = -0.0042;
 
     let mut followed = rig(&scene, &x0);
@@ -84,14 +85,15 @@ fn following_a_plan_is_one_tick_and_one_plant_step_per_step() {
     let (mut states, mut commands, mut energies, mut statuses) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for _ in 0..STEPS {
         let tau_ext = plant.measured_tau_ext().to_vec();
-        inner.tick(&plan, plant.state(), &tau_ext, plant.time(), plant.dt(), &mut out).unwrap();
+        inner
+            .tick(&plan, plant.state(), &tau_ext, plant.time(), plant.dt(), &mut out)
+            .unwrap();
         plant.step(&out.torque).unwrap();
         states.extend_from_slice(plant.state());
         commands.extend_from_slice(&out.command);
         energies.push(out.tank_energy.unwrap());
         statuses.push(out.status.unwrap());
     }
-    drop(inner);
 
     assert_eq!(trace.state, states);
     assert_eq!(trace.filtered, commands);
@@ -99,10 +101,11 @@ fn following_a_plan_is_one_tick_and_one_plant_step_per_step() {
     assert_eq!(trace.filter_status, statuses);
     assert_eq!(followed.tank.refilled(), ticked.tank.refilled());
     assert_eq!(followed.filter.stats().calls, STEPS as u64);
-    // The run exercised what it claims to: contact, a drained tank, a filter that held the base back.
+    // The run exercised what it claims to: contact, a tank drained and refilled, a filter that
+    // held the base back.
     assert!(trace.contact.iter().any(|&c| c));
-    assert!(energies.iter().copied().fold(f64::INFINITY, f64::min) < 5.0);
+    assert!(energies[STEPS - 1] < 9.0, "{}", energies[STEPS - 1]);
+    assert!(ticked.tank.refilled() > 0.1, "{}", ticked.tank.refilled());
     assert!((0..STEPS).any(|s| commands[s * nq + BASE_X] < 0.2));
-    eprintln!("base x {} -> {}, contacts {}, cmd base {:?}", states[0], states[(STEPS - 1) * scene.nx()], trace.contact.iter().filter(|c| **c).count(), (0..STEPS).step_by(50).map(|s| commands[s * nq]).collect::<Vec<_>>());
-    eprintln!("tank {:?}, refilled {} statuses {:?}", (0..STEPS).step_by(50).map(|s| energies[s]).collect::<Vec<_>>(), ticked.tank.refilled(), statuses.iter().filter(|s| **s != FilterStatus::Solved).count());
+    assert!(statuses.iter().all(|s| *s != FilterStatus::Fallback));
 }

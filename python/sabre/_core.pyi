@@ -23,6 +23,8 @@ __all__ = [
     "Plant",
     "LowLevelConfig",
     "LowLevelController",
+    "Plan",
+    "InnerLoop",
     "Cost",
     "MppiConfig",
     "ServoGuideConfig",
@@ -257,6 +259,48 @@ class LowLevelController:
         tank: EnergyTank | None = None,
         predicted_dissipation: npt.NDArray[np.float64] | None = None,
     ) -> dict: ...
+
+@final
+class Plan:
+    def __new__(
+        cls,
+        reference: npt.NDArray[np.float64],
+        t0: float,
+        dt: float,
+        predicted_dissipation: npt.NDArray[np.float64] | None = None,
+        gain_inertia_floor: float | None = None,
+    ) -> Plan: ...
+    @property
+    def reference(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def nu(self) -> int: ...
+    @property
+    def steps(self) -> int: ...
+    @property
+    def t0(self) -> float: ...
+    @property
+    def dt(self) -> float: ...
+    @property
+    def predicted_dissipation(self) -> npt.NDArray[np.float64] | None: ...
+    @property
+    def gain_inertia_floor(self) -> float | None: ...
+    def reference_at(self, t: float) -> npt.NDArray[np.float64]: ...
+    def predicted_dissipation_at(self, t: float) -> float | None: ...
+
+@final
+class InnerLoop:
+    def __new__(
+        cls, low_level: LowLevelController, filter: SafetyFilter | None = None, tank: EnergyTank | None = None
+    ) -> InnerLoop: ...
+    @property
+    def low_level(self) -> LowLevelController: ...
+    @property
+    def filter(self) -> SafetyFilter | None: ...
+    @property
+    def tank(self) -> EnergyTank | None: ...
+    def tick(
+        self, plan: Plan, x: npt.NDArray[np.float64], tau_ext: npt.NDArray[np.float64], t: float, dt: float
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], float | None, str]: ...
 
 @final
 class Plant:

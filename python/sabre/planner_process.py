@@ -79,6 +79,53 @@ def _read(block: np.ndarray, tries: int = 1000) -> tuple[float, np.ndarray] | No
     return None
 
 
+def _lower_priority(nice: int, idle: bool) -> None:
+    """Lowers the planner process's priority below the 1 kHz path and the DDS threads."""
+    if nice:
+        try:
+            os.nice(nice)  # leave the cores to the 1 kHz path and the DDS threads when they want them
+        except OSError:
+            pass
+    if idle and hasattr(os, "SCHED_IDLE"):
+        # Stronger than any niceness: a waking middleware or control thread preempts the planner at
+        # once instead of waiting for its time slice. The sampler's workers, started later, inherit it.
+        try:
+            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+        except OSError:
+            pass
+
+
+def _run_commands(controller: Any, commands: Any) -> None:
+    """Calls every method call the parent queued (obstacle changes) on the controller."""
+    while True:
+        try:
+            name, args = commands.get_nowait()
+        except queue.Empty:
+            return
+        getattr(controller, name)(*args)
+
+
+def _hand_over(plan: np.ndarray, controller: Any, stats: Any, phases: tuple[str, ...], steps: int, nu: int) -> None:
+    """Writes the controller's newest plan, with its header, into the shared plan block."""
+    floor = controller.task.gain_inertia_floor(controller.phase)
+    predicted = controller.predicted_dissipation
+    nominal = np.asarray(controller.nominal, dtype=np.float64)
+    header = [
+        float(controller.nominal_t0),
+        float(controller.config.dt),
+        np.nan if floor is None else float(floor),
+        float(phases.index(controller.phase)),
+        float(stats.iteration_time),
+        float(stats.iteration),
+        0.0 if predicted is None else 1.0,
+        0.0,
+    ]
+    values: list[tuple[int, Any]] = [(_T0, header), (_PLAN_HEADER, nominal[:steps, :nu])]
+    if predicted is not None:
+        values.append((_PLAN_HEADER + steps * nu, np.asarray(predicted, dtype=np.float64)[:steps]))
+    _write(plan, values)
+
+
 def _planner_main(
     factory: Callable[[], Any],
     state_raw: Any,
@@ -98,18 +145,7 @@ def _planner_main(
     iteration's time from reading the state to handing the plan over). SIGINT is the parent's to
     handle (it stops the planner through ``stop``)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if nice:
-        try:
-            os.nice(nice)  # leave the cores to the 1 kHz path and the DDS threads when they want them
-        except OSError:
-            pass
-    if idle and hasattr(os, "SCHED_IDLE"):
-        # Stronger than any niceness: a waking middleware or control thread preempts the planner at
-        # once instead of waiting for its time slice. The sampler's workers, started later, inherit it.
-        try:
-            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-        except OSError:
-            pass
+    _lower_priority(nice, idle)
     parent = os.getppid()
     nx, steps, nu = dims
     state = np.frombuffer(state_raw, dtype=np.float64)
@@ -121,12 +157,7 @@ def _planner_main(
         delay = 0.0
         while not stop.is_set() and os.getppid() == parent:  # an orphan (its parent killed) stops
             started = time.perf_counter()
-            while True:
-                try:
-                    name, args = commands.get_nowait()
-                except queue.Empty:
-                    break
-                getattr(controller, name)(*args)
+            _run_commands(controller, commands)
             read = _read(state)
             if read is None:
                 continue
@@ -136,23 +167,7 @@ def _planner_main(
             if compensate:
                 x, t = controller.predict(x, t, delay)
             stats = controller.update(x, t)
-            floor = controller.task.gain_inertia_floor(controller.phase)
-            predicted = controller.predicted_dissipation
-            nominal = np.asarray(controller.nominal, dtype=np.float64)
-            header = [
-                float(controller.nominal_t0),
-                float(controller.config.dt),
-                np.nan if floor is None else float(floor),
-                float(phases.index(controller.phase)),
-                float(stats.iteration_time),
-                float(stats.iteration),
-                0.0 if predicted is None else 1.0,
-                0.0,
-            ]
-            values: list[tuple[int, Any]] = [(_T0, header), (_PLAN_HEADER, nominal[:steps, :nu])]
-            if predicted is not None:
-                values.append((_PLAN_HEADER + steps * nu, np.asarray(predicted, dtype=np.float64)[:steps]))
-            _write(plan, values)
+            _hand_over(plan, controller, stats, phases, steps, nu)
             delay = time.perf_counter() - taken
             rest = min_period - (time.perf_counter() - started)
             if rest > 0.0:

@@ -37,10 +37,185 @@ class ScriptedMotion:
     planned_opening: np.ndarray
 
 
+# Waypoints in the handle frame: behind the bar (−z) and beside it (−y), clear of the tip.
+_PRE_INSERT = (0.0, -0.022, -0.09)
+_INSERTED = (0.0, -0.022, 0.0)
+_HOOKED = (0.0, 0.0, 0.0)
+_PULLING = (0.0, 0.0, -0.016)
+
+
+@dataclass(frozen=True)
+class _Segment:
+    """One phase of the motion: the grasp pose and the object opening it aims at, as functions of
+    the phase's progress s ∈ (0, 1]."""
+
+    phase: int
+    duration: float
+    pose_at: Callable[[float], np.ndarray]
+    opening_at: Callable[[float], float]
+
+
 def _offset(pose: np.ndarray, xyz: tuple[float, float, float]) -> np.ndarray:
     out = pose.copy()
     out[:3, 3] = pose[:3, 3] + pose[:3, :3] @ np.asarray(xyz)
     return out
+
+
+def _blend(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
+    """The pose a fraction s of the way from a to b (position linear, rotation along the geodesic),
+    eased so that the motion starts and stops smoothly."""
+    s = 0.5 - 0.5 * np.cos(np.pi * np.clip(s, 0.0, 1.0))
+    out = np.eye(4)
+    out[:3, 3] = (1 - s) * a[:3, 3] + s * b[:3, 3]
+    rel = a[:3, :3].T @ b[:3, :3]
+    w = rotation_log(rel) * s
+    angle = np.linalg.norm(w)
+    if angle < 1e-12:
+        out[:3, :3] = a[:3, :3]
+    else:
+        k = w / angle
+        kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+        out[:3, :3] = a[:3, :3] @ (np.eye(3) + np.sin(angle) * kx + (1 - np.cos(angle)) * kx @ kx)
+    return out
+
+
+def _engage(s: float) -> tuple[float, float, float]:
+    """The pull's offset from the handle: taking up the slack first (tip against the bar)."""
+    x, y, z = np.asarray(_PULLING) * min(1.0, 8.0 * s)
+    return (float(x), float(y), float(z))
+
+
+def _pull_target(scene: Scene, opening: float | None, release_after: bool | None) -> tuple[float, bool]:
+    """The opening the pull aims at, and whether the hook retreats after it (by default for objects
+    that fall open under gravity: the dishwasher)."""
+    upper = float(scene.o_upper[0])
+    target = 0.75 * upper if opening is None else float(opening)
+    if release_after is None:
+        release_after = scene.object_name == "dishwasher"
+    if release_after and opening is None:
+        target = 0.45
+    return target, release_after
+
+
+def _segments(
+    scene: Scene,
+    q0: np.ndarray,
+    o0: float,
+    target: float,
+    approach_time: float,
+    pull_time: float,
+    release_after: bool,
+) -> list[_Segment]:
+    """Approach, insert, hook, pull along the handle's path to ``target`` and, with
+    ``release_after``, retreat."""
+
+    def handle(o: float) -> np.ndarray:
+        return scene.object_fk(np.array([o]), "handle_frame")
+
+    def closed(s: float) -> float:
+        return o0
+
+    def opening_profile(s: float) -> float:
+        return o0 + (target - o0) * (0.5 - 0.5 * np.cos(np.pi * np.clip(s, 0, 1)))
+
+    h0 = handle(o0)
+    grasp0 = scene.fk(q0, "grasp")
+    segments = [
+        _Segment(0, approach_time, lambda s: _blend(grasp0, _offset(h0, _PRE_INSERT), s), closed),
+        _Segment(1, 1.2, lambda s: _blend(_offset(h0, _PRE_INSERT), _offset(h0, _INSERTED), s), closed),
+        _Segment(2, 0.8, lambda s: _blend(_offset(h0, _INSERTED), _offset(h0, _HOOKED), s), closed),
+        _Segment(3, pull_time, lambda s: _offset(handle(opening_profile(s)), _engage(s)), opening_profile),
+    ]
+    if release_after:
+        end = _offset(handle(target), _PULLING)
+        away = end.copy()
+        away[:3, 3] += np.array([-0.15, 0.0, 0.12]) @ np.eye(3)
+        segments.append(_Segment(4, 1.5, lambda s: _blend(end, away, s), lambda s: target))
+    return segments
+
+
+class _DifferentialIK:
+    """Damped least-squares differential IK of the grasp frame on the robot's Jacobian (base and
+    arm, the base weighted to move less), with a null-space pull of the arm toward a posture and
+    the base kept ``standoff`` in front of the object."""
+
+    DAMPING = 1e-4
+
+    def __init__(self, scene: Scene, dt: float, standoff: float) -> None:
+        self.scene = scene
+        self.dt = dt
+        self.standoff = standoff
+        self.lower, self.upper, self.vmax = scene.q_lower, scene.q_upper, scene.dq_limit
+        weights = np.ones(scene.nq)
+        weights[:3] = 4.0  # moving the 165 kg base is costlier than moving the arm
+        self.w_inv = 1.0 / weights
+        self.home = scene.home_configuration()
+        # Null-space posture: for a Panda, elbow up and wrist pitched so the hand points forward
+        # with margin on every joint limit; other robots keep their home configuration.
+        if scene.joint_names[3:] == tuple(f"panda_joint{i}" for i in range(1, 8)):
+            self.home = self.home.copy()
+            self.home[3:] = [0.0, 0.3, 0.0, -1.9, 0.0, 2.2, 0.785]
+        # Keep the base footprint (radius 0.53 m) clear of the cabinet front: its centre stays
+        # `standoff` in front of the object's front plane (the plane x = 0 of the object frame).
+        pose = scene.object_pose
+        self.front_normal = -pose[:3, 0]  # points from the object toward the robot
+        self.front_point = pose[:3, 3]
+        self.base_joints = [i for i, n in enumerate(scene.joint_names) if n in ("base_x", "base_y")]
+
+    def step(self, q: np.ndarray, desired: np.ndarray) -> np.ndarray:
+        """The configuration one step on from q toward the grasp pose ``desired``, within the
+        joints' velocity and position limits and the base's standoff."""
+        scene, dt, w_inv = self.scene, self.dt, self.w_inv
+        current = scene.fk(q, "grasp")
+        err = np.concatenate([desired[:3, 3] - current[:3, 3], rotation_log(desired[:3, :3] @ current[:3, :3].T)])
+        twist = err / dt * 0.5
+        J = scene.jacobian(q, "grasp")
+        Jw = J * w_inv
+        u = w_inv * (J.T @ np.linalg.solve(Jw @ J.T + self.DAMPING * np.eye(6), twist))
+        # Secondary task: stay near the home posture and away from the joint limits (arm only).
+        null = np.eye(scene.nq) - (w_inv[:, None] * J.T) @ np.linalg.solve(Jw @ J.T + self.DAMPING * np.eye(6), J)
+        posture = np.zeros(scene.nq)
+        posture[3:] = 0.5 * (self.home[3:] - q[3:])
+        u = u + null @ posture
+        u = np.clip(u, -0.8 * self.vmax, 0.8 * self.vmax)
+        q_next = np.clip(q + dt * u, self.lower + 1e-3, self.upper - 1e-3)
+        if len(self.base_joints) == 2:
+            xy = q_next[self.base_joints]
+            depth = self.standoff - float(np.dot(np.r_[xy, 0.0] - self.front_point, self.front_normal))
+            if depth > 0.0:
+                normal = self.front_normal[:2]
+                q_next[self.base_joints] = xy + depth * normal / max(float(np.linalg.norm(normal)), 1e-9)
+        return q_next
+
+
+def _follow(ik: _DifferentialIK, segments: list[_Segment], q0: np.ndarray, o0: float) -> ScriptedMotion:
+    """Steps the IK through every segment; the commands are what the joints actually did."""
+    dt = ik.dt
+    total = sum(int(round(seg.duration / dt)) for seg in segments)
+    U = np.zeros((total, len(q0)))
+    phases = np.zeros(total, dtype=np.int64)
+    q = q0.copy()
+    planned = [q.copy()]
+    planned_opening = [o0]
+    k = 0
+    for seg in segments:
+        steps = int(round(seg.duration / dt))
+        for i in range(steps):
+            s = (i + 1) / steps
+            q_next = ik.step(q, seg.pose_at(s))
+            U[k] = (q_next - q) / dt  # what the joints can actually do at their limits
+            q = q_next
+            phases[k] = seg.phase
+            planned.append(q.copy())
+            planned_opening.append(seg.opening_at(s))
+            k += 1
+    return ScriptedMotion(
+        U=U,
+        dt=dt,
+        phases=phases,
+        planned_states=np.asarray(planned),
+        planned_opening=np.asarray(planned_opening),
+    )
 
 
 def hook_and_pull(
@@ -64,123 +239,7 @@ def hook_and_pull(
     """
     dt = as_positive("dt", dt)
     x0 = scene.default_state() if x0 is None else as_float_array("x0", x0, (scene.nx,))
-    nq = scene.nq
     q0, _, o0, _ = scene.split_state(x0)
-    upper = float(scene.o_upper[0])
-    target = 0.75 * upper if opening is None else float(opening)
-    if release_after is None:
-        release_after = scene.object_name == "dishwasher"
-    if release_after and opening is None:
-        target = 0.45
-
-    # Waypoints in the handle frame: behind the bar (−z) and beside it (−y), clear of the tip.
-    pre_insert = (0.0, -0.022, -0.09)
-    inserted = (0.0, -0.022, 0.0)
-    hooked = (0.0, 0.0, 0.0)
-    pulling = (0.0, 0.0, -0.016)
-
-    def handle(o: float) -> np.ndarray:
-        return scene.object_fk(np.array([o]), "handle_frame")
-
-    segments: list[tuple[int, float, Callable[[float], np.ndarray]]] = []
-
-    def add(phase: int, duration: float, pose_at: Callable[[float], np.ndarray]) -> None:
-        segments.append((phase, duration, pose_at))
-
-    h0 = handle(o0[0])
-    grasp0 = scene.fk(q0, "grasp")
-
-    def blend(a: np.ndarray, b: np.ndarray, s: float) -> np.ndarray:
-        s = 0.5 - 0.5 * np.cos(np.pi * np.clip(s, 0.0, 1.0))  # smooth start and stop
-        out = np.eye(4)
-        out[:3, 3] = (1 - s) * a[:3, 3] + s * b[:3, 3]
-        rel = a[:3, :3].T @ b[:3, :3]
-        w = rotation_log(rel) * s
-        angle = np.linalg.norm(w)
-        if angle < 1e-12:
-            out[:3, :3] = a[:3, :3]
-        else:
-            k = w / angle
-            kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-            out[:3, :3] = a[:3, :3] @ (np.eye(3) + np.sin(angle) * kx + (1 - np.cos(angle)) * kx @ kx)
-        return out
-
-    add(0, approach_time, lambda s: blend(grasp0, _offset(h0, pre_insert), s))
-    add(1, 1.2, lambda s: blend(_offset(h0, pre_insert), _offset(h0, inserted), s))
-    add(2, 0.8, lambda s: blend(_offset(h0, inserted), _offset(h0, hooked), s))
-
-    def opening_profile(s: float) -> float:
-        return o0[0] + (target - o0[0]) * (0.5 - 0.5 * np.cos(np.pi * np.clip(s, 0, 1)))
-
-    # Take up the slack first (tip against the bar), then follow the handle along its path.
-    def engage(s: float) -> tuple[float, float, float]:
-        x, y, z = np.asarray(pulling) * min(1.0, 8.0 * s)
-        return (float(x), float(y), float(z))
-
-    add(3, pull_time, lambda s: _offset(handle(opening_profile(s)), engage(s)))
-    if release_after:
-        end = _offset(handle(target), pulling)
-        away = end.copy()
-        away[:3, 3] += np.array([-0.15, 0.0, 0.12]) @ np.eye(3)
-        add(4, 1.5, lambda s: blend(end, away, s))
-
-    total = sum(int(round(d / dt)) for _, d, _ in segments)
-    U = np.zeros((total, nq))
-    phases = np.zeros(total, dtype=np.int64)
-    q = q0.copy()
-    planned = [q.copy()]
-    planned_opening = [o0[0]]
-    lower, upper_q, vmax = scene.q_lower, scene.q_upper, scene.dq_limit
-    weights = np.ones(nq)
-    weights[:3] = 4.0  # moving the 165 kg base is costlier than moving the arm
-    w_inv = 1.0 / weights
-    home = scene.home_configuration()
-    # Null-space posture: for a Panda, elbow up and wrist pitched so the hand points forward
-    # with margin on every joint limit; other robots keep their home configuration.
-    if scene.joint_names[3:] == tuple(f"panda_joint{i}" for i in range(1, 8)):
-        home = home.copy()
-        home[3:] = [0.0, 0.3, 0.0, -1.9, 0.0, 2.2, 0.785]
-    # Keep the base footprint (radius 0.53 m) clear of the cabinet front: its centre stays
-    # `standoff` in front of the object's front plane (the plane x = 0 of the object frame).
-    pose = scene.object_pose
-    front_normal = -pose[:3, 0]  # points from the object toward the robot
-    front_point = pose[:3, 3]
-    base_joints = [i for i, n in enumerate(scene.joint_names) if n in ("base_x", "base_y")]
-    k = 0
-    for phase, duration, pose_at in segments:
-        steps = int(round(duration / dt))
-        for i in range(steps):
-            s = (i + 1) / steps
-            desired = pose_at(s)
-            current = scene.fk(q, "grasp")
-            err = np.concatenate([desired[:3, 3] - current[:3, 3], rotation_log(desired[:3, :3] @ current[:3, :3].T)])
-            twist = err / dt * 0.5
-            J = scene.jacobian(q, "grasp")
-            Jw = J * w_inv
-            damping = 1e-4
-            u = w_inv * (J.T @ np.linalg.solve(Jw @ J.T + damping * np.eye(6), twist))
-            # Secondary task: stay near the home posture and away from the joint limits (arm only).
-            null = np.eye(nq) - (w_inv[:, None] * J.T) @ np.linalg.solve(Jw @ J.T + damping * np.eye(6), J)
-            posture = np.zeros(nq)
-            posture[3:] = 0.5 * (home[3:] - q[3:])
-            u = u + null @ posture
-            u = np.clip(u, -0.8 * vmax, 0.8 * vmax)
-            q_next = np.clip(q + dt * u, lower + 1e-3, upper_q - 1e-3)
-            if len(base_joints) == 2:
-                xy = q_next[base_joints]
-                depth = standoff - float(np.dot(np.r_[xy, 0.0] - front_point, front_normal))
-                if depth > 0.0:
-                    q_next[base_joints] = xy + depth * front_normal[:2] / max(float(np.linalg.norm(front_normal[:2])), 1e-9)
-            U[k] = (q_next - q) / dt  # what the joints can actually do at their limits
-            q = q_next
-            phases[k] = phase
-            planned.append(q.copy())
-            planned_opening.append(opening_profile(s) if phase == 3 else (target if phase == 4 else o0[0]))
-            k += 1
-    return ScriptedMotion(
-        U=U,
-        dt=dt,
-        phases=phases,
-        planned_states=np.asarray(planned),
-        planned_opening=np.asarray(planned_opening),
-    )
+    target, release_after = _pull_target(scene, opening, release_after)
+    segments = _segments(scene, q0, o0[0], target, approach_time, pull_time, release_after)
+    return _follow(_DifferentialIK(scene, dt, standoff), segments, q0, o0[0])

@@ -1,9 +1,11 @@
-//! Low-level joint velocity controller (53) and the inner loop around it (interpolation, optional safety stage, plant).
+//! Low-level joint velocity controller (53), and the inner loop driving the plant with it (one
+//! [`InnerLoop::tick`] per plant step).
 
 use std::sync::Arc;
 
 use nalgebra::{DMatrix, DVector, Isometry3};
 
+use super::inner_loop::{InnerLoop, Plan, TickOutput};
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
 use crate::model::dynamics::{joint_space_terms, DynamicsWorkspace};
 use crate::model::scene::Scene;
@@ -57,12 +59,16 @@ pub struct LowLevelController {
     config: LowLevelConfig,
     dt: f64,
     integral: Vec<f64>,
-    previous_reference: Option<Vec<f64>>,
+    /// The previous call's reference, for the feed-forward q̈*; only valid while `has_previous`.
+    previous_reference: Vec<f64>,
+    has_previous: bool,
     workspace: DynamicsWorkspace,
     mass_matrix: DMatrix<f64>,
     gravity_torque: DVector<f64>,
     acceleration: DVector<f64>,
     pi_acceleration: DVector<f64>,
+    /// M(q) q̈ of the current call.
+    inertial_torque: DVector<f64>,
 }
 
 impl LowLevelController {
@@ -84,17 +90,24 @@ impl LowLevelController {
             config,
             dt,
             integral: vec![0.0; nq],
-            previous_reference: None,
+            previous_reference: vec![0.0; nq],
+            has_previous: false,
             workspace: DynamicsWorkspace::default(),
             mass_matrix: DMatrix::zeros(nq, nq),
             gravity_torque: DVector::zeros(nq),
             acceleration: DVector::zeros(nq),
             pi_acceleration: DVector::zeros(nq),
+            inertial_torque: DVector::zeros(nq),
         })
     }
 
     pub fn config(&self) -> &LowLevelConfig {
         &self.config
+    }
+
+    /// The scene of the robot this controller drives.
+    pub fn scene(&self) -> &Arc<Scene> {
+        &self.scene
     }
 
     /// Changes the gain inertia floor between ticks (gain scheduling, e.g. per task phase); the
@@ -107,15 +120,25 @@ impl LowLevelController {
 
     pub fn reset(&mut self) {
         self.integral.iter_mut().for_each(|v| *v = 0.0);
-        self.previous_reference = None;
+        self.has_previous = false;
     }
 
     /// Joint torques that make the robot at state `x` track the velocity reference `u_ref`.
     pub fn torque(&mut self, x: &[f64], u_ref: &[f64]) -> Result<Vec<f64>> {
+        let mut tau = vec![0.0; self.scene.nq()];
+        self.torque_into(x, u_ref, self.config.gain_inertia_floor, &mut tau)?;
+        Ok(tau)
+    }
+
+    /// [`Self::torque`] into `tau` (nq) with the gain inertia floor `gain_inertia_floor` for this
+    /// call instead of the configured one (a plan's phase schedules its own); allocates nothing.
+    pub fn torque_into(&mut self, x: &[f64], u_ref: &[f64], gain_inertia_floor: f64, tau: &mut [f64]) -> Result<()> {
         let nq = self.scene.nq();
         self.scene.check_state(x)?;
         ensure_len("u_ref", u_ref, nq)?;
         ensure_finite("u_ref", u_ref)?;
+        ensure_len("tau", tau, nq)?;
+        check_gain("gain_inertia_floor", gain_inertia_floor)?;
         let q = &x[..nq];
         let qd = &x[nq..2 * nq];
         joint_space_terms(
@@ -131,24 +154,27 @@ impl LowLevelController {
         for i in 0..nq {
             let error = u_ref[i] - qd[i];
             self.integral[i] = (self.integral[i] + error * self.dt).clamp(-c.integral_limit, c.integral_limit);
-            let feedforward = match &self.previous_reference {
-                Some(prev) => (u_ref[i] - prev[i]) / self.dt,
-                None => 0.0,
+            let feedforward = if self.has_previous {
+                (u_ref[i] - self.previous_reference[i]) / self.dt
+            } else {
+                0.0
             };
             self.pi_acceleration[i] = c.bandwidth * error + c.integral_gain * self.integral[i];
             // Summed as (53) is written, the floor's term added separately below,
             // so that a zero floor gives exactly the torque of plain (53).
             self.acceleration[i] = feedforward + c.bandwidth * error + c.integral_gain * self.integral[i];
         }
-        self.previous_reference = Some(u_ref.to_vec());
-        let mut tau = &self.mass_matrix * &self.acceleration + &self.gravity_torque;
-        for i in 0..nq {
-            let extra = c.gain_inertia_floor - self.mass_matrix[(i, i)];
+        self.previous_reference.copy_from_slice(u_ref);
+        self.has_previous = true;
+        self.mass_matrix.mul_to(&self.acceleration, &mut self.inertial_torque);
+        for (i, tau) in tau.iter_mut().enumerate() {
+            *tau = self.inertial_torque[i] + self.gravity_torque[i];
+            let extra = gain_inertia_floor - self.mass_matrix[(i, i)];
             if extra > 0.0 {
-                tau[i] += extra * self.pi_acceleration[i];
+                *tau += extra * self.pi_acceleration[i];
             }
         }
-        Ok(tau.iter().copied().collect())
+        Ok(())
     }
 }
 
@@ -196,13 +222,12 @@ pub struct InnerSafety<'a> {
     pub predicted_dissipation: Option<&'a [f64]>,
 }
 
-/// The inner loop (the paper's, Sec. IV): for `steps` plant steps, interpolate the reference
-/// sequence (K × nq starting at `t0`, steps of `dt`) at the plant's time, pass it through the
-/// optional safety stage, turn it into torques and step the plant; records every `record_every`-th
-/// step into `trace`. At each plant step: interpolate → FILTER-QP (with the passivity row when a
-/// tank is given: the plant's current τ_ext measurement, energy S) → tank update with that
-/// measurement and the filtered command → low-level controller → plant step. A filter fallback
-/// (u = 0) is tracked like any other command and recorded.
+/// The inner loop (the paper's, Sec. IV) driving the plant: for `steps` plant steps, one
+/// [`InnerLoop::tick`] of the plan (the reference sequence K × nq starting at `t0`, steps of
+/// `dt`, with the stage's predicted dissipation) at the plant's state, its current τ_ext
+/// measurement and time, integrating over the plant's step, then the plant step with the tick's
+/// torques; records every `record_every`-th step into `trace`. A filter fallback (u = 0) is
+/// tracked like any other command and recorded.
 #[allow(clippy::too_many_arguments)]
 pub fn follow_reference_safe(
     plant: &mut crate::sim::Plant,
@@ -213,21 +238,19 @@ pub fn follow_reference_safe(
     steps: usize,
     record_every: usize,
     trace: &mut TrackTrace,
-    mut safety: Option<InnerSafety<'_>>,
+    safety: Option<InnerSafety<'_>>,
 ) -> Result<()> {
     let nq = plant.scene().nq();
-    if reference.is_empty() || !reference.len().is_multiple_of(nq) {
-        return Err(SabreError::shape(
-            "reference",
-            format!("(K, {nq})"),
-            format!("{} elements", reference.len()),
-        ));
+    let InnerSafety {
+        filter,
+        tank,
+        predicted_dissipation,
+    } = safety.unwrap_or_default();
+    let mut plan = Plan::new(reference.to_vec(), nq, t0, dt)?;
+    if let Some(predicted) = predicted_dissipation.filter(|p| !p.is_empty()) {
+        plan = plan.with_predicted_dissipation(predicted.to_vec())?;
     }
-    ensure_finite("reference", reference)?;
-    if !(dt.is_finite() && dt > 0.0 && t0.is_finite()) {
-        return Err(SabreError::invalid("reference timing", "t0 must be finite and dt positive"));
-    }
-    if let Some(f) = safety.as_ref().and_then(|s| s.filter.as_ref()) {
+    if let Some(f) = &filter {
         if f.scene().nq() != nq || f.scene().nx() != plant.scene().nx() {
             return Err(SabreError::invalid(
                 "safety filter",
@@ -235,59 +258,37 @@ pub fn follow_reference_safe(
             ));
         }
     }
-    let mut u_ref = vec![0.0; nq];
-    let mut u = vec![0.0; nq];
-    let mut status = FilterStatus::Solved;
+    let (has_filter, has_tank) = (filter.is_some(), tank.is_some());
+    let mut inner = InnerLoop::new(controller, filter, tank)?;
+    let mut out = TickOutput::new(nq, nq);
     let plant_dt = plant.dt();
     let mut poll = crate::interrupt::Poll::new();
     for step in 0..steps {
         poll.check()?;
-        crate::mppi::interpolate(reference, nq, (plant.time() - t0) / dt, &mut u_ref);
-        match safety.as_mut() {
-            Some(InnerSafety {
-                filter: Some(filter),
-                tank,
-                ..
-            }) => {
-                let passivity = tank.as_ref().map(|t| (plant.measured_tau_ext(), t.energy()));
-                let out = filter.filter(plant.state(), &u_ref, passivity)?;
-                u.copy_from_slice(&out.u);
-                status = out.status;
-            }
-            _ => u.copy_from_slice(&u_ref),
-        }
-        if let Some(s) = safety.as_mut() {
-            if let Some(tank) = s.tank.as_deref_mut() {
-                if let Some(predicted) = s.predicted_dissipation.filter(|p| !p.is_empty()) {
-                    let mut now = [0.0];
-                    crate::mppi::interpolate(predicted, 1, (plant.time() - t0) / dt, &mut now);
-                    // Against the reference, not the filtered command: the test is whether the world
-                    // pushes back as the model predicted, whatever the passivity row let through.
-                    let measured = -EnergyTank::power(plant.measured_tau_ext(), &u_ref);
-                    tank.refill(now[0], measured, plant_dt)?;
-                }
-                tank.step(plant.measured_tau_ext(), &u, plant_dt)?;
-            }
-        }
-        let tau = controller.torque(plant.state(), &u)?;
-        plant.step(&tau)?;
+        inner.tick(
+            &plan,
+            plant.state(),
+            plant.measured_tau_ext(),
+            plant.time(),
+            plant_dt,
+            &mut out,
+        )?;
+        plant.step(&out.torque)?;
         if record_every > 0 && step % record_every == 0 {
             trace.time.push(plant.time());
             trace.state.extend_from_slice(plant.state());
-            trace.reference.extend_from_slice(&u_ref);
+            trace.reference.extend_from_slice(&out.reference);
             let i = plant.interaction();
             trace.wrench.extend_from_slice(&i.wrench);
             trace.tau_ext.extend_from_slice(&i.tau_ext);
             trace.tau_ext_measured.extend_from_slice(plant.measured_tau_ext());
             trace.contact.push(i.contact);
-            if let Some(s) = &safety {
-                if s.filter.is_some() {
-                    trace.filtered.extend_from_slice(&u);
-                    trace.filter_status.push(status);
-                }
-                if let Some(tank) = &s.tank {
-                    trace.tank_energy.push(tank.energy());
-                }
+            if has_filter {
+                trace.filtered.extend_from_slice(&out.command);
+                trace.filter_status.push(out.status.unwrap_or_default());
+            }
+            if has_tank {
+                trace.tank_energy.push(out.tank_energy.unwrap_or(f64::NAN));
             }
         }
     }

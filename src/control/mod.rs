@@ -1,5 +1,7 @@
 //! The control cascade's inner loop: the low-level joint velocity controller that drives the plant, with an optional safety stage.
 
+pub mod inner_loop;
 pub mod low_level;
 
+pub use inner_loop::{InnerLoop, Plan, TickOutput};
 pub use low_level::{follow_reference_safe, InnerSafety, LowLevelConfig, LowLevelController, TrackTrace};

@@ -34,6 +34,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<sim::PyPlant>()?;
     m.add_class::<control::PyLowLevelConfig>()?;
     m.add_class::<control::PyLowLevelController>()?;
+    m.add_class::<control::PyPlan>()?;
+    m.add_class::<control::PyInnerLoop>()?;
     m.add_class::<cost::PyCost>()?;
     m.add_class::<mppi::PyMppiConfig>()?;
     m.add_class::<mppi::PyServoGuideConfig>()?;

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -189,19 +190,11 @@ def test_urdf_visuals_read_the_robot_primitives_with_their_colours():
 
 
 def test_viewer_without_viser_raises_missing_extra(monkeypatch):
-    import builtins
-
-    real_import = builtins.__import__
-
-    def no_viser(name, *args, **kwargs):
-        if name == "viser":
-            raise ImportError("No module named 'viser'")
-        return real_import(name, *args, **kwargs)
-
-    monkeypatch.setattr(builtins, "__import__", no_viser)
+    # None in sys.modules makes every import of the module fail, as when the extra is not installed
+    monkeypatch.setitem(sys.modules, "viser", None)
     from sabre.viz.viewer import Viewer
 
-    with pytest.raises(sabre.MissingExtraError, match=r"sabre-mpc\[viewer\]"):
+    with pytest.raises(sabre.MissingExtraError, match=r"sabre-mpc\[viewer\]' \(missing: viser\)"):
         Viewer(sabre.Scene.load())
 
 

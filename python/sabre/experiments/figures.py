@@ -6,6 +6,7 @@ import datetime
 import os
 import platform
 from collections import defaultdict
+from typing import Any
 
 import numpy as np
 
@@ -43,94 +44,112 @@ def draw(name: str, records: list[dict], path: str | os.PathLike[str]) -> None:
 
     fig, ax = plt.subplots(figsize=(6.4, 3.8))
     if name == "fig3":
-        for i, (mapping, runs) in enumerate(_group(records, "mapping").items()):
-            for scale, scaled in _group(runs, "scale").items():
-                w = scaled[0]["series"]["weights"]
-                ess = np.mean([r["metrics"]["effective_samples"] for r in scaled])
-                ax.plot(
-                    w["t"],
-                    w["y"],
-                    color=f"C{i}",
-                    ls="-" if scale == 1.0 else "--",
-                    marker=".",
-                    label=f"{mapping}, costs ×{scale:g} (ESS {ess:.1f})",
-                )
-        ax.set(
-            xlabel="rollout, by increasing cost",
-            ylabel="normalised weight",
-            yscale="symlog",
-            title="Fig. 3: likelihood weight mappings",
-        )
-        ax.set_yscale("symlog", linthresh=1e-3)
-    elif name in ("fig4", "fig11", "fig12"):
-        key = {"fig4": "variant", "fig11": "variant", "fig12": "alpha"}[name]
-        series = "wrench" if name == "fig11" else "tank"
-        for value, runs in _group(records, key).items():
-            end = min(r["series"][series]["t"][-1] for r in runs)
-            start = max(r["series"][series]["t"][0] for r in runs)
-            grid = np.linspace(start, end, 300)
-            mean, std = _mean_std(runs, series, grid)
-            label = f"α = {value:g}" if key == "alpha" else str(value)
-            ax.plot(grid, mean, label=label)
-            # a force magnitude is never negative: its band stops at zero
-            ax.fill_between(grid, np.maximum(mean - std, 0.0) if series == "wrench" else mean - std, mean + std, alpha=0.25)
-        if series == "tank":
-            ax.axhline(2.0, color="k", ls="--", lw=0.8, label="floor ε")
-        ax.axvline(0.0, color="grey", ls=":", lw=0.8)
-        ylabel = "wrist force |f| (N)" if series == "wrench" else "tank energy (J)"
-        title = {
-            "fig4": "Fig. 4: tank energy, worst case",
-            "fig11": "Fig. 11: wrench on the stuck door (mean ± std)",
-            "fig12": "Fig. 12: tank energy for α = 1 and α = 1000",
-        }[name]
-        ax.set(xlabel="time from the hold (s)", ylabel=ylabel, title=title)
+        _draw_weights(ax, records)
+    elif name in _TIME_SERIES:
+        _draw_time_series(ax, name, records)
     elif name == "fig8":
-        groups = _group(records, "variant")
-        classes = sorted({k for r in records for k in r["metrics"] if k.startswith("violation_")})
-        width = 0.8 / max(1, len(groups))
-        for i, (variant, runs) in enumerate(groups.items()):
-            vals = np.array([[r["metrics"][c] for c in classes] for r in runs])
-            ax.bar(np.arange(len(classes)) + i * width, vals.mean(axis=0), width, yerr=vals.std(axis=0), label=variant)
-        ax.set_xticks(
-            np.arange(len(classes)) + 0.4 - width / 2, [c.removeprefix("violation_") for c in classes], rotation=20, fontsize=8
-        )
-        # the classes differ by orders of magnitude (the base box from a start outside it, joint
-        # limits within the slack): linear near zero, logarithmic above, so every bar shows
-        ax.set_yscale("symlog", linthresh=1e-4)
-        ax.set(ylabel="cumulative violation Δ_tot (symlog)", title="Fig. 8: constraint violation per class")
+        _draw_violations(ax, records)
     elif name == "fig10":
-        for variant, runs in _group(records, "variant").items():
-            for j, r in enumerate(runs):
-                s = r["series"]["hand_xy"]
-                ax.plot(
-                    s["t"],
-                    s["y"],
-                    color=f"C{list(_group(records, 'variant')).index(variant)}",
-                    label=f"{variant} hand" if j == 0 else None,
-                )
-        obstacle = records[0]["series"]["obstacle"]
-        ax.add_patch(plt.Circle((obstacle["t"][0], obstacle["y"][0]), 0.08, color="grey", alpha=0.5, label="obstacle (r = 8 cm)"))
-        appeared = [r["metrics"]["appeared_at"] for r in records if np.isfinite(r["metrics"]["appeared_at"])]
-        note = f", appears at {np.mean(appeared):.1f} s" if appeared else ", never reached"
-        ax.set(xlabel="x (m)", ylabel="y (m)", title=f"Fig. 10: hand path with the sudden obstacle{note}", aspect="equal")
+        _draw_hand_paths(ax, records)
     elif name == "acceptance":
-        groups = _group(records, "obj")
-        for i, (obj, runs) in enumerate(groups.items()):
-            for r in runs:
-                s = r["series"]["opening"]
-                ax.plot(
-                    s["t"],
-                    s["y"],
-                    color=f"C{i}",
-                    lw=1,
-                    label=f"{obj} ({np.mean([q['metrics']['success'] for q in runs]):.0%} success)" if r is runs[0] else None,
-                )
-        variants = ", ".join(sorted({r["config"]["variant"] for r in records}))
-        ax.set(xlabel="time (s)", ylabel="opening (rad or m)", title=f"Acceptance: opening from the paper's start ({variants})")
+        _draw_openings(ax, records)
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def _draw_weights(ax: Any, records: list[dict]) -> None:
+    """Fig. 3: the normalised weight of each rollout, per weight mapping and cost scale."""
+    for i, (mapping, runs) in enumerate(_group(records, "mapping").items()):
+        for scale, scaled in _group(runs, "scale").items():
+            w = scaled[0]["series"]["weights"]
+            ess = np.mean([r["metrics"]["effective_samples"] for r in scaled])
+            ax.plot(
+                w["t"],
+                w["y"],
+                color=f"C{i}",
+                ls="-" if scale == 1.0 else "--",
+                marker=".",
+                label=f"{mapping}, costs ×{scale:g} (ESS {ess:.1f})",
+            )
+    ax.set(
+        xlabel="rollout, by increasing cost",
+        ylabel="normalised weight",
+        yscale="symlog",
+        title="Fig. 3: likelihood weight mappings",
+    )
+    ax.set_yscale("symlog", linthresh=1e-3)
+
+
+#: the figures of one series over time, mean ± std per group: (config key grouped by, series, title)
+_TIME_SERIES = {
+    "fig4": ("variant", "tank", "Fig. 4: tank energy, worst case"),
+    "fig11": ("variant", "wrench", "Fig. 11: wrench on the stuck door (mean ± std)"),
+    "fig12": ("alpha", "tank", "Fig. 12: tank energy for α = 1 and α = 1000"),
+}
+
+
+def _draw_time_series(ax: Any, name: str, records: list[dict]) -> None:
+    """Figs. 4, 11 and 12: the tank energy or the wrist force around the hold, mean ± std per group."""
+    key, series, title = _TIME_SERIES[name]
+    for value, runs in _group(records, key).items():
+        end = min(r["series"][series]["t"][-1] for r in runs)
+        start = max(r["series"][series]["t"][0] for r in runs)
+        grid = np.linspace(start, end, 300)
+        mean, std = _mean_std(runs, series, grid)
+        label = f"α = {value:g}" if key == "alpha" else str(value)
+        ax.plot(grid, mean, label=label)
+        # a force magnitude is never negative: its band stops at zero
+        ax.fill_between(grid, np.maximum(mean - std, 0.0) if series == "wrench" else mean - std, mean + std, alpha=0.25)
+    if series == "tank":
+        ax.axhline(2.0, color="k", ls="--", lw=0.8, label="floor ε")
+    ax.axvline(0.0, color="grey", ls=":", lw=0.8)
+    ylabel = "wrist force |f| (N)" if series == "wrench" else "tank energy (J)"
+    ax.set(xlabel="time from the hold (s)", ylabel=ylabel, title=title)
+
+
+def _draw_violations(ax: Any, records: list[dict]) -> None:
+    """Fig. 8: cumulative constraint violation per class, a bar per variant."""
+    groups = _group(records, "variant")
+    classes = sorted({k for r in records for k in r["metrics"] if k.startswith("violation_")})
+    width = 0.8 / max(1, len(groups))
+    for i, (variant, runs) in enumerate(groups.items()):
+        vals = np.array([[r["metrics"][c] for c in classes] for r in runs])
+        ax.bar(np.arange(len(classes)) + i * width, vals.mean(axis=0), width, yerr=vals.std(axis=0), label=variant)
+    ax.set_xticks(
+        np.arange(len(classes)) + 0.4 - width / 2, [c.removeprefix("violation_") for c in classes], rotation=20, fontsize=8
+    )
+    # the classes differ by orders of magnitude (the base box from a start outside it, joint
+    # limits within the slack): linear near zero, logarithmic above, so every bar shows
+    ax.set_yscale("symlog", linthresh=1e-4)
+    ax.set(ylabel="cumulative violation Δ_tot (symlog)", title="Fig. 8: constraint violation per class")
+
+
+def _draw_hand_paths(ax: Any, records: list[dict]) -> None:
+    """Fig. 10: the hand's path in the plane, per variant, around the suddenly appearing obstacle."""
+    from matplotlib.patches import Circle
+
+    for i, (variant, runs) in enumerate(_group(records, "variant").items()):
+        for j, r in enumerate(runs):
+            s = r["series"]["hand_xy"]
+            ax.plot(s["t"], s["y"], color=f"C{i}", label=f"{variant} hand" if j == 0 else None)
+    obstacle = records[0]["series"]["obstacle"]
+    ax.add_patch(Circle((obstacle["t"][0], obstacle["y"][0]), 0.08, color="grey", alpha=0.5, label="obstacle (r = 8 cm)"))
+    appeared = [r["metrics"]["appeared_at"] for r in records if np.isfinite(r["metrics"]["appeared_at"])]
+    note = f", appears at {np.mean(appeared):.1f} s" if appeared else ", never reached"
+    ax.set(xlabel="x (m)", ylabel="y (m)", title=f"Fig. 10: hand path with the sudden obstacle{note}", aspect="equal")
+
+
+def _draw_openings(ax: Any, records: list[dict]) -> None:
+    """Acceptance: the opening over time of every run, coloured by object, with its success rate."""
+    for i, (obj, runs) in enumerate(_group(records, "obj").items()):
+        success = np.mean([q["metrics"]["success"] for q in runs])
+        for r in runs:
+            s = r["series"]["opening"]
+            ax.plot(s["t"], s["y"], color=f"C{i}", lw=1, label=f"{obj} ({success:.0%} success)" if r is runs[0] else None)
+    variants = ", ".join(sorted({r["config"]["variant"] for r in records}))
+    ax.set(xlabel="time (s)", ylabel="opening (rad or m)", title=f"Acceptance: opening from the paper's start ({variants})")
 
 
 def summary(name: str, records: list[dict], *, seeds: int, short: bool) -> str:

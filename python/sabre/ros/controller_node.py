@@ -51,19 +51,26 @@ class ControllerNode:
 
     def __init__(self, overrides: dict[str, Any] | None = None, node_name: str = "sabre_controller") -> None:
         rclpy = require_ros()
-        from diagnostic_msgs.msg import DiagnosticArray  # noqa: F401
-        from geometry_msgs.msg import Twist, WrenchStamped
-        from sensor_msgs.msg import JointState
-        from std_msgs.msg import Float64MultiArray
-
         self._rclpy = rclpy
         self.node = rclpy.create_node(node_name)
         p = self.params = declare(self.node, CONTROLLER_PARAMETERS, overrides)
+        self._build_cascade(p)
+        names = self._map_joints(p)
+        self._init_bookkeeping(p)
+        self._create_endpoints(p, names)
+        self._start_threads(p)
+        self.node.get_logger().info(
+            f"sabre controller: {p['object']} variant {p['variant']}, joints {list(self.scene.joint_names)}, "
+            f"object state from {p['object_state_topic'] or 'the hand-pose estimator'}"
+        )
+
+    # Set-up ----------------------------------------------------------------------------------
+    def _build_cascade(self, p: dict[str, Any]) -> None:
+        """The controller and the cascade around it (its planner in a process of its own if asked)."""
         factory = functools.partial(planner_controller, str(p["object"]), str(p["variant"]), int(p["seed"]), int(p["threads"]))
         self.controller = factory()
         self.scene = self.controller.scene
         self.task = self.controller.task
-        config = self.controller.config
         self.cascade = RealtimeCascade(
             self.controller,
             min_replan_period=float(p["min_replan_period"]),
@@ -72,6 +79,11 @@ class ControllerNode:
             planner_idle=bool(p["planner_idle"]),
             delay_compensation=bool(p["delay_compensation"]),
         )
+        self.horizon = float(self.controller.config.horizon)
+
+    def _map_joints(self, p: dict[str, Any]) -> list[str]:
+        """Maps the robot's joint names onto sabre's joints, the arm's and the base's commands;
+        returns the robot's names in sabre's order."""
         # joint_names: the robot's names for sabre's joints, in sabre's order (Scene.joint_names)
         names = list(p["joint_names"]) or list(self.scene.joint_names)
         if len(names) != self.scene.nq:
@@ -86,11 +98,13 @@ class ControllerNode:
         self.arm_index = np.array([index[n] for n in self.arm_joints], dtype=np.intp)
         self.base_index = np.array([index[n] for n in self.base_joints], dtype=np.intp)
         self.object_joints = JointMap(self.scene.object_joint_names)
+        return names
+
+    def _init_bookkeeping(self, p: dict[str, Any]) -> None:
+        """Timeouts, the latest inputs, the watchdog's flags and the statistics the summary reports."""
         self.state_timeout = float(p["state_timeout"])
         self.wrench_timeout = float(p["wrench_timeout"])
         self.max_tick_dt = float(p["max_tick_dt"])
-        self.horizon = float(config.horizon)
-
         self._lock = threading.Lock()  # publishers and the shared state below
         self._tau_filter = LowPass(float(p["tau_ext_cutoff"]))
         self._wrench: np.ndarray | None = None
@@ -123,15 +137,18 @@ class ControllerNode:
         self._running = True
         self._planner_started: float | None = None
 
-        self._JointState = JointState
-        self._Float64MultiArray = Float64MultiArray
+    def _create_endpoints(self, p: dict[str, Any], names: list[str]) -> None:
+        """The command, echo and status publishers (with their reused messages) and the input subscriptions."""
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import Twist, WrenchStamped
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import Float64MultiArray
+
         self._twist = Twist()
         self.arm_pub = self.node.create_publisher(Float64MultiArray, p["arm_command_topic"], 10)
         self.base_pub = self.node.create_publisher(Twist, p["cmd_vel_topic"], 10)
         self.echo_pub = self.node.create_publisher(JointState, p["command_echo_topic"], 10)
-        from diagnostic_msgs.msg import DiagnosticArray as _DA
-
-        self.status_pub = self.node.create_publisher(_DA, p["status_topic"], 10)
+        self.status_pub = self.node.create_publisher(DiagnosticArray, p["status_topic"], 10)
         self._echo = JointState()
         self._echo.name = names
         self._arm_msg = Float64MultiArray()
@@ -140,6 +157,9 @@ class ControllerNode:
         if p["object_state_topic"]:
             self.node.create_subscription(JointState, p["object_state_topic"], self._on_object, 10)
         self.node.create_subscription(Float64MultiArray, p["obstacle_topic"], self._on_obstacles, 10)
+
+    def _start_threads(self, p: dict[str, Any]) -> None:
+        """Starts the state watchdog and the periodic status publisher."""
         self._status = PeriodicThread(
             1.0 / float(p["status_rate"]),
             self._publish_status,
@@ -150,10 +170,6 @@ class ControllerNode:
         self._watchdog = threading.Thread(target=self._watch, name="sabre-state-watchdog", daemon=True)
         self._watchdog.start()
         self._status.start()
-        self.node.get_logger().info(
-            f"sabre controller: {p['object']} variant {p['variant']}, joints {list(self.scene.joint_names)}, "
-            f"object state from {p['object_state_topic'] or 'the hand-pose estimator'}"
-        )
 
     # Inputs ----------------------------------------------------------------------------------
     def _on_wrench(self, msg: Any) -> None:
@@ -203,43 +219,23 @@ class ControllerNode:
             self._obstacles = kept
 
     def _on_joint_state(self, msg: Any) -> None:
+        """One inner-loop tick on an accepted joint state, answered with its command (or zero)."""
         received = time.monotonic()
         self.stats["state_age"].record(time.time() - stamp_seconds(msg.header.stamp))
-        try:
-            q = self.joints.values(msg.name, msg.position, "position")
-            dq = self.joints.values(msg.name, msg.velocity, "velocity")
-            stamp = stamp_seconds(msg.header.stamp)
-            if self._last_t is not None and self._t_origin is not None and stamp - self._t_origin <= self._last_t:
-                raise MessageError(f"joint state stamp {stamp:.6f} is not after the previous one")
-        except MessageError as exc:
-            self.node.get_logger().error(f"joint state rejected: {exc}; sending zero", throttle_duration_sec=1.0)
-            self.stats["rejected"] += 1
-            self.publish_zero(msg.header.stamp)
+        measured = self._accept_joint_state(msg)
+        if measured is None:
             return
+        q, dq, stamp = measured
         if self._t_origin is None:
             self._t_origin = stamp
         t = stamp - self._t_origin
-        force = 0.0 if self._wrench is None else float(np.linalg.norm(self._wrench[:3]))
-        if self.estimator is not None:
-            e = self.estimator.update(q, t, force)
-            o, od = e.position, e.velocity
-        elif self._object is not None:
-            o, od = self._object
-        else:
+        object_state = self._object_state(q, t)
+        if object_state is None:
             self.publish_zero(msg.header.stamp)  # waiting for the first object state
             return
-        x = np.concatenate([q, dq, o, od])
+        x = np.concatenate([q, dq, *object_state])
         if not self.cascade.running:
-            if self._planner_started is not None:
-                self.publish_zero(msg.header.stamp)  # the planner stopped (error logged): never restarted
-                return
-            self.node.get_logger().info("first state received: planning")
-            # the planner process makes its first plan while this callback answers with zeros
-            self.cascade.start(x, t, wait=False)
-            self._planner_started = time.monotonic()
-            self._last_t = t
-            self._last_recv = received
-            self.publish_zero(msg.header.stamp)
+            self._start_planner(x, t, received, msg.header.stamp)
             return
         if not self.cascade.ready:
             self._observe_or_stop(x, t)
@@ -250,19 +246,8 @@ class ControllerNode:
         previous = t if self._last_t is None else self._last_t
         dt = min(t - previous, self.max_tick_dt)
         self._last_t = t
-        wrench_fresh = self._wrench is not None and received - self._wrench_recv <= self.wrench_timeout
-        if not wrench_fresh:
-            self.stats["wrench_stale"] += 1
-        fresh = self._wrench if wrench_fresh else None
-        raw = np.zeros(self.scene.nq) if fresh is None else tau_ext_from_wrench(self.scene, q, fresh)
-        tau_ext = self._tau_filter.update(raw, dt)
-        plan_start = self.cascade.plan_start
-        if plan_start is not None and t - plan_start > self.horizon:
-            self._observe_or_stop(x, t)  # the planner re-plans from here, so the plan can become fresh
-            self.stats["plan_stale"] += 1
-            self.node.get_logger().warning("plan older than its horizon: zero command", throttle_duration_sec=1.0)
-            self._last_recv = received
-            self.publish_zero(msg.header.stamp)
+        tau_ext = self._external_torque(q, received, dt)
+        if self._plan_expired(x, t, received, msg.header.stamp):
             return
         try:
             result = self.cascade.tick(x, tau_ext, t, dt=dt)
@@ -271,17 +256,85 @@ class ControllerNode:
             self.cascade.stop()
             self.publish_zero(msg.header.stamp)
             return
+        self._answer_tick(result, q, received, msg.header.stamp)
+        self._note_phase(t)  # after the command: logging is off the 1 kHz path
+
+    def _accept_joint_state(self, msg: Any) -> tuple[np.ndarray, np.ndarray, float] | None:
+        """(q, q̇, stamp) of a valid joint state newer than the last; None, after logging it and
+        answering with zero, for any other."""
+        try:
+            q = self.joints.values(msg.name, msg.position, "position")
+            dq = self.joints.values(msg.name, msg.velocity, "velocity")
+            stamp = stamp_seconds(msg.header.stamp)
+            if self._last_t is not None and self._t_origin is not None and stamp - self._t_origin <= self._last_t:
+                raise MessageError(f"joint state stamp {stamp:.6f} is not after the previous one")
+        except MessageError as exc:
+            self.node.get_logger().error(f"joint state rejected: {exc}; sending zero", throttle_duration_sec=1.0)
+            self.stats["rejected"] += 1
+            self.publish_zero(msg.header.stamp)
+            return None
+        return q, dq, stamp
+
+    def _object_state(self, q: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """(o, ȯ): the estimator's from the hand pose, else the newest on the object topic (None before one came)."""
+        if self.estimator is not None:
+            force = 0.0 if self._wrench is None else float(np.linalg.norm(self._wrench[:3]))
+            e = self.estimator.update(q, t, force)
+            return e.position, e.velocity
+        return self._object
+
+    def _start_planner(self, x: np.ndarray, t: float, received: float, stamp: Any) -> None:
+        """Starts the planner on the first state and answers with zero; a planner that stopped
+        (its error logged) is never restarted."""
+        if self._planner_started is not None:
+            self.publish_zero(stamp)
+            return
+        self.node.get_logger().info("first state received: planning")
+        # the planner process makes its first plan while this callback answers with zeros
+        self.cascade.start(x, t, wait=False)
+        self._planner_started = time.monotonic()
+        self._last_t = t
+        self._last_recv = received
+        self.publish_zero(stamp)
+
+    def _external_torque(self, q: np.ndarray, received: float, dt: float) -> np.ndarray:
+        """The low-passed joint torques of the wrist wrench (zero while the wrench is stale)."""
+        wrench_fresh = self._wrench is not None and received - self._wrench_recv <= self.wrench_timeout
+        if not wrench_fresh:
+            self.stats["wrench_stale"] += 1
+        fresh = self._wrench if wrench_fresh else None
+        raw = np.zeros(self.scene.nq) if fresh is None else tau_ext_from_wrench(self.scene, q, fresh)
+        return self._tau_filter.update(raw, dt)
+
+    def _plan_expired(self, x: np.ndarray, t: float, received: float, stamp: Any) -> bool:
+        """Whether the plan is older than its horizon; if so the state goes to the planner and the
+        answer is zero."""
+        plan_start = self.cascade.plan_start
+        expired = plan_start is not None and t - plan_start > self.horizon
+        if expired:
+            self._observe_or_stop(x, t)  # the planner re-plans from here, so the plan can become fresh
+            self.stats["plan_stale"] += 1
+            self.node.get_logger().warning("plan older than its horizon: zero command", throttle_duration_sec=1.0)
+            self._last_recv = received
+            self.publish_zero(stamp)
+        return expired
+
+    def _answer_tick(self, result: Any, q: np.ndarray, received: float, stamp: Any) -> None:
+        """Publishes a tick's command and books its filter status, tank energy and compute time."""
         self._last_status = result.status
         self._last_tank = result.tank_energy
         self._min_tank = min(self._min_tank, result.tank_energy)
         with self._lock:
             self._last_recv = received
             self._stale = False
-            self._publish_command(result.command, q[self.base_index[2]] if len(self.base_index) == 3 else 0.0, msg.header.stamp)
+            self._publish_command(result.command, q[self.base_index[2]] if len(self.base_index) == 3 else 0.0, stamp)
         self._fresh.set()
         self.stats["ticks"] += 1
         self.stats["compute"].record(time.monotonic() - received)
-        if self.cascade.phase != self._phase:  # after the command: logging is off the 1 kHz path
+
+    def _note_phase(self, t: float) -> None:
+        """Logs and counts a change of the task's phase."""
+        if self.cascade.phase != self._phase:
             self.node.get_logger().info(f"phase {self._phase} -> {self.cascade.phase} at t = {t:.3f} s")
             self._phase = self.cascade.phase
             self.stats["phase_changes"] += 1

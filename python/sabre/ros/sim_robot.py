@@ -40,15 +40,27 @@ class SimRobotNode:
 
     def __init__(self, overrides: dict[str, Any] | None = None, node_name: str = "sabre_sim_robot") -> None:
         rclpy = require_ros()
-        from diagnostic_msgs.msg import DiagnosticArray
-        from geometry_msgs.msg import Twist, WrenchStamped
-        from rosgraph_msgs.msg import Clock
-        from sensor_msgs.msg import JointState
-        from std_msgs.msg import Bool, Float64MultiArray
-
         self._rclpy = rclpy
         self.node = rclpy.create_node(node_name)
         p = self.params = declare(self.node, SIM_ROBOT_PARAMETERS, overrides)
+        self._build_plant(p)
+        names = self._map_joints(p)
+        self._init_bookkeeping(p)
+        self._create_endpoints(p, names)
+        self._status = PeriodicThread(
+            1.0 / float(p["status_rate"]),
+            self._publish_status,
+            "sabre-status",
+            lambda exc: self.node.get_logger().error(f"status not published: {exc}"),
+            priority=gil_priority(int(p["realtime_priority"]) - 10),
+        )
+        self._thread = threading.Thread(target=self._loop, name="sabre-sim-robot", daemon=True)
+        self.done = threading.Event()
+        self.error: Exception | None = None
+
+    # Set-up ----------------------------------------------------------------------------------
+    def _build_plant(self, p: dict[str, Any]) -> None:
+        """The scene, the plant at its start state and the joint velocity controller inside it."""
         self.scene = scene = Scene.load(obj=p["object"])
         self.task = tasks.OpenObject()
         self.period = 1.0 / float(p["rate"])
@@ -56,6 +68,12 @@ class SimRobotNode:
         self.low = LowLevelController(scene, dt=self.period, gain_inertia_floor=float(p["gain_inertia_floor"]))
         x0 = paper_start_state(scene) if p["start"] == "paper" else scene.default_state()
         self.plant.reset(x0)
+        self._nq = scene.nq
+
+    def _map_joints(self, p: dict[str, Any]) -> list[str]:
+        """The order the joint states are published in and the joints the arm and base commands
+        drive; returns the robot's names for sabre's joints, in sabre's order."""
+        scene = self.scene
         names = list(p["joint_names"]) or list(scene.joint_names)
         if len(names) != scene.nq:
             raise SabreError(f"joint_names needs {scene.nq} names, got {names}")
@@ -68,10 +86,11 @@ class SimRobotNode:
         arm = list(p["arm_joints"]) or [n for n, s in zip(names, scene.joint_names) if s not in BASE_JOINTS]
         self.arm_index = np.array([index[n] for n in arm], dtype=np.intp)
         self.base_index = np.array([scene.joint_names.index(n) for n in BASE_JOINTS], dtype=np.intp)
-        self.command_timeout = float(p["command_timeout"])
-        nq = scene.nq
-        self._nq = nq
+        return names
 
+    def _init_bookkeeping(self, p: dict[str, Any]) -> None:
+        """The latest commands, the hold fault's schedule and the statistics the summary reports."""
+        self.command_timeout = float(p["command_timeout"])
         self._arm_cmd = np.zeros(len(self.arm_index))
         self._arm_recv = -math.inf
         self._base_cmd = np.zeros(3)
@@ -103,10 +122,20 @@ class SimRobotNode:
             "hold_started": None,
             "hold_ended": None,
         }
+        scene = self.scene
         self._hold_at = float(p["hold_at_opening"]) * float(scene.o_upper[0] - scene.o_lower[0]) + float(scene.o_lower[0])
         self._hold_done = False
         # The recent states by stamp (ns) → their index: an echo names the state it answers
         self._published: dict[int, int] = {}
+
+    def _create_endpoints(self, p: dict[str, Any], names: list[str]) -> None:
+        """The state, wrench, clock, status and obstacle publishers (with their reused messages) and
+        the command, echo and fault subscriptions."""
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import Twist, WrenchStamped
+        from rosgraph_msgs.msg import Clock
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import Bool, Float64MultiArray
 
         qos = 10
         self.js_pub = self.node.create_publisher(JointState, p["joint_state_topic"], qos)
@@ -118,7 +147,7 @@ class SimRobotNode:
         self._js = JointState()
         self._js.name = [names[i] for i in self.publish_index] + self.extra
         self._obj = JointState()
-        self._obj.name = list(scene.object_joint_names)
+        self._obj.name = list(self.scene.object_joint_names)
         self._wrench = WrenchStamped()
         self._wrench.header.frame_id = "world"
         self._clock = Clock()
@@ -128,16 +157,6 @@ class SimRobotNode:
         self.node.create_subscription(JointState, p["command_echo_topic"], self._on_echo, qos)
         self.node.create_subscription(Bool, p["hold_topic"], self._on_hold, qos)
         self.node.create_subscription(Float64MultiArray, p["set_obstacles_topic"], self._on_set_obstacles, qos)
-        self._status = PeriodicThread(
-            1.0 / float(p["status_rate"]),
-            self._publish_status,
-            "sabre-status",
-            lambda exc: self.node.get_logger().error(f"status not published: {exc}"),
-            priority=gil_priority(int(p["realtime_priority"]) - 10),
-        )
-        self._thread = threading.Thread(target=self._loop, name="sabre-sim-robot", daemon=True)
-        self.done = threading.Event()
-        self.error: Exception | None = None
 
     def start(self) -> None:
         self._start_wall = time.monotonic()
