@@ -61,7 +61,7 @@ class Scene:
         joint: str | None = None,
         hold: list[tuple[str, float]] | None = None,
         handle: str | None = None,
-        density: float = 600.0,
+        density: float = ...,
     ) -> Scene: ...
     @staticmethod
     def from_urdf_strings(
@@ -71,7 +71,7 @@ class Scene:
         joint: str | None = None,
         hold: list[tuple[str, float]] | None = None,
         handle: str | None = None,
-        density: float = 600.0,
+        density: float = ...,
     ) -> Scene: ...
     @property
     def nq(self) -> int: ...

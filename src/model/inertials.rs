@@ -142,3 +142,67 @@ pub fn assume_missing(tree: &mut KinematicTree, density: f64, source: &str) -> R
     }
     Ok(assumed)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::scene::{Scene, BUILTIN_ROBOTS};
+
+    fn object(tray_inertial: &str) -> String {
+        format!(
+            r#"<robot name="o"><link name="body"/>
+            <link name="tray">{tray_inertial}<collision><origin xyz="0.1 0 0"/><geometry><box size="0.2 0.4 0.02"/></geometry></collision></link>
+            <joint name="slide" type="prismatic"><parent link="body"/><child link="tray"/><axis xyz="-1 0 0"/>
+            <limit lower="0" upper="0.3" effort="1" velocity="1"/></joint></robot>"#
+        )
+    }
+
+    fn tray(inertial: &str, density: f64) -> (Inertial, Vec<AssumedInertial>) {
+        let scene = Scene::from_urdf_strings(BUILTIN_ROBOTS[0].1, &object(inertial), None)
+            .unwrap()
+            .with_density(density)
+            .unwrap();
+        let link = scene.object.link_id("tray").unwrap();
+        (scene.object.links[link].inertial.unwrap(), scene.assumed_inertials)
+    }
+
+    #[test]
+    fn an_inertial_without_mass_or_inertia_reads_and_keeps_what_it_declares() {
+        let doc_text = r#"<robot><link name="a"><inertial><origin xyz="1 2 3"/><mass value="2"/></inertial></link><link name="b"><inertial/></link></robot>"#;
+        let doc = roxmltree::Document::parse(doc_text).unwrap();
+        let completed = with_complete_inertials(doc_text, &doc);
+        assert!(completed.contains(r#"<mass value="2"/><inertia ixx="0""#), "{completed}");
+        assert!(completed.contains(r#"<inertial><mass value="0"/><inertia"#), "{completed}");
+        let present = inertial_elements(&doc);
+        assert_eq!(present["a"], (true, true, false));
+        assert_eq!(present["b"], (false, false, false));
+
+        let (full, assumed) = tray("", 500.0);
+        let m = 500.0 * 0.2 * 0.4 * 0.02;
+        assert!((full.mass - m).abs() < 1e-12 && (full.com - Vector3::new(0.1, 0.0, 0.0)).norm() < 1e-12);
+        assert_eq!(assumed.len(), 1);
+        assert_eq!(assumed[0].source, "collision geometry at 500 kg/m³");
+        let (declared, assumed) = tray(r#"<inertial><origin xyz="0.05 0 0"/><mass value="3"/></inertial>"#, 500.0);
+        assert_eq!((declared.mass, declared.com), (3.0, Vector3::new(0.05, 0.0, 0.0)));
+        assert!((declared.inertia - full.inertia * (3.0 / m)).norm() < 1e-12);
+        assert_eq!(
+            assumed[0].source,
+            "collision geometry at 500 kg/m³; declared mass, centre of mass"
+        );
+        let complete =
+            r#"<inertial><mass value="1"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial>"#;
+        assert!(tray(complete, 500.0).1.is_empty());
+    }
+
+    #[test]
+    fn a_changed_density_or_joint_choice_recomputes_what_was_assumed() {
+        let text = object("");
+        let light = Scene::from_urdf_strings(BUILTIN_ROBOTS[0].1, &text, None).unwrap();
+        let heavy = light.clone().with_density(1200.0).unwrap();
+        assert!((heavy.assumed_inertials[0].mass - 2.0 * light.assumed_inertials[0].mass).abs() < 1e-12);
+        let again = heavy.with_object_joint(Some("slide"), &[], Some("tray")).unwrap();
+        assert_eq!(again.density, 1200.0);
+        assert!((again.assumed_inertials[0].mass - 2.0 * light.assumed_inertials[0].mass).abs() < 1e-12);
+        assert!(light.with_density(f64::NAN).is_err());
+    }
+}
