@@ -11,6 +11,7 @@ from ._core import __version__
 from .closed_loop import paper_start_state, run_episode
 from .episode import Episode
 from .errors import (
+    AssumedInertialWarning,
     InvalidValueError,
     MissingExtraError,
     PlannerError,
@@ -101,4 +102,5 @@ __all__ = [
     "SimulationError",
     "MissingExtraError",
     "PlannerError",
+    "AssumedInertialWarning",
 ]

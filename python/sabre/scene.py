@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -10,15 +11,19 @@ from typing import NamedTuple
 import numpy as np
 
 from . import _core
-from ._validate import as_array, as_finite, as_float_array, readonly
-from .errors import InvalidValueError, ShapeError, UrdfError
+from ._validate import as_array, as_finite, as_float_array, as_positive, readonly
+from .errors import AssumedInertialWarning, InvalidValueError, ShapeError, UrdfError
 
-__all__ = ["Scene", "StateParts", "ROBOTS", "OBJECTS"]
+__all__ = ["Scene", "StateParts", "CollisionShape", "AssumedInertial", "ROBOTS", "OBJECTS", "DEFAULT_DENSITY"]
 
 #: Built-in robots (compiled into the library).
 ROBOTS: tuple[str, ...] = ("royalpanda",)
 #: Built-in articulated objects.
 OBJECTS: tuple[str, ...] = ("shelf", "microwave", "dishwasher", "drawer")
+#: Density (kg/m³) of moving object parts whose file gives no inertial: medium-density fibreboard and
+#: particle board, which most cabinet doors, drawer fronts and drawer boxes are made of, weigh
+#: 600–750 kg/m³ and solid pine about 500 (see :attr:`Scene.assumed_inertials`).
+DEFAULT_DENSITY: float = 600.0
 
 
 def _pose(obj_pose: Sequence[float] | np.ndarray | None) -> list[float] | None:
@@ -27,14 +32,32 @@ def _pose(obj_pose: Sequence[float] | np.ndarray | None) -> list[float] | None:
     return as_float_array("obj_pose", obj_pose, (6,)).tolist()
 
 
-def _selection(joint: str | None, hold: Mapping[str, float] | None) -> tuple[str | None, list[tuple[str, float]] | None]:
-    if joint is not None and not isinstance(joint, str):
-        raise InvalidValueError(f"joint must be a joint name, got {type(joint).__name__}")
+def _selection(
+    joint: str | None, hold: Mapping[str, float] | None, handle: str | None
+) -> tuple[str | None, list[tuple[str, float]] | None, str | None]:
+    for name, value in (("joint", joint), ("handle", handle)):
+        if value is not None and not isinstance(value, str):
+            raise InvalidValueError(f"{name} must be a {'joint' if name == 'joint' else 'link'} name, got {type(value).__name__}")
     if hold is None:
-        return joint, None
+        return joint, None, handle
     if not isinstance(hold, Mapping):
         raise InvalidValueError(f"hold must map joint names to positions, got {type(hold).__name__}")
-    return joint, [(str(name), as_finite(f"hold[{name!r}]", value)) for name, value in hold.items()]
+    return joint, [(str(name), as_finite(f"hold[{name!r}]", value)) for name, value in hold.items()], handle
+
+
+def _density(density: float) -> float:
+    return as_positive("density", density)
+
+
+def _warn_assumed(scene: Scene) -> Scene:
+    """One :class:`AssumedInertialWarning` per moving object link whose inertial was filled in."""
+    for a in scene.assumed_inertials:
+        warnings.warn(
+            f"object link {a.link!r} has no complete <inertial>: mass {a.mass:.3g} kg and inertia from its {a.source}",
+            AssumedInertialWarning,
+            stacklevel=3,
+        )
+    return scene
 
 
 class StateParts(NamedTuple):
@@ -68,6 +91,22 @@ class CollisionShape:
     size: tuple[float, ...]
     pose: np.ndarray
     points: np.ndarray
+
+
+class AssumedInertial(NamedTuple):
+    """The inertial of a moving object link that the file leaves out, filled in from its collision
+    geometry (:attr:`Scene.assumed_inertials`)."""
+
+    link: str
+    mass: float
+    """kg."""
+    com: np.ndarray
+    """(3,) centre of mass in the link frame (m)."""
+    inertia: np.ndarray
+    """(3, 3) inertia about the centre of mass, in the link frame (kg m²)."""
+    source: str
+    """Where the values come from: the collision geometry at the scene's density, and which parts
+    (mass, centre of mass, inertia) the file declared and were kept."""
 
 
 class Scene:
@@ -106,19 +145,37 @@ class Scene:
         *,
         joint: str | None = None,
         hold: Mapping[str, float] | None = None,
+        handle: str | None = None,
+        density: float = DEFAULT_DENSITY,
     ) -> Scene:
         """A scene from a robot URDF and an object URDF on disk. Collision geometry: boxes, spheres,
-        cylinders, capsules, and STL or OBJ meshes as their convex hulls (docs/objects.md says where
-        mesh files are looked for).
+        cylinders, capsules, and STL or OBJ meshes as convex hulls (docs/objects.md says where mesh
+        files are looked for, ``package://`` included).
 
-        An object with several movable joints (a cabinet with two doors) is opened one joint at a
-        time: ``joint`` names the one that stays movable, and every other movable joint is fixed at
-        its value in ``hold`` (rad or m; default 0 within its limits, i.e. closed).
+        An object with several movable joints (a cabinet with two doors and two drawers) is opened
+        one joint at a time: ``joint`` names the one that stays movable, or ``handle`` names a link
+        (the handle to open by) and the joint that moves it stays movable; every other movable
+        joint is fixed at its value in ``hold`` (rad or m; default 0 within its limits, i.e. closed).
+
+        A moving object link whose file gives no inertial, or only part of one, gets what is missing
+        from its collision geometry filled with material of ``density`` (kg/m³, default
+        :data:`DEFAULT_DENSITY`): the plant and the rollout model both use those values, the scene
+        lists them (:attr:`assumed_inertials`) and an :class:`~sabre.errors.AssumedInertialWarning`
+        names each such link.
+
+        Raises:
+            UrdfError: a missing or malformed file, a mesh not found (the message lists where it
+                looked), a ``joint`` or ``handle`` that does not pick one movable joint (the message
+                lists the candidates).
+            InvalidValueError: a non-finite held value, a non-positive density.
         """
         for label, path in (("robot", robot_path), ("object", obj_path)):
             if not os.path.isfile(path):
                 raise UrdfError(f"URDF {path}: {label} file does not exist")
-        return cls(_core.Scene.from_urdf(os.fspath(robot_path), os.fspath(obj_path), _pose(obj_pose), *_selection(joint, hold)))
+        core = _core.Scene.from_urdf(
+            os.fspath(robot_path), os.fspath(obj_path), _pose(obj_pose), *_selection(joint, hold, handle), _density(density)
+        )
+        return _warn_assumed(cls(core))
 
     @classmethod
     def from_urdf_strings(
@@ -129,9 +186,16 @@ class Scene:
         *,
         joint: str | None = None,
         hold: Mapping[str, float] | None = None,
+        handle: str | None = None,
+        density: float = DEFAULT_DENSITY,
     ) -> Scene:
-        """A scene from URDF text; ``joint`` and ``hold`` as in :meth:`from_urdf`."""
-        return cls(_core.Scene.from_urdf_strings(robot_urdf, obj_urdf, _pose(obj_pose), *_selection(joint, hold)))
+        """A scene from URDF text; ``joint``, ``hold``, ``handle`` and ``density`` as in
+        :meth:`from_urdf` (relative mesh paths resolve against the working directory and
+        ``SABRE_MESH_PATH``, ``package://`` only through the package paths)."""
+        core = _core.Scene.from_urdf_strings(
+            robot_urdf, obj_urdf, _pose(obj_pose), *_selection(joint, hold, handle), _density(density)
+        )
+        return _warn_assumed(cls(core))
 
     # -- sizes and names ----------------------------------------------------------------------
     @property
@@ -189,6 +253,37 @@ class Scene:
             )
             for link, kind, size, pose, points in self._core.object_collisions()
         )
+
+    @property
+    def density(self) -> float:
+        """Density (kg/m³) of the moving object links whose file gives no complete inertial."""
+        return self._core.density
+
+    @property
+    def assumed_inertials(self) -> tuple[AssumedInertial, ...]:
+        """The inertials of moving object links that their file leaves out (wholly or in part),
+        filled in from collision geometry at :attr:`density`; empty when the file gives them all."""
+        return tuple(
+            AssumedInertial(
+                link,
+                mass,
+                readonly(np.asarray(com, dtype=float)),
+                readonly(np.asarray(inertia, dtype=float).reshape(3, 3)),
+                source,
+            )
+            for link, mass, com, inertia, source in self._core.assumed_inertials()
+        )
+
+    def object_joints_moving(self, frame: str) -> tuple[str, ...]:
+        """The movable object joints that move the object frame or link ``frame``, root first (empty
+        for a part of the fixed carcass)."""
+        return tuple(self._core.object_joints_moving(str(frame)))
+
+    def object_closest_points(self, o: Sequence[float] | np.ndarray, point: Sequence[float] | np.ndarray) -> np.ndarray:
+        """(M, 3) for each collision primitive of :attr:`object_collisions` (a mesh's convex hull, a
+        box, ...), its world point nearest to the world ``point`` (3,) at object configuration o (no,);
+        ``point`` itself where it lies inside the primitive."""
+        return self._core.object_closest_points(as_float_array("o", o, (self.no,)), as_float_array("point", point, (3,)).tolist())
 
     # -- limits ---------------------------------------------------------------------------------
     def _robot_limits(self, i: int) -> np.ndarray:

@@ -1,6 +1,8 @@
 //! Robot and object models: URDF parsing, kinematic trees, rigid-body dynamics terms and the scene.
 
+pub(crate) mod collision_shape;
 pub mod dynamics;
+pub mod inertials;
 pub mod kinematics;
 pub mod mesh;
 pub mod scene;

@@ -8,7 +8,9 @@ use pyo3::prelude::*;
 
 use super::convert::{array, pose_array, poses_array, view};
 use super::error::run;
+use crate::model::inertials::DEFAULT_DENSITY;
 use crate::model::scene::Scene;
+use nalgebra::Point3;
 
 /// A self-collision sphere: (name, link, centre xyz in the link frame, radius).
 type SphereRow = (String, String, [f64; 3], f64);
@@ -47,37 +49,83 @@ impl PyScene {
         run(|| Scene::load(robot, obj, obj_pose.as_deref())).map(Self::wrap)
     }
 
-    /// `joint` keeps one movable object joint; the others are fixed at `hold` (default 0 within limits).
+    /// `joint` keeps one movable object joint, or `handle` the one that moves that link; the others
+    /// are fixed at `hold` (default 0 within limits). Moving object links without a complete
+    /// inertial get one from their collision geometry at `density` (kg/m³).
     #[staticmethod]
-    #[pyo3(signature = (robot_path, obj_path, obj_pose=None, joint=None, hold=None))]
+    #[pyo3(signature = (robot_path, obj_path, obj_pose=None, joint=None, hold=None, handle=None, density=DEFAULT_DENSITY))]
     fn from_urdf(
         robot_path: PathBuf,
         obj_path: PathBuf,
         obj_pose: Option<Vec<f64>>,
         joint: Option<String>,
         hold: Option<Vec<(String, f64)>>,
+        handle: Option<String>,
+        density: f64,
     ) -> PyResult<Self> {
         run(|| {
             Scene::from_urdf_files(&robot_path, &obj_path, obj_pose.as_deref())?
-                .with_object_joint(joint.as_deref(), &hold.unwrap_or_default())
+                .with_object_joint(joint.as_deref(), &hold.unwrap_or_default(), handle.as_deref())?
+                .with_density(density)
         })
         .map(Self::wrap)
     }
 
     #[staticmethod]
-    #[pyo3(signature = (robot_urdf, obj_urdf, obj_pose=None, joint=None, hold=None))]
+    #[pyo3(signature = (robot_urdf, obj_urdf, obj_pose=None, joint=None, hold=None, handle=None, density=DEFAULT_DENSITY))]
     fn from_urdf_strings(
         robot_urdf: &str,
         obj_urdf: &str,
         obj_pose: Option<Vec<f64>>,
         joint: Option<String>,
         hold: Option<Vec<(String, f64)>>,
+        handle: Option<String>,
+        density: f64,
     ) -> PyResult<Self> {
         run(|| {
             Scene::from_urdf_strings(robot_urdf, obj_urdf, obj_pose.as_deref())?
-                .with_object_joint(joint.as_deref(), &hold.unwrap_or_default())
+                .with_object_joint(joint.as_deref(), &hold.unwrap_or_default(), handle.as_deref())?
+                .with_density(density)
         })
         .map(Self::wrap)
+    }
+
+    /// Density (kg/m³) that moving object links without an inertial were given.
+    #[getter]
+    fn density(&self) -> f64 {
+        self.inner.density
+    }
+
+    /// The inertials filled in from collision geometry as (link, mass, centre of mass in the link
+    /// frame, inertia about it as a row-major 3 × 3, source).
+    fn assumed_inertials(&self) -> Vec<(String, f64, [f64; 3], Vec<f64>, String)> {
+        self.inner
+            .assumed_inertials
+            .iter()
+            .map(|a| {
+                let inertia = (0..3).flat_map(|r| (0..3).map(move |c| a.inertia[(r, c)])).collect();
+                (a.link.clone(), a.mass, [a.com.x, a.com.y, a.com.z], inertia, a.source.clone())
+            })
+            .collect()
+    }
+
+    /// The movable object joints that move the object frame `frame`, root first.
+    fn object_joints_moving(&self, frame: &str) -> PyResult<Vec<String>> {
+        run(|| self.inner.object_joints_moving(frame))
+    }
+
+    /// (M, 3) for each object collision primitive (in `object_collisions` order) its world point
+    /// nearest to the world point `point` (3,) at object configuration o (no,).
+    fn object_closest_points<'py>(
+        &self,
+        py: Python<'py>,
+        o: PyReadonlyArrayDyn<'py, f64>,
+        point: [f64; 3],
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let no = self.inner.no() as isize;
+        let points = run(|| self.inner.object_closest_points(view("o", &o, &[no])?, &Point3::from(point)))?;
+        let flat: Vec<f64> = points.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+        array(py, flat, &[points.len(), 3])
     }
 
     #[getter]
