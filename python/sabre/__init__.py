@@ -6,7 +6,7 @@ this package is the public API.
 
 from __future__ import annotations
 
-from . import costs, guides, tasks  # noqa: F401 (modules of the public API)
+from . import assets, costs, guides, tasks  # noqa: F401 (modules of the public API)
 from ._core import __version__
 from .closed_loop import paper_start_state, run_episode
 from .episode import Episode
@@ -22,10 +22,12 @@ from .errors import (
     UnknownFrameError,
     UrdfError,
 )
+from .estimation import LowPass, ObjectEstimate, ObjectStateEstimator, tau_ext_from_wrench
 from .experiments import scenarios
-from .inner_loop import LowLevelController, Trace
+from .inner_loop import LowLevelController, PlanSnapshot, Trace
+from .mujoco import MujocoPlant
 from .planner import VARIANTS, Controller, ControllerConfig, IterationStats, likelihood_weights
-from .planner_process import PlanSnapshot
+from .plants import PlantInterface
 from .realtime import RealtimeCascade, TickResult
 from .safety import (
     ConstraintRows,
@@ -57,6 +59,8 @@ __all__ = [
     "RolloutResult",
     "CONTACT_MODELS",
     "Plant",
+    "PlantInterface",
+    "MujocoPlant",
     "Trace",
     "ContactPoint",
     "LowLevelController",
@@ -72,6 +76,7 @@ __all__ = [
     "TankRefill",
     "default_threads",
     "costs",
+    "assets",
     "tasks",
     "scenarios",
     "Controller",
@@ -84,6 +89,10 @@ __all__ = [
     "likelihood_weights",
     "ScriptedMotion",
     "hook_and_pull",
+    "LowPass",
+    "tau_ext_from_wrench",
+    "ObjectEstimate",
+    "ObjectStateEstimator",
     "SabreError",
     "ShapeError",
     "InvalidValueError",

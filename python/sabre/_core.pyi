@@ -9,6 +9,7 @@ class: it cannot be subclassed (``@final``), is constructed by ``__new__``, and 
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from typing import final
 
 import numpy as np
@@ -25,6 +26,7 @@ __all__ = [
     "LowLevelController",
     "Plan",
     "InnerLoop",
+    "RateLimiter",
     "Cost",
     "MppiConfig",
     "ServoGuideConfig",
@@ -36,6 +38,7 @@ __all__ = [
     "TankRefillConfig",
     "EnergyTank",
     "default_threads",
+    "builtin_urdf",
     "likelihood_weights",
     "servo_guide",
     "__version__",
@@ -48,6 +51,7 @@ DEFAULT_TAU_EXT_CUTOFF: float
 CONTACT_MODELS: tuple[str, ...]
 
 def default_threads() -> int: ...
+def builtin_urdf(kind: str, name: str) -> str: ...
 
 @final
 class Scene:
@@ -301,6 +305,34 @@ class InnerLoop:
     def tick(
         self, plan: Plan, x: npt.NDArray[np.float64], tau_ext: npt.NDArray[np.float64], t: float, dt: float
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], float | None, str]: ...
+
+@final
+class RateLimiter:
+    def __new__(
+        cls,
+        v_max: Sequence[float] | npt.NDArray[np.float64],
+        a_max: Sequence[float] | npt.NDArray[np.float64],
+        j_max: Sequence[float] | npt.NDArray[np.float64],
+        dt: float,
+    ) -> RateLimiter: ...
+    def limit(self, target: Sequence[float] | npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
+    def reset(self, velocity: Sequence[float] | npt.NDArray[np.float64] | None = None) -> None: ...
+    @property
+    def state(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
+    @property
+    def at_rest(self) -> bool: ...
+    @property
+    def steps_to_rest(self) -> int: ...
+    @property
+    def size(self) -> int: ...
+    @property
+    def dt(self) -> float: ...
+    @property
+    def v_max(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def a_max(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def j_max(self) -> npt.NDArray[np.float64]: ...
 
 @final
 class Plant:

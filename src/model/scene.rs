@@ -93,6 +93,18 @@ fn builtin<'a>(kind: &str, table: &'a [(&str, &str)], name: &str) -> Result<&'a 
         })
 }
 
+/// The URDF text of a built-in asset: `kind` is "robot" or "object", `name` one of that table's names.
+pub fn builtin_urdf(kind: &str, name: &str) -> Result<&'static str> {
+    match kind {
+        "robot" => builtin(kind, BUILTIN_ROBOTS, name),
+        "object" => builtin(kind, BUILTIN_OBJECTS, name),
+        _ => Err(SabreError::invalid(
+            "kind",
+            format!("must be \"robot\" or \"object\", got {kind:?}"),
+        )),
+    }
+}
+
 impl Scene {
     /// Scene from built-in assets by name.
     pub fn load(robot: &str, object: &str, object_pose: Option<&[f64]>) -> Result<Self> {

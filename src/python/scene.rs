@@ -17,6 +17,12 @@ type SphereRow = (String, String, [f64; 3], f64);
 /// A float64 array handed to Python.
 type Array<'py> = Bound<'py, PyArrayDyn<f64>>;
 
+/// The URDF text of a built-in asset compiled into the library (`kind`: "robot" or "object").
+#[pyfunction]
+pub fn builtin_urdf(kind: &str, name: &str) -> PyResult<&'static str> {
+    run(|| crate::model::scene::builtin_urdf(kind, name))
+}
+
 #[pyclass(name = "Scene", module = "sabre._core", frozen)]
 pub struct PyScene {
     pub(crate) inner: Arc<Scene>,

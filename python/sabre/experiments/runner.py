@@ -4,28 +4,32 @@ hash of (experiment, configuration, seed), with per-seed CSV, the figure as PNG 
 Every run is a pure function :func:`run_one` of (experiment, configuration, seed); its result is a
 JSON file ``results/<name>/runs/<hash>.json``, so an interrupted sweep resumes where it stopped.
 ``short=True`` shortens every episode (smoke tests); short and full runs never share a cache entry.
+``plant="module:factory"`` runs every episode on ``factory(scene)`` (a :class:`~sabre.PlantInterface`) instead of
+the Rapier plant; the name is part of each run's configuration, so those runs are cached apart.
 """
 
 from __future__ import annotations
 
 import csv
 import hashlib
+import importlib
 import itertools
 import json
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..errors import InvalidValueError, require_extra
 from ..scene import OBJECTS
 
-__all__ = ["NAMES", "RunSpec", "run_one", "run_experiments", "run_specs", "specs", "acceptance_specs"]
+__all__ = ["NAMES", "RunSpec", "run_one", "run_experiments", "run_specs", "specs", "acceptance_specs", "transfer_specs"]
 
-NAMES: tuple[str, ...] = ("fig3", "fig4", "fig8", "fig10", "fig11", "fig12", "acceptance")
+NAMES: tuple[str, ...] = ("fig3", "fig4", "fig8", "fig10", "fig11", "fig12", "acceptance", "transfer")
 _SERIES_POINTS = 400
 
 
@@ -51,10 +55,42 @@ def _spec(name: str, seed: int, **config: object) -> RunSpec:
     return RunSpec(name, tuple(sorted(config.items())), int(seed))
 
 
-def specs(name: str, seeds: int, short: bool) -> list[RunSpec]:
-    """Every run of one experiment."""
+def _on_plant(runs: list[RunSpec], plant: str | None) -> list[RunSpec]:
+    """``runs`` on the plant ``plant`` ("module:factory") names; as they are for None (the Rapier plant)."""
+    if plant is None:
+        return runs
+    _plant_factory(plant)  # a name that does not resolve fails here, before any run
+    return [_spec(r.name, r.seed, **r.options, plant=plant) for r in runs]
+
+
+def _plant_factory(plant: str | None) -> Callable | None:
+    """The callable ``plant`` names as "module:attribute" (None for None)."""
+    if plant is None:
+        return None
+    module, _, attribute = str(plant).partition(":")
+    try:
+        factory = getattr(importlib.import_module(module), attribute)
+    except (ImportError, AttributeError, ValueError) as exc:
+        raise InvalidValueError(f"plant must name a factory as 'module:attribute', got {plant!r} ({exc})") from None
+    if not callable(factory):
+        raise InvalidValueError(f"plant: {plant!r} is not callable")
+    return factory
+
+
+def specs(name: str, seeds: int, short: bool, plant: str | None = None) -> list[RunSpec]:
+    """Every run of one experiment (on the plant ``plant`` names, "module:factory"; None: the Rapier plant)."""
     if name == "acceptance":
-        return acceptance_specs(range(seeds), duration=8.0 if short else 60.0)
+        return acceptance_specs(range(seeds), duration=8.0 if short else 60.0, plant=plant)
+    if name == "transfer":
+        # its runs name their own plants (sabre's and MuJoCo's), so `plant` does not apply; short: a smoke test
+        # of every object, variant and plant, nominal damping only
+        return transfer_specs(range(seeds), duration=1.0, scales=(1.0,)) if short else transfer_specs(range(seeds))
+    runs = _specs(name, seeds, short)
+    return runs if name == "fig3" else _on_plant(runs, plant)  # the weights of fig3 need no plant
+
+
+def _specs(name: str, seeds: int, short: bool) -> list[RunSpec]:
+    """Every run of one experiment on the Rapier plant."""
     out: list[RunSpec] = []
     for seed in range(seeds):
         if name == "fig3":
@@ -107,20 +143,31 @@ def acceptance_specs(
     variants: Sequence[str] = ("IO",),
     duration: float = 60.0,
     replan_rate: float = 50.0,
+    plant: str | None = None,
 ) -> list[RunSpec]:
     """The acceptance runs: every object opened from the paper's start by every variant at every seed,
-    for up to ``duration`` s of simulated time, re-planning at ``replan_rate`` Hz."""
+    for up to ``duration`` s of simulated time, re-planning at ``replan_rate`` Hz (on the plant ``plant``
+    names, "module:factory"; None: the Rapier plant)."""
     from ..planner import VARIANTS
 
     unknown = [o for o in objects if o not in OBJECTS] + [v for v in variants if v not in VARIANTS]
     if unknown:
         raise InvalidValueError(f"acceptance: unknown objects or variants {unknown}; objects {OBJECTS}, variants {VARIANTS}")
-    return [
+    runs = [
         _spec("acceptance", seed, obj=o, variant=v, duration=float(duration), replan_rate=float(replan_rate))
         for o in objects
         for v in variants
         for seed in seeds
     ]
+    return _on_plant(runs, plant)
+
+
+def transfer_specs(seeds: Iterable[int], **options: Any) -> list[RunSpec]:
+    """The transfer runs (:mod:`sabre.experiments.transfer`) at every seed; ``options`` are those of
+    :func:`~sabre.experiments.transfer.transfer_configs` (objects, variants, simulators, scales, duration, ...)."""
+    from .transfer import transfer_configs
+
+    return [_spec("transfer", seed, **config) for config in transfer_configs(**options) for seed in seeds]
 
 
 def _series(t: np.ndarray, y: np.ndarray) -> dict:
@@ -134,6 +181,7 @@ def run_one(spec: RunSpec) -> dict:
     from . import scenarios
 
     c, seed = spec.options, spec.seed
+    plant = _plant_factory(c.get("plant"))
     if spec.name == "fig3":
         # the same rollouts with costs scaled by `scale`: (55) gives the same weights, exp(−λJ) does not
         costs = c["scale"] * np.sort(np.random.default_rng(seed).gamma(2.0, 5.0, size=64) + 10.0)
@@ -153,6 +201,7 @@ def run_one(spec: RunSpec) -> dict:
             alpha=c.get("alpha", 1.0),
             driver=c["driver"],
             tank_initial=c.get("tank_initial", 10.0),
+            plant=plant,
         )
         ep = door.episode
         force = np.linalg.norm(ep.wrench[:, :3], axis=1)
@@ -170,9 +219,11 @@ def run_one(spec: RunSpec) -> dict:
             },
         }
     if spec.name == "acceptance":
-        return _acceptance_run(c, seed)
+        return _acceptance_run(c, seed, plant)
+    if spec.name == "transfer":
+        return _transfer_run(c, seed)
     if spec.name == "fig8":
-        manipulation = scenarios.object_manipulation(c["variant"], "shelf", seed, c["duration"])
+        manipulation = scenarios.object_manipulation(c["variant"], "shelf", seed, c["duration"], plant=plant)
         ep = manipulation.episode
         metrics = {
             "success": float(manipulation.success),
@@ -181,7 +232,7 @@ def run_one(spec: RunSpec) -> dict:
         }
         return {"metrics": metrics, "series": {"opening": _series(ep.time, ep.opening)}}
     if spec.name == "fig10":
-        corridor = scenarios.obstacle_corridor(c["variant"], seed, c["duration"])
+        corridor = scenarios.obstacle_corridor(c["variant"], seed, c["duration"], plant=plant)
         ep = corridor.episode
         hand = ep.scene.fk_many(ep.scene.split_state(ep.state).q, "grasp")[:, :3, 3]
         # the scenario's obstacle sits half-way between the start and the target 0.5 m to the side
@@ -202,12 +253,25 @@ def run_one(spec: RunSpec) -> dict:
     raise InvalidValueError(f"unknown experiment {spec.name!r}")
 
 
-def _acceptance_run(c: dict, seed: int) -> dict:
+def _transfer_run(c: dict, seed: int) -> dict:
+    """One transfer episode's metrics and opening; a plant that fails (a SabreError) is a run that did not open."""
+    from ..errors import SabreError
+    from .transfer import transfer_episode, transfer_metrics
+
+    try:
+        ep = transfer_episode(c, seed)
+    except SabreError as exc:
+        return {"metrics": transfer_metrics(None), "series": {}, "error": str(exc)}
+    return {"metrics": transfer_metrics(ep), "series": {"opening": _series(ep.time, ep.opening)}}
+
+
+def _acceptance_run(c: dict, seed: int, plant: Callable | None = None) -> dict:
     """One acceptance episode: whether and when it opened, how hard it pushed, how often the hook
     slipped off (open back to approach) or let go (into release), and how fast it ran."""
     from . import scenarios
 
-    ep = scenarios.object_manipulation(c["variant"], c["obj"], seed, c["duration"], replan_rate=c["replan_rate"]).episode
+    run = scenarios.object_manipulation(c["variant"], c["obj"], seed, c["duration"], replan_rate=c["replan_rate"], plant=plant)
+    ep = run.episode
     phases = [ep.phases[i] for i in ep.phase]
     transitions = list(itertools.pairwise(phases))
     needed = ep.success_opening
@@ -280,16 +344,19 @@ def run_experiments(
     ray_address: str | None = None,
     out: str | os.PathLike[str] = "results",
     short: bool = False,
+    plant: str | None = None,
 ) -> dict[str, list[dict]]:
     """Runs ``name`` (one of :data:`NAMES` or "all") over ``seeds`` seeds, reusing cached runs, and
-    writes ``<out>/<name>/runs.csv``, ``<name>.png`` and ``summary.md``. Returns the run records."""
+    writes ``<out>/<name>/runs.csv``, ``<name>.png`` and ``summary.md``. Returns the run records.
+    ``plant``: "module:factory" naming a callable that builds the plant of a scene (a
+    :class:`~sabre.PlantInterface`, e.g. a class taking the scene); None: the Rapier plant."""
     if int(seeds) < 1:
         raise InvalidValueError(f"seeds must be at least 1, got {seeds}")
     names = NAMES if name == "all" else (name,)
     records = {}
     for n in names:
         folder = Path(out) / n
-        ordered = run_specs(specs(n, int(seeds), short), folder, workers=workers, ray_address=ray_address)
+        ordered = run_specs(specs(n, int(seeds), short, plant), folder, workers=workers, ray_address=ray_address)
         records[n] = ordered
         _write_csv(folder / "runs.csv", ordered)
         from .figures import draw, summary
