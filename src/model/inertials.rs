@@ -77,8 +77,8 @@ pub fn with_complete_inertials(text: &str, doc: &roxmltree::Document) -> String 
         }
         let range = node.range();
         let element = &text[range.clone()];
-        if element.ends_with("/>") {
-            let open = element[..element.len() - 2].trim_end();
+        if let Some(open) = element.strip_suffix("/>") {
+            let open = open.trim_end();
             inserts.push((range.start, range.end, format!("{open}>{missing}</inertial>")));
         } else if let Some(close) = element.rfind("</") {
             inserts.push((range.start + close, range.start + close, missing));

@@ -23,6 +23,8 @@ pub fn builtin_urdf(kind: &str, name: &str) -> PyResult<&'static str> {
     run(|| crate::model::scene::builtin_urdf(kind, name))
 }
 
+/// One assumed inertial as Python sees it: (link, mass, centre of mass (3), inertia row-major (9), source).
+type AssumedInertialRow = (String, f64, [f64; 3], Vec<f64>, String);
 #[pyclass(name = "Scene", module = "sabre._core", frozen)]
 pub struct PyScene {
     pub(crate) inner: Arc<Scene>,
@@ -98,7 +100,7 @@ impl PyScene {
 
     /// The inertials filled in from collision geometry as (link, mass, centre of mass in the link
     /// frame, inertia about it as a row-major 3 × 3, source).
-    fn assumed_inertials(&self) -> Vec<(String, f64, [f64; 3], Vec<f64>, String)> {
+    fn assumed_inertials(&self) -> Vec<AssumedInertialRow> {
         self.inner
             .assumed_inertials
             .iter()
