@@ -17,7 +17,11 @@ lower limits):
 - the bar is the part of the handle farthest from the panel (standoffs and a U handle's legs stand
   between): its centre lies half its thickness behind the handle's front face, midway along and
   across the part of the handle within one thickness of that face;
-- x points up for a bar within 45° of vertical and, for any other bar, so that y = z × x points up.
+- for a bar within 45° of vertical, x points so that the finger, which hooks from the frame's −y
+  side, comes in from the hinge's side when the part turns about a vertical hinge (a door: the
+  side of the free edge may hold the neighbouring door and its handle, the hinge's side is the
+  door's own), and x points up on anything else (a drawer); for any other bar, so that y = z × x
+  points up.
 """
 
 from __future__ import annotations
@@ -135,6 +139,32 @@ def _surface_behind(scene: Scene, link: str, centre: np.ndarray, closed: np.ndar
     return (nearest[best] - centre) / gap
 
 
+def _hinge_to(scene: Scene, link: str, centre: np.ndarray, closed: np.ndarray) -> np.ndarray | None:
+    """Unit direction from the hinge axis to ``centre`` (a point of ``link``) when the object's joints
+    turn ``link`` about a vertical axis (within 45°) as they open from ``closed``; None otherwise."""
+    step = 1e-4 * (np.asarray(scene.o_upper, dtype=float) - closed)
+    before, after = scene.object_fk(closed, link), scene.object_fk(closed + step, link)
+    turn = after[:3, :3] @ before[:3, :3].T
+    omega = 0.5 * np.array([turn[2, 1] - turn[1, 2], turn[0, 2] - turn[2, 0], turn[1, 0] - turn[0, 1]])
+    if np.linalg.norm(omega) < 1e-9 or abs(omega @ UP) < np.sqrt(0.5) * np.linalg.norm(omega):
+        return None
+    moved = after[:3, :3] @ np.linalg.solve(before[:3, :3], centre - before[:3, 3]) + after[:3, 3] - centre
+    lever = -np.cross(omega, moved) / float(omega @ omega)  # v = ω × r with r ⊥ ω: r = −ω × v / |ω|²
+    lever -= (lever @ UP) * UP
+    norm = float(np.linalg.norm(lever))
+    return lever / norm if norm > 1e-9 else None
+
+
+def _bar_direction(axis: np.ndarray, z: np.ndarray, from_hinge: np.ndarray | None) -> np.ndarray:
+    """The handle frame's x: ``axis`` or its opposite (see the module's rules). The finger hooks from
+    the frame's −y side; on a door turning about a vertical hinge that side faces the hinge."""
+    if abs(axis @ UP) >= np.sqrt(0.5):
+        if from_hinge is not None:
+            return axis if np.cross(z, axis) @ from_hinge > 0.0 else -axis
+        return axis if axis @ UP > 0.0 else -axis
+    return axis if np.cross(z, axis) @ UP >= 0.0 else -axis
+
+
 def infer_handle_frame(scene: Scene, link: str) -> np.ndarray:
     """(4, 4) the handle frame of object link ``link`` in that link's frame (see the module's rules).
 
@@ -174,10 +204,7 @@ def infer_handle_frame(scene: Scene, link: str) -> np.ndarray:
     centre = (
         0.5 * (along.min() + along.max()) * axis + 0.5 * (across.min() + across.max()) * side - (out.max() - 0.5 * thickness) * z
     )
-    if abs(axis @ UP) >= np.sqrt(0.5):
-        x = axis if axis @ UP > 0.0 else -axis
-    else:
-        x = axis if np.cross(z, axis) @ UP >= 0.0 else -axis
+    x = _bar_direction(axis, z, _hinge_to(scene, link, centre, closed))
     world = np.eye(4)
     world[:3, 0], world[:3, 1], world[:3, 2], world[:3, 3] = x, np.cross(z, x), z, centre
     return np.linalg.inv(link_pose) @ world

@@ -170,3 +170,23 @@ def test_a_handle_with_nothing_moving_behind_it_is_refused(tmp_path):
     scene = load(tmp_path, cabinet(collisions(["grip.obj"]), leaf=""))
     with pytest.raises(sabre.InvalidValueError, match="no moving collision geometry besides the handle"):
         infer_handle_frame(scene, "grip")
+
+
+def test_the_finger_comes_in_from_the_hinge_side_of_a_door_hinged_left_or_right(tmp_path):
+    mesh_files.write_obj(tmp_path / "grip.obj", u_handle(0.17))
+    left = load(tmp_path, cabinet(collisions(["grip.obj"])))  # hinged on its +y edge, the handle near −y
+    right_hinged = (
+        cabinet(collisions(["grip.obj"]))
+        .replace(f'xyz="{HINGE[0]} {HINGE[1]} {HINGE[2]}"', f'xyz="{HINGE[0]} {-HINGE[1]} {HINGE[2]}"')
+        .replace('<axis xyz="0 0 -1"/>', '<axis xyz="0 0 1"/>')
+        .replace('<origin xyz="0.009 -0.2 0"/>', '<origin xyz="0.009 0.2 0"/>')
+        .replace(f'xyz="{MOUNT[0]} {MOUNT[1]} {MOUNT[2]}"', f'xyz="{MOUNT[0]} {-MOUNT[1]} {MOUNT[2]}"')
+    )
+    right = load(tmp_path, right_hinged)
+    for scene, hinge_y in ((left, HINGE[1]), (right, -HINGE[1])):
+        frame = world_frame(scene)
+        to_hinge = np.array([1.0, hinge_y, 0.0]) - frame[:3, 3]  # the object stands at (1, 0, 0)
+        to_hinge[[0, 2]] = 0.0
+        assert frame[:3, 1] @ to_hinge < 0.0  # the finger, on the −y side, is on the hinge's side
+        assert abs(frame[2, 0]) == pytest.approx(1.0)
+    assert world_frame(left)[2, 0] > 0.0 > world_frame(right)[2, 0]  # x up on the left door, down on the right
