@@ -8,6 +8,7 @@ use pyo3::prelude::*;
 
 use super::convert::{array, pose_array, poses_array, view};
 use super::error::run;
+use super::robot::{parsed, roles_row, visual_rows, RobotOptions, RolesRow, VisualRow};
 use crate::model::scene::Scene;
 
 /// A self-collision sphere: (name, link, centre xyz in the link frame, radius).
@@ -53,6 +54,31 @@ impl PyScene {
     ) -> PyResult<Self> {
         run(|| {
             Scene::from_urdf_files(&robot_path, &obj_path, obj_pose.as_deref())?
+                .with_object_joint(joint.as_deref(), &hold.unwrap_or_default())
+        })
+        .map(Self::wrap)
+    }
+
+    /// A scene from a robot and an object, each given as (kind, value): ("builtin", name), ("file",
+    /// path) or ("text", URDF); `robot` holds the robot's options (tool, held joints, base, postures)
+    /// over what its `<sabre>` block declares. A built-in object without `obj_pose` stands at its
+    /// default place.
+    #[staticmethod]
+    #[pyo3(signature = (robot_source, obj_source, robot, obj_pose=None, joint=None, hold=None))]
+    fn build(
+        robot_source: (String, String),
+        obj_source: (String, String),
+        robot: RobotOptions,
+        obj_pose: Option<Vec<f64>>,
+        joint: Option<String>,
+        hold: Option<Vec<(String, f64)>>,
+    ) -> PyResult<Self> {
+        run(|| {
+            let parsed_robot = parsed(&robot_source.0, &robot_source.1, true)?;
+            let parsed_object = parsed(&obj_source.0, &obj_source.1, false)?;
+            let default_pose = crate::model::scene::default_object_pose(&obj_source.1);
+            let pose = obj_pose.as_deref().or((obj_source.0 == "builtin").then_some(&default_pose[..]));
+            Scene::from_parts(parsed_robot, parsed_object, pose, &robot.decls()?)?
                 .with_object_joint(joint.as_deref(), &hold.unwrap_or_default())
         })
         .map(Self::wrap)
@@ -151,6 +177,27 @@ impl PyScene {
     fn home_configuration(&self) -> Vec<f64> {
         self.inner.home_configuration()
     }
+    fn start_configuration(&self) -> Vec<f64> {
+        self.inner.start_configuration()
+    }
+    fn work_configuration(&self) -> Vec<f64> {
+        self.inner.roles.work.clone()
+    }
+    /// What the robot's parts are for (see `robot::RolesRow`).
+    fn roles(&self) -> RolesRow {
+        roles_row(&self.inner)
+    }
+    /// The visuals of the robot's and of the object's links (see `robot::VisualRow`).
+    fn visuals(&self) -> (Vec<VisualRow>, Vec<VisualRow>) {
+        (visual_rows(&self.inner.robot), visual_rows(&self.inner.object))
+    }
+    /// The same scene with no robot link touching the object in the rollout model (to watch the
+    /// object move by itself).
+    fn without_robot_contact(&self) -> Self {
+        let mut scene = (*self.inner).clone();
+        scene.rollout_contact_links.clear();
+        Self::wrap(scene)
+    }
     fn rollout_contact_links(&self) -> Vec<String> {
         self.inner
             .rollout_contact_links
@@ -186,6 +233,17 @@ impl PyScene {
             }
         }
         out
+    }
+    /// Every collision sphere, in order: (name, link, centre xyz, radius, checked against obstacles).
+    fn spheres(&self) -> Vec<(String, String, [f64; 3], f64, bool)> {
+        self.inner
+            .spheres
+            .iter()
+            .map(|sp| {
+                let (name, link, centre, radius) = self.sphere_row(sp);
+                (name, link, centre, radius, sp.obstacles)
+            })
+            .collect()
     }
     /// The collision spheres checked against run-time obstacles as (name, link, centre xyz, radius).
     fn obstacle_spheres(&self) -> Vec<SphereRow> {

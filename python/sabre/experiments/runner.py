@@ -183,7 +183,9 @@ def run_one(spec: RunSpec) -> dict:
     if spec.name == "fig10":
         corridor = scenarios.obstacle_corridor(c["variant"], seed, c["duration"])
         ep = corridor.episode
-        hand = ep.scene.fk_many(ep.scene.split_state(ep.state).q, "grasp")[:, :3, 3]
+        q = ep.scene.split_state(ep.state).q
+        hand = ep.scene.fk_many(q, ep.scene.require_tool_frame("fig10"))[:, :3, 3]
+        base = ep.scene.fk_many(q, ep.scene.base_link)[:, :3, 3]
         # the scenario's obstacle sits half-way between the start and the target 0.5 m to the side
         centre = hand[0] + 0.5 * np.array([-0.15, 0.5, 0.0])
         appeared = corridor.appeared_at
@@ -195,7 +197,7 @@ def run_one(spec: RunSpec) -> dict:
             },
             "series": {
                 "hand_xy": _series(hand[:, 0], hand[:, 1]),
-                "base_xy": _series(ep.state[:, 0], ep.state[:, 1]),
+                "base_xy": _series(base[:, 0], base[:, 1]),
                 "obstacle": {"t": [float(centre[0])], "y": [float(centre[1])]},
             },
         }

@@ -365,7 +365,8 @@ def obstacle_corridor(
     and base-box rows from the appearance on (m² for obstacle rows, m for the box)."""
     scene = Scene.load(obj="shelf")
     x0 = scene.default_state()
-    start = scene.fk(scene.split_state(x0).q, "grasp")
+    hand = scene.require_tool_frame("obstacle_corridor")
+    start = scene.fk(scene.split_state(x0).q, hand)
     target = start.copy()
     target[:3, 3] = start[:3, 3] + np.array([-0.15, 0.5, 0.0])
     center = 0.5 * (start[:3, 3] + target[:3, 3])
@@ -383,7 +384,7 @@ def obstacle_corridor(
     def appear(t, x, plant, controller):
         if appeared:
             return
-        p = scene.fk(scene.split_state(x).q, "grasp")[:3, 3]
+        p = scene.fk(scene.split_state(x).q, hand)[:3, 3]
         if np.linalg.norm(p - center) - obstacle_radius <= 0.01:
             appeared.append(t)
             controller.add_obstacle(center, obstacle_radius)
