@@ -38,6 +38,7 @@ from .safety import (
     SequenceResult,
     TankRefill,
 )
+from .robots import TOOLS, Tool
 from .scene import OBJECTS, ROBOTS, Scene
 from .scripted import ScriptedMotion, hook_and_pull
 from .sim import CONTACT_MODELS, ContactPoint, Plant, RolloutModel, RolloutResult, default_threads
@@ -52,6 +53,8 @@ __all__ = [
     "Scene",
     "ROBOTS",
     "OBJECTS",
+    "Tool",
+    "TOOLS",
     "RolloutModel",
     "RolloutResult",
     "CONTACT_MODELS",

@@ -29,9 +29,11 @@ EXAMPLE_ROBOTS: dict[str, str] = {
 }
 
 #: The objects each example robot opens and where they stand (x, y, z, roll, pitch, yaw): the fixed
-#: Panda's within its reach in front of the pedestal, the mobile UR5's where the RoyalPanda's stand.
+#: Panda's in front of the pedestal where the hand can follow the handle all the way open (the drawer
+#: turned so that it slides out past the arm rather than into it), the mobile UR5's where the
+#: RoyalPanda's stand.
 EXAMPLE_OBJECTS: dict[str, dict[str, tuple[float, ...]]] = {
-    "panda_pedestal": {"drawer": (0.85, 0.0, 0.0, 0.0, 0.0, 0.0), "microwave": (0.7, 0.1, -0.2, 0.0, 0.0, 0.0)},
+    "panda_pedestal": {"drawer": (0.686, -0.235, 0.0, 0.0, 0.0, -1.047), "microwave": (0.86, 0.22, 0.0, 0.0, 0.0, 0.0)},
     "ur5_mobile": {"shelf": (1.0, 0.0, 0.0, 0.0, 0.0, 0.0), "dishwasher": (1.2, 0.0, 0.0, 0.0, 0.0, 0.0)},
 }
 

@@ -47,6 +47,19 @@ def _selection(joint: str | None, hold: Mapping[str, float] | None) -> tuple[str
     return joint, [(str(name), as_finite(f"hold[{name!r}]", value)) for name, value in hold.items()]
 
 
+def _collision_shapes(rows: list) -> tuple[CollisionShape, ...]:
+    return tuple(
+        CollisionShape(
+            link=link,
+            kind=kind,
+            size=tuple(size),
+            pose=readonly(np.asarray(pose, dtype=float).reshape(4, 4)),
+            points=readonly(np.asarray(points, dtype=float).reshape(-1, 3)),
+        )
+        for link, kind, size, pose, points in rows
+    )
+
+
 class StateParts(NamedTuple):
     """The parts of a state ``x = [q, q̇, o, ȯ]`` (:meth:`Scene.split_state`), each a view into x
     with x's leading axes."""
@@ -272,16 +285,12 @@ class Scene:
     @property
     def object_collisions(self) -> tuple[CollisionShape, ...]:
         """The object's collision primitives, each with its link and pose in that link's frame."""
-        return tuple(
-            CollisionShape(
-                link=link,
-                kind=kind,
-                size=tuple(size),
-                pose=readonly(np.asarray(pose, dtype=float).reshape(4, 4)),
-                points=readonly(np.asarray(points, dtype=float).reshape(-1, 3)),
-            )
-            for link, kind, size, pose, points in self._core.object_collisions()
-        )
+        return _collision_shapes(self._core.object_collisions())
+
+    @property
+    def robot_collisions(self) -> tuple[CollisionShape, ...]:
+        """The robot's collision primitives (its tool's included), each with its link and pose in that link's frame."""
+        return _collision_shapes(self._core.robot_collisions())
 
     # -- limits ---------------------------------------------------------------------------------
     def _robot_limits(self, i: int) -> np.ndarray:

@@ -6,12 +6,13 @@
 //! [`SURFACE_SPACING`] apart, split into up to [`MAX_SPHERES_PER_LINK`] slices along their principal
 //! axis, and each slice gets the smallest sphere about its bounding-box centre that holds its samples,
 //! grown by the spacing: every surface point lies within the spacing of a sample, so every one is
-//! inside a sphere. Pairs: spheres of two rigid bodies that no single movable joint connects, which
-//! overlap in at least [`RARELY_OVERLAPPING`] of [`PAIR_SAMPLES`] random configurations within the
-//! joint limits but not in most of them (those are neighbours whose spheres overlap by
-//! construction), and not at the home or start posture.
-
-use std::collections::HashSet;
+//! inside a sphere. Pairs: spheres of two links at least [`PAIR_JOINTS`] movable joints apart along
+//! the tree (nearer links move together, and the spheres that cover them overlap in ordinary
+//! postures where the links themselves do not), which overlap in at least [`RARELY_OVERLAPPING`] of [`PAIR_SAMPLES`] random configurations within the
+//! joint limits but not in more than [`ALWAYS_OVERLAPPING`] of them (those are neighbours whose
+//! spheres overlap by construction), mostly (in at least [`FAITHFUL_SHARE`] of those samples) while
+//! the links' own collision geometry is within [`NEAR`] (spheres that overlap while their links are
+//! well apart would only hold the arm back), and not at the home or start posture.
 
 use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 use rand::{Rng, SeedableRng};
@@ -25,13 +26,20 @@ use super::scene::{ArmReach, Sphere};
 pub const SURFACE_SPACING: f64 = 0.005;
 /// Most spheres one link gets.
 pub const MAX_SPHERES_PER_LINK: usize = 3;
+/// Fewest movable joints between the links of a self-collision pair.
+pub const PAIR_JOINTS: usize = 3;
+/// Distance (m) between two links' collision geometry that counts as meeting.
+pub const NEAR: f64 = 0.02;
+/// Share of a pair's overlapping samples in which its links must meet for the pair to be kept.
+pub const FAITHFUL_SHARE: f64 = 0.5;
 /// Random configurations the pairs are chosen on.
 pub const PAIR_SAMPLES: usize = 500;
-/// A pair overlapping in more than this share of the samples is left out ...
-pub const ALWAYS_OVERLAPPING: f64 = 0.5;
+/// A pair overlapping in more than this share of the samples is left out (its spheres overlap in
+/// ordinary postures of neighbouring links) ...
+pub const ALWAYS_OVERLAPPING: f64 = 0.2;
 /// ... and so is one overlapping in less (it can meet only in postures a task hardly visits).
 pub const RARELY_OVERLAPPING: f64 = 0.01;
-/// The generated reach limit is this share of the longest planar reach found in the samples.
+/// The generated reach limit is this share of the arm's longest planar reach.
 pub const REACH_SHARE: f64 = 0.9;
 
 fn grid(n: usize) -> impl Iterator<Item = f64> {
@@ -249,40 +257,66 @@ fn overlapping(tree: &KinematicTree, spheres: &[Sphere], q: &[f64], a: usize, b:
     d.norm() < sa.radius + sb.radius
 }
 
+/// Movable joints between two links along the tree: those that move one of them but not the other.
+fn joints_between(tree: &KinematicTree, a: usize, b: usize) -> usize {
+    let (ja, jb) = (tree.ancestor_active_joints(a), tree.ancestor_active_joints(b));
+    ja.iter().filter(|j| !jb.contains(j)).count() + jb.iter().filter(|j| !ja.contains(j)).count()
+}
+
+/// The distance between the collision geometry of links `a` and `b` at link poses `poses`.
+fn link_distance(tree: &KinematicTree, poses: &[Isometry3<f64>], a: usize, b: usize) -> f64 {
+    use rapier3d_f64::parry::math::Pose;
+    let shapes = |l: usize| {
+        tree.links[l].collisions.iter().map(move |c| {
+            let (shape, frame) = crate::sim::collision_shape::shared_shape(&c.shape);
+            (shape, Pose::from(poses[l] * c.origin * frame))
+        })
+    };
+    let mut nearest = f64::INFINITY;
+    for (sa, pa) in shapes(a) {
+        for (sb, pb) in shapes(b) {
+            if let Ok(d) = rapier3d_f64::parry::query::distance(&pa, &*sa, &pb, &*sb) {
+                nearest = nearest.min(d.distance);
+            }
+        }
+    }
+    nearest
+}
+
 /// Self-collision pairs among `spheres`: see the module documentation.
 pub fn collision_pairs(tree: &KinematicTree, spheres: &[Sphere], postures: &[&[f64]]) -> Vec<(usize, usize)> {
-    let body = bodies(tree);
-    let adjacent: HashSet<(usize, usize)> = tree
-        .active_joints
-        .iter()
-        .flat_map(|&j| {
-            let (p, c) = (body[tree.joints[j].parent], body[tree.joints[j].child]);
-            [(p, c), (c, p)]
-        })
-        .collect();
     let candidates: Vec<(usize, usize)> = (0..spheres.len())
         .flat_map(|a| (a + 1..spheres.len()).map(move |b| (a, b)))
-        .filter(|&(a, b)| {
-            let (ba, bb) = (body[spheres[a].link], body[spheres[b].link]);
-            ba != bb && !adjacent.contains(&(ba, bb))
-        })
+        .filter(|&(a, b)| joints_between(tree, spheres[a].link, spheres[b].link) >= PAIR_JOINTS)
         .collect();
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let samples: Vec<Vec<f64>> = (0..PAIR_SAMPLES).map(|_| random_configuration(tree, &mut rng)).collect();
     let all_poses: Vec<Vec<Isometry3<f64>>> = samples.iter().map(|q| tree.link_poses(&Isometry3::identity(), q)).collect();
+    let mut near: std::collections::HashMap<(usize, usize, usize), bool> = std::collections::HashMap::new();
     candidates
         .into_iter()
         .filter(|&(a, b)| {
             let (sa, sb) = (&spheres[a], &spheres[b]);
-            let meets = all_poses
-                .iter()
-                .filter(|poses| {
+            let overlapping_samples: Vec<usize> = (0..all_poses.len())
+                .filter(|&k| {
+                    let poses = &all_poses[k];
                     let d = poses[sa.link] * Point3::from(sa.center) - poses[sb.link] * Point3::from(sb.center);
                     d.norm() < sa.radius + sb.radius
                 })
+                .collect();
+            let share = overlapping_samples.len() as f64 / PAIR_SAMPLES as f64;
+            if !(RARELY_OVERLAPPING..=ALWAYS_OVERLAPPING).contains(&share) || postures.iter().any(|q| overlapping(tree, spheres, q, a, b)) {
+                return false;
+            }
+            let meeting = overlapping_samples
+                .iter()
+                .filter(|&&k| {
+                    *near
+                        .entry((k, sa.link, sb.link))
+                        .or_insert_with(|| link_distance(tree, &all_poses[k], sa.link, sb.link) < NEAR)
+                })
                 .count();
-            let share = meets as f64 / PAIR_SAMPLES as f64;
-            (RARELY_OVERLAPPING..=ALWAYS_OVERLAPPING).contains(&share) && !postures.iter().any(|q| overlapping(tree, spheres, q, a, b))
+            meeting as f64 >= FAITHFUL_SHARE * overlapping_samples.len() as f64
         })
         .collect()
 }
@@ -302,9 +336,31 @@ pub fn contact_links(tree: &KinematicTree, tool_frame: Option<usize>) -> Vec<usi
     (0..tree.links.len()).filter(|l| kept.contains(&body[*l]) && with_geometry(l)).collect()
 }
 
+/// The configuration within the limits near `start` that takes `measure` highest: a hill climb of
+/// random steps that shrink as they stop paying off.
+fn climb(tree: &KinematicTree, start: Vec<f64>, measure: &dyn Fn(&[f64]) -> f64, rng: &mut ChaCha8Rng) -> f64 {
+    let (mut q, mut best, mut step) = (start, 0.0, 0.3);
+    best = measure(&q).max(best);
+    let limits: Vec<(f64, f64)> = tree.active_limits().iter().map(|l| (l.lower, l.upper)).collect();
+    for _ in 0..400 {
+        let trial: Vec<f64> = q
+            .iter()
+            .zip(&limits)
+            .map(|(v, (lo, hi))| (v + step * rng.random_range(-1.0..1.0)).clamp(*lo, *hi))
+            .collect();
+        let value = measure(&trial);
+        if value > best {
+            (q, best) = (trial, value);
+        } else {
+            step = (step * 0.97).max(1e-3);
+        }
+    }
+    best
+}
+
 /// The planar reach limit of the tool frame from the arm's base link (the parent of the first
 /// movable joint on the tool frame's chain that is not a base joint): [`REACH_SHARE`] of the longest
-/// planar distance between them over random configurations.
+/// planar distance between them, found by a hill climb from the farthest of random configurations.
 pub fn arm_reach(tree: &KinematicTree, roles: &RobotRoles) -> Option<ArmReach> {
     let frame = roles.tool_frame?;
     let base_joints = roles.base.map(|b| b.indices()).unwrap_or_default();
@@ -314,17 +370,19 @@ pub fn arm_reach(tree: &KinematicTree, roles: &RobotRoles) -> Option<ArmReach> {
         .copied()
         .find(|&j| roles.base.is_none() || !base_joints.contains(&tree.joints[j].q_index.expect("movable")))?;
     let base_link = tree.joints[first].parent;
+    let measure = |q: &[f64]| {
+        let mut q = q.to_vec();
+        if let Some(base) = roles.base {
+            base.indices().iter().for_each(|&i| q[i] = 0.0);
+        }
+        let poses = tree.link_poses(&Isometry3::identity(), &q);
+        (poses[frame].translation.vector - poses[base_link].translation.vector).xy().norm()
+    };
     let mut rng = ChaCha8Rng::seed_from_u64(1);
-    let longest = (0..PAIR_SAMPLES)
-        .map(|_| {
-            let mut q = random_configuration(tree, &mut rng);
-            if let Some(base) = roles.base {
-                base.indices().iter().for_each(|&i| q[i] = 0.0);
-            }
-            let poses = tree.link_poses(&Isometry3::identity(), &q);
-            (poses[frame].translation.vector - poses[base_link].translation.vector).xy().norm()
-        })
-        .fold(0.0, f64::max);
+    let farthest = (0..PAIR_SAMPLES)
+        .map(|_| random_configuration(tree, &mut rng))
+        .max_by(|a, b| measure(a).total_cmp(&measure(b)))?;
+    let longest = climb(tree, farthest, &measure, &mut rng);
     (longest > 0.0).then(|| ArmReach {
         base_link,
         frame_link: frame,

@@ -13,6 +13,34 @@ use crate::model::scene::Scene;
 
 /// A self-collision sphere: (name, link, centre xyz in the link frame, radius).
 type SphereRow = (String, String, [f64; 3], f64);
+/// A collision primitive: (link, kind, size, pose row-major, hull vertices).
+type CollisionRow = (String, String, Vec<f64>, Vec<f64>, Vec<[f64; 3]>);
+
+/// The collision primitives of every link of `tree` (see `PyScene::object_collisions`).
+fn collision_rows(tree: &crate::model::KinematicTree) -> Vec<CollisionRow> {
+    use crate::model::kinematics::Shape;
+    let mut out = Vec::new();
+    for link in &tree.links {
+        for c in &link.collisions {
+            let (kind, size) = match &c.shape {
+                Shape::Box { half_extents } => ("box", vec![half_extents.x, half_extents.y, half_extents.z]),
+                Shape::Sphere { radius } => ("sphere", vec![*radius]),
+                Shape::Cylinder { radius, half_length } => ("cylinder", vec![*radius, *half_length]),
+                Shape::Capsule { radius, half_length } => ("capsule", vec![*radius, *half_length]),
+                Shape::Hull { half_extents, .. } => ("mesh", vec![half_extents.x, half_extents.y, half_extents.z]),
+            };
+            let m = c.origin.to_homogeneous();
+            let pose = (0..4).flat_map(|r| (0..4).map(move |col| m[(r, col)])).collect();
+            let points = match &c.shape {
+                Shape::Hull { points, .. } => points.iter().map(|p| [p.x, p.y, p.z]).collect(),
+                _ => Vec::new(),
+            };
+            out.push((link.name.clone(), kind.to_string(), size, pose, points));
+        }
+    }
+    out
+}
+
 /// A float64 array handed to Python.
 type Array<'py> = Bound<'py, PyArrayDyn<f64>>;
 
@@ -209,30 +237,12 @@ impl PyScene {
     /// 4 × 4): kind "box" (size = half extents x, y, z), "sphere" (radius), "cylinder" and "capsule"
     /// (radius, half length along the primitive's z), "mesh" (a mesh's convex hull: half extents of
     /// its bounding box, which the pose centres), and for meshes the hull's vertices (else empty).
-    #[allow(clippy::type_complexity)]
-    fn object_collisions(&self) -> Vec<(String, String, Vec<f64>, Vec<f64>, Vec<[f64; 3]>)> {
-        use crate::model::kinematics::Shape;
-        let tree = &self.inner.object;
-        let mut out = Vec::new();
-        for link in &tree.links {
-            for c in &link.collisions {
-                let (kind, size) = match &c.shape {
-                    Shape::Box { half_extents } => ("box", vec![half_extents.x, half_extents.y, half_extents.z]),
-                    Shape::Sphere { radius } => ("sphere", vec![*radius]),
-                    Shape::Cylinder { radius, half_length } => ("cylinder", vec![*radius, *half_length]),
-                    Shape::Capsule { radius, half_length } => ("capsule", vec![*radius, *half_length]),
-                    Shape::Hull { half_extents, .. } => ("mesh", vec![half_extents.x, half_extents.y, half_extents.z]),
-                };
-                let m = c.origin.to_homogeneous();
-                let pose = (0..4).flat_map(|r| (0..4).map(move |col| m[(r, col)])).collect();
-                let points = match &c.shape {
-                    Shape::Hull { points, .. } => points.iter().map(|p| [p.x, p.y, p.z]).collect(),
-                    _ => Vec::new(),
-                };
-                out.push((link.name.clone(), kind.to_string(), size, pose, points));
-            }
-        }
-        out
+    fn object_collisions(&self) -> Vec<CollisionRow> {
+        collision_rows(&self.inner.object)
+    }
+    /// The robot's collision primitives (its tool's included), as `object_collisions`.
+    fn robot_collisions(&self) -> Vec<CollisionRow> {
+        collision_rows(&self.inner.robot)
     }
     /// Every collision sphere, in order: (name, link, centre xyz, radius, checked against obstacles).
     fn spheres(&self) -> Vec<(String, String, [f64; 3], f64, bool)> {

@@ -297,16 +297,21 @@ class OpenObject(Task):
         return not self._slipped(scene, x)
 
     def backed_out(self, scene: Scene, x: np.ndarray) -> bool:
-        """Whether the finger, hooking an object already opened, has backed out in front of the bar
-        without moving it: the grasp frame more than ``hook.backout`` (m) short of the hook target's
-        depth, the handle at least ``hook.drag_distance`` (m) from closed (as for ``pulling``) and opening
-        no faster than ``hook.drag_speed`` (m/s). A finger that catches the bar with its tip often drags
-        a free door open that way until the bar slides into the pocket (``pulling``), and on a closed
-        door that is how the drag starts; a door that was opened and does not move now (held, or
-        stuck) only takes the tank's energy for the catch."""
-        if self.hook.backout is None or self.depth_error(scene, x, "hook") >= -self.hook.backout:
+        """Whether the finger, hooking, has backed out in front of the bar and stalled: the grasp frame
+        more than ``hook.backout`` (m) short of the hook target's depth, the handle opening no faster
+        than ``hook.drag_speed`` (m/s), and either at least ``hook.drag_distance`` (m) from closed (as
+        for ``pulling``) or the frame more than ``hook.stall_depth`` (m) short. A finger that catches
+        the bar with its tip often drags a free door open that way until the bar slides into the
+        pocket (``pulling``), and on a closed door that is how the drag starts; a door that was opened
+        and does not move now (held, or stuck) only takes the tank's energy for the catch, and a
+        finger too far out for its tip to hold the bar starts over however little it dragged."""
+        if self.hook.backout is None:
             return False
-        if self.handle_from_closed(scene, x) < self.hook.drag_distance:
+        short = -self.depth_error(scene, x, "hook")
+        if short <= self.hook.backout:
+            return False
+        lost = self.hook.stall_depth is not None and short > self.hook.stall_depth
+        if not lost and self.handle_from_closed(scene, x) < self.hook.drag_distance:
             return False
         return self.handle_speed(scene, x) <= self.hook.drag_speed
 
