@@ -26,6 +26,7 @@ from .inner_loop import LowLevelController, Trace
 from .planner import VARIANTS, Controller, ControllerConfig, IterationStats, likelihood_weights
 from .planner_process import PlanSnapshot
 from .realtime import RealtimeCascade, TickResult
+from .robots import TOOLS, Tool
 from .safety import (
     ConstraintRows,
     EnergyTank,
@@ -38,7 +39,6 @@ from .safety import (
     SequenceResult,
     TankRefill,
 )
-from .robots import TOOLS, Tool
 from .scene import OBJECTS, ROBOTS, Scene
 from .scripted import ScriptedMotion, hook_and_pull
 from .sim import CONTACT_MODELS, ContactPoint, Plant, RolloutModel, RolloutResult, default_threads
