@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 
 from ..experiments.runner import NAMES, run_experiments
+from ..robot_examples import EXAMPLE_ROBOTS
 
 __all__ = ["register", "view_command", "experiment_command"]
 
@@ -31,6 +32,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     exp.add_argument("--ray", default=None, metavar="ADDRESS", help="run on a Ray cluster ('auto' or host:port)")
     exp.add_argument("--out", default="results", help="output folder (results/<name>/ inside)")
     exp.add_argument("--short", action="store_true", help="short durations (smoke test)")
+    exp.add_argument(
+        "--robot",
+        choices=("royalpanda", *EXAMPLE_ROBOTS),
+        default="royalpanda",
+        help="the acceptance's robot: an example robot opens its own objects (docs/robots.md)",
+    )
     exp.set_defaults(run=experiment_command)
 
 
@@ -44,5 +51,7 @@ def view_command(args: argparse.Namespace) -> int:
 
 def experiment_command(args: argparse.Namespace) -> int:
     """``experiment``: runs the named experiment (or all) and writes results/<name>/; 0."""
-    run_experiments(args.name, seeds=args.seeds, workers=args.workers, ray_address=args.ray, out=args.out, short=args.short)
+    run_experiments(
+        args.name, seeds=args.seeds, workers=args.workers, ray_address=args.ray, out=args.out, short=args.short, robot=args.robot
+    )
     return 0

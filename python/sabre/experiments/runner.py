@@ -51,10 +51,12 @@ def _spec(name: str, seed: int, **config: object) -> RunSpec:
     return RunSpec(name, tuple(sorted(config.items())), int(seed))
 
 
-def specs(name: str, seeds: int, short: bool) -> list[RunSpec]:
-    """Every run of one experiment."""
+def specs(name: str, seeds: int, short: bool, robot: str = "royalpanda") -> list[RunSpec]:
+    """Every run of one experiment (``robot``: the acceptance's robot; the others are the RoyalPanda's)."""
     if name == "acceptance":
-        return acceptance_specs(range(seeds), duration=8.0 if short else 60.0)
+        return acceptance_specs(range(seeds), duration=8.0 if short else 60.0, robot=robot)
+    if robot != "royalpanda":
+        raise InvalidValueError(f"experiment {name!r} runs on the RoyalPanda; only acceptance takes another robot")
     out: list[RunSpec] = []
     for seed in range(seeds):
         if name == "fig3":
@@ -107,16 +109,27 @@ def acceptance_specs(
     variants: Sequence[str] = ("IO",),
     duration: float = 60.0,
     replan_rate: float = 50.0,
+    robot: str = "royalpanda",
 ) -> list[RunSpec]:
-    """The acceptance runs: every object opened from the paper's start by every variant at every seed,
-    for up to ``duration`` s of simulated time, re-planning at ``replan_rate`` Hz."""
+    """The acceptance runs: every object opened from the robot's start by every variant at every seed,
+    for up to ``duration`` s of simulated time, re-planning at ``replan_rate`` Hz. ``robot``: the
+    RoyalPanda (the paper's start) or an example robot (:data:`sabre.robot_examples.EXAMPLE_ROBOTS`),
+    which opens its own objects (``objects`` defaults to them)."""
     from ..planner import VARIANTS
+    from ..robot_examples import EXAMPLE_OBJECTS
 
-    unknown = [o for o in objects if o not in OBJECTS] + [v for v in variants if v not in VARIANTS]
+    if robot != "royalpanda" and robot not in EXAMPLE_OBJECTS:
+        raise InvalidValueError(f"acceptance: unknown robot {robot!r}; royalpanda or one of {list(EXAMPLE_OBJECTS)}")
+    known = OBJECTS if robot == "royalpanda" else tuple(EXAMPLE_OBJECTS[robot])
+    if robot != "royalpanda" and tuple(objects) == OBJECTS:
+        objects = known
+    unknown = [o for o in objects if o not in known] + [v for v in variants if v not in VARIANTS]
     if unknown:
-        raise InvalidValueError(f"acceptance: unknown objects or variants {unknown}; objects {OBJECTS}, variants {VARIANTS}")
+        raise InvalidValueError(f"acceptance: unknown objects or variants {unknown}; objects {known}, variants {VARIANTS}")
+    # the RoyalPanda's runs keep the configuration (and so the cache entries) they always had
+    mounted = {} if robot == "royalpanda" else {"robot": robot}
     return [
-        _spec("acceptance", seed, obj=o, variant=v, duration=float(duration), replan_rate=float(replan_rate))
+        _spec("acceptance", seed, obj=o, variant=v, duration=float(duration), replan_rate=float(replan_rate), **mounted)
         for o in objects
         for v in variants
         for seed in seeds
@@ -209,7 +222,9 @@ def _acceptance_run(c: dict, seed: int) -> dict:
     slipped off (open back to approach) or let go (into release), and how fast it ran."""
     from . import scenarios
 
-    ep = scenarios.object_manipulation(c["variant"], c["obj"], seed, c["duration"], replan_rate=c["replan_rate"]).episode
+    ep = scenarios.object_manipulation(
+        c["variant"], c["obj"], seed, c["duration"], replan_rate=c["replan_rate"], robot=c.get("robot", "royalpanda")
+    ).episode
     phases = [ep.phases[i] for i in ep.phase]
     transitions = list(itertools.pairwise(phases))
     needed = ep.success_opening
@@ -282,16 +297,18 @@ def run_experiments(
     ray_address: str | None = None,
     out: str | os.PathLike[str] = "results",
     short: bool = False,
+    robot: str = "royalpanda",
 ) -> dict[str, list[dict]]:
     """Runs ``name`` (one of :data:`NAMES` or "all") over ``seeds`` seeds, reusing cached runs, and
-    writes ``<out>/<name>/runs.csv``, ``<name>.png`` and ``summary.md``. Returns the run records."""
+    writes ``<out>/<name>/runs.csv``, ``<name>.png`` and ``summary.md``. Returns the run records.
+    ``robot`` other than the RoyalPanda: the acceptance of that example robot, in ``<out>/acceptance_<robot>/``."""
     if int(seeds) < 1:
         raise InvalidValueError(f"seeds must be at least 1, got {seeds}")
     names = NAMES if name == "all" else (name,)
     records = {}
     for n in names:
-        folder = Path(out) / n
-        ordered = run_specs(specs(n, int(seeds), short), folder, workers=workers, ray_address=ray_address)
+        folder = Path(out) / (n if robot == "royalpanda" else f"{n}_{robot}")
+        ordered = run_specs(specs(n, int(seeds), short, robot), folder, workers=workers, ray_address=ray_address)
         records[n] = ordered
         _write_csv(folder / "runs.csv", ordered)
         from .figures import draw, summary

@@ -23,7 +23,7 @@ from ..errors import InvalidValueError
 from ..inner_loop import LowLevelController
 from ..planner import Controller, ControllerConfig
 from ..safety import EnergyTank, SafetyConfig, SafetyFilter
-from ..scene import Scene
+from ..scene import ROBOTS, Scene
 from ..scripted import hook_and_pull
 from ..sim import Plant
 
@@ -37,6 +37,7 @@ __all__ = [
     "tank_chattering",
     "obstacle_corridor",
     "object_manipulation",
+    "manipulation_scene",
     "power_sign_changes_per_s",
     "tank_power",
     "FloorPower",
@@ -417,6 +418,15 @@ def obstacle_corridor(
 
 
 # -- object manipulation -----------------------------------------------------------------------
+def manipulation_scene(robot: str, obj: str) -> Scene:
+    """The scene of ``robot`` (built-in or example) opening built-in object ``obj``."""
+    if robot in ROBOTS:
+        return Scene.load(robot, obj)
+    from ..robot_examples import example_scene
+
+    return example_scene(robot, obj)
+
+
 @dataclass(frozen=True)
 class ManipulationResult:
     episode: Episode = field(repr=False)
@@ -427,10 +437,18 @@ class ManipulationResult:
 
 
 def object_manipulation(
-    variant: str = "IO", obj: str = "shelf", seed: int = 0, duration: float = 60.0, *, replan_rate: float = 50.0
+    variant: str = "IO",
+    obj: str = "shelf",
+    seed: int = 0,
+    duration: float = 60.0,
+    *,
+    replan_rate: float = 50.0,
+    robot: str = "royalpanda",
 ) -> ManipulationResult:
-    """OpenObject from :func:`~sabre.closed_loop.paper_start_state`; violations per ZBF class."""
-    scene = Scene.load(obj=obj)
+    """OpenObject from :func:`~sabre.closed_loop.paper_start_state`; violations per ZBF class. ``robot``:
+    a built-in robot (:data:`sabre.ROBOTS`) or an example robot
+    (:data:`sabre.robot_examples.EXAMPLE_ROBOTS`, with its objects where it opens them)."""
+    scene = manipulation_scene(robot, obj)
     ctrl = Controller(scene, tasks.OpenObject(), ControllerConfig(variant=variant, seed=seed))
     ep = run_episode(
         scene, ctrl, duration, seed=seed, x0=paper_start_state(scene), replan_rate=replan_rate, record_every=10, progress=False
