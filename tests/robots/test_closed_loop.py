@@ -27,7 +27,7 @@ def test_a_stalled_hook_far_short_of_the_bar_starts_over_whatever_the_drag():
     scene = sabre.Scene.load(obj="shelf")
     task = tasks.OpenObject()
     x = scene.default_state()
-    q, q_dot, o, o_dot = scene.split_state(x)
+    q, _, o, o_dot = scene.split_state(x)
     o[0] = 0.027 / task.handle_travel(scene, 0.0)  # the handle dragged 2.7 cm, below hook.drag_distance
     target = task.handle_pose(scene, o) @ task.grasp_offset(scene, "hook")
     target[:3, 3] -= 0.065 * target[:3, 2]  # the grasp frame 65 mm short of the hook target's depth

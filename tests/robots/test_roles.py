@@ -55,7 +55,7 @@ def test_held_robot_joints_take_the_given_value(panda_urdf):
     np.testing.assert_allclose(finger[:3, 3], [0.0, 0.04, 0.0584], atol=1e-12)
     with pytest.raises(sabre.UrdfError, match="outside its limits"):
         sabre.Scene.from_urdf(panda_urdf, "drawer", tool=HOOK_ON_HAND, robot_hold={"panda_finger_joint1": 0.1})
-    with pytest.raises(sabre.UrdfError, match="'gripper'.*movable joints are: panda_joint1"):
+    with pytest.raises(sabre.UrdfError, match=r"'gripper'.*movable joints are: panda_joint1"):
         sabre.Scene.from_urdf(panda_urdf, "drawer", robot_hold={"gripper": 0.0})
 
 
@@ -73,7 +73,7 @@ def test_a_robot_without_a_tool_frame_is_refused_by_the_task_naming_the_role():
       <joint name="b" type="fixed"><parent link="arm"/><child link="tip_b"/></joint></robot>"""
     scene = sabre.Scene.from_urdf_strings(two_leaves, (ASSETS / "objects" / "shelf.urdf").read_text())
     assert scene.tool_frame is None and scene.role_origins["tool_frame"] == "none"
-    with pytest.raises(sabre.UnknownFrameError, match="OpenObject needs a tool frame.*tool_frame="):
+    with pytest.raises(sabre.UnknownFrameError, match=r"OpenObject needs a tool frame.*tool_frame="):
         sabre.tasks.OpenObject().check(scene)
     named = sabre.Scene.from_urdf_strings(two_leaves, (ASSETS / "objects" / "shelf.urdf").read_text(), tool_frame="tip_b")
     assert named.tool_frame == "tip_b" and named.role_origins["tool_frame"] == "declared"
@@ -191,7 +191,7 @@ def test_a_gain_floor_that_would_make_a_light_joint_diverge_is_refused():
     plant.reset(scene.start_state())
     auto.track(plant, np.zeros(scene.nq), 5)
     heavy = sabre.LowLevelController(scene, dt=0.001, gain_inertia_floor=2.0 * stable)
-    with pytest.raises(sabre.InvalidValueError, match="joint 'panda_joint7'.*diverges.*at most"):
+    with pytest.raises(sabre.InvalidValueError, match=r"joint 'panda_joint7'.*diverges.*at most"):
         heavy.track(plant, np.zeros(scene.nq), 1)
 
 
