@@ -37,6 +37,7 @@ __all__ = [
     "EnergyTank",
     "default_threads",
     "likelihood_weights",
+    "mesh_triangles",
     "servo_guide",
     "__version__",
     "DEFAULT_TAU_EXT_CUTOFF",
