@@ -19,7 +19,7 @@ TEST_STAMP := $(VENV)/.stamp-test
 LINT_STAMP := $(VENV)/.stamp-lint
 BENCH_STAMP := $(VENV)/.stamp-bench
 
-.PHONY: all venv build demo test test-setup test-rust test-python lint lint-rust lint-python lint-ruff lint-format lint-types \
+.PHONY: all venv build demo test test-setup test-rust test-python test-ros-jazzy lint lint-rust lint-python lint-ruff lint-format lint-types \
 	lint-length bench bench-rust bench-python clean
 
 all: build
@@ -71,6 +71,16 @@ test-python: $(TEST_STAMP) build test-setup
 
 test: test-rust test-python
 
+# The ROS 2 bridge's tests under Jazzy (`make test` runs them under Kilted, the `ros` extra): a venv of its own,
+# since the two distributions' wheels install the same module names.
+JAZZY_VENV := .venv-jazzy
+test-ros-jazzy: $(BASE_STAMP)
+	test -x $(JAZZY_VENV)/bin/python || $(PYTHON) -m venv $(JAZZY_VENV)
+	$(JAZZY_VENV)/bin/python -m pip install --quiet "pip>=25.1" pytest
+	$(JAZZY_VENV)/bin/python -m pip install --quiet --group build
+	VIRTUAL_ENV=$(CURDIR)/$(JAZZY_VENV) $(JAZZY_VENV)/bin/maturin develop --release --quiet --extras ros-jazzy
+	$(JAZZY_VENV)/bin/python -m pytest -q tests/ros
+
 # `make -k lint` reports every tool's findings instead of stopping at the first.
 # clippy with the python feature builds PyO3 against the venv's interpreter.
 lint-rust: $(BASE_STAMP)
@@ -112,4 +122,4 @@ bench: bench-rust bench-python
 
 clean:
 	cargo clean
-	rm -rf $(VENV) .pytest_cache
+	rm -rf $(VENV) $(JAZZY_VENV) .pytest_cache

@@ -1,15 +1,19 @@
 """Generality sweep: objects written the way other tools write them, opened by naming their handle link.
 
-    .venv/bin/python experiments/generality_sweep.py --objects 40 --duration 60 --variants N IO --out results/generality.md
+    .venv/bin/python experiments/generality_sweep.py --family box --objects 40 --duration 60 --variants N IO
+    .venv/bin/python experiments/generality_sweep.py --family mesh --objects 40 --duration 60 --variants N IO
 
-The objects are support/objects.py's: a URDF each with its own link and joint names, a `world` root
-with a fixed joint and no `handle_frame`, varying handle height, width, hinge side, bar orientation and
-shape, door or drawer, friction, damping, moving mass and where it stands (see that module).
+The objects are support/objects.py's. The box family: a URDF each with its own link and joint names, a
+`world` root with a fixed joint and no `handle_frame`, varying handle height, width, hinge side, bar
+orientation and shape, door or drawer, friction, damping, moving mass and where it stands. The mesh
+family: cabinets as robot-learning benchmarks ship them (a ROS package each, every part convex mesh
+pieces, no inertials, two doors and two drawers, handles as mesh bars on standoffs); the scene keeps the
+joint of the target part's handle (`Scene.from_urdf(..., handle=...)`) and holds the others shut.
 `OpenObject(handle=<bar link>)` opens each from the default robot state; success is 90 % of the target
 opening within the simulated duration. Failures are classified: could not reach (never inserting),
 could not hook (never opening), slipped (opening, then back to reaching), stalled at a joint limit (an
 arm joint within 0.02 rad of a limit over the last 5 s), tank spent (I/IO: the tank within 0.1 J of its
-floor at the end), or stalled (none of these).
+floor at the end), or stalled (none of these). ``--first``/``--objects`` split a sweep over processes.
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ import numpy as np
 import sabre
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository root, for support/
-from support.objects import ObjectSpec, random_spec, scene_of
+from support.objects import MeshCabinetSpec, ObjectSpec, random_mesh_spec, random_spec, scene_of
 
 
 def classify(episode: sabre.Episode, scene: sabre.Scene) -> str:
@@ -50,7 +54,7 @@ def classify(episode: sabre.Episode, scene: sabre.Scene) -> str:
     return "stalled"
 
 
-def run_one(spec: ObjectSpec, variant: str, duration: float, seed: int = 0) -> tuple[str, float | None]:
+def run_one(spec: ObjectSpec | MeshCabinetSpec, variant: str, duration: float, seed: int = 0) -> tuple[str, float | None]:
     scene = scene_of(spec)
     task = sabre.tasks.OpenObject(handle=spec.handle_link)
     # The filter's base box (the paper's experiments: ±2 m) must hold the robot's way to an object
@@ -63,6 +67,7 @@ def run_one(spec: ObjectSpec, variant: str, duration: float, seed: int = 0) -> t
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--family", choices=["box", "mesh"], default="box", help="which generated objects")
     parser.add_argument("--objects", type=int, default=40)
     parser.add_argument("--first", type=int, default=0, help="index of the first object (to split a sweep)")
     parser.add_argument("--duration", type=float, default=60.0, help="simulated seconds per episode")
@@ -71,7 +76,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
-    specs = [random_spec(rng, i) for i in range(args.first + args.objects)][args.first :]
+    draw = random_mesh_spec if args.family == "mesh" else random_spec
+    specs = [draw(rng, i) for i in range(args.first + args.objects)][args.first :]
     started = time.perf_counter()
     outcomes: dict[str, Counter] = {v: Counter() for v in args.variants}
     rows = []
@@ -81,15 +87,14 @@ def main(argv: list[str] | None = None) -> int:
             outcomes[variant][outcome] += 1
             rows.append((spec, variant, outcome, when))
             print(
-                f"object {spec.index} ({spec.kind}, w {spec.width:.2f}, h {spec.handle_height:.2f}, "
-                f"{'vertical' if spec.vertical_bar else 'horizontal'} {spec.bar_shape}) {variant}: {outcome}"
+                f"object {spec.index} ({spec.describe()}) {variant}: {outcome}"
                 + (f" at {when:.1f} s" if when is not None else ""),
                 file=sys.stderr,
                 flush=True,
             )
     failures = ("could not reach", "could not hook", "slipped", "stalled at a joint limit", "tank spent", "stalled")
     command = (
-        f"python experiments/generality_sweep.py --objects {args.objects} --first {args.first} "
+        f"python experiments/generality_sweep.py --family {args.family} --objects {args.objects} --first {args.first} "
         f"--duration {args.duration:g} --variants {' '.join(args.variants)} --seed {args.seed}"
     )
     lines = [

@@ -1,23 +1,33 @@
-"""Objects written the way other tools write them: a URDF per random specification, with its own link and
-joint names, a `world` root with a fixed joint and no `handle_frame`.
+"""Objects written the way other tools write them, in two families, each drawn from a random specification.
 
-`random_spec(rng, index)` draws one object: handle height 0.6–1.1 m, door or drawer width 0.25–0.6 m,
-hinge left or right, vertical or horizontal bar, a box, cylinder or mesh (STL) bar, revolute door or
-prismatic drawer, friction and damping ×0.5–×2, moving mass ×0.5–×2, and where it stands: 2–4 m from
-the robot, its front within ±60° of facing it. `object_urdf(spec)` writes it and `scene_of(spec)` loads
-it next to the RoyalPanda. The generality sweep (experiments/generality_sweep.py) opens these objects
-and tests/scenarios/test_generality.py checks the handle frame inferred from each.
+The box family (`random_spec`, `object_urdf`): a URDF per object with its own link and joint names, a
+`world` root with a fixed joint and no `handle_frame`; handle height 0.6–1.1 m, door or drawer width
+0.25–0.6 m, hinge left or right, vertical or horizontal bar, a box, cylinder or mesh (STL) bar, revolute
+door or prismatic drawer, friction and damping ×0.5–×2, moving mass ×0.5–×2.
+
+The mesh family (`random_mesh_spec`, `write_mesh_cabinet`): cabinets as robot-learning benchmarks ship
+them, a ROS package each (package.xml, urdf/, meshes/ named by package:// URLs); every part a set of
+convex mesh pieces (STL and multi-object OBJ files), no inertial anywhere; two doors hinged left and
+right over or under two stacked drawers, so that handles stand 0.48–1.23 m high; handles as mesh bars
+(one piece, two halves, or a 16-sided round bar) on standoffs; one of the four parts is the target.
+
+Both stand 2–4 m from the robot, their front within ±60° of facing it (`pose()`), and `scene_of(spec)`
+loads either next to the RoyalPanda. The generality sweep (experiments/generality_sweep.py) opens these
+objects and tests/scenarios/test_generality.py checks the handle frame inferred from each.
 """
 
 from __future__ import annotations
 
 import tempfile
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 import sabre
+
+from . import mesh_files
 
 ROBOT_URDF = Path(__file__).resolve().parents[1] / "assets" / "robots" / "royalpanda.urdf"
 
@@ -49,6 +59,10 @@ class ObjectSpec:
         origin, turned by ``facing``."""
         x, y = self.distance * np.cos(self.bearing), self.distance * np.sin(self.bearing)
         return [float(x), float(y), 0.0, 0.0, 0.0, float(self.bearing + self.facing)]
+
+    def describe(self) -> str:
+        bar = "vertical" if self.vertical_bar else "horizontal"
+        return f"{self.kind}, w {self.width:.2f}, h {self.handle_height:.2f}, {bar} {self.bar_shape}"
 
 
 def random_spec(rng: np.random.Generator, index: int) -> ObjectSpec:
@@ -179,5 +193,279 @@ def object_urdf(spec: ObjectSpec) -> str:
 """
 
 
-def scene_of(spec: ObjectSpec) -> sabre.Scene:
+def scene_of(spec: ObjectSpec | MeshCabinetSpec) -> sabre.Scene:
+    """The object of either family next to the RoyalPanda, its target joint the one movable."""
+    if isinstance(spec, MeshCabinetSpec):
+        return mesh_scene_of(spec)
     return sabre.Scene.from_urdf_strings(ROBOT_URDF.read_text(), object_urdf(spec), spec.pose())
+
+
+# -- the mesh family: cabinets as robot-learning benchmarks ship them ------------------------------------------------
+
+#: The four moving parts of a mesh cabinet, by their index in link and joint names.
+PARTS = ("left door", "right door", "low drawer", "high drawer")
+BOARD = 0.018  # m: carcass boards and fronts
+DEPTH = 0.45  # m: the carcass behind the fronts
+
+
+@dataclass(frozen=True)
+class MeshCabinetSpec:
+    """One generated cabinet with two doors (hinged left and right, side by side) and two drawers
+    (stacked), every part a set of convex mesh pieces, no inertial anywhere, handles as mesh bars
+    on standoffs; ``target`` is the part the sweep opens."""
+
+    index: int
+    width: float
+    plinth: float  # m: the height the lowest section starts at
+    drawer_height: float
+    door_height: float
+    drawers_on_top: bool
+    handle_inset: float  # m: a door handle's distance from the door's edge nearest the drawers
+    handle_edge: float  # m: a door handle's distance from the door's free edge
+    bar_length: float
+    handle_style: str  # "pieces" (bar and standoffs, an STL each), "split" (bar in halves, one OBJ), "round" (16-gon bar)
+    target: int  # index into PARTS
+    damping_scale: float
+    friction_scale: float
+    distance: float
+    bearing: float
+    facing: float
+
+    @property
+    def handle_link(self) -> str:
+        return f"handle_{self.target}"
+
+    @property
+    def package(self) -> str:
+        return f"mesh_cabinet_{self.index}"
+
+    def pose(self) -> list[float]:
+        x, y = self.distance * np.cos(self.bearing), self.distance * np.sin(self.bearing)
+        return [float(x), float(y), 0.0, 0.0, 0.0, float(self.bearing + self.facing)]
+
+    def sections(self) -> dict[str, tuple[float, float]]:
+        """(bottom, height) of the door section and each drawer, bottom to top."""
+        order = ["doors", "low drawer", "high drawer"] if self.drawers_on_top else ["low drawer", "high drawer", "doors"]
+        out, z = {}, self.plinth
+        for name in order:
+            height = self.door_height if name == "doors" else self.drawer_height
+            out[name] = (z, height)
+            z += height
+        return out
+
+    def handle_height(self) -> float:
+        """Height (m) of the target's handle above the floor."""
+        bottom, height = self.sections()["doors" if self.target < 2 else PARTS[self.target]]
+        if self.target >= 2:
+            return bottom + height / 2
+        return bottom + height - self.handle_inset if self.drawers_on_top else bottom + self.handle_inset
+
+    def describe(self) -> str:
+        return f"{PARTS[self.target]}, w {self.width:.2f}, h {self.handle_height():.2f}, {self.handle_style} mesh handle"
+
+
+def random_mesh_spec(rng: np.random.Generator, index: int) -> MeshCabinetSpec:
+    def scale() -> float:
+        return float(np.exp(rng.uniform(np.log(0.5), np.log(2.0))))
+
+    drawers_on_top = bool(rng.random() < 0.5)
+    return MeshCabinetSpec(
+        index=index,
+        width=float(rng.uniform(0.6, 0.9)),
+        # drawers on top of low doors: door handles 0.51–0.77 m, drawers 0.75–1.23 m; drawers under
+        # raised doors: drawers 0.48–0.83 m, door handles 0.86–1.09 m
+        plinth=float(rng.uniform(0.2, 0.3) if drawers_on_top else rng.uniform(0.38, 0.45)),
+        drawer_height=float(rng.uniform(0.2, 0.25)),
+        door_height=float(rng.uniform(0.45, 0.55)),
+        drawers_on_top=drawers_on_top,
+        handle_inset=float(rng.uniform(0.08, 0.14)),
+        handle_edge=float(rng.uniform(0.06, 0.1)),
+        bar_length=float(rng.uniform(0.14, 0.22)),
+        handle_style=("pieces", "split", "round")[int(rng.integers(3))],
+        target=int(rng.integers(4)),
+        damping_scale=scale(),
+        friction_scale=scale(),
+        distance=float(rng.uniform(2.0, 4.0)),
+        bearing=float(rng.uniform(-0.5, 0.5)),
+        facing=float(rng.uniform(-np.pi / 3, np.pi / 3)),
+    )
+
+
+def _carcass(spec: MeshCabinetSpec) -> list[tuple[str, mesh_files.Piece]]:
+    """The fixed body's convex pieces in its frame: sides, top, back, a plinth block and a rail
+    under and over each drawer."""
+    w, x = spec.width, BOARD + 0.002 + DEPTH / 2
+    top = sum(spec.sections()["doors"]) if not spec.drawers_on_top else sum(spec.sections()["high drawer"])
+    pieces = [
+        ("side_left", mesh_files.box((x, w / 2 - BOARD / 2, top / 2), (DEPTH, BOARD, top))),
+        ("side_right", mesh_files.box((x, -w / 2 + BOARD / 2, top / 2), (DEPTH, BOARD, top))),
+        ("top", mesh_files.box((x, 0.0, top + BOARD / 2), (DEPTH, w, BOARD))),
+        ("back", mesh_files.box((x + DEPTH / 2 - BOARD / 2, 0.0, top / 2), (BOARD, w - 2 * BOARD, top))),
+        ("plinth", mesh_files.box((x, 0.0, spec.plinth / 2 - BOARD / 2), (DEPTH, w - 2 * BOARD, spec.plinth - BOARD))),
+    ]
+    for name, (bottom, _) in spec.sections().items():
+        if name != "doors":
+            rail = (DEPTH - BOARD, w - 2 * BOARD, 0.008)
+            pieces.append((f"rail_{name.replace(' ', '_')}", mesh_files.box((x - BOARD / 2, 0.0, bottom - 0.004), rail)))
+    return pieces
+
+
+def _handle_pieces(spec: MeshCabinetSpec, vertical: bool) -> list[tuple[str, mesh_files.Piece]]:
+    """The handle's convex pieces in its link frame (origin at the bar's centre, +x into the front):
+    the bar and two standoffs 0.061 m deep."""
+    length, axis = spec.bar_length, 2 if vertical else 1
+    along = np.eye(3)[axis]
+    standoffs = [
+        (f"standoff_{k}", mesh_files.box(np.array([0.0325, 0.0, 0.0]) + sign * (length / 2 - 0.012) * along, (0.057, 0.01, 0.01)))
+        for k, sign in enumerate((-1.0, 1.0))
+    ]
+    if spec.handle_style == "round":
+        return [("bar", mesh_files.prism((0.0, 0.0, 0.0), axis, 0.006, length))] + standoffs
+    size = np.full(3, 0.01)
+    size[axis] = length
+    if spec.handle_style == "split":
+        halves = []
+        for k, sign in enumerate((-1.0, 1.0)):
+            half = size.copy()
+            half[axis] = length / 2
+            halves.append((f"bar_{k}", mesh_files.box(sign * length / 4 * along, half)))
+        return halves + standoffs
+    return [("bar", mesh_files.box((0.0, 0.0, 0.0), size))] + standoffs
+
+
+def _door(spec: MeshCabinetSpec, k: int) -> tuple[list[tuple[str, mesh_files.Piece]], list[float], str]:
+    """Door k (0 left, 1 right): its leaf's pieces in the link frame (at the hinge), the joint's origin
+    and axis, and the handle's origin in the leaf frame."""
+    s = 1.0 if k == 0 else -1.0  # the hinge on the robot's left (+y) for the left door
+    bottom, height = spec.sections()["doors"]
+    leaf_w, leaf_h = spec.width / 2 - 0.004, height - 0.006
+    half = [
+        (f"leaf_{j}", mesh_files.box((BOARD / 2, -s * leaf_w / 2, sign * leaf_h / 4), (BOARD, leaf_w, leaf_h / 2)))
+        for j, sign in enumerate((-1, 1))
+    ]
+    handle_z = (height / 2 - spec.handle_inset) if spec.drawers_on_top else (spec.handle_inset - height / 2)
+    joint = [0.0, s * (spec.width / 2 - 0.002), bottom + height / 2]
+    return half, joint, f"-0.061 {-s * (leaf_w - spec.handle_edge):.4f} {handle_z:.4f}"
+
+
+def _drawer(spec: MeshCabinetSpec, name: str) -> tuple[list[tuple[str, mesh_files.Piece]], list[float]]:
+    """A drawer's pieces in its link frame (at the front's centre) and the joint's origin."""
+    bottom, height = spec.sections()[name]
+    inner = spec.width - 2 * BOARD - 0.014
+    box_h, depth = height - 0.04, DEPTH - 0.06
+    x = BOARD + 0.004 + depth / 2
+    pieces = [
+        ("front", mesh_files.box((BOARD / 2, 0.0, 0.0), (BOARD, spec.width - 0.004, height - 0.006))),
+        ("floor", mesh_files.box((x, 0.0, -height / 2 + 0.025), (depth, inner, 0.012))),
+        ("side_a", mesh_files.box((x, inner / 2 - 0.006, -height / 2 + 0.02 + box_h / 2), (depth, 0.012, box_h))),
+        ("side_b", mesh_files.box((x, -inner / 2 + 0.006, -height / 2 + 0.02 + box_h / 2), (depth, 0.012, box_h))),
+        ("back", mesh_files.box((x + depth / 2 - 0.006, 0.0, -height / 2 + 0.02 + box_h / 2), (0.012, inner - 0.024, box_h))),
+    ]
+    return pieces, [0.0, 0.0, bottom + height / 2]
+
+
+def _mesh_link(name: str, files: list[str]) -> str:
+    """A link whose collision and visual are the given mesh files (package:// URLs)."""
+    geometries = [f'<geometry><mesh filename="{f}"/></geometry>' for f in files]
+    body = "".join(f"<visual>{g}</visual><collision>{g}</collision>" for g in geometries)
+    return f'  <link name="{name}">{body}</link>\n'
+
+
+def _write_handle(spec: MeshCabinetSpec, part: int, meshes: Path, url: str) -> list[str]:
+    """Writes part ``part``'s handle meshes; returns their package:// URLs."""
+    pieces = _handle_pieces(spec, vertical=part < 2)
+    if spec.handle_style == "pieces":
+        for name, piece in pieces:
+            mesh_files.write_stl(meshes / f"handle_{part}_{name}.stl", piece)
+        return [f"{url}/handle_{part}_{name}.stl" for name, _ in pieces]
+    mesh_files.write_obj(meshes / f"handle_{part}.obj", pieces)
+    return [f"{url}/handle_{part}.obj"]
+
+
+def _moving_parts(spec: MeshCabinetSpec, meshes: Path, url: str) -> str:
+    """Writes every moving part's meshes; returns their links and joints as URDF text."""
+    text = ""
+    for part in range(4):
+        if part < 2:
+            pieces, origin, handle_origin = _door(spec, part)
+            s = 1.0 if part == 0 else -1.0
+            joint = (
+                f'type="revolute"><axis xyz="0 0 {-s:.0f}"/><limit lower="0" upper="1.57" effort="50" velocity="2"/>'
+                f'<dynamics damping="{2.0 * spec.damping_scale:.3f}" friction="{4.0 * spec.friction_scale:.3f}"/>'
+            )
+        else:
+            pieces, origin = _drawer(spec, PARTS[part])
+            handle_origin = "-0.061 0 0"
+            joint = (
+                f'type="prismatic"><axis xyz="-1 0 0"/><limit lower="0" upper="0.35" effort="100" velocity="1"/>'
+                f'<dynamics damping="{2.0 * spec.damping_scale:.3f}" friction="{0.5 * spec.friction_scale:.3f}"/>'
+            )
+        mesh_files.write_obj(meshes / f"link_{part}.obj", pieces)
+        text += _mesh_link(f"link_{part}", [f"{url}/link_{part}.obj"])
+        text += _mesh_link(f"handle_{part}", _write_handle(spec, part, meshes, url))
+        text += (
+            f'  <joint name="joint_{part}" {joint}<parent link="body"/><child link="link_{part}"/>'
+            f'<origin xyz="{origin[0]:.4f} {origin[1]:.4f} {origin[2]:.4f}"/></joint>\n'
+            f'  <joint name="handle_joint_{part}" type="fixed"><parent link="link_{part}"/><child link="handle_{part}"/>'
+            f'<origin xyz="{handle_origin}"/></joint>\n'
+        )
+    return text
+
+
+#: The cabinet shipped as assets/objects/examples/mesh_cabinet, written by
+#: ``write_mesh_cabinet(MESH_CABINET_EXAMPLE, Path("assets/objects/examples"), "mesh_cabinet")``.
+MESH_CABINET_EXAMPLE = MeshCabinetSpec(
+    index=0,
+    width=0.7,
+    plinth=0.35,
+    drawer_height=0.18,
+    door_height=0.5,
+    drawers_on_top=False,
+    handle_inset=0.12,
+    handle_edge=0.045,
+    bar_length=0.17,
+    handle_style="split",
+    target=2,
+    damping_scale=1.0,
+    friction_scale=1.0,
+    distance=2.0,
+    bearing=0.0,
+    facing=0.0,
+)
+
+
+def write_mesh_cabinet(spec: MeshCabinetSpec, root: Path, package: str | None = None) -> Path:
+    """Writes the cabinet as a ROS package ``package`` (default ``spec.package``) under ``root``
+    (package.xml, urdf/cabinet.urdf, meshes/; the URDF names its meshes by package:// URLs) and
+    returns the URDF's path. An even index names the package's folder like the package, an odd one
+    differently (found through its package.xml)."""
+    package = package or spec.package
+    folder = root / (package if spec.index % 2 == 0 else f"cabinet_{spec.index}_description")
+    meshes, url = folder / "meshes", f"package://{package}/meshes"
+    mesh_files.write_obj(meshes / "body.obj", _carcass(spec))
+    urdf = (
+        f'<?xml version="1.0"?>\n<robot name="{package}">\n  <link name="base"/>\n'
+        f'  <joint name="base_joint" type="fixed"><parent link="base"/><child link="body"/></joint>\n'
+        + _mesh_link("body", [f"{url}/body.obj"])
+        + _moving_parts(spec, meshes, url)
+        + "</robot>\n"
+    )
+    package_xml = (
+        f'<?xml version="1.0"?>\n<package format="3">\n  <name>{package}</name>\n  <version>0.0.0</version>\n'
+        f'  <description>A generated cabinet</description>\n  <maintainer email="sabre@example.com">sabre</maintainer>\n'
+        f"  <license>Apache-2.0</license>\n</package>\n"
+    )
+    mesh_files.write_text(folder / "package.xml", package_xml)
+    path = folder / "urdf" / "cabinet.urdf"
+    mesh_files.write_text(path, urdf)
+    return path
+
+
+def mesh_scene_of(spec: MeshCabinetSpec, root: Path | None = None) -> sabre.Scene:
+    """The cabinet written under ``root`` (default: the temp directory) and loaded from its file next to
+    the RoyalPanda, keeping the joint of the target's handle; no inertial warnings (there are none
+    by design: sabre fills every moving part's in from its meshes)."""
+    path = write_mesh_cabinet(spec, root or Path(tempfile.gettempdir()) / "sabre-generated" / "mesh-cabinets")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", sabre.errors.AssumedInertialWarning)
+        return sabre.Scene.from_urdf(ROBOT_URDF, path, spec.pose(), handle=spec.handle_link)

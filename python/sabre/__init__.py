@@ -6,11 +6,12 @@ this package is the public API.
 
 from __future__ import annotations
 
-from . import costs, guides, tasks  # noqa: F401 (modules of the public API)
+from . import assets, costs, guides, tasks  # noqa: F401 (modules of the public API)
 from ._core import __version__
 from .closed_loop import paper_start_state, run_episode
 from .episode import Episode
 from .errors import (
+    AssumedInertialWarning,
     InvalidValueError,
     MissingExtraError,
     PlannerError,
@@ -21,10 +22,12 @@ from .errors import (
     UnknownFrameError,
     UrdfError,
 )
+from .estimation import LowPass, ObjectEstimate, ObjectStateEstimator, tau_ext_from_wrench
 from .experiments import scenarios
-from .inner_loop import LowLevelController, Trace
+from .inner_loop import LowLevelController, PlanSnapshot, Trace
+from .mujoco import MujocoPlant
 from .planner import VARIANTS, Controller, ControllerConfig, IterationStats, likelihood_weights
-from .planner_process import PlanSnapshot
+from .plants import PlantInterface
 from .realtime import RealtimeCascade, TickResult
 from .robots import TOOLS, Tool
 from .safety import (
@@ -59,6 +62,8 @@ __all__ = [
     "RolloutResult",
     "CONTACT_MODELS",
     "Plant",
+    "PlantInterface",
+    "MujocoPlant",
     "Trace",
     "ContactPoint",
     "LowLevelController",
@@ -74,6 +79,7 @@ __all__ = [
     "TankRefill",
     "default_threads",
     "costs",
+    "assets",
     "tasks",
     "scenarios",
     "Controller",
@@ -86,6 +92,10 @@ __all__ = [
     "likelihood_weights",
     "ScriptedMotion",
     "hook_and_pull",
+    "LowPass",
+    "tau_ext_from_wrench",
+    "ObjectEstimate",
+    "ObjectStateEstimator",
     "SabreError",
     "ShapeError",
     "InvalidValueError",
@@ -95,4 +105,5 @@ __all__ = [
     "SimulationError",
     "MissingExtraError",
     "PlannerError",
+    "AssumedInertialWarning",
 ]

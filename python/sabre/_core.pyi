@@ -9,6 +9,7 @@ class: it cannot be subclassed (``@final``), is constructed by ``__new__``, and 
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from typing import final
 
 import numpy as np
@@ -25,6 +26,7 @@ __all__ = [
     "LowLevelController",
     "Plan",
     "InnerLoop",
+    "RateLimiter",
     "Cost",
     "MppiConfig",
     "ServoGuideConfig",
@@ -36,6 +38,7 @@ __all__ = [
     "TankRefillConfig",
     "EnergyTank",
     "default_threads",
+    "builtin_urdf",
     "likelihood_weights",
     "mesh_triangles",
     "servo_guide",
@@ -49,6 +52,7 @@ DEFAULT_TAU_EXT_CUTOFF: float
 CONTACT_MODELS: tuple[str, ...]
 
 def default_threads() -> int: ...
+def builtin_urdf(kind: str, name: str) -> str: ...
 
 @final
 class Scene:
@@ -61,6 +65,8 @@ class Scene:
         obj_pose: list[float] | None = None,
         joint: str | None = None,
         hold: list[tuple[str, float]] | None = None,
+        handle: str | None = None,
+        density: float = ...,
     ) -> Scene: ...
     @staticmethod
     def build(
@@ -70,6 +76,8 @@ class Scene:
         obj_pose: list[float] | None = None,
         joint: str | None = None,
         hold: list[tuple[str, float]] | None = None,
+        handle: str | None = None,
+        density: float = ...,
     ) -> Scene: ...
     @staticmethod
     def from_urdf_strings(
@@ -78,6 +86,8 @@ class Scene:
         obj_pose: list[float] | None = None,
         joint: str | None = None,
         hold: list[tuple[str, float]] | None = None,
+        handle: str | None = None,
+        density: float = ...,
     ) -> Scene: ...
     @property
     def nq(self) -> int: ...
@@ -99,6 +109,11 @@ class Scene:
     def object_joint_names(self) -> list[str]: ...
     @property
     def object_frame_names(self) -> list[str]: ...
+    @property
+    def density(self) -> float: ...
+    def assumed_inertials(self) -> list[tuple[str, float, list[float], list[float], str]]: ...
+    def object_joints_moving(self, frame: str) -> list[str]: ...
+    def object_closest_points(self, o: npt.NDArray[np.float64], point: list[float]) -> npt.NDArray[np.float64]: ...
     def robot_limits(self) -> tuple[list[float], list[float], list[float], list[float]]: ...
     def object_limits(self) -> tuple[list[float], list[float]]: ...
     def object_dynamics(self) -> tuple[list[float], list[float]]: ...
@@ -326,6 +341,34 @@ class InnerLoop:
     def tick(
         self, plan: Plan, x: npt.NDArray[np.float64], tau_ext: npt.NDArray[np.float64], t: float, dt: float
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], float | None, str]: ...
+
+@final
+class RateLimiter:
+    def __new__(
+        cls,
+        v_max: Sequence[float] | npt.NDArray[np.float64],
+        a_max: Sequence[float] | npt.NDArray[np.float64],
+        j_max: Sequence[float] | npt.NDArray[np.float64],
+        dt: float,
+    ) -> RateLimiter: ...
+    def limit(self, target: Sequence[float] | npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
+    def reset(self, velocity: Sequence[float] | npt.NDArray[np.float64] | None = None) -> None: ...
+    @property
+    def state(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
+    @property
+    def at_rest(self) -> bool: ...
+    @property
+    def steps_to_rest(self) -> int: ...
+    @property
+    def size(self) -> int: ...
+    @property
+    def dt(self) -> float: ...
+    @property
+    def v_max(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def a_max(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def j_max(self) -> npt.NDArray[np.float64]: ...
 
 @final
 class Plant:

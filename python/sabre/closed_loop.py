@@ -1,15 +1,15 @@
-"""Closed-loop episodes in the plant: :func:`run_episode` runs a :class:`~sabre.Controller` on the 1 kHz plant.
+"""Closed-loop episodes on a plant: :func:`run_episode` runs a :class:`~sabre.Controller` on the 1 kHz plant, a
+:class:`~sabre.Plant` or any other :class:`~sabre.PlantInterface`.
 
-The inner loop interpolates the controller's reference and tracks it with the low-level controller (53); the
-outer loop re-plans at ``replan_rate`` in simulated time. :func:`paper_start_state` is the paper's starting
-condition.
+The inner loop interpolates the plan in force (a :class:`~sabre.PlanSnapshot`), filters it (variants I, IO) and
+tracks it with the low-level controller (53); the outer loop re-plans at ``replan_rate`` in simulated time.
+:func:`paper_start_state` is the paper's starting condition.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -17,8 +17,9 @@ import numpy as np
 from ._validate import as_count, as_float_array, as_non_negative, as_positive
 from .episode import Episode, PlanRecorder, TraceChunks
 from .errors import InvalidValueError
-from .inner_loop import LowLevelController
+from .inner_loop import LowLevelController, PlanSnapshot
 from .planner import Controller, likelihood_weights
+from .plants import PlantInterface, as_plant
 from .scene import Scene
 from .sim import Plant
 from .tasks import OpenObject, Task
@@ -49,9 +50,9 @@ def run_episode(
     stop_on_success: bool = True,
     settle_time: float = 0.5,
     progress: bool | None = None,
-    plant: Plant | None = None,
+    plant: PlantInterface | None = None,
     low_level: LowLevelController | None = None,
-    on_replan: Callable[[float, np.ndarray, Plant, Controller], None] | None = None,
+    on_replan: Callable[[float, np.ndarray, PlantInterface, Controller], None] | None = None,
     record_plans: bool = False,
     viewer: Viewer | None = None,
     plan_delay: float = 0.0,
@@ -73,8 +74,8 @@ def run_episode(
         record_every: record every n-th plant step (default 10, i.e. 100 Hz on the 1 kHz plant).
         stop_on_success, settle_time: end ``settle_time`` s (default 0.5) after the task succeeds.
         progress: a tqdm bar; None (default) shows it for runs longer than 10 s of simulated time.
-        plant, low_level: the plant (default: a new 1 kHz :class:`Plant`) and its controller
-            (default: a :class:`LowLevelController` at the plant's step).
+        plant, low_level: any :class:`~sabre.PlantInterface` (default: a new 1 kHz :class:`Plant`, stepped in
+            Rust; others from Python, same tick) and its controller (default: one at the plant's step).
         on_replan: ``on_replan(t, x, plant, controller)`` runs before each re-plan (for
             disturbances); returning True ends the episode there.
         plan_delay: seconds (default 0) between the state a plan is made from and the plan taking
@@ -86,14 +87,14 @@ def run_episode(
 
     Raises:
         InvalidValueError: non-positive duration or replan_rate, record_every < 1, non-finite x0,
-            a negative plan_delay or one longer than the re-planning period.
-        ShapeError: x0 is not (nx,).
+            a negative plan_delay or one longer than the re-planning period, a plant of another scene.
+        ShapeError: x0 is not (nx,). TypeError: plant is no :class:`~sabre.PlantInterface` (naming what it lacks).
     """
     duration = as_positive("duration", duration)
     replan_rate = as_positive("replan_rate", replan_rate)
     plan_delay = as_non_negative("plan_delay", plan_delay)
     record_every = as_count("record_every", record_every)
-    plant = plant or Plant(scene)
+    plant = Plant(scene) if plant is None else as_plant(plant, scene)
     low_level = low_level or LowLevelController(scene, dt=plant.dt)
     x0 = paper_start_state(scene) if x0 is None else as_float_array("x0", x0, (scene.nx,))
     steps_per_plan = max(1, int(round(1.0 / (replan_rate * plant.dt))))
@@ -130,32 +131,6 @@ def _progress_bar(scene: Scene, duration: float, show: bool) -> Any:
     return tqdm(total=round(duration, 3), unit="s sim", leave=False, desc=f"{scene.object_name}")
 
 
-@dataclass(frozen=True)
-class _RunningPlan:
-    """A plan as the inner loop follows it (a copy: the controller's own moves on when it re-plans)."""
-
-    nominal: np.ndarray
-    t0: float
-    dt: float
-    predicted: np.ndarray | None
-    floor: float | None
-    cost: float
-    phase: int
-
-    @staticmethod
-    def of(controller: Controller, cost: float) -> _RunningPlan:
-        predicted = controller.predicted_dissipation
-        return _RunningPlan(
-            np.array(controller.nominal),
-            float(controller.nominal_t0),
-            float(controller.config.dt),
-            None if predicted is None else np.array(predicted),
-            controller.task.gain_inertia_floor(controller.phase),
-            cost,
-            controller.task.phases.index(controller.phase),
-        )
-
-
 class _ClosedLoop:
     """The state of one :func:`run_episode` between re-plans: the plant and its inner loop, the plan the inner loop
     follows while the next one is computed, and the recorders of the episode."""
@@ -164,7 +139,7 @@ class _ClosedLoop:
         self,
         scene: Scene,
         controller: Controller,
-        plant: Plant,
+        plant: PlantInterface,
         low_level: LowLevelController,
         *,
         delay_steps: int,
@@ -184,13 +159,13 @@ class _ClosedLoop:
             controller.keep_samples = True  # the recorder draws the heaviest sampled rollouts
         self.planning_times: list[float] = []
         self.success_time: float | None = None
-        self.running: _RunningPlan | None = None
+        self.running: PlanSnapshot | None = None
 
     def run(
         self,
         total_steps: int,
         steps_per_plan: int,
-        on_replan: Callable[[float, np.ndarray, Plant, Controller], None] | None,
+        on_replan: Callable[[float, np.ndarray, PlantInterface, Controller], None] | None,
         stop_on_success: bool,
         settle_time: float,
         bar: Any,
@@ -223,7 +198,7 @@ class _ClosedLoop:
                 bar.close()
         return self.episode(time.perf_counter() - wall)
 
-    def replan(self, x: np.ndarray, t: float) -> _RunningPlan:
+    def replan(self, x: np.ndarray, t: float) -> PlanSnapshot:
         """One planning iteration from the plant's state x at time t, or, with a compensated delay, from the
         state the controller predicts for when the plan takes over."""
         controller = self.controller
@@ -232,15 +207,16 @@ class _ClosedLoop:
         else:
             stats = controller.update(x, t)
         self.planning_times.append(stats.iteration_time)
-        return _RunningPlan.of(controller, stats.nominal_cost)
+        return controller.snapshot()
 
-    def follow(self, plan: _RunningPlan, steps: int) -> None:
+    def follow(self, plan: PlanSnapshot, steps: int) -> None:
         """``steps`` plant steps of the inner loop: the running plan for the delay, then ``plan``."""
         delayed = min(self.delay_steps, steps)
         for segment, count in ((self.running or plan, delayed), (plan, steps - delayed)):
             if count == 0:
                 continue
-            self.low_level.gain_inertia_floor = self.own_floor if segment.floor is None else segment.floor
+            floor = segment.gain_inertia_floor
+            self.low_level.gain_inertia_floor = self.own_floor if floor is None else floor
             trace = self.low_level.follow(
                 self.plant,
                 segment.nominal,
@@ -252,7 +228,7 @@ class _ClosedLoop:
                 tank=self.controller.tank,
                 predicted_dissipation=segment.predicted,
             )
-            self.chunks.append(trace, cost=segment.cost, phase=segment.phase)
+            self.chunks.append(trace, cost=segment.nominal_cost, phase=self.controller.task.phases.index(segment.phase))
         self.running = plan
 
     def record(self, x: np.ndarray, t: float) -> None:
@@ -308,7 +284,7 @@ class _ClosedLoop:
         )
 
 
-def _record_plan(plans: PlanRecorder, controller: Controller, x: np.ndarray, t: float, plant: Plant) -> None:
+def _record_plan(plans: PlanRecorder, controller: Controller, x: np.ndarray, t: float, plant: PlantInterface) -> None:
     """Hands ``plans`` the controller's latest plan, made from x at time t: the nominal's rollout in the
     controller's model, the sampled rollouts it kept with their weights (55), the filters' sphere obstacles, and
     the plant's contacts now."""

@@ -1,4 +1,5 @@
-"""The exception hierarchy of sabre: every error the library raises derives from :class:`SabreError`."""
+"""The exception hierarchy of sabre: every error the library raises derives from :class:`SabreError`; and
+the warnings it gives."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ __all__ = [
     "SimulationError",
     "MissingExtraError",
     "PlannerError",
+    "AssumedInertialWarning",
     "DISTRIBUTION",
     "require_extra",
 ]
@@ -60,6 +62,12 @@ class MissingExtraError(SabreError, ImportError):
 
 class PlannerError(SabreError, RuntimeError):
     """The planner running apart from the inner loop (a thread or a process) failed or stopped."""
+
+
+class AssumedInertialWarning(UserWarning):
+    """A moving object link has no complete ``<inertial>``: sabre filled in its mass and inertia from
+    its collision geometry (:attr:`sabre.Scene.assumed_inertials` lists the values). Silence it with
+    ``warnings.simplefilter("ignore", sabre.errors.AssumedInertialWarning)`` once they are checked."""
 
 
 def require_extra(extra: str, purpose: str, *modules: str) -> list[ModuleType]:

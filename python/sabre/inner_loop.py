@@ -1,21 +1,29 @@
-"""The inner loop: the low-level joint-velocity controller (53) and the 1 kHz loop that makes the
-plant follow a planned reference, optionally through the FILTER-QP and the energy tank."""
+"""The inner loop: the low-level joint-velocity controller (53), the 1 kHz loop that makes a plant follow a
+planned reference (optionally through the FILTER-QP and the energy tank), and the plan it follows as a value
+(:class:`PlanSnapshot`).
+
+:class:`sabre.Plant` is driven in Rust, a whole stretch of steps per call; any other
+:class:`~sabre.PlantInterface` is driven step by step from Python with the same tick
+(``_core.InnerLoop``), so both record the same :class:`Trace`.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from . import _core
 from ._validate import as_count, as_float_array, as_non_negative, as_positive, core_config, readonly
-from .errors import InvalidValueError
+from .errors import InvalidValueError, ShapeError
+from .plants import PlantInterface, as_plant
 from .safety import EnergyTank, SafetyFilter
 from .scene import Scene
 from .sim import Plant
 
-__all__ = ["LowLevelController", "Trace"]
+__all__ = ["LowLevelController", "Trace", "PlanSnapshot"]
 
 # The core's defaults, the one source of every default below.
 _PLANT = _core.PlantConfig()
@@ -95,19 +103,31 @@ class LowLevelController:
         u_ref = as_float_array("u_ref", u_ref, (self.scene.nq,))
         return np.asarray(self._core.torque(x, u_ref), dtype=np.float64)
 
-    def track(self, plant: Plant, u_ref: Sequence[float] | np.ndarray, steps: int = 1) -> None:
+    def track(self, plant: PlantInterface, u_ref: Sequence[float] | np.ndarray, steps: int = 1) -> None:
         """Runs ``steps`` plant steps (default 1) with this controller tracking the constant joint
-        velocity reference u_ref (nq,) in rad/s (m/s for the prismatic base joints).
+        velocity reference u_ref (nq,) in rad/s (m/s for the prismatic base joints). A velocity plant
+        (:attr:`~sabre.PlantInterface.command_interface` ``"velocity"``) gets u_ref itself, its own
+        servo tracks it.
 
         Raises:
+            TypeError: plant is not a :class:`~sabre.PlantInterface` (naming what it lacks).
             ShapeError: u_ref is not (nq,). InvalidValueError: non-finite u_ref or negative steps.
         """
         self._check_plant(plant)
-        self._core.track(plant._core, as_float_array("u_ref", u_ref, (plant.scene.nq,)), as_count("steps", steps, 0))
+        u_ref = as_float_array("u_ref", u_ref, (plant.scene.nq,))
+        steps = as_count("steps", steps, 0)
+        if isinstance(plant, Plant):
+            self._core.track(plant._core, u_ref, steps)
+            return
+        for _ in range(steps):
+            if plant.command_interface == "velocity":
+                plant.step(u_ref.copy())
+            else:
+                plant.step(np.asarray(self._core.torque(_vector("plant.state", plant.state), u_ref), dtype=np.float64))
 
     def follow(
         self,
-        plant: Plant,
+        plant: PlantInterface,
         reference: np.ndarray,
         t0: float,
         dt: float,
@@ -120,18 +140,22 @@ class LowLevelController:
     ) -> Trace:
         """The inner loop for ``steps`` plant steps: the reference sequence (K, nq) of joint
         velocities, sampled every ``dt`` seconds from time ``t0`` (s), is interpolated at the plant's
-        time and tracked by this controller.
+        time and tracked by this controller (a velocity plant gets the command and tracks it itself).
 
         With ``safety`` each step's command goes through the FILTER-QP (41) first; with ``tank`` too,
         its passivity row (56) uses the plant's last measured τ_ext and the tank's energy, and the
-        tank integrates the filtered command against the newly measured τ_ext after the step (49).
+        tank integrates the filtered command over the step against that same reading (49), the one
+        the row saw, as a controller on a robot must (it cannot know the next reading).
         A tank without a filter only keeps the books. ``predicted_dissipation`` (K,), on the
         reference's time grid, is the plan's predicted port dissipation −τ_extᵀu (W) that a tank with a refill
         (:class:`~sabre.TankRefill`) is refilled by while the measurement agrees. Records every
         ``record_every``-th step (default: every step).
 
+        :class:`sabre.Plant` runs the whole stretch in Rust; any other :class:`~sabre.PlantInterface`
+        is stepped from Python through the same tick, recording the same trace.
+
         Raises:
-            TypeError: plant, safety or tank of the wrong type.
+            TypeError: plant, safety or tank of the wrong type (a plant: naming what it lacks).
             ShapeError: reference is not (K, nq).
             InvalidValueError: an empty or non-finite reference, a filter built for another scene,
                 non-positive dt, negative steps, record_every < 1.
@@ -149,36 +173,110 @@ class LowLevelController:
         t0 = float(t0)
         if not np.isfinite(t0):
             raise InvalidValueError(f"t0: must be finite, got {t0}")
-        d = self._core.follow(
-            plant._core,
-            reference,
-            t0,
-            as_positive("dt", dt),
-            as_count("steps", steps, 0),
-            as_count("record_every", record_every, 1),
-            None if safety is None else safety._core,
-            None if tank is None else tank._core,
-            None if predicted_dissipation is None else as_float_array("predicted_dissipation", predicted_dissipation, (None,)),
+        dt = as_positive("dt", dt)
+        steps = as_count("steps", steps, 0)
+        record_every = as_count("record_every", record_every, 1)
+        predicted = (
+            None if predicted_dissipation is None else as_float_array("predicted_dissipation", predicted_dissipation, (None,))
         )
-        status = d.get("filter_status")
-        return Trace(
-            time=readonly(d["time"]),
-            state=readonly(d["state"]),
-            reference=readonly(d["reference"]),
-            filtered=readonly(d["filtered"]) if "filtered" in d else None,
-            filter_status=None if status is None else tuple(status),
-            tank_energy=readonly(d["tank_energy"]) if "tank_energy" in d else None,
-            wrench=readonly(d["wrench"]),
-            tau_ext=readonly(d["tau_ext"]),
-            tau_ext_measured=readonly(d["tau_ext_measured"]),
-            contact=readonly(d["contact"]),
-        )
+        safety_core = None if safety is None else safety._core
+        tank_core = None if tank is None else tank._core
+        if isinstance(plant, Plant):
+            d = self._core.follow(plant._core, reference, t0, dt, steps, record_every, safety_core, tank_core, predicted)
+        else:
+            plan = _core.Plan(reference, t0, dt, None if predicted is None or predicted.size == 0 else predicted)
+            inner = _core.InnerLoop(self._core, safety_core, tank_core)
+            d = _follow_stepwise(inner, plan, plant, steps, record_every)
+        return _trace(d)
 
-    def _check_plant(self, plant: Plant) -> None:
+    def _check_plant(self, plant: PlantInterface) -> None:
         if not isinstance(plant, Plant):
-            raise TypeError(f"plant must be a sabre.Plant, got {type(plant).__name__}")
-        if plant.scene.nq != self.scene.nq:
+            as_plant(plant, self.scene)
+        elif plant.scene.nq != self.scene.nq:
             raise InvalidValueError("plant: the controller was built for a different scene than the plant's")
+
+
+def _vector(name: str, value: Any) -> np.ndarray:
+    """A plant's reading as the C-contiguous float64 array the core takes (its shape and values are
+    checked there)."""
+    try:
+        return np.ascontiguousarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ShapeError(f"{name}: cannot be read as a float array ({exc})") from None
+
+
+class _StepRecord:
+    """The rows :func:`_follow_stepwise` records, under the names of the core's trace dict."""
+
+    def __init__(self, has_filter: bool, has_tank: bool) -> None:
+        names = ["time", "state", "reference", "wrench", "tau_ext", "tau_ext_measured", "contact"]
+        names += ["filtered", "filter_status"] if has_filter else []
+        names += ["tank_energy"] if has_tank else []
+        self.rows: dict[str, list[Any]] = {name: [] for name in names}
+
+    def add(self, plant: PlantInterface, reference: np.ndarray, command: np.ndarray, energy: float | None, status: str) -> None:
+        rows = self.rows
+        rows["time"].append(float(plant.time))
+        rows["state"].append(_vector("plant.state", plant.state))
+        rows["reference"].append(reference)
+        rows["wrench"].append(_vector("plant.wrench", plant.wrench))
+        rows["tau_ext"].append(_vector("plant.tau_ext", plant.tau_ext))
+        rows["tau_ext_measured"].append(_vector("plant.measured_tau_ext", plant.measured_tau_ext))
+        rows["contact"].append(bool(plant.contact))
+        if "filtered" in rows:
+            rows["filtered"].append(command)
+            rows["filter_status"].append(status)
+        if "tank_energy" in rows:
+            rows["tank_energy"].append(np.nan if energy is None else energy)
+
+    def arrays(self, nx: int, nq: int) -> dict[str, Any]:
+        widths = {"state": nx, "reference": nq, "wrench": 6, "tau_ext": nq, "tau_ext_measured": nq, "filtered": nq}
+        out: dict[str, Any] = {}
+        for name, rows in self.rows.items():
+            if name == "filter_status":
+                out[name] = rows
+            elif name == "contact":
+                out[name] = np.array(rows, dtype=bool)
+            elif name in widths:
+                out[name] = np.array(rows, dtype=np.float64).reshape(len(rows), widths[name])
+            else:
+                out[name] = np.array(rows, dtype=np.float64)
+        return out
+
+
+def _follow_stepwise(inner: Any, plan: Any, plant: PlantInterface, steps: int, record_every: int) -> dict[str, Any]:
+    """``steps`` ticks of ``inner`` (a ``_core.InnerLoop``) on ``plan``, each at the plant's state, τ_ext
+    reading and time, integrating over its step, and a plant step with the torque (a torque plant) or the
+    command (a velocity plant); the trace dict of every ``record_every``-th step, as the core's follow
+    records it."""
+    velocity = plant.command_interface == "velocity"
+    dt = float(plant.dt)
+    record = _StepRecord(inner.filter is not None, inner.tank is not None)
+    for step in range(steps):
+        x = _vector("plant.state", plant.state)
+        tau_ext = _vector("plant.measured_tau_ext", plant.measured_tau_ext)
+        reference, command, torque, energy, status = inner.tick(plan, x, tau_ext, float(plant.time), dt)
+        plant.step(command if velocity else torque)
+        if step % record_every == 0:
+            record.add(plant, reference, command, energy, status)
+    return record.arrays(plant.scene.nx, plant.scene.nq)
+
+
+def _trace(d: dict[str, Any]) -> Trace:
+    """The :class:`Trace` of a follow's trace dict."""
+    status = d.get("filter_status")
+    return Trace(
+        time=readonly(d["time"]),
+        state=readonly(d["state"]),
+        reference=readonly(d["reference"]),
+        filtered=readonly(d["filtered"]) if "filtered" in d else None,
+        filter_status=None if status is None else tuple(status),
+        tank_energy=readonly(d["tank_energy"]) if "tank_energy" in d else None,
+        wrench=readonly(d["wrench"]),
+        tau_ext=readonly(d["tau_ext"]),
+        tau_ext_measured=readonly(d["tau_ext_measured"]),
+        contact=readonly(d["contact"]),
+    )
 
 
 @dataclass(frozen=True)
@@ -214,3 +312,83 @@ class Trace:
     def fallback(self) -> np.ndarray | None:
         """(M,) bool: the filter fell back to the safe stop in that step (None without a filter)."""
         return None if self.filter_status is None else np.array([s == "fallback" for s in self.filter_status])
+
+
+@dataclass(frozen=True)
+class PlanSnapshot:
+    """A plan as a value: what the planner hands the inner loop (:meth:`sabre.Controller.snapshot`, the
+    planner process, :meth:`sabre.RealtimeCascade.plan`). Immutable and picklable; the planner moving on
+    never changes it.
+
+    ``plan`` (the core's) holds the reference (K, nu) with row k applying at t0 + k·dt, the predicted port
+    dissipation (K,) for the tank's refill (None without one) and the low-level gain inertia floor of the
+    planned phase (None: the low-level controller's own); the inner loop's tick reads it as is. Next to it:
+    the task ``phase`` the plan is for, the planning iteration's wall time (s), the number of iterations
+    since the planner's reset (0 before the first) and the nominal's cost (NaN before the first).
+    """
+
+    plan: _core.Plan
+    phase: str = ""
+    iteration_time: float = float("nan")
+    iterations: int = 0
+    nominal_cost: float = float("nan")
+
+    @staticmethod
+    def of(
+        nominal: np.ndarray,
+        t0: float,
+        dt: float,
+        *,
+        predicted: np.ndarray | None = None,
+        gain_inertia_floor: float | None = None,
+        phase: str = "",
+        iteration_time: float = float("nan"),
+        iterations: int = 0,
+        nominal_cost: float = float("nan"),
+    ) -> PlanSnapshot:
+        """The snapshot of the reference ``nominal`` (K, nu) starting at ``t0`` (s) on a grid of ``dt`` (s).
+
+        Raises:
+            ShapeError: nominal not (K, nu) with K ≥ 1, predicted not (K,).
+            InvalidValueError: non-finite values, dt not positive, a negative floor.
+        """
+        nominal = as_float_array("nominal", nominal, (None, None))
+        if predicted is not None:
+            predicted = as_float_array("predicted", predicted, (None,))
+        plan = _core.Plan(
+            nominal, float(t0), float(dt), predicted, None if gain_inertia_floor is None else float(gain_inertia_floor)
+        )
+        return PlanSnapshot(plan, str(phase), float(iteration_time), int(iterations), float(nominal_cost))
+
+    @property
+    def nominal(self) -> np.ndarray:
+        """(K, nu) the reference sequence (a copy)."""
+        return self.plan.reference
+
+    @property
+    def t0(self) -> float:
+        """Time (s) at which row 0 of :attr:`nominal` applies."""
+        return self.plan.t0
+
+    @property
+    def dt(self) -> float:
+        """Time (s) between the rows of :attr:`nominal`."""
+        return self.plan.dt
+
+    @property
+    def predicted(self) -> np.ndarray | None:
+        """(K,) the predicted port dissipation −τ_extᵀu (W) on the grid of :attr:`nominal` (a copy), or None."""
+        return self.plan.predicted_dissipation
+
+    @property
+    def gain_inertia_floor(self) -> float | None:
+        """The low-level gain inertia floor (kg m²) of the planned phase; None: the low-level controller's own."""
+        return self.plan.gain_inertia_floor
+
+    def reference(self, t: float) -> np.ndarray:
+        """(nu,) the reference at time t (s): linear between rows, held at both ends."""
+        return np.asarray(self.plan.reference_at(float(t)), dtype=np.float64)
+
+    def predicted_dissipation(self, t: float) -> float | None:
+        """The predicted port dissipation (W) at time t (s), interpolated as :meth:`reference`; None without one."""
+        return self.plan.predicted_dissipation_at(float(t))

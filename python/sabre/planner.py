@@ -19,6 +19,7 @@ from . import _core
 from ._validate import as_array, as_count, as_finite, as_float_array, as_non_negative, as_positive, core_config
 from .costs import Batch, CompiledCost
 from .errors import InvalidValueError, ShapeError
+from .inner_loop import PlanSnapshot
 from .safety import EnergyTank, SafetyConfig, SafetyFilter, TankRefill
 from .scene import Scene
 from .sim import CONTACT_MODELS, MAX_THREADS, RolloutModel
@@ -432,6 +433,35 @@ class Controller:
         the grid of :attr:`nominal` (row k at ``nominal_t0 + k·dt``); None without a tank refill or
         before the first :meth:`update`."""
         return self._predicted_dissipation
+
+    def predicted_dissipation_at(self, t: float) -> float | None:
+        """The predicted port dissipation (W) at time t, interpolated on the grid of :attr:`nominal` as
+        :meth:`reference` is (held at both ends); None where :attr:`predicted_dissipation` is None."""
+        predicted = self._predicted_dissipation
+        if predicted is None:
+            return None
+        s = min(max((as_finite("t", t) - self.nominal_t0) / self.config.dt, 0.0), float(len(predicted) - 1))
+        i = int(s)
+        j = min(i + 1, len(predicted) - 1)
+        return float((1.0 - (s - i)) * predicted[i] + (s - i) * predicted[j])
+
+    def snapshot(self) -> PlanSnapshot:
+        """The current plan as a value the inner loop follows (:class:`~sabre.PlanSnapshot`): a copy of
+        :attr:`nominal` from :attr:`nominal_t0`, the predicted dissipation, the task's gain inertia floor
+        for the phase, and the last iteration's phase, time, count and nominal cost. Later updates leave
+        it as it is."""
+        stats = self._stats
+        return PlanSnapshot.of(
+            self.nominal,
+            self.nominal_t0,
+            self.config.dt,
+            predicted=self._predicted_dissipation,
+            gain_inertia_floor=self.task.gain_inertia_floor(self.phase),
+            phase=self.phase,
+            iteration_time=float("nan") if stats is None else stats.iteration_time,
+            iterations=0 if stats is None else stats.iteration,
+            nominal_cost=float("nan") if stats is None else stats.nominal_cost,
+        )
 
     def reference(self, t: float) -> np.ndarray:
         """(nu,) commanded joint velocity at time t."""

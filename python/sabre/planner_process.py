@@ -1,5 +1,6 @@
 """The outer loop in a process of its own: a controller built there by a picklable factory re-plans
-on the newest state the inner loop shares, and hands each plan back through shared memory.
+on the newest state the inner loop shares, and hands each plan back through shared memory, where
+the inner loop's process takes it as a :class:`~sabre.PlanSnapshot` like one made in-process.
 
 In one process, the planner's Python work (phase logic, guides, the task's probes) holds the
 interpreter lock between its Rust calls, and a 1 kHz state callback waits for it; here the inner
@@ -18,38 +19,21 @@ import signal
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from .errors import PlannerError
+from .inner_loop import PlanSnapshot
 
 __all__ = ["PlanSnapshot", "PlannerProcess"]
 
 # Plan block header: sequence, t0, dt, gain floor (NaN: none), phase index, iteration time (s),
-# iterations, has predicted dissipation, failed; then nominal (K·nu), then predicted (K).
-_SEQ, _T0, _DT, _FLOOR, _PHASE, _ITER_TIME, _ITERS, _HAS_PRED, _FAILED = range(9)
-_PLAN_HEADER = 9
+# iterations, nominal cost, has predicted dissipation, failed; then nominal (K·nu), then predicted (K).
+_SEQ, _T0, _DT, _FLOOR, _PHASE, _ITER_TIME, _ITERS, _COST, _HAS_PRED, _FAILED = range(10)
+_PLAN_HEADER = 10
 # State block: sequence, t, then x (nx).
 _STATE_HEADER = 2
-
-
-@dataclass(frozen=True)
-class PlanSnapshot:
-    """One plan as the planner process handed it over: nominal (K, nu) with row k applying at
-    t0 + k·dt, the predicted port dissipation (K,) for the tank's refill (None without one), the
-    task's low-level gain floor for the planned phase (None: the controller's own), the phase, the
-    iteration's wall time (s) and the number of iterations since the start."""
-
-    nominal: np.ndarray
-    t0: float
-    dt: float
-    predicted: np.ndarray | None
-    floor: float | None
-    phase: str
-    iteration_time: float
-    iterations: int
 
 
 def _write(block: np.ndarray, values: list[tuple[int, Any]]) -> None:
@@ -105,25 +89,26 @@ def _run_commands(controller: Any, commands: Any) -> None:
         getattr(controller, name)(*args)
 
 
-def _hand_over(plan: np.ndarray, controller: Any, stats: Any, phases: tuple[str, ...], steps: int, nu: int) -> None:
-    """Writes the controller's newest plan, with its header, into the shared plan block."""
-    floor = controller.task.gain_inertia_floor(controller.phase)
-    predicted = controller.predicted_dissipation
-    nominal = np.asarray(controller.nominal, dtype=np.float64)
+def _hand_over(block: np.ndarray, snapshot: PlanSnapshot, phases: tuple[str, ...], steps: int, nu: int) -> None:
+    """Writes a plan the controller made (:meth:`Controller.snapshot`), with its header, into the shared
+    plan block; :meth:`PlannerProcess.snapshot` makes the same snapshot of it on the other side."""
+    floor = snapshot.gain_inertia_floor
+    predicted = snapshot.predicted
     header = [
-        float(controller.nominal_t0),
-        float(controller.config.dt),
-        np.nan if floor is None else float(floor),
-        float(phases.index(controller.phase)),
-        float(stats.iteration_time),
-        float(stats.iteration),
+        snapshot.t0,
+        snapshot.dt,
+        np.nan if floor is None else floor,
+        float(phases.index(snapshot.phase)),
+        snapshot.iteration_time,
+        float(snapshot.iterations),
+        snapshot.nominal_cost,
         0.0 if predicted is None else 1.0,
         0.0,
     ]
-    values: list[tuple[int, Any]] = [(_T0, header), (_PLAN_HEADER, nominal[:steps, :nu])]
+    values: list[tuple[int, Any]] = [(_T0, header), (_PLAN_HEADER, snapshot.nominal[:steps, :nu])]
     if predicted is not None:
-        values.append((_PLAN_HEADER + steps * nu, np.asarray(predicted, dtype=np.float64)[:steps]))
-    _write(plan, values)
+        values.append((_PLAN_HEADER + steps * nu, predicted[:steps]))
+    _write(block, values)
 
 
 def _planner_main(
@@ -166,8 +151,8 @@ def _planner_main(
             t, x = float(copy[1]), copy[_STATE_HEADER : _STATE_HEADER + nx]
             if compensate:
                 x, t = controller.predict(x, t, delay)
-            stats = controller.update(x, t)
-            _hand_over(plan, controller, stats, phases, steps, nu)
+            controller.update(x, t)
+            _hand_over(plan, controller.snapshot(), phases, steps, nu)
             delay = time.perf_counter() - taken
             rest = min_period - (time.perf_counter() - started)
             if rest > 0.0:
@@ -307,16 +292,16 @@ class PlannerProcess:
         if block[_FAILED] != 0.0:
             raise PlannerError(self._error_text())
         floor = float(block[_FLOOR])
-        predicted = block[_PLAN_HEADER + steps * nu :] if block[_HAS_PRED] != 0.0 else None
-        self._snapshot = PlanSnapshot(
-            nominal=block[_PLAN_HEADER : _PLAN_HEADER + steps * nu].reshape(steps, nu),
-            t0=float(block[_T0]),
-            dt=float(block[_DT]),
-            predicted=None if predicted is None else predicted.copy(),
-            floor=None if np.isnan(floor) else floor,
+        self._snapshot = PlanSnapshot.of(
+            block[_PLAN_HEADER : _PLAN_HEADER + steps * nu].reshape(steps, nu),
+            float(block[_T0]),
+            float(block[_DT]),
+            predicted=block[_PLAN_HEADER + steps * nu :] if block[_HAS_PRED] != 0.0 else None,
+            gain_inertia_floor=None if np.isnan(floor) else floor,
             phase=self._phases[int(block[_PHASE])],
             iteration_time=float(block[_ITER_TIME]),
             iterations=int(block[_ITERS]),
+            nominal_cost=float(block[_COST]),
         )
         self._seen = seq
         return self._snapshot

@@ -1,15 +1,16 @@
-"""Real-time mode of the cascade: the outer loop re-plans on its own thread, the inner loop is
-driven by incoming state (e.g. a ROS 2 joint-state callback at 1 kHz).
+"""The deployment loop of the cascade, on any clock: :class:`RealtimeCascade` plans (outer loop) and ticks
+(inner loop, Sec. IV) on the states a simulator or a robot hands it.
 
-``RealtimeCascade.tick(x, tau_ext, t)`` is the inner loop of Sec. IV: it interpolates the latest
-reference at time t, runs the controller's inner FILTER-QP with the energy tank (variants I, IO),
-integrates the tank, and returns the command (and, with a low-level controller, the torque). The
-planner runs ``Controller.update`` in a background thread on the most recent state it was given;
-its iterations release the GIL in Rust, but its Python work between those calls (phase logic,
-guides) holds it. With ``planner_process=factory`` the planner runs in a process of its own on a
-controller the factory builds there (:class:`~sabre.planner_process.PlannerProcess`), so that a
-1 kHz callback never waits for it. The reference the inner loop reads is a snapshot swapped in
-after each iteration, never the planner's working copy.
+``tick(x, tau_ext, t)`` is the inner loop: one call into the core's tick (``_core.InnerLoop``), which
+interpolates the plan in force at time t, runs the controller's inner FILTER-QP with the energy tank
+(variants I, IO), refills the tank from the plan's predicted dissipation, integrates it, and computes the
+low-level torque; every input is checked there, once. ``plan(x, t)`` is one planning iteration in the
+caller's thread, so that a simulator can run the cascade in simulated time, deterministically
+(``delay=`` the planning time to simulate); ``start()`` instead plans in the background against the wall
+clock: a thread running ``Controller.update`` on the newest state (its iterations release the GIL in Rust,
+its Python work between them holds it), or, with ``planner_process=factory``, a process of its own
+(:class:`~sabre.planner_process.PlannerProcess`), so that a 1 kHz callback never waits for it. Either way
+the inner loop reads :class:`~sabre.PlanSnapshot` values, swapped in whole, never the planner's working copy.
 """
 
 from __future__ import annotations
@@ -18,22 +19,29 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from . import _core
 from ._validate import as_finite, as_float_array, as_non_negative, as_positive
-from .errors import InvalidValueError
-from .inner_loop import LowLevelController
+from .errors import InvalidValueError, ShapeError
+from .inner_loop import LowLevelController, PlanSnapshot
 from .planner import Controller
-from .planner_process import PlannerProcess, PlanSnapshot
+from .planner_process import PlannerProcess
 
 __all__ = ["RealtimeCascade", "TickResult"]
+
+#: A plan handed over for time t_a takes over at the first tick at t ≥ t_a − this (s): simulated clocks
+#: that sum their steps land a rounding error short of t_a.
+_TAKEOVER_TOLERANCE = 1e-7
 
 
 @dataclass(frozen=True)
 class TickResult:
     """One inner-loop tick: reference (nu,) from the plan, command (nu,) after the filter, torque
-    (nq,) from the low-level controller (None without one), tank energy (J), filter status."""
+    (nq,) from the low-level controller (None without one), tank energy (J), filter status
+    (``"unfiltered"`` without a filter)."""
 
     reference: np.ndarray
     command: np.ndarray
@@ -42,17 +50,32 @@ class TickResult:
     status: str
 
 
-def _interpolate(sequence: np.ndarray, t0: float, dt: float, t: float) -> np.ndarray:
-    """Row k of ``sequence`` applies at t0 + k·dt: linear in between, held at both ends."""
-    s = min(max((float(t) - t0) / dt, 0.0), float(len(sequence) - 1))
-    i = int(s)
-    j = min(i + 1, len(sequence) - 1)
-    a = s - i
-    return (1.0 - a) * sequence[i] + a * sequence[j]
+def _vector(name: str, value: Any, copy: bool) -> np.ndarray:
+    """``value`` as the C-contiguous float64 array the core's tick takes (a copy if asked); its shape
+    and values are checked there."""
+    try:
+        return np.array(value, dtype=np.float64) if copy else np.ascontiguousarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ShapeError(f"{name}: cannot be read as a float array ({exc})") from None
+
+
+def _number(name: str, value: Any) -> float:
+    """``value`` as a float (its finiteness is checked by the core)."""
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise InvalidValueError(f"{name}: expected a number, got {value!r}") from None
 
 
 class RealtimeCascade:
-    """Runs `controller` as a real-time cascade. Use as a context manager or call start/stop.
+    """Runs ``controller`` as a cascade: :meth:`plan` and :meth:`tick` in the caller's loop (simulated or
+    wall-clock time), or :meth:`start` / :meth:`stop` (or a ``with`` block) with the planner in the
+    background against the wall clock.
+
+    ``low_level``: the low-level controller (53) whose torques :meth:`tick` returns, for a robot (or
+    simulator) taking joint torques. None: a robot with a velocity interface, which gets the command;
+    the tick then returns no torque, since a PI controller whose torques nobody applies would only wind
+    up its integral (the core's tick still computes one, with a controller at ``inner_dt`` kept inside).
 
     ``planner_process``: a picklable callable (a module-level function or a ``functools.partial``
     of one) that builds the same controller as ``controller`` (scene, task, configuration); the
@@ -64,8 +87,8 @@ class RealtimeCascade:
 
     ``delay_compensation`` (default True): each plan takes over only once computed, while the inner
     loop still follows the previous one, so the planner plans from the state
-    :meth:`Controller.predict` expects at that moment (its last iteration's time ahead) instead of
-    the measured one. ``run_episode(plan_delay=...)`` reproduces the delay in simulated time.
+    :meth:`Controller.predict` expects at that moment (the planning time ahead) instead of the
+    measured one.
     """
 
     def __init__(
@@ -82,8 +105,13 @@ class RealtimeCascade:
     ) -> None:
         if not isinstance(controller, Controller):
             raise TypeError(f"controller must be a sabre.Controller, got {type(controller).__name__}")
+        if low_level is not None and not isinstance(low_level, LowLevelController):
+            raise TypeError(f"low_level must be a sabre.LowLevelController, got {type(low_level).__name__}")
         if planner_process is not None and not callable(planner_process):
             raise InvalidValueError("planner_process must be a callable that builds the planner's Controller")
+        scene = controller.scene
+        if low_level is not None and (low_level.scene.nq != scene.nq or low_level.scene.nx != scene.nx):
+            raise InvalidValueError("low_level: built for a different scene than the controller's")
         self.controller = controller
         self.low_level = low_level
         self.inner_dt = as_positive("inner_dt", inner_dt)
@@ -92,29 +120,98 @@ class RealtimeCascade:
         self._planner_nice = int(planner_nice)
         self._planner_idle = bool(planner_idle)
         self.delay_compensation = bool(delay_compensation)
-        self._delay = 0.0  # the planner thread's last time from reading a state to handing its plan over
+        self._low = low_level if low_level is not None else LowLevelController(scene, dt=self.inner_dt)
+        inner_filter = controller.inner_filter
+        self._inner = _core.InnerLoop(
+            self._low._core, None if inner_filter is None else inner_filter._core, controller.tank._core
+        )
+        self._delay = 0.0  # the last wall-clock planning's time from reading a state to handing its plan over
         self._process: PlannerProcess | None = None
         self._obstacle_log: list[tuple[str, tuple[object, ...]]] = []  # replayed in each planner process
-        self._phase = controller.phase
-        self._iteration_time = float("nan")
-        self._lock = threading.Lock()
+        # Each a single reference, swapped whole: the planner thread and the tick never see half of one.
         self._latest: tuple[np.ndarray, float] | None = None
-        # (nominal, t0, dt) and the plan's predicted port dissipation for the tank's refill
-        self._plan: tuple[np.ndarray, float, float] | None = None
-        self._predicted: np.ndarray | None = None
-        # the task's low-level gain inertia floor for the planned phase (None: the controller's own)
-        self._floor: float | None = None
-        self._own_floor = 0.0 if low_level is None else low_level.gain_inertia_floor
+        self._plan: PlanSnapshot | None = None
+        self._pending: tuple[PlanSnapshot, float] | None = None  # a plan handed over for a later time
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._error: BaseException | None = None
         self._stopped = False
-        self.iterations = 0
         self.ticks = 0
 
     # Outer loop -----------------------------------------------------------------------------
+    def reset(self, seed: int | None = None, t0: float = 0.0) -> None:
+        """Resets the controller (``seed``: its sampler's stream, default the configured one; ``t0``: the
+        start time), the low-level controller's integral and the tank, and forgets the plans and the
+        measured planning time: a simulated run after reset repeats exactly. Refused while the planner runs."""
+        self._refuse_while_planning("reset()")
+        self.controller.reset(seed, as_finite("t0", t0))
+        self._low.reset()
+        self._plan, self._pending, self._latest = None, None, None
+        self._delay = 0.0
+        self._stopped = False
+
+    def plan(self, x: Sequence[float] | np.ndarray, t: float, *, delay: float | None = None) -> PlanSnapshot:
+        """One planning iteration in the caller's thread from the measured state x (nx,) at time t (s);
+        returns its plan, which the next ticks follow.
+
+        ``delay`` None (wall-clock use): the plan takes over at once, and with ``delay_compensation`` it is
+        made from the state :meth:`Controller.predict` expects the previous planning's measured time
+        ahead. ``delay`` in seconds (simulated use): the planning is taken to last that long, so the plan
+        takes over at the first tick at t + delay (the plan in force runs until then) and, with
+        ``delay_compensation``, is made from the state predicted that far ahead; no clock is read, so a
+        run is deterministic for the controller's seed. Refused while :meth:`start` plans in the background.
+
+        Raises:
+            ShapeError: x is not (nx,). InvalidValueError: non-finite x or t, a negative delay.
+        """
+        self._refuse_while_planning("plan()")
+        x = as_float_array("x", x, (self.controller.scene.nx,))
+        t = as_finite("t", t)
+        self._latest = (x, t)
+        if delay is None:
+            snapshot = self._plan_now(x, t)
+            self.hand_over(snapshot)
+        else:
+            delay = as_non_negative("delay", delay)
+            self._plan_at(t)  # a plan handed over for t or earlier is in force by now
+            snapshot = self._make_plan(x, t, delay if self.delay_compensation else 0.0)
+            self.hand_over(snapshot, at=t + delay if delay > 0.0 else None)
+        return snapshot
+
+    def hand_over(self, snapshot: PlanSnapshot, at: float | None = None) -> None:
+        """Hands the inner loop a plan: one from :meth:`plan` or :meth:`Controller.snapshot`, or made
+        elsewhere (:meth:`PlanSnapshot.of`). It takes over at the first tick at time ``at`` (s) or later;
+        None, or no plan in force yet: at once. A plan still waiting for its time is dropped. Refused while
+        :meth:`start` plans in the background."""
+        if not isinstance(snapshot, PlanSnapshot):
+            raise TypeError(f"snapshot must be a sabre.PlanSnapshot, got {type(snapshot).__name__}")
+        self._refuse_while_planning("hand_over()")
+        if at is None or self._plan is None:
+            self._plan, self._pending = snapshot, None
+        else:
+            self._pending = (snapshot, as_finite("at", at))
+        self._stopped = False
+
+    def _refuse_while_planning(self, what: str) -> None:
+        if self._thread is not None or self._process is not None:
+            raise InvalidValueError(f"{what}: the planner runs in the background (start()); stop() it first")
+
+    def _make_plan(self, x: np.ndarray, t: float, delay: float) -> PlanSnapshot:
+        """One planning iteration from the state predicted ``delay`` s after x at t (x itself for 0)."""
+        if delay > 0.0:
+            x, t = self.controller.predict(x, t, delay)
+        self.controller.update(x, t)
+        return self.controller.snapshot()
+
+    def _plan_now(self, x: np.ndarray, t: float) -> PlanSnapshot:
+        """A wall-clock planning iteration: compensated by the previous one's measured time, and timed."""
+        taken = time.perf_counter()
+        snapshot = self._make_plan(x, t, self._delay if self.delay_compensation else 0.0)
+        self._delay = time.perf_counter() - taken
+        return snapshot
+
     def start(self, x0: Sequence[float] | np.ndarray, t0: float = 0.0, *, wait: bool = True) -> RealtimeCascade:
-        """Resets the controller, plans once from x0 (so the first tick has a reference) and starts
+        """Resets (:meth:`reset`), plans once from x0 (so the first tick has a reference) and starts
         the planner: a thread, or the planner process (which makes that first plan itself). With
         the planner process, ``wait=False`` returns before that first plan: :attr:`ready` tells when
         it has arrived (a caller answers the states before it with a safe stop and hands them to
@@ -123,82 +220,49 @@ class RealtimeCascade:
             raise InvalidValueError("the cascade is already running")
         x0 = as_float_array("x0", x0, (self.controller.scene.nx,))
         t0 = as_finite("t0", t0)
-        self.controller.reset(t0=t0)
-        if self.low_level is not None:
-            self.low_level.reset()
+        self.reset(t0=t0)
         self._latest = (x0, t0)
-        self._delay = 0.0
-        self._stopped = False
-        with self._lock:
-            self._plan, self._predicted, self._floor = None, None, None
         if self._factory is not None:
-            self.iterations = 0
-            c = self.controller
-            self._process = PlannerProcess(
-                self._factory,
-                nx=c.scene.nx,
-                steps=c.config.horizon_steps,
-                nu=c.scene.nu,
-                phases=tuple(c.task.phases),
-                min_replan_period=self.min_replan_period,
-                nice=self._planner_nice,
-                idle=self._planner_idle,
-                compensate=self.delay_compensation,
-            )
-            for name, args in self._obstacle_log:
-                self._process.call(name, *args)
-            try:
-                first = self._process.start(x0, t0, wait=wait)
-                if first is not None:
-                    self._apply(first)
-            except BaseException:
-                self._process.stop()
-                self._process = None
-                raise
+            self._start_process(self._factory, x0, t0, wait)
             return self
-        self._plan_once()
+        self._plan = self._plan_now(x0, t0)
         self._stop.clear()
+        self._error = None
         self._thread = threading.Thread(target=self._run, name="sabre-outer-loop", daemon=True)
         self._thread.start()
         return self
 
-    def _apply(self, snapshot: PlanSnapshot) -> None:
-        """Takes over a plan the planner process handed over."""
-        with self._lock:
-            self._plan = (snapshot.nominal, snapshot.t0, snapshot.dt)
-            self._predicted = snapshot.predicted
-            self._floor = snapshot.floor
-        self._phase = snapshot.phase
-        self._iteration_time = snapshot.iteration_time
-        self.iterations = snapshot.iterations
-
-    def _plan_once(self) -> None:
-        with self._lock:
-            latest = self._latest
-        assert latest is not None, "start() stores the first state before any planning"
-        taken = time.perf_counter()
-        x, t = latest
-        if self.delay_compensation:
-            x, t = self.controller.predict(x, t, self._delay)
-        self.controller.update(x, t)
-        plan = (np.array(self.controller.nominal), float(self.controller.nominal_t0), float(self.controller.config.dt))
-        predicted = self.controller.predicted_dissipation
-        floor = self.controller.task.gain_inertia_floor(self.controller.phase)
-        with self._lock:
-            self._plan = plan
-            self._predicted = None if predicted is None else np.array(predicted)
-            self._floor = floor
-        self._phase = self.controller.phase
-        stats = self.controller.stats
-        self._iteration_time = float("nan") if stats is None else float(stats.iteration_time)
-        self.iterations += 1
-        self._delay = time.perf_counter() - taken
+    def _start_process(self, factory: Callable[[], Controller], x0: np.ndarray, t0: float, wait: bool) -> None:
+        c = self.controller
+        self._process = PlannerProcess(
+            factory,
+            nx=c.scene.nx,
+            steps=c.config.horizon_steps,
+            nu=c.scene.nu,
+            phases=tuple(c.task.phases),
+            min_replan_period=self.min_replan_period,
+            nice=self._planner_nice,
+            idle=self._planner_idle,
+            compensate=self.delay_compensation,
+        )
+        for name, args in self._obstacle_log:
+            self._process.call(name, *args)
+        try:
+            first = self._process.start(x0, t0, wait=wait)
+            if first is not None:
+                self._plan = first
+        except BaseException:
+            self._process.stop()
+            self._process = None
+            raise
 
     def _run(self) -> None:
         try:
             while not self._stop.is_set():
                 started = time.perf_counter()
-                self._plan_once()
+                latest = self._latest
+                assert latest is not None, "start() stores the first state before the thread starts"
+                self._plan = self._plan_now(*latest)
                 rest = self.min_replan_period - (time.perf_counter() - started)
                 if rest > 0:
                     self._stop.wait(rest)
@@ -206,7 +270,8 @@ class RealtimeCascade:
             self._error = exc
 
     def stop(self) -> None:
-        """Stops the planner (thread or process) and waits for it to finish."""
+        """Stops the planner (thread or process) and waits for it to finish; ticks then raise until the
+        next :meth:`start` or :meth:`plan`."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join()
@@ -232,20 +297,34 @@ class RealtimeCascade:
 
     @property
     def ready(self) -> bool:
-        """Whether a plan is there for the inner loop to read (after start)."""
-        if self._process is not None and self._plan is None:
-            self._take_newer_plan()
+        """Whether a plan is there for the inner loop to read."""
+        process = self._process
+        if process is not None and self._plan is None:
+            self._take_newer_plan(process)
         return self._plan is not None
 
     @property
+    def current_plan(self) -> PlanSnapshot | None:
+        """The plan in force: the one the last tick followed, or the newest handed over since."""
+        return self._plan
+
+    @property
     def phase(self) -> str:
-        """The task phase of the newest plan."""
-        return self._phase
+        """The task phase of the plan in force (the controller's before the first plan)."""
+        plan = self._plan
+        return self.controller.phase if plan is None else plan.phase
 
     @property
     def iteration_time(self) -> float:
-        """Wall time (s) of the planning iteration that made the newest plan (NaN before one)."""
-        return self._iteration_time
+        """Wall time (s) of the planning iteration that made the plan in force (NaN before one)."""
+        plan = self._plan
+        return float("nan") if plan is None else plan.iteration_time
+
+    @property
+    def iterations(self) -> int:
+        """Planning iterations since the start up to the plan in force (0 before one)."""
+        plan = self._plan
+        return 0 if plan is None else plan.iterations
 
     @property
     def planner_in_process(self) -> bool:
@@ -285,13 +364,21 @@ class RealtimeCascade:
 
     # Inner loop -----------------------------------------------------------------------------
     def reference(self, t: float) -> np.ndarray:
-        """(nu,) the latest plan linearly interpolated at time t (held at its ends)."""
-        with self._lock:
-            plan = self._plan
+        """(nu,) the reference a tick at time t would follow: the plan in force at t, linearly
+        interpolated (held at its ends)."""
+        plan, pending = self._plan, self._pending
+        if pending is not None and t >= pending[1] - _TAKEOVER_TOLERANCE:
+            plan = pending[0]
         if plan is None:
-            raise InvalidValueError("no plan yet: call start() first (and, with wait=False, wait until ready)")
-        nominal, t0, dt = plan
-        return _interpolate(nominal, t0, dt, t)
+            raise InvalidValueError("no plan yet: call plan() or start() first (and, with wait=False, wait until ready)")
+        return plan.reference(t)
+
+    def _plan_at(self, t: float) -> PlanSnapshot | None:
+        """The plan in force at time t, after a plan handed over for t or earlier takes over."""
+        pending = self._pending
+        if pending is not None and t >= pending[1] - _TAKEOVER_TOLERANCE:
+            self._plan, self._pending = pending[0], None
+        return self._plan
 
     def observe(self, x: Sequence[float] | np.ndarray, t: float) -> None:
         """Hands the planner the newest measured state x (nx,) at time t without ticking (a caller
@@ -299,77 +386,71 @@ class RealtimeCascade:
         still let the planner catch up), and takes over a newer plan if the planner process has one."""
         x = as_float_array("x", x, (self.controller.scene.nx,))
         t = as_finite("t", t)
-        with self._lock:
-            self._latest = (x, t)
-        self._refresh(x, t)
+        self._latest = (x, t)
+        process = self._process
+        if process is not None:
+            process.share_state(x, t)
+            self._take_newer_plan(process)
 
-    def _refresh(self, x: np.ndarray, t: float) -> None:
-        if self._process is not None:
-            self._process.share_state(x, t)
-            self._take_newer_plan()
-
-    def _take_newer_plan(self) -> None:
-        """Takes over the planner process's newest plan if it is not the one in use; raises
-        PlannerError once the process has failed."""
-        assert self._process is not None
-        snapshot = self._process.snapshot()
-        if snapshot is not None and (self._plan is None or snapshot.iterations != self.iterations):
-            self._apply(snapshot)
+    def _take_newer_plan(self, process: PlannerProcess) -> None:
+        """Takes over the planner process's newest plan if it is not the one in force; raises
+        PlannerError once the process has failed. The caller passes the process it saw: another
+        thread may :meth:`stop` the cascade meanwhile."""
+        snapshot = process.snapshot()
+        if snapshot is not None and snapshot is not self._plan:
+            self._plan = snapshot
 
     @property
     def plan_start(self) -> float | None:
-        """Time (s) of the first step of the plan the inner loop reads (None before start)."""
-        if self._process is not None:
-            self._take_newer_plan()
-        with self._lock:
-            plan = self._plan
-        return None if plan is None else plan[1]
+        """Time (s) of the first step of the plan in force (None before one)."""
+        process = self._process
+        if process is not None:
+            self._take_newer_plan(process)
+        plan = self._plan
+        return None if plan is None else plan.t0
 
     def tick(
         self, x: Sequence[float] | np.ndarray, tau_ext: Sequence[float] | np.ndarray, t: float, dt: float | None = None
     ) -> TickResult:
         """One inner-loop step from the measured state x (nx,) and external torques τ_ext (nq,)
-        at time t: reference → FILTER-QP with the tank (variants I, IO) → tank (refilled as in
-        :class:`~sabre.TankRefill` when the controller's tank has a refill) → low-level torque.
-        The tank integrates over ``dt`` (s): the measured time since the previous state, e.g.
-        the difference of two message stamps (default: ``inner_dt``).
+        at time t (s): the plan in force at t → FILTER-QP with the tank (variants I, IO) → the tank's
+        refill (when the controller's tank has one, :class:`~sabre.TankRefill`, while τ_ext agrees with the
+        plan's predicted dissipation) and step → low-level torque with the plan's gain inertia floor.
+        The tank integrates over ``dt`` (s): the measured time since the previous state, e.g. the
+        difference of two message stamps (default: ``inner_dt``).
         The tank integrates this τ_ext against the returned command, the same pair the passivity
         row constrained, so the floor holds step by step. τ_ext should be a band-limited estimate
-        (a momentum observer, a filtered wrist sensor; in simulation :attr:`Plant.measured_tau_ext`):
+        (a momentum observer, a filtered wrist sensor; in simulation :attr:`PlantInterface.measured_tau_ext`):
         raw impact spikes that vanish between steps let the command through in between and chatter.
-        The state also becomes the outer loop's next starting point."""
+        The state also becomes the outer loop's next starting point.
+
+        Raises:
+            ShapeError: x not (nx,), τ_ext not (nq,). InvalidValueError: non-finite input, dt not
+            positive, no plan yet, a stopped cascade. PlannerError: the planner process failed.
+        """
         if self._error is not None:
             raise self._error
         if self._stopped:
             raise InvalidValueError("the cascade was stopped: its plan is frozen; start() it again")
-        scene = self.controller.scene
-        x = as_float_array("x", x, (scene.nx,))
-        tau_ext = as_float_array("tau_ext", tau_ext, (scene.nq,))
-        t = as_finite("t", t)
-        with self._lock:
-            self._latest = (x, t)
-        self._refresh(x, t)
-        u_ref = self.reference(t)
-        tank = self.controller.tank
-        status = "unfiltered"
-        u = u_ref
-        f = self.controller.inner_filter
-        if f is not None:
-            r = f.filter(x, u_ref, tau_ext, tank.energy)
-            u, status = np.asarray(r.u), r.status
-        step = self.inner_dt if dt is None else as_positive("dt", dt)
-        with self._lock:
-            predicted, plan = self._predicted, self._plan
-        if predicted is not None and plan is not None and tank.refill_config is not None:
-            tank.refill(float(_interpolate(predicted, plan[1], plan[2], t)), -float(tau_ext @ u_ref), step)
-        energy = tank.step(tau_ext, u, step)
-        torque = None
-        if self.low_level is not None:
-            with self._lock:
-                floor = self._floor
-            wanted = self._own_floor if floor is None else floor
-            if self.low_level.gain_inertia_floor != wanted:
-                self.low_level.gain_inertia_floor = wanted
-            torque = self.low_level.torque(x, u)
+        x = _vector("x", x, copy=True)  # kept as the planner's next state: the caller may reuse its array
+        tau_ext = _vector("tau_ext", tau_ext, copy=False)
+        t = _number("t", t)
+        step = self.inner_dt if dt is None else _number("dt", dt)
+        process = self._process
+        if process is not None:
+            self._take_newer_plan(process)
+        plan = self._plan_at(t)
+        if plan is None:
+            raise InvalidValueError("no plan yet: call plan() or start() first (and, with wait=False, wait until ready)")
+        reference, command, torque, energy, status = self._inner.tick(plan.plan, x, tau_ext, t, step)
+        self._latest = (x, t)
+        if process is not None:
+            process.share_state(x, t)
         self.ticks += 1
-        return TickResult(reference=u_ref, command=np.asarray(u), torque=torque, tank_energy=float(energy), status=status)
+        return TickResult(
+            reference=reference,
+            command=command,
+            torque=None if self.low_level is None else torque,
+            tank_energy=float("nan") if energy is None else energy,
+            status=status,
+        )

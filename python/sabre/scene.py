@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -10,22 +11,54 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from . import _core
-from ._validate import as_array, as_finite, as_float_array, readonly
-from .errors import InvalidValueError, ShapeError, UnknownFrameError, UrdfError
+from ._validate import as_array, as_finite, as_float_array, as_positive, readonly
+from .errors import AssumedInertialWarning, InvalidValueError, ShapeError, UnknownFrameError, UrdfError
 from .robots import Tool, robot_options
 
-__all__ = ["Scene", "StateParts", "Visual", "ROBOTS", "OBJECTS"]
+__all__ = ["Scene", "StateParts", "CollisionShape", "AssumedInertial", "Visual", "ROBOTS", "OBJECTS", "DEFAULT_DENSITY"]
 
 #: Built-in robots (compiled into the library).
 ROBOTS: tuple[str, ...] = ("royalpanda",)
 #: Built-in articulated objects.
 OBJECTS: tuple[str, ...] = ("shelf", "microwave", "dishwasher", "drawer")
+#: Density (kg/m³) of moving object parts whose file gives no inertial: medium-density fibreboard and
+#: particle board, which most cabinet doors, drawer fronts and drawer boxes are made of, weigh
+#: 600–750 kg/m³ and solid pine about 500 (see :attr:`Scene.assumed_inertials`).
+DEFAULT_DENSITY: float = 600.0
 
 
 def _pose(obj_pose: Sequence[float] | np.ndarray | None) -> list[float] | None:
     if obj_pose is None:
         return None
     return as_float_array("obj_pose", obj_pose, (6,)).tolist()
+
+
+def _selection(
+    joint: str | None, hold: Mapping[str, float] | None, handle: str | None
+) -> tuple[str | None, list[tuple[str, float]] | None, str | None]:
+    for name, value in (("joint", joint), ("handle", handle)):
+        if value is not None and not isinstance(value, str):
+            raise InvalidValueError(f"{name} must be a {'joint' if name == 'joint' else 'link'} name, got {type(value).__name__}")
+    if hold is None:
+        return joint, None, handle
+    if not isinstance(hold, Mapping):
+        raise InvalidValueError(f"hold must map joint names to positions, got {type(hold).__name__}")
+    return joint, [(str(name), as_finite(f"hold[{name!r}]", value)) for name, value in hold.items()], handle
+
+
+def _density(density: float) -> float:
+    return as_positive("density", density)
+
+
+def _warn_assumed(scene: Scene) -> Scene:
+    """One :class:`AssumedInertialWarning` per moving object link whose inertial was filled in."""
+    for a in scene.assumed_inertials:
+        warnings.warn(
+            f"object link {a.link!r} has no complete <inertial>: mass {a.mass:.3g} kg and inertia from its {a.source}",
+            AssumedInertialWarning,
+            stacklevel=3,
+        )
+    return scene
 
 
 def _object_source(obj: str) -> tuple[str, str]:
@@ -35,16 +68,6 @@ def _object_source(obj: str) -> tuple[str, str]:
     if obj in OBJECTS:
         return "builtin", obj
     raise UrdfError(f"URDF {obj}: object file does not exist (nor is it a built-in object: {', '.join(OBJECTS)})")
-
-
-def _selection(joint: str | None, hold: Mapping[str, float] | None) -> tuple[str | None, list[tuple[str, float]] | None]:
-    if joint is not None and not isinstance(joint, str):
-        raise InvalidValueError(f"joint must be a joint name, got {type(joint).__name__}")
-    if hold is None:
-        return joint, None
-    if not isinstance(hold, Mapping):
-        raise InvalidValueError(f"hold must map joint names to positions, got {type(hold).__name__}")
-    return joint, [(str(name), as_finite(f"hold[{name!r}]", value)) for name, value in hold.items()]
 
 
 def _collision_shapes(rows: list) -> tuple[CollisionShape, ...]:
@@ -91,6 +114,22 @@ class CollisionShape:
     size: tuple[float, ...]
     pose: np.ndarray
     points: np.ndarray
+
+
+class AssumedInertial(NamedTuple):
+    """The inertial of a moving object link that the file leaves out, filled in from its collision
+    geometry (:attr:`Scene.assumed_inertials`)."""
+
+    link: str
+    mass: float
+    """kg."""
+    com: np.ndarray
+    """(3,) centre of mass in the link frame (m)."""
+    inertia: np.ndarray
+    """(3, 3) inertia about the centre of mass, in the link frame (kg m²)."""
+    source: str
+    """Where the values come from: the collision geometry at the scene's density, and which parts
+    (mass, centre of mass, inertia) the file declared and were kept."""
 
 
 @dataclass(frozen=True)
@@ -152,7 +191,7 @@ class Scene:
         """
         if not options:
             return cls(_core.Scene.load(str(robot), str(obj), _pose(obj_pose)))
-        return cls._build(("builtin", str(robot)), ("builtin", str(obj)), obj_pose, None, None, options)
+        return cls._build(("builtin", str(robot)), ("builtin", str(obj)), obj_pose, (None, None, None, DEFAULT_DENSITY), options)
 
     @classmethod
     def from_urdf(
@@ -163,6 +202,8 @@ class Scene:
         *,
         joint: str | None = None,
         hold: Mapping[str, float] | None = None,
+        handle: str | None = None,
+        density: float = DEFAULT_DENSITY,
         tool: Tool | None = None,
         tool_frame: str | None = None,
         robot_hold: Mapping[str, float] | None = None,
@@ -175,11 +216,19 @@ class Scene:
     ) -> Scene:
         """A scene from a robot URDF and an object URDF on disk (or a built-in object's name, see
         :data:`OBJECTS`). Collision geometry: boxes, spheres, cylinders, capsules, and STL, OBJ or
-        COLLADA meshes as their convex hulls (docs/objects.md says where mesh files are looked for).
+        COLLADA meshes as convex hulls (docs/objects.md says where mesh files are looked for,
+        ``package://`` included).
 
-        An object with several movable joints (a cabinet with two doors) is opened one joint at a
-        time: ``joint`` names the one that stays movable, and every other movable joint is fixed at
-        its value in ``hold`` (rad or m; default 0 within its limits, i.e. closed).
+        An object with several movable joints (a cabinet with two doors and two drawers) is opened
+        one joint at a time: ``joint`` names the one that stays movable, or ``handle`` names a link
+        (the handle to open by) and the joint that moves it stays movable; every other movable
+        joint is fixed at its value in ``hold`` (rad or m; default 0 within its limits, i.e. closed).
+
+        A moving object link whose file gives no inertial, or only part of one, gets what is missing
+        from its collision geometry filled with material of ``density`` (kg/m³, default
+        :data:`DEFAULT_DENSITY`): the plant and the rollout model both use those values, the scene
+        lists them (:attr:`assumed_inertials`) and an :class:`~sabre.errors.AssumedInertialWarning`
+        names each such link.
 
         The robot's options override what its URDF's ``<sabre>`` block declares (docs/robots.md):
         ``tool`` attaches a :class:`~sabre.Tool` (e.g. the shipped hook) to one of its links;
@@ -191,6 +240,12 @@ class Scene:
         detected); ``home``, ``start`` and ``work`` give joint values of the home, start and
         working postures (the last: hand forward, what scripted motions pull toward);
         ``wrist_sensor`` names the link of the wrist force-torque sensor.
+
+        Raises:
+            UrdfError: a missing or malformed file, a mesh not found (the message lists where it
+                looked), a ``joint`` or ``handle`` that does not pick one movable joint (the message
+                lists the candidates), a robot role that names what the robot does not have.
+            InvalidValueError: a non-finite held value, a non-positive density.
         """
         robot_path = os.fspath(robot_path)
         if not os.path.isfile(robot_path):
@@ -207,7 +262,7 @@ class Scene:
             work=work,
             wrist_sensor=wrist_sensor,
         )
-        return cls._build(("file", robot_path), obj_source, obj_pose, joint, hold, options)
+        return cls._build(("file", robot_path), obj_source, obj_pose, (joint, hold, handle, density), options)
 
     @classmethod
     def from_urdf_strings(
@@ -218,13 +273,21 @@ class Scene:
         *,
         joint: str | None = None,
         hold: Mapping[str, float] | None = None,
+        handle: str | None = None,
+        density: float = DEFAULT_DENSITY,
         **options: Any,
     ) -> Scene:
-        """A scene from URDF text; ``joint``, ``hold`` and the robot ``options`` as in :meth:`from_urdf`
-        (relative mesh paths resolve against the working directory and ``SABRE_MESH_PATH``)."""
-        if not options:
-            return cls(_core.Scene.from_urdf_strings(robot_urdf, obj_urdf, _pose(obj_pose), *_selection(joint, hold)))
-        return cls._build(("text", str(robot_urdf)), ("text", str(obj_urdf)), obj_pose, joint, hold, options)
+        """A scene from URDF text; ``joint``, ``hold``, ``handle``, ``density`` and the robot ``options``
+        as in :meth:`from_urdf` (relative mesh paths resolve against the working directory and
+        ``SABRE_MESH_PATH``, ``package://`` only through the package paths)."""
+        if options:
+            return cls._build(
+                ("text", str(robot_urdf)), ("text", str(obj_urdf)), obj_pose, (joint, hold, handle, density), options
+            )
+        core = _core.Scene.from_urdf_strings(
+            robot_urdf, obj_urdf, _pose(obj_pose), *_selection(joint, hold, handle), _density(density)
+        )
+        return _warn_assumed(cls(core))
 
     @classmethod
     def _build(
@@ -232,12 +295,14 @@ class Scene:
         robot: tuple[str, str],
         obj: tuple[str, str],
         obj_pose: Sequence[float] | None,
-        joint: str | None,
-        hold: Mapping[str, float] | None,
+        selection: tuple[str | None, Mapping[str, float] | None, str | None, float],
         options: Mapping[str, Any],
     ) -> Scene:
-        core_options = robot_options(**options)
-        return cls(_core.Scene.build(robot, obj, core_options, _pose(obj_pose), *_selection(joint, hold)))
+        joint, hold, handle, density = selection
+        core = _core.Scene.build(
+            robot, obj, robot_options(**options), _pose(obj_pose), *_selection(joint, hold, handle), _density(density)
+        )
+        return _warn_assumed(cls(core))
 
     # -- sizes and names ----------------------------------------------------------------------
     @property
@@ -291,6 +356,37 @@ class Scene:
     def robot_collisions(self) -> tuple[CollisionShape, ...]:
         """The robot's collision primitives (its tool's included), each with its link and pose in that link's frame."""
         return _collision_shapes(self._core.robot_collisions())
+
+    @property
+    def density(self) -> float:
+        """Density (kg/m³) of the moving object links whose file gives no complete inertial."""
+        return self._core.density
+
+    @property
+    def assumed_inertials(self) -> tuple[AssumedInertial, ...]:
+        """The inertials of moving object links that their file leaves out (wholly or in part),
+        filled in from collision geometry at :attr:`density`; empty when the file gives them all."""
+        return tuple(
+            AssumedInertial(
+                link,
+                mass,
+                readonly(np.asarray(com, dtype=float)),
+                readonly(np.asarray(inertia, dtype=float).reshape(3, 3)),
+                source,
+            )
+            for link, mass, com, inertia, source in self._core.assumed_inertials()
+        )
+
+    def object_joints_moving(self, frame: str) -> tuple[str, ...]:
+        """The movable object joints that move the object frame or link ``frame``, root first (empty
+        for a part of the fixed carcass)."""
+        return tuple(self._core.object_joints_moving(str(frame)))
+
+    def object_closest_points(self, o: Sequence[float] | np.ndarray, point: Sequence[float] | np.ndarray) -> np.ndarray:
+        """(M, 3) for each collision primitive of :attr:`object_collisions` (a mesh's convex hull, a
+        box, ...), its world point nearest to the world ``point`` (3,) at object configuration o (no,);
+        ``point`` itself where it lies inside the primitive."""
+        return self._core.object_closest_points(as_float_array("o", o, (self.no,)), as_float_array("point", point, (3,)).tolist())
 
     # -- limits ---------------------------------------------------------------------------------
     def _robot_limits(self, i: int) -> np.ndarray:

@@ -186,7 +186,12 @@ class Plant:
     wrist sensor. Rigid contacts in the simulator deliver force as per-step impulses (a finger
     bouncing on a held door reads 0, 300, 0 N·m on consecutive steps); a controller reacting to
     that raw signal lets the full command through between impacts and chatters.
+
+    One implementation of :class:`sabre.PlantInterface`, the one the closed loop drives in Rust.
     """
+
+    #: :meth:`step` takes joint torques (:class:`sabre.PlantInterface`).
+    command_interface = "torque"
 
     def __init__(
         self,

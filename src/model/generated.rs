@@ -268,7 +268,7 @@ fn link_distance(tree: &KinematicTree, poses: &[Isometry3<f64>], a: usize, b: us
     use rapier3d_f64::parry::math::Pose;
     let shapes = |l: usize| {
         tree.links[l].collisions.iter().map(move |c| {
-            let (shape, frame) = crate::sim::collision_shape::shared_shape(&c.shape);
+            let (shape, frame) = crate::model::collision_shape::shared_shape(&c.shape);
             (shape, Pose::from(poses[l] * c.origin * frame))
         })
     };

@@ -102,6 +102,9 @@ pub struct Link {
     /// The joint whose child this link is; `None` for the root.
     pub parent_joint: Option<usize>,
     pub inertial: Option<Inertial>,
+    /// What the file declares of an inertial it leaves incomplete or out (None: `inertial` is the
+    /// file's); a scene fills the rest in for moving object links (see `super::inertials`).
+    pub declared_inertial: Option<super::inertials::DeclaredInertial>,
     pub collisions: Vec<Collision>,
     /// What the link looks like (URDF `<visual>`), for viewers.
     pub visuals: Vec<super::visual::Visual>,

@@ -2,9 +2,11 @@
 
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
+use super::collision_shape::closest_point;
 use super::dynamics::{joint_space_terms, DynamicsWorkspace};
 use super::assembly::{assemble as assemble_robot, RobotRoles};
 use super::generated;
+use super::inertials::{assume_missing, AssumedInertial, DEFAULT_DENSITY};
 use super::kinematics::{Frames, JointKind, JointLimits, KinematicTree};
 use super::roles::RoleDecls;
 use super::urdf::{check_extension, parse_urdf, ParsedUrdf, SabreExtension};
@@ -75,6 +77,10 @@ pub struct Scene {
     pub geometry_origin: GeometryOrigin,
     pub robot_source: String,
     pub object_source: String,
+    /// Density (kg/m³) of moving object parts whose file gives no inertial (see [`super::inertials`]).
+    pub density: f64,
+    /// The inertials of moving object links that were filled in from collision geometry.
+    pub assumed_inertials: Vec<AssumedInertial>,
 }
 
 /// (x, y, z, roll, pitch, yaw) to an isometry; roll-pitch-yaw as in URDF.
@@ -98,6 +104,18 @@ pub fn builtin<'a>(kind: &str, table: &'a [(&str, &str)], name: &str) -> Result<
             name: name.to_string(),
             available: table.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", "),
         })
+}
+
+/// The URDF text of a built-in asset: `kind` is "robot" or "object", `name` one of that table's names.
+pub fn builtin_urdf(kind: &str, name: &str) -> Result<&'static str> {
+    match kind {
+        "robot" => builtin(kind, BUILTIN_ROBOTS, name),
+        "object" => builtin(kind, BUILTIN_OBJECTS, name),
+        _ => Err(SabreError::invalid(
+            "kind",
+            format!("must be \"robot\" or \"object\", got {kind:?}"),
+        )),
+    }
 }
 
 impl Scene {
@@ -146,6 +164,16 @@ impl Scene {
         if obj.tree.nq() == 0 {
             return Err(SabreError::urdf(&obj.tree.name, "the object has no movable joint"));
         }
+        if let Some(link) = tree
+            .links
+            .iter()
+            .find(|l| l.declared_inertial.is_some_and(|d| d.mass.is_some()))
+        {
+            return Err(SabreError::urdf(
+                &tree.name,
+                format!("robot link '{}' declares a mass but no inertia tensor", link.name),
+            ));
+        }
         for &j in &obj.tree.active_joints {
             let l = obj.tree.joints[j].limits;
             if !(l.lower.is_finite() && l.upper.is_finite()) {
@@ -165,7 +193,7 @@ impl Scene {
             let reach = generated::arm_reach(&tree, &roles);
             (spheres, pairs, contact, reach)
         };
-        Ok(Self {
+        Self {
             robot_source: tree.name.clone(),
             object_source: obj.tree.name.clone(),
             robot: tree,
@@ -177,25 +205,106 @@ impl Scene {
             arm_reach,
             roles,
             geometry_origin: GeometryOrigin(if declared { "declared" } else { "generated" }),
-        })
+            density: DEFAULT_DENSITY,
+            assumed_inertials: Vec::new(),
+        }
+        .with_density(DEFAULT_DENSITY)
     }
 
-    /// The scene with one movable object joint: `joint` (required when the object has several) is
-    /// kept and every other movable joint is fixed at its `hold` value (default 0 within its limits).
-    pub fn with_object_joint(mut self, joint: Option<&str>, hold: &[(String, f64)]) -> Result<Self> {
-        match joint {
+    /// The scene with the inertials its object file leaves out filled in from collision geometry
+    /// at `density` (kg/m³), for every link a movable joint moves ([`super::inertials`]).
+    pub fn with_density(mut self, density: f64) -> Result<Self> {
+        for assumed in &self.assumed_inertials {
+            let link = self.object.link_id(&assumed.link).expect("an object link");
+            self.object.links[link].inertial = None;
+        }
+        self.assumed_inertials = assume_missing(&mut self.object, density, &self.object_source)?;
+        self.density = density;
+        Ok(self)
+    }
+
+    /// The scene with one movable object joint: `joint`, or the one that moves the link `handle`
+    /// (either is required when the object has several), is kept and every other movable joint is
+    /// fixed at its `hold` value (default 0 within its limits).
+    pub fn with_object_joint(mut self, joint: Option<&str>, hold: &[(String, f64)], handle: Option<&str>) -> Result<Self> {
+        let keep = match handle {
+            Some(handle) => Some(self.joint_moving_handle(handle, joint)?),
+            None => joint.map(str::to_string),
+        };
+        match keep {
             Some(keep) => {
-                self.object = self.object.with_single_joint(keep, hold, &self.object_source)?;
+                self.object = self.object.with_single_joint(&keep, hold, &self.object_source)?;
             }
             None if !hold.is_empty() => {
                 return Err(SabreError::urdf(
                     &self.object_source,
-                    "`hold` needs `joint`: the one joint that stays movable",
+                    "`hold` needs `joint` or `handle`: what says which joint stays movable",
                 ));
             }
             None => {}
         }
-        Ok(self)
+        let density = self.density;
+        self.with_density(density)
+    }
+
+    /// The movable object joints that move the object link or frame `frame`, root first.
+    pub fn object_joints_moving(&self, frame: &str) -> Result<Vec<String>> {
+        let link = self.object.require_link(frame)?;
+        Ok(self
+            .object
+            .ancestor_active_joints(link)
+            .iter()
+            .map(|&j| self.object.joints[j].name.clone())
+            .collect())
+    }
+
+    /// The joint to open for the handle link `handle`: the one movable joint that moves it, or
+    /// `joint` when it is one of several that do.
+    fn joint_moving_handle(&self, handle: &str, joint: Option<&str>) -> Result<String> {
+        let movers = self.object_joints_moving(handle)?;
+        let source = &self.object_source;
+        let movable = self.object.active_joint_names().join(", ");
+        match (movers.as_slice(), joint) {
+            ([], _) => Err(SabreError::urdf(
+                source,
+                format!("handle '{handle}' is on a part no joint moves; the movable joints are: {movable}"),
+            )),
+            (_, Some(joint)) if movers.iter().any(|m| m == joint) => Ok(joint.to_string()),
+            (_, Some(joint)) => Err(SabreError::urdf(
+                source,
+                format!(
+                    "joint '{joint}' does not move handle '{handle}'; it is moved by: {}",
+                    movers.join(", ")
+                ),
+            )),
+            ([only], None) => Ok(only.clone()),
+            (_, None) => Err(SabreError::urdf(
+                source,
+                format!(
+                    "handle '{handle}' is moved by several joints: {}; name the one to open with `joint`",
+                    movers.join(", ")
+                ),
+            )),
+        }
+    }
+
+    /// For each collision primitive of the object (link by link, in file order), its point nearest
+    /// to the world point `point` at object configuration `o`.
+    pub fn object_closest_points(&self, o: &[f64], point: &Point3<f64>) -> Result<Vec<Point3<f64>>> {
+        self.check_o(o)?;
+        ensure_finite("point", point.coords.as_slice())?;
+        let poses = self.object.link_poses(&self.object_pose, o);
+        Ok(self
+            .object
+            .links
+            .iter()
+            .zip(&poses)
+            .flat_map(|(link, pose)| {
+                link.collisions
+                    .iter()
+                    .map(move |c| closest_point(&c.shape, &(pose * c.origin), point))
+            })
+            .collect())
     }
 
     pub fn nq(&self) -> usize {
@@ -417,7 +526,7 @@ mod tests {
         let held = vec![("right_hinge".to_string(), 0.5)];
         let left = Scene::from_urdf_strings(robot, DOUBLE_CABINET, None)
             .unwrap()
-            .with_object_joint(Some("left_hinge"), &held)
+            .with_object_joint(Some("left_hinge"), &held, None)
             .unwrap();
         assert_eq!(left.no(), 1);
         assert_eq!(left.object.active_joint_names(), ["left_hinge"]);
@@ -434,7 +543,7 @@ mod tests {
         // Without a value the other door is held closed (0 lies within its limits).
         let closed = Scene::from_urdf_strings(robot, DOUBLE_CABINET, None)
             .unwrap()
-            .with_object_joint(Some("right_hinge"), &[])
+            .with_object_joint(Some("right_hinge"), &[], None)
             .unwrap();
         let full = both.object_fk(&[0.0, 0.3], "left_pull").unwrap();
         assert!((closed.object_fk(&[0.3], "left_pull").unwrap().to_homogeneous() - full.to_homogeneous()).norm() < 1e-12);
@@ -446,7 +555,7 @@ mod tests {
         let build = |joint: Option<&str>, hold: &[(String, f64)]| {
             Scene::from_urdf_strings(robot, DOUBLE_CABINET, None)
                 .unwrap()
-                .with_object_joint(joint, hold)
+                .with_object_joint(joint, hold, None)
                 .unwrap_err()
                 .to_string()
         };

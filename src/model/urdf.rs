@@ -4,6 +4,7 @@ use std::path::Path;
 
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 
+use super::inertials::{inertial_elements, with_complete_inertials, DeclaredInertial};
 use super::kinematics::{Collision, Inertial, Joint, JointKind, JointLimits, KinematicTree, Link, Shape};
 use crate::error::{Result, SabreError};
 
@@ -69,7 +70,7 @@ fn finite_or_err(source: &str, what: &str, values: &[f64]) -> Result<()> {
 
 /// A physical inertia tensor: symmetric positive definite, and its principal moments obey the
 /// triangle inequality (no rigid body has one moment larger than the other two together).
-fn check_inertia(source: &str, link: &str, inertia: &Matrix3<f64>) -> Result<()> {
+pub(super) fn check_inertia(source: &str, link: &str, inertia: &Matrix3<f64>) -> Result<()> {
     let moments = inertia.symmetric_eigenvalues();
     let scale = moments.abs().max().max(f64::MIN_POSITIVE);
     let tolerance = 1e-9 * scale;
@@ -105,37 +106,41 @@ fn check_depth(source: &str, doc: &roxmltree::Document) -> Result<()> {
     Ok(())
 }
 
-/// The shape of a URDF geometry and where its centre lies in the geometry's frame (non-zero only for
-/// meshes, whose hull is centred on its bounding box).
-fn convert_shape(source: &str, link: &str, geometry: &urdf_rs::Geometry) -> Result<(Shape, Vector3<f64>)> {
-    if let urdf_rs::Geometry::Mesh { filename, scale } = geometry {
-        let scale = scale.as_ref().map_or([1.0; 3], |s| [s[0], s[1], s[2]]);
-        if scale.iter().any(|s| !(s.is_finite() && *s != 0.0)) {
-            return Err(SabreError::urdf(
-                source,
-                format!("link '{link}': mesh scale must be finite and non-zero, got {scale:?}"),
-            ));
-        }
-        let urdf_dir = Path::new(source).is_file().then(|| Path::new(source).parent()).flatten();
-        let path =
-            super::mesh::resolve(filename, urdf_dir).map_err(|e| SabreError::urdf(source, format!("link '{link}': {e}")))?;
-        let hull = super::mesh::load_hull(&path, scale).map_err(|e| SabreError::urdf(source, format!("link '{link}': {e}")))?;
-        let (mut lo, mut hi) = (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY));
-        for p in &hull {
-            lo = lo.inf(&p.coords);
-            hi = hi.sup(&p.coords);
-        }
-        let centre = (lo + hi) / 2.0;
-        let points: Vec<_> = hull.iter().map(|p| p - centre).collect();
-        return Ok((
-            Shape::Hull {
-                points: points.into(),
-                half_extents: (hi - lo) / 2.0,
-            },
-            centre,
+/// The shapes of a URDF geometry and where each one's centre lies in the geometry's frame: one
+/// primitive, centred; or a mesh's convex pieces (one per object of an OBJ file, one for an STL),
+/// each a hull centred on its bounding box.
+fn convert_shape(source: &str, link: &str, geometry: &urdf_rs::Geometry) -> Result<Vec<(Shape, Vector3<f64>)>> {
+    let urdf_rs::Geometry::Mesh { filename, scale } = geometry else {
+        return Ok(vec![(convert_primitive(source, link, geometry)?, Vector3::zeros())]);
+    };
+    let scale = scale.as_ref().map_or([1.0; 3], |s| [s[0], s[1], s[2]]);
+    if scale.iter().any(|s| !(s.is_finite() && *s != 0.0)) {
+        return Err(SabreError::urdf(
+            source,
+            format!("link '{link}': mesh scale must be finite and non-zero, got {scale:?}"),
         ));
     }
-    Ok((convert_primitive(source, link, geometry)?, Vector3::zeros()))
+    let urdf_dir = Path::new(source).is_file().then(|| Path::new(source).parent()).flatten();
+    let in_link = |e: String| SabreError::urdf(source, format!("link '{link}': {e}"));
+    let path = super::mesh::resolve(filename, urdf_dir).map_err(in_link)?;
+    let hulls = super::mesh::load_hulls(&path, scale).map_err(in_link)?;
+    Ok(hulls
+        .into_iter()
+        .map(|hull| {
+            let (mut lo, mut hi) = (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY));
+            for p in &hull {
+                lo = lo.inf(&p.coords);
+                hi = hi.sup(&p.coords);
+            }
+            let centre = (lo + hi) / 2.0;
+            let points: Vec<_> = hull.iter().map(|p| p - centre).collect();
+            let shape = Shape::Hull {
+                points: points.into(),
+                half_extents: (hi - lo) / 2.0,
+            };
+            (shape, centre)
+        })
+        .collect())
 }
 
 fn convert_primitive(source: &str, link: &str, geometry: &urdf_rs::Geometry) -> Result<Shape> {
@@ -172,34 +177,55 @@ fn convert_primitive(source: &str, link: &str, geometry: &urdf_rs::Geometry) -> 
     })
 }
 
-fn convert_link(source: &str, link: &urdf_rs::Link) -> Result<Link> {
-    let inertial = if link.inertial.mass.value > 0.0 {
-        let i = &link.inertial.inertia;
-        let values = [link.inertial.mass.value, i.ixx, i.ixy, i.ixz, i.iyy, i.iyz, i.izz];
-        finite_or_err(source, &format!("inertial of link '{}'", link.name), &values)?;
-        let o = &link.inertial.origin;
-        finite_or_err(
-            source,
-            &format!("inertial origin of link '{}'", link.name),
-            &[o.xyz[0], o.xyz[1], o.xyz[2], o.rpy[0], o.rpy[1], o.rpy[2]],
-        )?;
-        let origin = origin_pose(&link.inertial.origin);
-        let local = Matrix3::new(i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz);
-        check_inertia(source, &link.name, &local)?;
-        let r = origin.rotation.to_rotation_matrix();
-        Some(Inertial {
-            mass: link.inertial.mass.value,
-            com: origin.translation.vector,
-            inertia: r.matrix() * local * r.matrix().transpose(),
-        })
-    } else if link.inertial.mass.value < 0.0 || !link.inertial.mass.value.is_finite() {
+/// The link's inertial when the file gives all of it, else what the file declares of it: the parts
+/// `present` (its `<mass>`, `<origin>` and `<inertia>` elements) says the file wrote, a zero mass or
+/// an all-zero inertia counting as left out.
+fn link_inertial(
+    source: &str,
+    link: &urdf_rs::Link,
+    present: (bool, bool, bool),
+) -> Result<(Option<Inertial>, Option<DeclaredInertial>)> {
+    let mass = link.inertial.mass.value;
+    let i = &link.inertial.inertia;
+    let values = [mass, i.ixx, i.ixy, i.ixz, i.iyy, i.iyz, i.izz];
+    finite_or_err(source, &format!("inertial of link '{}'", link.name), &values)?;
+    let o = &link.inertial.origin;
+    finite_or_err(
+        source,
+        &format!("inertial origin of link '{}'", link.name),
+        &[o.xyz[0], o.xyz[1], o.xyz[2], o.rpy[0], o.rpy[1], o.rpy[2]],
+    )?;
+    if mass < 0.0 {
         return Err(SabreError::urdf(
             source,
-            format!("link '{}' has invalid mass {}", link.name, link.inertial.mass.value),
+            format!("link '{}' has invalid mass {mass}", link.name),
         ));
-    } else {
-        None
-    };
+    }
+    let origin = origin_pose(&link.inertial.origin);
+    let local = Matrix3::new(i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz);
+    let r = origin.rotation.to_rotation_matrix();
+    let (has_mass, has_origin, has_inertia) = present;
+    let inertia = (has_inertia && local != Matrix3::zeros()).then(|| r.matrix() * local * r.matrix().transpose());
+    if inertia.is_some() {
+        check_inertia(source, &link.name, &local)?;
+    }
+    let mass = (has_mass && mass > 0.0).then_some(mass);
+    if let (Some(mass), Some(inertia)) = (mass, inertia) {
+        return Ok((
+            Some(Inertial {
+                mass,
+                com: origin.translation.vector,
+                inertia,
+            }),
+            None,
+        ));
+    }
+    let com = has_origin.then_some(origin.translation.vector);
+    Ok((None, Some(DeclaredInertial { mass, com, inertia })))
+}
+
+fn convert_link(source: &str, link: &urdf_rs::Link, present: (bool, bool, bool)) -> Result<Link> {
+    let (inertial, declared_inertial) = link_inertial(source, link, present)?;
     let mut collisions = Vec::with_capacity(link.collision.len());
     for c in &link.collision {
         finite_or_err(
@@ -214,19 +240,21 @@ fn convert_link(source: &str, link: &urdf_rs::Link) -> Result<Link> {
                 c.origin.rpy[2],
             ],
         )?;
-        let (shape, centre) = convert_shape(source, &link.name, &c.geometry)?;
         let origin = origin_pose(&c.origin);
-        collisions.push(Collision {
-            name: c.name.clone(),
-            shape,
-            origin: origin * nalgebra::Translation3::from(centre),
-        });
+        for (shape, centre) in convert_shape(source, &link.name, &c.geometry)? {
+            collisions.push(Collision {
+                name: c.name.clone(),
+                shape,
+                origin: origin * nalgebra::Translation3::from(centre),
+            });
+        }
     }
     fuse_capsules(&mut collisions);
     Ok(Link {
         name: link.name.clone(),
         parent_joint: None,
         inertial,
+        declared_inertial,
         collisions,
         visuals: Vec::new(),
     })
@@ -401,9 +429,7 @@ fn parse_xyz(source: &str, node: &roxmltree::Node) -> Result<Vector3<f64>> {
     Ok(Vector3::new(values[0], values[1], values[2]))
 }
 
-fn parse_extension(source: &str, text: &str) -> Result<SabreExtension> {
-    let doc = roxmltree::Document::parse(text).map_err(|e| SabreError::urdf(source, format!("malformed XML: {e}")))?;
-    check_depth(source, &doc)?;
+fn parse_extension(source: &str, doc: &roxmltree::Document) -> Result<SabreExtension> {
     let mut ext = SabreExtension::default();
     let Some(block) = doc.root_element().children().find(|n| n.has_tag_name("sabre")) else {
         return Ok(ext);
@@ -465,15 +491,19 @@ fn parse_extension(source: &str, text: &str) -> Result<SabreExtension> {
 /// Parses URDF text; `source` names it in error messages (a path or a built-in asset name).
 pub fn parse_urdf(source: &str, text: &str) -> Result<ParsedUrdf> {
     // roxmltree first: it reports malformed XML with a position, which urdf-rs does not.
-    let extension = parse_extension(source, text)?;
-    let robot = urdf_rs::read_from_string(text).map_err(|e| SabreError::urdf(source, e.to_string()))?;
+    let doc = roxmltree::Document::parse(text).map_err(|e| SabreError::urdf(source, format!("malformed XML: {e}")))?;
+    check_depth(source, &doc)?;
+    let extension = parse_extension(source, &doc)?;
+    let present = inertial_elements(&doc);
+    let robot =
+        urdf_rs::read_from_string(&with_complete_inertials(text, &doc)).map_err(|e| SabreError::urdf(source, e.to_string()))?;
     if robot.links.is_empty() {
         return Err(SabreError::urdf(source, "no <link> elements"));
     }
     let mut links = robot
         .links
         .iter()
-        .map(|l| convert_link(source, l))
+        .map(|l| convert_link(source, l, present.get(&l.name).copied().unwrap_or_default()))
         .collect::<Result<Vec<_>>>()?;
     for (link, urdf_link) in links.iter_mut().zip(&robot.links) {
         link.visuals = super::visual::convert(source, urdf_link, &robot.materials);

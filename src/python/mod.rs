@@ -37,6 +37,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<control::PyLowLevelController>()?;
     m.add_class::<control::PyPlan>()?;
     m.add_class::<control::PyInnerLoop>()?;
+    m.add_class::<control::PyRateLimiter>()?;
     m.add_class::<cost::PyCost>()?;
     m.add_class::<mppi::PyMppiConfig>()?;
     m.add_class::<mppi::PyServoGuideConfig>()?;
@@ -48,6 +49,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<safety::PyEnergyTank>()?;
     m.add_class::<safety::PyTankRefillConfig>()?;
     m.add_function(wrap_pyfunction!(default_threads, m)?)?;
+    m.add_function(wrap_pyfunction!(scene::builtin_urdf, m)?)?;
     m.add_function(wrap_pyfunction!(mppi::likelihood_weights, m)?)?;
     m.add_function(wrap_pyfunction!(mppi::servo_guide, m)?)?;
     m.add_function(wrap_pyfunction!(robot::mesh_triangles, m)?)?;

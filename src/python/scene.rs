@@ -9,7 +9,9 @@ use pyo3::prelude::*;
 use super::convert::{array, pose_array, poses_array, view};
 use super::error::run;
 use super::robot::{parsed, roles_row, visual_rows, RobotOptions, RolesRow, VisualRow};
+use crate::model::inertials::DEFAULT_DENSITY;
 use crate::model::scene::Scene;
+use nalgebra::Point3;
 
 /// A self-collision sphere: (name, link, centre xyz in the link frame, radius).
 type SphereRow = (String, String, [f64; 3], f64);
@@ -44,6 +46,14 @@ fn collision_rows(tree: &crate::model::KinematicTree) -> Vec<CollisionRow> {
 /// A float64 array handed to Python.
 type Array<'py> = Bound<'py, PyArrayDyn<f64>>;
 
+/// The URDF text of a built-in asset compiled into the library (`kind`: "robot" or "object").
+#[pyfunction]
+pub fn builtin_urdf(kind: &str, name: &str) -> PyResult<&'static str> {
+    run(|| crate::model::scene::builtin_urdf(kind, name))
+}
+
+/// One assumed inertial as Python sees it: (link, mass, centre of mass (3), inertia row-major (9), source).
+type AssumedInertialRow = (String, f64, [f64; 3], Vec<f64>, String);
 #[pyclass(name = "Scene", module = "sabre._core", frozen)]
 pub struct PyScene {
     pub(crate) inner: Arc<Scene>,
@@ -70,19 +80,24 @@ impl PyScene {
         run(|| Scene::load(robot, obj, obj_pose.as_deref())).map(Self::wrap)
     }
 
-    /// `joint` keeps one movable object joint; the others are fixed at `hold` (default 0 within limits).
+    /// `joint` keeps one movable object joint, or `handle` the one that moves that link; the others
+    /// are fixed at `hold` (default 0 within limits). Moving object links without a complete
+    /// inertial get one from their collision geometry at `density` (kg/m³).
     #[staticmethod]
-    #[pyo3(signature = (robot_path, obj_path, obj_pose=None, joint=None, hold=None))]
+    #[pyo3(signature = (robot_path, obj_path, obj_pose=None, joint=None, hold=None, handle=None, density=DEFAULT_DENSITY))]
     fn from_urdf(
         robot_path: PathBuf,
         obj_path: PathBuf,
         obj_pose: Option<Vec<f64>>,
         joint: Option<String>,
         hold: Option<Vec<(String, f64)>>,
+        handle: Option<String>,
+        density: f64,
     ) -> PyResult<Self> {
         run(|| {
             Scene::from_urdf_files(&robot_path, &obj_path, obj_pose.as_deref())?
-                .with_object_joint(joint.as_deref(), &hold.unwrap_or_default())
+                .with_object_joint(joint.as_deref(), &hold.unwrap_or_default(), handle.as_deref())?
+                .with_density(density)
         })
         .map(Self::wrap)
     }
@@ -90,9 +105,10 @@ impl PyScene {
     /// A scene from a robot and an object, each given as (kind, value): ("builtin", name), ("file",
     /// path) or ("text", URDF); `robot` holds the robot's options (tool, held joints, base, postures)
     /// over what its `<sabre>` block declares. A built-in object without `obj_pose` stands at its
-    /// default place.
+    /// default place; `joint`, `hold`, `handle` and `density` as in `from_urdf`.
     #[staticmethod]
-    #[pyo3(signature = (robot_source, obj_source, robot, obj_pose=None, joint=None, hold=None))]
+    #[pyo3(signature = (robot_source, obj_source, robot, obj_pose=None, joint=None, hold=None, handle=None, density=DEFAULT_DENSITY))]
+    #[allow(clippy::too_many_arguments)]
     fn build(
         robot_source: (String, String),
         obj_source: (String, String),
@@ -100,6 +116,8 @@ impl PyScene {
         obj_pose: Option<Vec<f64>>,
         joint: Option<String>,
         hold: Option<Vec<(String, f64)>>,
+        handle: Option<String>,
+        density: f64,
     ) -> PyResult<Self> {
         run(|| {
             let parsed_robot = parsed(&robot_source.0, &robot_source.1, true)?;
@@ -107,25 +125,67 @@ impl PyScene {
             let default_pose = crate::model::scene::default_object_pose(&obj_source.1);
             let pose = obj_pose.as_deref().or((obj_source.0 == "builtin").then_some(&default_pose[..]));
             Scene::from_parts(parsed_robot, parsed_object, pose, &robot.decls()?)?
-                .with_object_joint(joint.as_deref(), &hold.unwrap_or_default())
+                .with_object_joint(joint.as_deref(), &hold.unwrap_or_default(), handle.as_deref())?
+                .with_density(density)
         })
         .map(Self::wrap)
     }
 
     #[staticmethod]
-    #[pyo3(signature = (robot_urdf, obj_urdf, obj_pose=None, joint=None, hold=None))]
+    #[pyo3(signature = (robot_urdf, obj_urdf, obj_pose=None, joint=None, hold=None, handle=None, density=DEFAULT_DENSITY))]
     fn from_urdf_strings(
         robot_urdf: &str,
         obj_urdf: &str,
         obj_pose: Option<Vec<f64>>,
         joint: Option<String>,
         hold: Option<Vec<(String, f64)>>,
+        handle: Option<String>,
+        density: f64,
     ) -> PyResult<Self> {
         run(|| {
             Scene::from_urdf_strings(robot_urdf, obj_urdf, obj_pose.as_deref())?
-                .with_object_joint(joint.as_deref(), &hold.unwrap_or_default())
+                .with_object_joint(joint.as_deref(), &hold.unwrap_or_default(), handle.as_deref())?
+                .with_density(density)
         })
         .map(Self::wrap)
+    }
+
+    /// Density (kg/m³) that moving object links without an inertial were given.
+    #[getter]
+    fn density(&self) -> f64 {
+        self.inner.density
+    }
+
+    /// The inertials filled in from collision geometry as (link, mass, centre of mass in the link
+    /// frame, inertia about it as a row-major 3 × 3, source).
+    fn assumed_inertials(&self) -> Vec<AssumedInertialRow> {
+        self.inner
+            .assumed_inertials
+            .iter()
+            .map(|a| {
+                let inertia = (0..3).flat_map(|r| (0..3).map(move |c| a.inertia[(r, c)])).collect();
+                (a.link.clone(), a.mass, [a.com.x, a.com.y, a.com.z], inertia, a.source.clone())
+            })
+            .collect()
+    }
+
+    /// The movable object joints that move the object frame `frame`, root first.
+    fn object_joints_moving(&self, frame: &str) -> PyResult<Vec<String>> {
+        run(|| self.inner.object_joints_moving(frame))
+    }
+
+    /// (M, 3) for each object collision primitive (in `object_collisions` order) its world point
+    /// nearest to the world point `point` (3,) at object configuration o (no,).
+    fn object_closest_points<'py>(
+        &self,
+        py: Python<'py>,
+        o: PyReadonlyArrayDyn<'py, f64>,
+        point: [f64; 3],
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let no = self.inner.no() as isize;
+        let points = run(|| self.inner.object_closest_points(view("o", &o, &[no])?, &Point3::from(point)))?;
+        let flat: Vec<f64> = points.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+        array(py, flat, &[points.len(), 3])
     }
 
     #[getter]

@@ -1,7 +1,6 @@
 //! Simulation: the reduced-order rollout model (batch, parallel; its contacts through Rapier's
 //! pipeline or the reduced path solved in sabre) and the full-dynamics plant on Rapier.
 
-pub(crate) mod collision_shape;
 pub mod engine_clock;
 pub mod evaluator;
 pub mod interaction;

@@ -59,7 +59,7 @@ def _subcommands() -> dict:
 
 def test_every_subcommand_dispatches_through_one_run_function():
     commands = _subcommands()
-    assert set(commands) == {"demo", "episode", "scripted", "view", "experiment", "control", "sim-robot", "ros-demo"}
+    assert set(commands) == {"demo", "episode", "scripted", "view", "experiment", "control", "sim-robot", "ros-demo", "robot-check"}
     for name, sub in commands.items():
         run = sub.get_default("run")
         assert callable(run) and run.__module__.startswith("sabre.cli."), name
@@ -181,6 +181,8 @@ def _bridge_run(launch, sim=None, controller=None):
         "late_ticks": 3,
         "skipped_ticks": 1,
         "loop_work_p99_ms": 0.1234,
+        "reflex_aborts": 0,
+        "cpu_share": 0.312,
     }
     controller_summary = {
         "tank_energy": 8.5,
@@ -195,6 +197,7 @@ def _bridge_run(launch, sim=None, controller=None):
         "stale_events": 0,
         "state_age_p50_ms": 0.31,
         "state_age_p99_ms": 0.92,
+        "cpu_share": 0.2049,
     }
     return launch.BridgeRun(
         sim=sim_summary if sim is None else sim,
@@ -228,10 +231,13 @@ def test_ros_demo_report_names_each_number(launch_without_rclpy):
         "  states 20000 for 20010 plant ticks; commands back for 19950 of the 19960 published while the "
         "controller ran (99.95 %), dropped 10, late (> 1 ms) 12, rejected 2"
     )
-    assert lines[4] == "  plant: 20.01 s simulated in 20.50 s wall, late ticks 3, skipped 1, loop work p99 0.123 ms"
-    assert lines[5] == ("  planner 48.7 Hz (974 iterations), inner tick compute p50 0.210 ms p99 0.550 ms, stale-state events 0")
-    assert lines[6] == "  state age on arrival at the controller p50 0.310 ms, p99 0.920 ms"
-    assert lines[7] == "  exit codes: sim-robot 0, controller 1"
+    assert lines[4] == (
+        "  plant: 20.01 s simulated in 20.50 s wall, late ticks 3, skipped 1, loop work p99 0.123 ms; reflex aborts 0"
+    )
+    assert lines[5] == "  CPU: controller node 20.5 % of a core (planner process apart), simulated robot 31.2 %"
+    assert lines[6] == ("  planner 48.7 Hz (974 iterations), inner tick compute p50 0.210 ms p99 0.550 ms, stale-state events 0")
+    assert lines[7] == "  state age on arrival at the controller p50 0.310 ms, p99 0.920 ms"
+    assert lines[8] == "  exit codes: sim-robot 0, controller 1"
 
 
 def test_ros_demo_report_without_a_summary_shows_the_tail_of_each_log(launch_without_rclpy):

@@ -163,14 +163,23 @@ def test_open_object_stiffens_the_hand_only_while_opening():
 
 
 def test_realtime_cascade_ticks_with_the_task_gain_floor_of_the_planned_phase(scene):
+    """The tick's torque is the low-level controller's with the floor of the plan's phase (the task's, else
+    the controller's own, 0.01 here), and the controller keeps its own floor."""
     task = _TwoPhaseReach(target_pose=scene.fk(scene.default_state()[: scene.nq], "grasp"))
     x0 = scene.default_state()
-    for t0, expected in ((0.0, 0.01), (0.2, 0.2)):
+    torques = {}
+    for t0, floor, expected in ((0.0, None, 0.01), (0.2, 0.2, 0.2)):
         controller = sabre.Controller(scene, task, sabre.ControllerConfig(rollouts=8, seed=0))
         low = sabre.LowLevelController(scene, gain_inertia_floor=0.01)
         with sabre.RealtimeCascade(controller, low_level=low).start(x0, t0=t0) as cascade:
-            cascade.tick(x0, np.zeros(scene.nq), t0)
-            assert low.gain_inertia_floor == expected
+            r = cascade.tick(x0, np.zeros(scene.nq), t0)
+            assert cascade.current_plan.gain_inertia_floor == floor
+        by_hand = sabre.LowLevelController(scene, gain_inertia_floor=expected)
+        np.testing.assert_array_equal(r.torque, by_hand.torque(x0, r.command))
+        assert low.gain_inertia_floor == 0.01
+        torques[expected] = (r.torque, sabre.LowLevelController(scene, gain_inertia_floor=0.01).torque(x0, r.command))
+    with_floor, without = torques[0.2]
+    assert np.abs(with_floor - without).max() > 1e-3  # the floor changed the torque
 
 
 def test_iteration_stats_report_the_sequential_filter_only_with_the_outer_loop(scene):
@@ -215,19 +224,15 @@ def test_realtime_tick_refills_the_tank_only_while_the_measured_power_matches_th
             scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(variant="IO", rollouts=8, horizon=0.3, seed=0, threads=1)
         )
         x = scene.default_state()
-        with sabre.RealtimeCascade(controller, min_replan_period=10.0) as rt:
-            rt.start(x)
-            # start() made the first plan; the thread's own first plan follows at once, the next
-            # one 10 s later: poke the prediction after that one, or it would overwrite the poke
-            while rt.iterations < 2:
-                rt.tick(x, np.zeros(scene.nq), 0.0)
-            # The plan's own prediction is zero (no contact from here): give it a pull to compare with.
-            rt._predicted = np.full_like(rt._predicted, 1.0)
-            controller.tank.step(np.full(scene.nq, -1.0) / scene.nq, np.ones(scene.nq), 3.0)  # spend 3 J
-            for k in range(200):
-                u_ref = rt.reference(0.001 * k)
-                tau = -factor * u_ref / max(float(u_ref @ u_ref), 1e-12)  # −τᵀu_ref = factor W
-                rt.tick(x, tau, 0.001 * k, dt=0.001)
+        rt = sabre.RealtimeCascade(controller)
+        planned = rt.plan(x, 0.0)
+        # The plan's own prediction is zero (no contact from here): give it a pull of 1 W to compare with.
+        rt.hand_over(sabre.PlanSnapshot.of(planned.nominal, planned.t0, planned.dt, predicted=np.ones(len(planned.nominal))))
+        controller.tank.step(np.full(scene.nq, -1.0) / scene.nq, np.ones(scene.nq), 3.0)  # spend 3 J
+        for k in range(200):
+            u_ref = rt.reference(0.001 * k)
+            tau = -factor * u_ref / max(float(u_ref @ u_ref), 1e-12)  # −τᵀu_ref = factor W
+            rt.tick(x, tau, 0.001 * k, dt=0.001)
         refilled[factor] = controller.tank.refilled
     assert refilled[1.0] > 0.1
     assert refilled[10.0] < 0.01

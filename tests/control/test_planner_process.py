@@ -29,6 +29,13 @@ def test_first_plan_from_the_process_equals_the_same_controllers_plan_in_this_pr
         np.testing.assert_allclose(
             cascade.reference(cascade.plan_start + 2 * reference.config.dt), reference.nominal[2], rtol=0, atol=1e-12
         )
+        # The process hands over the plan as the snapshot the controller makes in-process.
+        handed, made = cascade.current_plan, reference.snapshot()
+        assert isinstance(handed, sabre.PlanSnapshot)
+        assert (handed.phase, handed.iterations, handed.gain_inertia_floor) == (made.phase, 1, made.gain_inertia_floor)
+        assert handed.nominal_cost == pytest.approx(made.nominal_cost, rel=1e-12)
+        np.testing.assert_allclose(handed.nominal, made.nominal, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(handed.predicted, made.predicted, rtol=0, atol=1e-9)
     assert not cascade.running
 
 

@@ -91,3 +91,54 @@ def test_a_mesh_bar_gives_the_same_handle_frame_and_pull_as_the_box(tmp_path, ca
     openings = [sabre.RolloutModel(s).rollout(s.default_state(), U, threads=1).states[0, :, 2 * s.nq] for s in (box, mesh)]
     assert openings[0][-1] > 0.5  # the pull opened the door
     assert np.max(np.abs(openings[0] - openings[1])) < 0.02  # rad
+
+
+@pytest.fixture
+def no_package_path(monkeypatch):
+    for variable in ("SABRE_PACKAGE_PATH", "ROS_PACKAGE_PATH", "AMENT_PREFIX_PATH"):
+        monkeypatch.delenv(variable, raising=False)
+
+
+@pytest.mark.parametrize("folder", ["my_cabinet", "cabinet_description"], ids=["named like the package", "with its package.xml"])
+def test_package_urls_resolve_from_inside_the_package_as_ros_tools_do(tmp_path, cache, no_package_path, folder):
+    package = tmp_path / "workspace" / "src" / folder
+    (package / "urdf").mkdir(parents=True)
+    (package / "meshes").mkdir()
+    bar_mesh(package / "meshes", "stl")
+    if folder != "my_cabinet":
+        (package / "package.xml").write_text('<?xml version="1.0"?>\n<package format="3"><name> my_cabinet </name></package>\n')
+    urdf = package / "urdf" / "shelf.urdf"
+    urdf.write_text(shelf_with_mesh_bar("package://my_cabinet/meshes/bar.stl"))
+    scene = sabre.Scene.from_urdf(ASSETS / "robots" / "royalpanda.urdf", urdf)
+    assert [c.kind for c in scene.object_collisions if c.link == "handle"].count("mesh") == 1
+    # the same text without a file to start from finds nothing, and says where it looked
+    with pytest.raises(UrdfError, match="nowhere: no package path is set"):
+        sabre.Scene.from_urdf_strings(ROBOT, urdf.read_text())
+
+
+def test_a_package_that_is_nowhere_lists_where_it_was_looked_for(tmp_path, cache, no_package_path, monkeypatch):
+    (tmp_path / "elsewhere" / "urdf").mkdir(parents=True)
+    urdf = tmp_path / "elsewhere" / "urdf" / "shelf.urdf"
+    urdf.write_text(shelf_with_mesh_bar("package://my_cabinet/meshes/bar.stl"))
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "ros"))
+    with pytest.raises(UrdfError, match="not found") as error:
+        sabre.Scene.from_urdf(ASSETS / "robots" / "royalpanda.urdf", urdf)
+    message = str(error.value)
+    assert str(tmp_path / "ros" / "my_cabinet" / "meshes" / "bar.stl") in message
+    assert f"no folder at or above {urdf.parent.resolve()} is named 'my_cabinet' or has a package.xml naming it" in message
+
+
+def test_an_obj_with_several_objects_is_that_many_convex_pieces(tmp_path, cache):
+    from support import mesh_files
+
+    halves = [(f"half_{k}", mesh_files.box((0.0, 0.0, z), (0.01, 0.01, 0.085))) for k, z in enumerate((-0.0425, 0.0425))]
+    mesh_files.write_obj(tmp_path / "bar.obj", halves)
+    scene = sabre.Scene.from_urdf_strings(ROBOT, shelf_with_mesh_bar(str(tmp_path / "bar.obj")))
+    pieces = [c for c in scene.object_collisions if c.link == "handle" and c.kind == "mesh"]
+    assert len(pieces) == 2
+    np.testing.assert_allclose(sorted(p.pose[2, 3] for p in pieces), [-0.0425, 0.0425], atol=1e-7)
+    for piece in pieces:
+        np.testing.assert_allclose(piece.size, (0.005, 0.005, 0.0425), atol=1e-7)
+    again = sabre.Scene.from_urdf_strings(ROBOT, shelf_with_mesh_bar(str(tmp_path / "bar.obj")))  # from the cache
+    assert len([c for c in again.object_collisions if c.link == "handle" and c.kind == "mesh"]) == 2
+    assert len(list(cache.glob("*.hull"))) == 1

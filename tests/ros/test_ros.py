@@ -1,143 +1,78 @@
-"""The ROS 2 bridge across real processes on real DDS (loopback only, a private domain per run):
-joint-name mapping, rejection of malformed messages, both watchdogs, the command timeout, a
-closed-loop approach, and the hand-pose object-state estimator against the plant."""
+"""The ROS 2 bridge across real processes on real DDS (loopback only, a private domain per run): the
+lifecycle (zeros until active, a ramp in, ramps to zero on the e-stop, on deactivation and on
+SIGTERM), a robot description with other joint limits, a best-effort wrench publisher, malformed and
+withheld states, a moved and turned shelf opened through the pose input within the command limits
+and without a reflex, and the simulated robot's accounting. Across processes the tests assert what
+the robot sees (commands, their limits, that it stops), never how soon a thread got to run; the stop
+logic's timing is tested on a fake clock (test_bridge_logic.py)."""
 
 from __future__ import annotations
 
 import json
 import math
 import os
-import subprocess
-import sys
+import re
 import threading
 import time
+from typing import ClassVar
 
 import numpy as np
 import pytest
 
 import sabre
-from sabre.ros.conversions import JointMap, MessageError, base_to_world, tau_ext_from_wrench, world_to_base
-from sabre.ros.estimator import ObjectStateEstimator
-from sabre.ros.launch import Domain, start_node
+from sabre.ros import params
+from sabre.ros.launch import Domain, run_bridge, start_node
 
 DEADLINE = 120.0  # s: generous bound for conditions on a loaded machine; never asserted as a duration
+ARM_SPEED = 1.0  # rad/s: the arm's velocity limit in the robot description the tests publish
 
 
-# -- plain NumPy parts --------------------------------------------------------------------------
-def test_joint_map_takes_any_order_ignores_extra_joints_and_rejects_missing_ones():
-    wanted = ("a", "b", "c")
-    m = JointMap(wanted)
-    names = ["extra1", "c", "a", "extra2", "b"]
-    assert np.array_equal(m.values(names, [9.0, 3.0, 1.0, 8.0, 2.0], "position"), [1.0, 2.0, 3.0])
-    with pytest.raises(MessageError, match="lacks joints"):
-        m.values(["a", "b", "x"], [1.0, 2.0, 3.0], "position")
-    with pytest.raises(MessageError, match="2 values for 3 names"):
-        m.values(["a", "b", "c"], [1.0, 2.0], "position")
-    with pytest.raises(MessageError, match="non-finite"):
-        m.values(["a", "b", "c"], [1.0, math.nan, 3.0], "position")
-
-
-def test_base_twist_conversion_rotates_by_yaw_and_inverts():
-    rng = np.random.default_rng(1)
-    for _ in range(20):
-        rates, yaw = rng.normal(size=3), rng.uniform(-math.pi, math.pi)
-        base = world_to_base(rates, yaw)
-        # the base-frame velocity rotated back by yaw is the world-frame velocity
-        c, s = math.cos(yaw), math.sin(yaw)
-        assert np.allclose([c * base[0] - s * base[1], s * base[0] + c * base[1], base[2]], rates)
-        assert np.allclose(base_to_world(base, yaw), rates)
-    assert np.allclose(world_to_base([1.0, 0.0, 0.2], math.pi / 2), [0.0, -1.0, 0.2])
-
-
-def test_tau_ext_from_the_wrist_wrench_equals_the_plants_contact_torques():
-    """Hooked on the shelf handle only the hand touches the object, so Jᵀw of the wrist sensor
-    must equal the plant's τ_ext summed over the contact points."""
-    scene = sabre.Scene.load(obj="shelf")
-    plant = sabre.Plant(scene, tau_ext_cutoff=None)
-    plant.reset(sabre.scenarios.hooked_state(scene))
-    low = sabre.LowLevelController(scene)
-    pull = np.zeros(scene.nu)
-    pull[0] = -0.1
-    compared = 0
-    for _ in range(300):
-        low.track(plant, pull, 1)
-        if plant.contact and np.linalg.norm(plant.tau_ext) > 1.0:
-            q = plant.state[: scene.nq]
-            assert np.allclose(tau_ext_from_wrench(scene, q, plant.wrench), plant.tau_ext, rtol=1e-9, atol=1e-9)
-            compared += 1
-    assert compared > 10
-
-
-@pytest.mark.parametrize("obj", ["shelf", "drawer"])
-def test_estimator_tracks_the_plants_articulation_during_hook_and_pull(obj):
-    scene = sabre.Scene.load(obj=obj)
-    motion = sabre.hook_and_pull(scene)
-    plant = sabre.Plant(scene)
-    low = sabre.LowLevelController(scene)
-    plant.reset(scene.default_state())
-    nq = scene.nq
-    estimator = ObjectStateEstimator(scene, scene.default_state()[2 * nq : 2 * nq + 1])
-    per = int(round(motion.dt / plant.dt))
-    rows = []
-    for u in motion.U:
-        low.track(plant, u, per)
-        x = plant.state
-        e = estimator.update(x[:nq], plant.time, float(np.linalg.norm(plant.wrench[:3])))
-        rows.append((x[2 * nq], e.position[0], x[2 * nq + 1], e.velocity[0], e.hooked))
-    true, est, rate, est_rate, hooked = (np.array(c, dtype=float) for c in zip(*rows))
-    travel = scene.o_upper[0] - scene.o_lower[0]
-    assert true[-1] > 0.5 * travel  # the scripted pull opened it
-    assert hooked.mean() > 0.3
-    assert np.max(np.abs(true - est)) < 0.01 * travel
-    moving = hooked.astype(bool) & (np.abs(rate) > 0.2 * np.abs(rate).max())
-    assert np.median(np.abs(rate - est_rate)[moving]) < 0.2 * np.abs(rate).max()
-
-
-def test_using_the_bridge_without_ros_raises_a_sabre_error_naming_the_extra():
-    code = (
-        "import sys; sys.modules['rclpy'] = None\n"
-        "import sabre, sabre.ros\n"
-        "assert 'rclpy' not in [m for m in sys.modules if sys.modules[m] is not None]\n"
-        "try:\n    sabre.ros.require_ros()\nexcept sabre.SabreError as e:\n    print('ERR', e)\n"
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr
-    assert "ERR" in out.stdout and "sabre-mpc[ros]" in out.stdout
-
-
-# -- across processes ---------------------------------------------------------------------------
-rclpy = pytest.importorskip("rclpy", reason="the ROS 2 extra sabre-mpc[ros] (make test installs it)")
+def ros():
+    return pytest.importorskip("rclpy", reason="the ROS 2 extra sabre-mpc[ros] (make test installs it)")
 
 
 class Probe:
-    """A node in the test process on the run's private domain: publishes and records messages."""
+    """A node in the test process on the run's private domain: publishes, records the topics it is
+    asked to (``record``: keys of TOPICS; the 1 kHz ones only where a test needs every message,
+    since a loaded machine may not leave this process the time to keep up), calls services."""
 
-    def __init__(self, domain: int) -> None:
+    TOPICS: ClassVar[dict[str, tuple[str, str, str]]] = {
+        "joint_states": ("sensor_msgs.msg", "JointState", "joint_states"),
+        "arm": ("std_msgs.msg", "Float64MultiArray", "forward_velocity_controller/commands"),
+        "diagnostics": ("diagnostic_msgs.msg", "DiagnosticArray", "/diagnostics"),
+        "sim_status": ("diagnostic_msgs.msg", "DiagnosticArray", "sabre/sim/status"),
+        "hand_path": ("nav_msgs.msg", "Path", "sabre/hand_path"),
+        "markers": ("visualization_msgs.msg", "MarkerArray", "sabre/markers"),
+    }
+
+    def __init__(self, domain: int, record: tuple[str, ...] = ("diagnostics", "sim_status")) -> None:
+        import importlib
+
+        rclpy = ros()
         os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
         os.environ["ROS_DOMAIN_ID"] = str(domain)
         sabre.ros.require_ros()
-        from diagnostic_msgs.msg import DiagnosticArray
-        from geometry_msgs.msg import WrenchStamped
         from sensor_msgs.msg import JointState
-        from std_msgs.msg import Float64MultiArray
+        from std_msgs.msg import Bool, Float64MultiArray
 
+        from sabre.ros.qos import profile
+
+        self.rclpy = rclpy
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
         self.node = rclpy.create_node("sabre_test_probe", context=self.context)
         self.lock = threading.Lock()
-        self.messages: dict[str, list] = {"joint_states": [], "echo": [], "arm": [], "diagnostics": [], "sim_status": []}
-        self.JointState, self.WrenchStamped = JointState, WrenchStamped
-        for key, typ, topic in (
-            ("joint_states", JointState, "/joint_states"),
-            ("echo", JointState, "/sabre/command"),
-            ("arm", Float64MultiArray, "/forward_velocity_controller/commands"),
-            ("diagnostics", DiagnosticArray, "/diagnostics"),
-            ("sim_status", DiagnosticArray, "/sabre/sim/status"),
-        ):
-            self.node.create_subscription(typ, topic, self._recorder(key), 50)
-        self.js_pub = self.node.create_publisher(JointState, "/joint_states", 10)
-        self.obj_pub = self.node.create_publisher(JointState, "/sabre/object/joint_states", 10)
-        self.wrench_pub = self.node.create_publisher(WrenchStamped, "/wrist_wrench", 10)
+        self.messages: dict[str, list] = {k: [] for k in self.TOPICS}
+        self.JointState, self.Bool, self.Float64MultiArray = JointState, Bool, Float64MultiArray
+        for key in record:
+            module, name, topic = self.TOPICS[key]
+            typ = getattr(importlib.import_module(module), name)
+            self.node.create_subscription(typ, topic, self._recorder(key), profile("reliable:100000"))
+        self.js_pub = self.node.create_publisher(JointState, "joint_states", profile("reliable"))
+        self.arm_pub = self.node.create_publisher(
+            Float64MultiArray, "forward_velocity_controller/commands", profile("reliable:1000")
+        )
+        self.estop_pub = self.node.create_publisher(Bool, "sabre/estop", profile("reliable"))
         self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._stop = threading.Event()
@@ -159,6 +94,10 @@ class Probe:
         with self.lock:
             return list(self.messages[key])
 
+    def arm(self) -> np.ndarray:
+        """(T, 7) every arm command received so far, in order."""
+        return np.array([list(m.data) for _, m in self.get("arm")]).reshape(-1, 7)
+
     def wait_for(self, condition, what: str):
         deadline = time.monotonic() + DEADLINE
         while time.monotonic() < deadline:
@@ -168,27 +107,58 @@ class Probe:
             time.sleep(0.05)
         raise AssertionError(f"timed out waiting for {what}")
 
-    def status(self, key: str, name: str) -> dict[str, str] | None:
+    def status(self, key: str, name: str) -> tuple[int, str, dict[str, str]] | None:
         for _, msg in reversed(self.get(key)):
             for st in msg.status:
                 if st.name == name:
-                    return {kv.key: kv.value for kv in st.values}
+                    return (
+                        st.level[0] if isinstance(st.level, bytes) else int(st.level),
+                        st.message,
+                        {kv.key: kv.value for kv in st.values},
+                    )
         return None
+
+    def call(self, service_type, name: str, request):
+        client = self.node.create_client(service_type, name)
+        self.wait_for(lambda: client.wait_for_service(timeout_sec=0.1), f"the service {name}")
+        future = client.call_async(request)
+        self.wait_for(future.done, f"the answer of {name}")
+        self.node.destroy_client(client)
+        return future.result()
+
+    def transition(self, label: str) -> bool:
+        from lifecycle_msgs.msg import Transition
+        from lifecycle_msgs.srv import ChangeState
+
+        ids = {"configure": Transition.TRANSITION_CONFIGURE, "activate": Transition.TRANSITION_ACTIVATE}
+        ids |= {"deactivate": Transition.TRANSITION_DEACTIVATE, "cleanup": Transition.TRANSITION_CLEANUP}
+        return bool(
+            self.call(
+                ChangeState, "/sabre_controller/change_state", ChangeState.Request(transition=Transition(id=ids[label]))
+            ).success
+        )
+
+    def trigger(self, name: str):
+        from std_srvs.srv import Trigger
+
+        return self.call(Trigger, f"/sabre_controller/{name}", Trigger.Request())
 
     def close(self):
         self._stop.set()
         self._thread.join()
         self.executor.shutdown()
         self.node.destroy_node()
-        rclpy.shutdown(context=self.context)
+        self.rclpy.shutdown(context=self.context)
 
 
 @pytest.fixture
-def bridge():
-    """A private domain, a probe node on it, and a list the test adds its node processes to
-    (all killed on teardown)."""
+def bridge(request):
+    """A private domain, a probe node on it (recording the topics of the test's ``record`` mark),
+    and a list the test adds its node processes to (all killed on teardown)."""
+    ros()
+    mark = request.node.get_closest_marker("record")
     domain = Domain()
-    probe = Probe(domain.id)
+    probe = Probe(domain.id, mark.args if mark else ("diagnostics", "sim_status"))
     processes = []
     try:
         yield domain, probe, processes
@@ -201,159 +171,208 @@ def bridge():
             os.unlink(p.log_path)
 
 
-def stamp_of(t: float):
-    from builtin_interfaces.msg import Time
+def arm_limits(speed: float = 2.175) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    accel, jerk = params.robust_arm_limits(0.001)
+    return np.full(7, speed), np.array(accel), np.array(jerk)
 
-    return Time(sec=int(t), nanosec=int(round((t % 1.0) * 1e9)) % 1_000_000_000)
+
+def assert_within_limits(stream: np.ndarray, limits: tuple[np.ndarray, np.ndarray, np.ndarray], dt: float = 0.001) -> None:
+    """Every command of a recorded stream (T, 7) and its difference quotients within the limits."""
+    v_max, a_max, j_max = limits
+    a = np.diff(stream, axis=0) / dt
+    jerk = np.diff(a, axis=0) / dt
+    assert np.all(np.abs(stream).max(axis=0) <= v_max + 1e-9), np.abs(stream).max(axis=0)
+    assert np.all(np.abs(a).max(axis=0) <= a_max * (1 + 1e-9) + 1e-6), np.abs(a).max(axis=0)
+    assert np.all(np.abs(jerk).max(axis=0) <= j_max * (1 + 1e-6) + 1e-3), np.abs(jerk).max(axis=0)
 
 
-def test_malformed_joint_states_get_a_logged_rejection_and_a_zero_command_and_fresh_state_resumes(bridge):
-    """The probe plays the robot: valid states start the controller; a wrong length, a NaN and
-    unknown names are each answered by a zero command (matched by their stamps) and a logged
-    error; withholding states past state_timeout zeroes the command; valid states resume it."""
+def slow_robot(tmp_path) -> str:
+    """The built-in robot's URDF with every arm joint's velocity limit at ARM_SPEED."""
+    from sabre.assets import urdf_text
+
+    text, replaced = re.subn(r'velocity="2\.(175|61)0*"', f'velocity="{ARM_SPEED}"', urdf_text("royalpanda"))
+    assert replaced == 7
+    path = tmp_path / "slow_royalpanda.urdf"
+    path.write_text(text)
+    return str(path)
+
+
+def moving(probe: Probe, since: int, above: float = 0.05) -> bool:
+    arm = probe.arm()[since:]
+    return bool(len(arm) and np.abs(arm).max() > above)
+
+
+def sim_status(probe: Probe) -> dict:
+    status = probe.status("sim_status", "sabre/sim_robot")
+    return {} if status is None else {k: json.loads(v) for k, v in status[2].items()}
+
+
+def commanded(probe: Probe, condition) -> dict | None:
+    """The sim robot's newest status once ``condition(status)`` holds on two statuses in a row
+    with commands arriving in between (so that it is not a stale reading)."""
+    seen = [m for _, m in probe.get("sim_status")][-2:]
+    if len(seen) < 2:
+        return None
+    a, b = ({kv.key: json.loads(kv.value) for kv in m.status[0].values} for m in seen)
+    return b if b["arm_commands"] > a["arm_commands"] and condition(a) and condition(b) else None
+
+
+def arm_speed(status: dict) -> float:
+    return float(np.abs(status["last_arm_command"]).max())
+
+
+@pytest.mark.record("diagnostics", "sim_status", "hand_path", "markers")
+def test_lifecycle_ramps_in_and_down_on_estop_deactivate_and_sigterm_within_the_urdfs_limits(bridge, tmp_path):
+    """The simulated robot publishes a robot description whose arm is limited to ARM_SPEED and a
+    best-effort wrench. The controller answers with zeros until activated, ramps in, ramps to
+    exactly zero on the e-stop (the robot stops; diagnostics at ERROR), resumes after reset and
+    start, ramps to zero on deactivation and, after reactivating, on SIGTERM; every command the
+    robot received (its own record) kept the description's velocity limit and the default
+    acceleration and jerk, and tripped no reflex."""
     domain, probe, processes = bridge
-    ctrl = start_node("control", domain.id, ["--object", "shelf", "--variant", "IO"], {"state_timeout": 0.05})
+    sim = start_node("sim-robot", domain.id, ["--object", "shelf"], {"robot_description_file": slow_robot(tmp_path)})
+    ctrl = start_node("control", domain.id, ["--object", "shelf"], {"autostart": False})
+    processes += [sim, ctrl]
+    probe.wait_for(lambda: probe.transition("configure"), "the controller to configure (descriptions and publishers there)")
+    inactive = probe.wait_for(lambda: commanded(probe, lambda s: s["arm_commands"] > 300), "commands while inactive")
+    assert max(inactive["arm_speed_max"]) == 0.0  # zeros until activated
+    assert probe.transition("activate")
+    probe.wait_for(lambda: commanded(probe, lambda s: arm_speed(s) > 0.05), "the arm to move")
+    assert int(probe.status("diagnostics", "sabre/controller")[2]["wrench_received"]) > 0  # best effort matched
+    path = probe.wait_for(lambda: [m for _, m in probe.get("hand_path") if len(m.poses) > 10], "a planned hand path")[-1]
+    assert path.header.frame_id == "odom"
+    markers = probe.wait_for(lambda: probe.get("markers"), "markers")[-1][1].markers
+    assert any(m.ns == "sabre/handle" for m in markers)
+
+    probe.estop_pub.publish(probe.Bool(data=True))
+    level, _ = probe.wait_for(
+        lambda: (lambda s: s[:2] if s and "e-stop" in s[1] else None)(probe.status("diagnostics", "sabre/controller")),
+        "the e-stop in the diagnostics",
+    )
+    assert level == 2
+    probe.wait_for(lambda: commanded(probe, lambda s: arm_speed(s) == 0.0 and s["robot_speed"] < 0.05), "the robot to stop")
+    assert not probe.trigger("start").success  # latched until reset
+    assert probe.trigger("reset").success and probe.trigger("start").success
+    probe.wait_for(lambda: commanded(probe, lambda s: arm_speed(s) > 0.05), "the arm to move again")
+
+    assert probe.transition("deactivate")
+    probe.wait_for(lambda: commanded(probe, lambda s: arm_speed(s) == 0.0), "the commands to ramp to zero on deactivation")
+    assert probe.transition("activate")
+    probe.wait_for(lambda: commanded(probe, lambda s: arm_speed(s) > 0.05), "the arm to move after reactivating")
+    ctrl.process.send_signal(15)
+    ctrl.process.wait(60)
+    assert ctrl.process.returncode == 0
+    summary = ctrl.summary()
+    assert summary["ramped_to_rest"] and summary["limits"]["arm_velocity"] == [ARM_SPEED] * 7
+    sim.stop()
+    record = sim.summary()
+    assert record["last_arm_command"] == [0.0] * 7 and record["reflex_aborts"] == 0, record["reflex_errors"]
+    v_max, a_max, j_max = arm_limits(ARM_SPEED)
+    assert np.all(np.array(record["arm_speed_max"]) <= v_max + 1e-9), record["arm_speed_max"]
+    assert np.all(np.array(record["arm_accel_max"]) <= a_max * (1 + 1e-6) + 1e-6), record["arm_accel_max"]
+    assert np.all(np.array(record["arm_jerk_max"]) <= j_max * (1 + 1e-6) + 1e-3), record["arm_jerk_max"]
+
+
+@pytest.mark.record("diagnostics", "arm")
+def test_malformed_and_withheld_states_are_answered_with_ramps_never_steps(bridge, tmp_path):
+    """The probe plays the robot (all joints in one joint state, no odometry). Malformed states (a
+    wrong length, NaN, a stamp going back) are each answered, matched by the stamp the command
+    carries, with a step of the ramp to zero, and logged; joints it does not know are ignored (the
+    state is answered); withholding the states ramps the commands to zero; the whole stream keeps
+    the limits."""
+    domain, probe, processes = bridge
+    from sabre.assets import urdf_text
+
+    path = tmp_path / "royalpanda.urdf"
+    path.write_text(urdf_text("royalpanda"))
+    ctrl = start_node(
+        "control",
+        domain.id,
+        ["--object", "shelf"],
+        {
+            "autostart": True,
+            "odometry_topic": "",  # the base's joints come in the joint state too
+            "wrench_topic": "",  # no wrist sensor here
+            "robot_description_file": str(path),
+            "object_pose": [1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        },
+    )
     processes.append(ctrl)
     scene = sabre.Scene.load(obj="shelf")
     x = sabre.paper_start_state(scene)
-    nq = scene.nq
-    names = list(scene.joint_names)
-    t0 = time.time()
+    nq, names = scene.nq, list(scene.joint_names)
+    sent: dict[int, str] = {}
     k = [0]
 
-    def send(position, velocity, joint_names, stamp_t=None):
+    def send(position, velocity, joint_names, label="valid", back=False):
         k[0] += 1
-        stamp_t = t0 + 0.001 * k[0] if stamp_t is None else stamp_t
-        obj = probe.JointState(name=list(scene.object_joint_names), position=[0.0], velocity=[0.0])
-        obj.header.stamp = stamp_of(stamp_t)
-        probe.obj_pub.publish(obj)
-        js = probe.JointState(name=joint_names, position=list(position), velocity=list(velocity))
-        js.header.stamp = stamp_of(stamp_t)
+        t = time.time() - (0.5 if back else 0.0)
+        js = probe.JointState(name=joint_names, position=[float(v) for v in position], velocity=[float(v) for v in velocity])
+        js.header.stamp.sec, js.header.stamp.nanosec = int(t), int((t % 1.0) * 1e9)
+        sent[js.header.stamp.nanosec] = label
         probe.js_pub.publish(js)
-        return js.header.stamp
 
-    def answers(stamp):
-        return [m for _, m in probe.get("echo") if m.header.stamp.sec == stamp.sec and m.header.stamp.nanosec == stamp.nanosec]
+    streaming = threading.Event()
+    streaming.set()
 
-    def run_valid(n):
-        last = None
-        for _ in range(n):
-            last = send(x[:nq], x[nq : 2 * nq], names)
-            time.sleep(0.002)
-        return last
+    def stream_states():
+        while streaming.is_set():
+            send(x[:nq], x[nq : 2 * nq], names)
+            time.sleep(0.001)
 
-    # until the controller plans and answers valid states with its command
-    probe.wait_for(
-        lambda: run_valid(50) and any(np.any(np.asarray(m.velocity) != 0.0) for _, m in probe.get("echo")),
-        "non-zero commands from the controller",
-    )
-    for label, position, velocity, joint_names in (
-        ("wrong length", x[: nq - 1], x[nq : 2 * nq - 1], names[:-1] + ["unknown_joint"]),
-        ("NaN", np.where(np.arange(nq) == 4, math.nan, x[:nq]), x[nq : 2 * nq], names),
-        ("unknown names", x[:nq], x[nq : 2 * nq], [f"other_{n}" for n in names]),
-        ("lengths differ", x[:nq], x[nq : 2 * nq - 2], names),
+    feeder = threading.Thread(target=stream_states, daemon=True)
+    feeder.start()
+    probe.wait_for(lambda: moving(probe, 0, 0.02), "non-zero commands from the controller")
+    for label, position, velocity, joint_names, back in (
+        ("wrong length", x[: nq - 1], x[nq : 2 * nq], names, False),
+        ("NaN", np.where(np.arange(nq) == 4, math.nan, x[:nq]), x[nq : 2 * nq], names, False),
+        ("unknown names", x[:nq], x[nq : 2 * nq], [f"other_{n}" for n in names[:3]] + names[3:], False),
+        ("stamp back", x[:nq], x[nq : 2 * nq], names, True),
     ):
-        stamp = send(position, velocity, joint_names)
-        reply = probe.wait_for(lambda stamp=stamp: answers(stamp), f"the answer to the {label} state")
-        assert np.all(np.asarray(reply[0].velocity) == 0.0), label
-    assert ctrl.process.poll() is None
+        send(position, velocity, joint_names, label, back)
+        time.sleep(0.05)
+    time.sleep(0.3)
+    streaming.clear()
+    feeder.join()
+    probe.wait_for(lambda: len(probe.arm()) and np.all(probe.arm()[-20:] == 0.0), "the commands to ramp to zero")
+    answered = {sent.get(m.layout.data_offset) for _, m in probe.get("arm")}
+    assert {"wrong length", "NaN", "stamp back", "unknown names"} <= answered
+    status = probe.wait_for(lambda: probe.status("diagnostics", "sabre/controller"), "diagnostics")
+    assert int(status[2]["rejected"]) >= 3 and int(status[2]["stale_events"]) >= 1
     assert ctrl.output().count("joint state rejected") >= 1
-
-    # withholding the state: the watchdog zeroes the command; fresh states resume it
-    probe.wait_for(
-        lambda: (probe.status("diagnostics", "sabre/controller") or {}).get("state_stale") == "true",
-        "the controller to flag the state stale",
-    )
-    status = probe.status("diagnostics", "sabre/controller")
-    ages = json.loads(status["stale_zero_age_ms"])
-    assert ages and ages[-1] >= 50.0  # never before state_timeout
-    _, last_echo = probe.get("echo")[-1]
-    assert np.all(np.asarray(last_echo.velocity) == 0.0)
-    before = len(probe.get("echo"))
-    probe.wait_for(
-        lambda: run_valid(20) and any(np.any(np.asarray(m.velocity) != 0.0) for _, m in probe.get("echo")[before:]),
-        "non-zero commands after fresh state",
-    )
+    assert_within_limits(probe.arm(), arm_limits())
     ctrl.stop()
     assert ctrl.process.returncode == 0
-    summary = ctrl.summary()
-    print(summary)
-    assert summary["rejected"] >= 4 and summary["stale_events"] >= 1
-    # the shutdown's final command is zero
-    _, final = probe.get("arm")[-1]
-    assert np.all(np.asarray(final.data) == 0.0)
 
 
-def grasp_to_handle(scene, msg, o: float) -> float:
-    q = JointMap(scene.joint_names).values(msg.name, msg.position, "position")
-    return float(np.linalg.norm(scene.fk(q, "grasp")[:3, 3] - scene.object_fk([o], "handle_frame")[:3, 3]))
+def test_a_moved_and_turned_shelf_is_opened_through_the_pose_input_within_the_limits_and_without_reflexes():
+    """The simulated robot places the shelf 0.3 m aside and turned by 20° and publishes that pose
+    as a perception node would; the controller takes it from the pose topic, opens the shelf, and
+    every arm command the robot received kept the limits (checked on its recording), no reflex."""
+    ros()
+    pose = [1.0, 0.3, 0.0, 0.0, 0.0, math.radians(20.0)]
+    # the planner at normal priority: on a machine shared with other jobs a niced planner starves
+    run = run_bridge("shelf", "IO", 0, timeout=90.0, object_pose=pose, controller_params={"planner_nice": 0})
+    s, c = run.sim, run.controller
+    assert s and c, run.logs
+    print({k: s[k] for k in ("success", "time_to_open", "latency_p99_ms", "delivered_fraction", "cpu_share", "reflex_aborts")})
+    assert s["object_pose"] == pytest.approx(pose)
+    assert s["success"], run.logs["control"][-3000:]
+    assert s["reflex_aborts"] == 0, s["reflex_errors"]
+    limits = c["limits"]
+    assert np.all(np.array(s["arm_accel_max"]) <= np.array(limits["arm_acceleration"]) * (1 + 1e-6) + 1e-6)
+    assert np.all(np.array(s["arm_jerk_max"]) <= np.array(limits["arm_jerk"]) * (1 + 1e-6) + 1e-3)
+    assert np.all(np.array(s["arm_speed_max"]) <= np.array(limits["arm_velocity"]) + 1e-9)
 
 
-def test_closed_loop_with_permuted_joint_order_moves_the_hand_toward_the_handle_then_the_sim_robot_stops_on_timeout(bridge):
-    """The sim robot publishes the joints in reversed order with two extra joints; the controller
-    maps them by name. Over the loop the grasp frame closes on the handle; with the controller
-    killed, the robot stops (zero reference) at most command_timeout plus one tick after the last
-    command, in the plant's schedule, and comes to rest."""
+def test_the_sim_robot_matches_answers_by_stamp_and_stops_on_its_command_timeout(bridge):
+    """The probe answers every tenth joint state with a zero arm command carrying that state's stamp
+    (and three with stamps no state had), then a small ramp it stops sending: the sim robot counts
+    the answers over the states published while answers came, the made-up ones apart, and stops
+    the arm at most command_timeout plus one tick after the last command, and it comes to rest."""
     domain, probe, processes = bridge
-    scene = sabre.Scene.load(obj="shelf")
-    order = list(reversed(scene.joint_names))
-    sim = start_node(
-        "sim-robot",
-        domain.id,
-        ["--object", "shelf"],
-        {"publish_order": order, "extra_joints": ["gripper_left", "gripper_right"], "command_timeout": 0.05},
-    )
+    sim = start_node("sim-robot", domain.id, ["--object", "shelf"], {"command_timeout": 0.05})
     processes.append(sim)
-    ctrl = start_node("control", domain.id, ["--object", "shelf", "--variant", "IO"])
-    processes.append(ctrl)
-    first = probe.wait_for(lambda: probe.get("joint_states"), "joint states from the sim robot")[0][1]
-    assert list(first.name) == order + ["gripper_left", "gripper_right"]
-    start = grasp_to_handle(scene, first, 0.0)
-    probe.wait_for(
-        lambda: grasp_to_handle(scene, probe.get("joint_states")[-1][1], 0.0) < start - 0.3,
-        "the hand to close 0.3 m on the handle",
-    )
-    assert (probe.status("diagnostics", "sabre/controller") or {}).get("rejected") == "0"
-    print(f"grasp to handle {start:.3f} m -> {grasp_to_handle(scene, probe.get('joint_states')[-1][1], 0.0):.3f} m")
-
-    ctrl.kill()
-    status = probe.wait_for(
-        lambda: (lambda s: s if s and json.loads(s["stop_delays_ms"]) else None)(probe.status("sim_status", "sabre/sim_robot")),
-        "the sim robot to stop",
-    )
-    delays = json.loads(status["stop_delays_ms"])
-    print("stop delays (ms)", delays)
-    assert delays[-1] <= 50.0 + 1.0 + 1e-6
-    probe.wait_for(lambda: np.linalg.norm(probe.get("joint_states")[-1][1].velocity) < 0.02, "the robot to come to rest")
-
-
-def test_controller_zeroes_its_commands_when_the_sim_robot_dies(bridge):
-    domain, probe, processes = bridge
-    sim = start_node("sim-robot", domain.id, ["--object", "drawer"])
-    processes.append(sim)
-    ctrl = start_node("control", domain.id, ["--object", "drawer", "--variant", "N"], {"state_timeout": 0.05})
-    processes.append(ctrl)
-    probe.wait_for(lambda: any(np.any(np.asarray(m.data) != 0.0) for _, m in probe.get("arm")), "non-zero arm commands")
-    sim.kill()
-    probe.wait_for(
-        lambda: (probe.status("diagnostics", "sabre/controller") or {}).get("state_stale") == "true",
-        "the controller to flag the state stale",
-    )
-    probe.wait_for(lambda: np.all(np.asarray(probe.get("arm")[-1][1].data) == 0.0), "a zero arm command")
-    status = probe.status("diagnostics", "sabre/controller")
-    assert json.loads(status["stale_zero_age_ms"])[-1] >= 50.0
-    assert ctrl.process.poll() is None
-
-
-def test_the_sim_robot_counts_an_answer_per_state_it_names_over_the_states_published_while_answers_came(bridge):
-    """The probe answers every tenth joint state it receives (an echo with that state's stamp)
-    for a while, and sends three echoes with stamps no state had. The sim robot matches each
-    real echo to its state, counts the made-up ones apart, and divides by the states it
-    published from the first answered to the last: a tenth, whatever it published before or after."""
-    domain, probe, processes = bridge
-    sim = start_node("sim-robot", domain.id, ["--object", "shelf"])
-    processes.append(sim)
-    echo_pub = probe.node.create_publisher(probe.JointState, "/sabre/command", 50)
     answered: list[float] = []
     received = [0]
     answering = threading.Event()
@@ -361,31 +380,57 @@ def test_the_sim_robot_counts_an_answer_per_state_it_names_over_the_states_publi
     def answer(msg):
         received[0] += 1
         if answering.is_set() and received[0] % 10 == 0:
-            echo = probe.JointState(name=list(msg.name))
-            echo.header.stamp = msg.header.stamp
-            echo_pub.publish(echo)
+            command = probe.Float64MultiArray(data=[0.0] * 7)
+            command.layout.data_offset = msg.header.stamp.nanosec
+            probe.arm_pub.publish(command)
             answered.append(msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)
 
-    probe.node.create_subscription(probe.JointState, "/joint_states", answer, 100)
+    probe.node.create_subscription(probe.JointState, "joint_states", answer, 100)
     probe.wait_for(lambda: received[0] > 200, "joint states from the sim robot")
     answering.set()
     probe.wait_for(lambda: len(answered) >= 150, "150 answers")
     answering.clear()
-    for k in range(3):
-        made_up = probe.JointState()
-        made_up.header.stamp = stamp_of(1.0 + 0.001 * k)
-        echo_pub.publish(made_up)
+    for j in range(3):
+        made_up = probe.Float64MultiArray(data=[0.0] * 7)
+        made_up.layout.data_offset = 1 + j
+        probe.arm_pub.publish(made_up)
     n = len(answered)
     status = probe.wait_for(
-        lambda: (lambda s: s if s and int(s["echoes"]) == n and int(s["unmatched_echoes"]) == 3 else None)(
+        lambda: (lambda s: s if s and int(s[2]["echoes"]) == n and int(s[2]["unmatched_echoes"]) >= 3 else None)(
             probe.status("sim_status", "sabre/sim_robot")
         ),
         "the sim robot's count of the answers",
-    )
+    )[2]
     window = int(status["answered_window"])
-    span_ticks = (answered[-1] - answered[0]) / 0.001 + 1  # the sim robot publishes a state per 1 ms tick
-    print(f"{n} answers, window {window} states, span {span_ticks:.0f} ms, published {status['states_published']}")
+    span_ticks = (answered[-1] - answered[0]) / 0.001 + 1
     assert abs(window - span_ticks) <= 0.05 * span_ticks
-    assert int(status["states_published"]) > window + 200  # states before the first answer are outside
+    assert int(status["states_published"]) > window + 200
     assert float(status["delivered_fraction"]) == pytest.approx(n / window)
-    assert 0.07 < n / window < 0.13
+    # a slow ramp, then silence: the robot-side timeout stops the arm
+    for step in range(1, 101):
+        probe.arm_pub.publish(probe.Float64MultiArray(data=[0.0, 0.0, 0.0, -0.0005 * step, 0.0, 0.0, 0.0]))
+        time.sleep(0.001)
+    stops = probe.wait_for(
+        lambda: (lambda s: json.loads(s[2]["stop_delays_ms"]) if s and len(json.loads(s[2]["stop_delays_ms"])) >= 2 else None)(
+            probe.status("sim_status", "sabre/sim_robot")
+        ),
+        "the sim robot to stop",
+    )
+    assert stops[-1] <= 50.0 + 1.0 + 1e-6
+    probe.wait_for(lambda: (sim_status(probe) or {}).get("robot_speed", 1.0) < 0.02, "the robot to come to rest")
+    assert sim_status(probe)["reflex_aborts"] == 0
+
+
+def test_using_the_bridge_without_ros_raises_a_sabre_error_naming_the_extra():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; sys.modules['rclpy'] = None\n"
+        "import sabre, sabre.ros, sabre.ros.commands, sabre.ros.inputs\n"
+        "assert 'rclpy' not in [m for m in sys.modules if sys.modules[m] is not None]\n"
+        "try:\n    sabre.ros.require_ros()\nexcept sabre.SabreError as e:\n    print('ERR', e)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "ERR" in out.stdout and "sabre-mpc[ros]" in out.stdout

@@ -15,6 +15,7 @@ from .. import (
     Controller,
     ControllerConfig,
     LowLevelController,
+    MujocoPlant,
     Plant,
     RolloutModel,
     Scene,
@@ -25,13 +26,17 @@ from .. import (
     run_episode,
     tasks,
 )
+from ..errors import InvalidValueError
 from ._args import HelpFormatter, non_negative_int, positive_float, thread_count
 
 if TYPE_CHECKING:
     from .. import Episode
     from ..viz.viewer import Viewer
 
-__all__ = ["register", "demo_command", "episode_command", "scripted_command", "open_in_plant", "scripted_demo"]
+__all__ = ["register", "demo_command", "episode_command", "scripted_command", "open_in_plant", "scripted_demo", "PLANTS"]
+
+#: The plants ``demo`` and ``episode`` run on (``--plant``): sabre's Rapier plant and MuJoCo's.
+PLANTS: tuple[str, ...] = ("sabre", "mujoco")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -89,6 +94,12 @@ def _episode_options(parser: argparse.ArgumentParser, duration: float, replan_ra
     )
     parser.add_argument("--seed", type=non_negative_int, default=0, help="random seed of the sampler")
     parser.add_argument(
+        "--plant",
+        choices=PLANTS,
+        default="sabre",
+        help="the 1 kHz plant: sabre's Rapier plant, or MuJoCo's (sabre.MujocoPlant, needs the mujoco extra)",
+    )
+    parser.add_argument(
         "--duration",
         type=positive_float,
         default=duration,
@@ -129,6 +140,7 @@ def demo_command(args: argparse.Namespace) -> int:
         variant=args.variant,
         threads=args.threads,
         view=args.view,
+        plant=args.plant,
     )
     return 0
 
@@ -144,6 +156,7 @@ def episode_command(args: argparse.Namespace) -> int:
         plot=args.plot,
         variant=args.variant,
         threads=args.threads,
+        plant=args.plant,
     )
     return 0 if opened else 1
 
@@ -164,19 +177,23 @@ def open_in_plant(
     variant: str = "N",
     threads: int | None = None,
     view: bool = False,
+    plant: str = "sabre",
 ) -> bool:
-    """Closed-loop opening with the sampling-based controller in the plant, reported on stdout;
-    True if the object opened."""
+    """Closed-loop opening with the sampling-based controller in the plant (``plant``: "sabre" for sabre's
+    Rapier plant, "mujoco" for :class:`sabre.MujocoPlant`), reported on stdout; True if the object opened."""
+    if plant not in PLANTS:
+        raise InvalidValueError(f"plant must be one of {PLANTS}, got {plant!r}")
     scene = Scene.load(obj=obj)
+    simulator = MujocoPlant(scene) if plant == "mujoco" else Plant(scene)
     task = tasks.OpenObject()
     controller = Controller(scene, task, ControllerConfig(seed=seed, variant=variant, threads=threads))
     x0 = paper_start_state(scene) if start == "paper" else scene.default_state()
     print(
         f"[{obj}] variant {variant}, seed {seed}: up to {duration:.0f} s of simulated time from the "
-        f"{'paper' if start == 'paper' else 'default'} start, re-planning at {replan_rate:.0f} Hz"
+        f"{'paper' if start == 'paper' else 'default'} start, re-planning at {replan_rate:.0f} Hz, in the {plant} plant"
     )
     viewer = _live_viewer(scene, x0) if view else None
-    episode = run_episode(scene, controller, duration, seed=seed, x0=x0, replan_rate=replan_rate, viewer=viewer)
+    episode = run_episode(scene, controller, duration, seed=seed, x0=x0, replan_rate=replan_rate, viewer=viewer, plant=simulator)
     _report(obj, episode, controller, task)
     if plot:
         plot_episode(episode, plot)

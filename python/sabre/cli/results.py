@@ -33,6 +33,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     exp.add_argument("--out", default="results", help="output folder (results/<name>/ inside)")
     exp.add_argument("--short", action="store_true", help="short durations (smoke test)")
     exp.add_argument(
+        "--plant",
+        default="sabre",
+        metavar="PLANT",
+        help="the 1 kHz plant of every episode: sabre (Rapier), mujoco (sabre.MujocoPlant), or module:factory "
+        "naming a callable that builds a sabre.PlantInterface from a scene (transfer runs both plants itself)",
+    )
+    exp.add_argument(
         "--robot",
         choices=("royalpanda", *EXAMPLE_ROBOTS),
         default="royalpanda",
@@ -51,7 +58,15 @@ def view_command(args: argparse.Namespace) -> int:
 
 def experiment_command(args: argparse.Namespace) -> int:
     """``experiment``: runs the named experiment (or all) and writes results/<name>/; 0."""
+    plant = {"sabre": None, "mujoco": "sabre.mujoco:MujocoPlant"}.get(args.plant, args.plant)
     run_experiments(
-        args.name, seeds=args.seeds, workers=args.workers, ray_address=args.ray, out=args.out, short=args.short, robot=args.robot
+        args.name,
+        seeds=args.seeds,
+        workers=args.workers,
+        ray_address=args.ray,
+        out=args.out,
+        short=args.short,
+        plant=plant,
+        robot=args.robot,
     )
     return 0

@@ -1,4 +1,5 @@
-"""The bridge's subcommands of ``python -m sabre``: ``control``, ``sim-robot`` and ``ros-demo``. The
+"""The bridge's subcommands of ``python -m sabre``: ``control`` (the lifecycle controller node),
+``sim-robot`` and ``ros-demo`` (both as processes, the controller started by its ``autostart``). The
 ROS 2 modules are imported when a command runs, so the parser builds without the ros extra."""
 
 from __future__ import annotations
@@ -25,6 +26,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     sim = sub.add_parser("sim-robot", help="ROS 2 simulated robot: the 1 kHz plant in wall-clock time")
     sim.add_argument("--object", choices=OBJECTS, default=None)
     sim.add_argument("--start", choices=("paper", "default"), default=None)
+    sim.add_argument("--plant", choices=("rapier", "mujoco"), default=None)
+    sim.add_argument(
+        "--object-pose", dest="object_pose", type=float, nargs=6, default=None, metavar=("X", "Y", "Z", "R", "P", "YAW")
+    )
     sim.add_argument("--ros-args", dest="ros_args", nargs=argparse.REMAINDER, default=None, help=_ROS_ARGS_HELP)
     sim.set_defaults(run=sim_robot_command)
     demo = sub.add_parser("ros-demo", help="both ROS 2 nodes as processes: open the object in real time")
@@ -32,6 +37,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     demo.add_argument("--variant", choices=VARIANTS, default="IO")
     demo.add_argument("--seed", type=int, default=0)
     demo.add_argument("--timeout", type=float, default=60.0, help="wall-clock seconds before giving up")
+    demo.add_argument("--plant", choices=("rapier", "mujoco"), default="rapier", help="the simulated robot's plant")
+    demo.add_argument(
+        "--object-pose",
+        dest="object_pose",
+        type=float,
+        nargs=6,
+        default=None,
+        metavar=("X", "Y", "Z", "R", "P", "YAW"),
+        help="where the simulated robot places the object (the controller reads it from the pose topic)",
+    )
     demo.set_defaults(run=ros_demo_command)
 
 
@@ -55,7 +70,8 @@ def sim_robot_command(args: argparse.Namespace) -> int:
     """``sim-robot``: the simulated robot node until it stops; its exit code."""
     from ..ros.sim_robot import run_sim_robot
 
-    return run_sim_robot(_given(object=args.object, start=args.start), _ros_args(args))
+    pose = None if args.object_pose is None else [float(v) for v in args.object_pose]
+    return run_sim_robot(_given(object=args.object, start=args.start, plant=args.plant, object_pose=pose), _ros_args(args))
 
 
 def ros_demo_command(args: argparse.Namespace) -> int:
@@ -68,6 +84,6 @@ def ros_demo_command(args: argparse.Namespace) -> int:
         f"[{args.object}] variant {args.variant}, seed {args.seed}: simulated robot and controller as two processes "
         f"over ROS 2 (loopback only), up to {args.timeout:.0f} s of wall-clock time"
     )
-    run = run_bridge(args.object, args.variant, args.seed, args.timeout)
+    run = run_bridge(args.object, args.variant, args.seed, args.timeout, object_pose=args.object_pose, plant=args.plant)
     print(format_run(run))
     return 0 if run.sim.get("success") else 1

@@ -21,6 +21,8 @@ PAPER = {
     "fig3": "the invariant mapping (55) keeps the effective sample size independent of the cost scale",
     "fig4": "the tank energy stays above the floor ε in the worst case",
     "acceptance": "every object opens from the paper's start",
+    "transfer": "the controller planned in simulation opens the objects on the real robot (Sec. VI); here a second "
+    "simulator (MuJoCo) stands in for it, with the object's damping and friction scaled and a 20 ms planning delay",
 }
 
 
@@ -53,6 +55,8 @@ def draw(name: str, records: list[dict], path: str | os.PathLike[str]) -> None:
         _draw_hand_paths(ax, records)
     elif name == "acceptance":
         _draw_openings(ax, records)
+    elif name == "transfer":
+        _draw_transfer(ax, records)
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
@@ -152,6 +156,21 @@ def _draw_openings(ax: Any, records: list[dict]) -> None:
     ax.set(xlabel="time (s)", ylabel="opening (rad or m)", title=f"Acceptance: opening from the paper's start ({variants})")
 
 
+def _draw_transfer(ax: Any, records: list[dict]) -> None:
+    """Transfer: the share of episodes that opened per object and variant, one bar per plant and scale."""
+    groups: defaultdict[tuple[str, float], defaultdict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
+    for r in records:
+        c = r["config"]
+        groups[c["simulator"], c["scale"]][f"{c['obj']} {c['variant']}"].append(r["metrics"]["success"])
+    labels = sorted({label for runs in groups.values() for label in runs})
+    width = 0.8 / max(1, len(groups))
+    for i, ((simulator, scale), runs) in enumerate(sorted(groups.items())):
+        rates = [np.mean(runs[label]) if runs.get(label) else np.nan for label in labels]
+        ax.bar(np.arange(len(labels)) + i * width, rates, width, label=f"{simulator} ×{scale:g}")
+    ax.set_xticks(np.arange(len(labels)) + 0.4 - width / 2, labels, rotation=45, ha="right", fontsize=7)
+    ax.set(ylabel="opened", ylim=(0, 1.05), title="Transfer: Rapier and MuJoCo plants, object damping and friction scaled")
+
+
 def summary(name: str, records: list[dict], *, seeds: int, short: bool) -> str:
     """Markdown: the command, the machine and date, mean ± std of every metric per configuration,
     and the paper's reported result."""
@@ -181,6 +200,10 @@ def summary(name: str, records: list[dict], *, seeds: int, short: bool) -> str:
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     if name == "acceptance":
         lines += ["", acceptance_table(records)]
+    if name == "transfer":
+        from .transfer import transfer_table
+
+        lines += ["", transfer_table(records)]
     return "\n".join(lines) + "\n"
 
 

@@ -4,28 +4,32 @@ hash of (experiment, configuration, seed), with per-seed CSV, the figure as PNG 
 Every run is a pure function :func:`run_one` of (experiment, configuration, seed); its result is a
 JSON file ``results/<name>/runs/<hash>.json``, so an interrupted sweep resumes where it stopped.
 ``short=True`` shortens every episode (smoke tests); short and full runs never share a cache entry.
+``plant="module:factory"`` runs every episode on ``factory(scene)`` (a :class:`~sabre.PlantInterface`) instead of
+the Rapier plant; the name is part of each run's configuration, so those runs are cached apart.
 """
 
 from __future__ import annotations
 
 import csv
 import hashlib
+import importlib
 import itertools
 import json
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..errors import InvalidValueError, require_extra
 from ..scene import OBJECTS
 
-__all__ = ["NAMES", "RunSpec", "run_one", "run_experiments", "run_specs", "specs", "acceptance_specs"]
+__all__ = ["NAMES", "RunSpec", "run_one", "run_experiments", "run_specs", "specs", "acceptance_specs", "transfer_specs"]
 
-NAMES: tuple[str, ...] = ("fig3", "fig4", "fig8", "fig10", "fig11", "fig12", "acceptance")
+NAMES: tuple[str, ...] = ("fig3", "fig4", "fig8", "fig10", "fig11", "fig12", "acceptance", "transfer")
 _SERIES_POINTS = 400
 
 
@@ -51,12 +55,45 @@ def _spec(name: str, seed: int, **config: object) -> RunSpec:
     return RunSpec(name, tuple(sorted(config.items())), int(seed))
 
 
-def specs(name: str, seeds: int, short: bool, robot: str = "royalpanda") -> list[RunSpec]:
-    """Every run of one experiment (``robot``: the acceptance's robot; the others are the RoyalPanda's)."""
+def _on_plant(runs: list[RunSpec], plant: str | None) -> list[RunSpec]:
+    """``runs`` on the plant ``plant`` ("module:factory") names; as they are for None (the Rapier plant)."""
+    if plant is None:
+        return runs
+    _plant_factory(plant)  # a name that does not resolve fails here, before any run
+    return [_spec(r.name, r.seed, **r.options, plant=plant) for r in runs]
+
+
+def _plant_factory(plant: str | None) -> Callable | None:
+    """The callable ``plant`` names as "module:attribute" (None for None)."""
+    if plant is None:
+        return None
+    module, _, attribute = str(plant).partition(":")
+    try:
+        factory = getattr(importlib.import_module(module), attribute)
+    except (ImportError, AttributeError, ValueError) as exc:
+        raise InvalidValueError(f"plant must name a factory as 'module:attribute', got {plant!r} ({exc})") from None
+    if not callable(factory):
+        raise InvalidValueError(f"plant: {plant!r} is not callable")
+    return factory
+
+
+def specs(name: str, seeds: int, short: bool, plant: str | None = None, robot: str = "royalpanda") -> list[RunSpec]:
+    """Every run of one experiment (on the plant ``plant`` names, "module:factory"; None: the Rapier plant;
+    ``robot``: the acceptance's robot, the other experiments are the RoyalPanda's)."""
     if name == "acceptance":
-        return acceptance_specs(range(seeds), duration=8.0 if short else 60.0, robot=robot)
+        return acceptance_specs(range(seeds), duration=8.0 if short else 60.0, plant=plant, robot=robot)
     if robot != "royalpanda":
         raise InvalidValueError(f"experiment {name!r} runs on the RoyalPanda; only acceptance takes another robot")
+    if name == "transfer":
+        # its runs name their own plants (sabre's and MuJoCo's), so `plant` does not apply; short: a smoke test
+        # of every object, variant and plant, nominal damping only
+        return transfer_specs(range(seeds), duration=1.0, scales=(1.0,)) if short else transfer_specs(range(seeds))
+    runs = _specs(name, seeds, short)
+    return runs if name == "fig3" else _on_plant(runs, plant)  # the weights of fig3 need no plant
+
+
+def _specs(name: str, seeds: int, short: bool) -> list[RunSpec]:
+    """Every run of one experiment on the Rapier plant."""
     out: list[RunSpec] = []
     for seed in range(seeds):
         if name == "fig3":
@@ -109,12 +146,14 @@ def acceptance_specs(
     variants: Sequence[str] = ("IO",),
     duration: float = 60.0,
     replan_rate: float = 50.0,
+    plant: str | None = None,
     robot: str = "royalpanda",
 ) -> list[RunSpec]:
     """The acceptance runs: every object opened from the robot's start by every variant at every seed,
-    for up to ``duration`` s of simulated time, re-planning at ``replan_rate`` Hz. ``robot``: the
-    RoyalPanda (the paper's start) or an example robot (:data:`sabre.robot_examples.EXAMPLE_ROBOTS`),
-    which opens its own objects (``objects`` defaults to them)."""
+    for up to ``duration`` s of simulated time, re-planning at ``replan_rate`` Hz (on the plant ``plant``
+    names, "module:factory"; None: the Rapier plant). ``robot``: the RoyalPanda (the paper's start) or
+    an example robot (:data:`sabre.robot_examples.EXAMPLE_ROBOTS`), which opens its own objects
+    (``objects`` defaults to them)."""
     from ..planner import VARIANTS
     from ..robot_examples import EXAMPLE_OBJECTS
 
@@ -128,12 +167,21 @@ def acceptance_specs(
         raise InvalidValueError(f"acceptance: unknown objects or variants {unknown}; objects {known}, variants {VARIANTS}")
     # the RoyalPanda's runs keep the configuration (and so the cache entries) they always had
     mounted = {} if robot == "royalpanda" else {"robot": robot}
-    return [
+    runs = [
         _spec("acceptance", seed, obj=o, variant=v, duration=float(duration), replan_rate=float(replan_rate), **mounted)
         for o in objects
         for v in variants
         for seed in seeds
     ]
+    return _on_plant(runs, plant)
+
+
+def transfer_specs(seeds: Iterable[int], **options: Any) -> list[RunSpec]:
+    """The transfer runs (:mod:`sabre.experiments.transfer`) at every seed; ``options`` are those of
+    :func:`~sabre.experiments.transfer.transfer_configs` (objects, variants, simulators, scales, duration, ...)."""
+    from .transfer import transfer_configs
+
+    return [_spec("transfer", seed, **config) for config in transfer_configs(**options) for seed in seeds]
 
 
 def _series(t: np.ndarray, y: np.ndarray) -> dict:
@@ -147,6 +195,7 @@ def run_one(spec: RunSpec) -> dict:
     from . import scenarios
 
     c, seed = spec.options, spec.seed
+    plant = _plant_factory(c.get("plant"))
     if spec.name == "fig3":
         # the same rollouts with costs scaled by `scale`: (55) gives the same weights, exp(−λJ) does not
         costs = c["scale"] * np.sort(np.random.default_rng(seed).gamma(2.0, 5.0, size=64) + 10.0)
@@ -166,6 +215,7 @@ def run_one(spec: RunSpec) -> dict:
             alpha=c.get("alpha", 1.0),
             driver=c["driver"],
             tank_initial=c.get("tank_initial", 10.0),
+            plant=plant,
         )
         ep = door.episode
         force = np.linalg.norm(ep.wrench[:, :3], axis=1)
@@ -183,9 +233,11 @@ def run_one(spec: RunSpec) -> dict:
             },
         }
     if spec.name == "acceptance":
-        return _acceptance_run(c, seed)
+        return _acceptance_run(c, seed, plant)
+    if spec.name == "transfer":
+        return _transfer_run(c, seed)
     if spec.name == "fig8":
-        manipulation = scenarios.object_manipulation(c["variant"], "shelf", seed, c["duration"])
+        manipulation = scenarios.object_manipulation(c["variant"], "shelf", seed, c["duration"], plant=plant)
         ep = manipulation.episode
         metrics = {
             "success": float(manipulation.success),
@@ -194,7 +246,7 @@ def run_one(spec: RunSpec) -> dict:
         }
         return {"metrics": metrics, "series": {"opening": _series(ep.time, ep.opening)}}
     if spec.name == "fig10":
-        corridor = scenarios.obstacle_corridor(c["variant"], seed, c["duration"])
+        corridor = scenarios.obstacle_corridor(c["variant"], seed, c["duration"], plant=plant)
         ep = corridor.episode
         q = ep.scene.split_state(ep.state).q
         hand = ep.scene.fk_many(q, ep.scene.require_tool_frame("fig10"))[:, :3, 3]
@@ -217,14 +269,27 @@ def run_one(spec: RunSpec) -> dict:
     raise InvalidValueError(f"unknown experiment {spec.name!r}")
 
 
-def _acceptance_run(c: dict, seed: int) -> dict:
+def _transfer_run(c: dict, seed: int) -> dict:
+    """One transfer episode's metrics and opening; a plant that fails (a SabreError) is a run that did not open."""
+    from ..errors import SabreError
+    from .transfer import transfer_episode, transfer_metrics
+
+    try:
+        ep = transfer_episode(c, seed)
+    except SabreError as exc:
+        return {"metrics": transfer_metrics(None), "series": {}, "error": str(exc)}
+    return {"metrics": transfer_metrics(ep), "series": {"opening": _series(ep.time, ep.opening)}}
+
+
+def _acceptance_run(c: dict, seed: int, plant: Callable | None = None) -> dict:
     """One acceptance episode: whether and when it opened, how hard it pushed, how often the hook
     slipped off (open back to approach) or let go (into release), and how fast it ran."""
     from . import scenarios
 
-    ep = scenarios.object_manipulation(
-        c["variant"], c["obj"], seed, c["duration"], replan_rate=c["replan_rate"], robot=c.get("robot", "royalpanda")
-    ).episode
+    run = scenarios.object_manipulation(
+        c["variant"], c["obj"], seed, c["duration"], replan_rate=c["replan_rate"], plant=plant, robot=c.get("robot", "royalpanda")
+    )
+    ep = run.episode
     phases = [ep.phases[i] for i in ep.phase]
     transitions = list(itertools.pairwise(phases))
     needed = ep.success_opening
@@ -297,10 +362,13 @@ def run_experiments(
     ray_address: str | None = None,
     out: str | os.PathLike[str] = "results",
     short: bool = False,
+    plant: str | None = None,
     robot: str = "royalpanda",
 ) -> dict[str, list[dict]]:
     """Runs ``name`` (one of :data:`NAMES` or "all") over ``seeds`` seeds, reusing cached runs, and
     writes ``<out>/<name>/runs.csv``, ``<name>.png`` and ``summary.md``. Returns the run records.
+    ``plant``: "module:factory" naming a callable that builds the plant of a scene (a
+    :class:`~sabre.PlantInterface`, e.g. a class taking the scene); None: the Rapier plant.
     ``robot`` other than the RoyalPanda: the acceptance of that example robot, in ``<out>/acceptance_<robot>/``."""
     if int(seeds) < 1:
         raise InvalidValueError(f"seeds must be at least 1, got {seeds}")
@@ -308,7 +376,7 @@ def run_experiments(
     records = {}
     for n in names:
         folder = Path(out) / (n if robot == "royalpanda" else f"{n}_{robot}")
-        ordered = run_specs(specs(n, int(seeds), short, robot), folder, workers=workers, ray_address=ray_address)
+        ordered = run_specs(specs(n, int(seeds), short, plant, robot), folder, workers=workers, ray_address=ray_address)
         records[n] = ordered
         _write_csv(folder / "runs.csv", ordered)
         from .figures import draw, summary

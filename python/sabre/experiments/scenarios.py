@@ -7,11 +7,13 @@
   obstacle that appears when the hand comes within 1 cm of it (Fig. 9, 10).
 - :func:`object_manipulation`: reach the handle from the paper's start and open (Fig. 8).
 
-Every function is deterministic for its ``seed`` and takes the controller ``variant``.
+Every function is deterministic for its ``seed`` and takes the controller ``variant``, and runs on the
+plant ``plant(scene)`` builds (a :class:`~sabre.PlantInterface`; default: :class:`~sabre.Plant`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -22,10 +24,14 @@ from ..episode import Episode, TraceChunks
 from ..errors import InvalidValueError
 from ..inner_loop import LowLevelController
 from ..planner import Controller, ControllerConfig
+from ..plants import PlantInterface, as_plant
 from ..safety import EnergyTank, SafetyConfig, SafetyFilter
 from ..scene import ROBOTS, Scene
 from ..scripted import hook_and_pull
 from ..sim import Plant
+
+#: Builds the plant of a scene (a :class:`~sabre.PlantInterface`, e.g. a class taking the scene).
+PlantFactory = Callable[[Scene], PlantInterface]
 
 __all__ = [
     "StuckDoorResult",
@@ -46,19 +52,24 @@ __all__ = [
 
 
 # -- helpers -----------------------------------------------------------------------------------
-def hooked_state(scene: Scene, engage: float = 0.6) -> np.ndarray:
+def _plant(scene: Scene, plant: PlantFactory | None) -> PlantInterface:
+    """The plant ``plant`` builds for ``scene``, checked; a :class:`~sabre.Plant` without a factory."""
+    return Plant(scene) if plant is None else as_plant(plant(scene), scene)
+
+
+def hooked_state(scene: Scene, engage: float = 0.6, plant: PlantFactory | None = None) -> np.ndarray:
     """Plays :func:`~sabre.scripted.hook_and_pull` on the plant from the default state through the
     approach, insert and hook and ``engage`` s into the pull (tip against the bar), then zeroes
     the robot's velocities. Returns the state (nx,)."""
     motion = hook_and_pull(scene, scene.default_state())
-    plant = Plant(scene)
-    low = LowLevelController(scene, dt=plant.dt)
-    plant.reset(scene.default_state())
-    per = int(round(motion.dt / plant.dt))
+    driven = _plant(scene, plant)
+    low = LowLevelController(scene, dt=driven.dt)
+    driven.reset(scene.default_state())
+    per = int(round(motion.dt / driven.dt))
     n = int(np.argmax(motion.phases == 3)) + int(round(engage / motion.dt))
     for u in motion.U[:n]:
-        low.track(plant, u, steps=per)
-    x = plant.state
+        low.track(driven, u, steps=per)
+    x = np.array(driven.state, dtype=np.float64)  # a copy: the velocities are zeroed below
     scene.split_state(x).q_dot[:] = 0.0
     return x
 
@@ -126,13 +137,13 @@ def power_near_floor(episode: Episode, mask: np.ndarray, near: float = 0.5) -> F
     )
 
 
-def _scripted_episode(scene, variant, safety, x0, hold_seconds, release_seconds, tank_initial):
+def _scripted_episode(scene, variant, safety, x0, hold_seconds, release_seconds, tank_initial, plant=None):
     """Scripted pull (the rest of hook_and_pull's pull phase) as the outer-loop reference through
     the inner loop of `variant` (filter + tank for I/IO), door held for hold_seconds."""
     motion = hook_and_pull(scene, scene.default_state())
     start = int(np.argmax(motion.phases == 3))
     U = np.asarray(motion.U[start:], dtype=float)
-    plant = Plant(scene)
+    plant = _plant(scene, plant)
     low = LowLevelController(scene, dt=plant.dt)
     plant.reset(x0)
     low.reset()
@@ -205,6 +216,7 @@ def stuck_door(
     tank_initial: float = 10.0,
     reach_timeout: float = 40.0,
     hold_at: float = 0.2,
+    plant: PlantFactory | None = None,
 ) -> StuckDoorResult:
     """The door is held for hold_seconds while the robot pulls on it, then released.
 
@@ -223,7 +235,8 @@ def stuck_door(
     if not (np.isfinite(hold_at) and 0.0 < hold_at < scene.o_upper[0] - scene.o_lower[0]):
         raise InvalidValueError(f"hold_at must lie inside the object's range, got {hold_at}")
     if driver == "scripted":
-        ep = _scripted_episode(scene, variant, safety, hooked_state(scene), hold_seconds, release_seconds, tank_initial)
+        x0 = hooked_state(scene, plant=plant)
+        ep = _scripted_episode(scene, variant, safety, x0, hold_seconds, release_seconds, tank_initial, plant)
         hold_start, was_held = 0.0, True
     elif driver == "controller":
         task = tasks.OpenObject()
@@ -245,6 +258,7 @@ def stuck_door(
             stop_on_success=False,
             progress=False,
             on_replan=hold,
+            plant=None if plant is None else plant(scene),
         )
         was_held = schedule.start is not None
         hold_start = schedule.start if schedule.start is not None else float(ep.time[-1])
@@ -314,10 +328,11 @@ def tank_chattering(
     driver: str = "controller",
     obj: str = "shelf",
     tank_initial: float = 10.0,
+    plant: PlantFactory | None = None,
 ) -> ChatteringResult:
     """The stuck door with variant IO and passivity rate α; α = 1000 should chatter at the floor.
     A ``tank_initial`` just above the floor (2 J) reaches it sooner."""
-    r = stuck_door("IO", seed, hold_seconds, release_seconds, obj, alpha, driver=driver, tank_initial=tank_initial)
+    r = stuck_door("IO", seed, hold_seconds, release_seconds, obj, alpha, driver=driver, tank_initial=tank_initial, plant=plant)
     return ChatteringResult(
         episode=r.episode,
         alpha=float(alpha),
@@ -358,7 +373,13 @@ CORRIDOR = (-0.5, 0.5, -0.1, 0.1)
 
 
 def obstacle_corridor(
-    variant: str = "IO", seed: int = 0, duration: float = 6.0, *, replan_rate: float = 20.0, obstacle_radius: float = 0.08
+    variant: str = "IO",
+    seed: int = 0,
+    duration: float = 6.0,
+    *,
+    replan_rate: float = 20.0,
+    obstacle_radius: float = 0.08,
+    plant: PlantFactory | None = None,
 ) -> CorridorResult:
     """Reach a grasp target 0.5 m to the side with the base confined to :data:`CORRIDOR`; a sphere
     obstacle sits half-way on the straight path and appears (filters + sampler cost) when the grasp
@@ -402,6 +423,7 @@ def obstacle_corridor(
         stop_on_success=False,
         progress=False,
         on_replan=appear,
+        plant=None if plant is None else plant(scene),
     )
     t_app = appeared[0] if appeared else None
     check = SafetyFilter(scene, safety)
@@ -443,6 +465,7 @@ def object_manipulation(
     duration: float = 60.0,
     *,
     replan_rate: float = 50.0,
+    plant: PlantFactory | None = None,
     robot: str = "royalpanda",
 ) -> ManipulationResult:
     """OpenObject from :func:`~sabre.closed_loop.paper_start_state`; violations per ZBF class. ``robot``:
@@ -451,6 +474,14 @@ def object_manipulation(
     scene = manipulation_scene(robot, obj)
     ctrl = Controller(scene, tasks.OpenObject(), ControllerConfig(variant=variant, seed=seed))
     ep = run_episode(
-        scene, ctrl, duration, seed=seed, x0=paper_start_state(scene), replan_rate=replan_rate, record_every=10, progress=False
+        scene,
+        ctrl,
+        duration,
+        seed=seed,
+        x0=paper_start_state(scene),
+        replan_rate=replan_rate,
+        record_every=10,
+        progress=False,
+        plant=None if plant is None else plant(scene),
     )
     return ManipulationResult(episode=ep, variant=variant, obj=obj, success=bool(ep.success), violations=ep.violations())

@@ -1,11 +1,12 @@
-"""The ROS 2 hardware bridge: a controller node around :class:`sabre.RealtimeCascade`, a simulated
-robot node around the 1 kHz :class:`sabre.Plant`, the object-state estimator and the launcher of
+"""The ROS 2 hardware bridge: a managed controller node around :class:`sabre.RealtimeCascade`, a
+simulated robot that behaves like a Franka arm's and a mobile base's drivers, and the launcher of
 both (``python -m sabre control | sim-robot | ros-demo``); see docs/ros2.md.
 
-Needs the optional extra ``sabre-mpc[ros]`` (ROS 2 from pip wheels, no system ROS). ``import
-sabre`` works without it; the node modules raise :class:`sabre.MissingExtraError` naming the
-extra. The estimator and the message conversions are
-plain NumPy and import without ROS.
+Needs the optional extra ``sabre-mpc[ros]`` (Kilted) or ``sabre-mpc[ros-jazzy]`` (ROS 2 from pip
+wheels, no system ROS). ``import sabre`` works without it; the node modules raise
+:class:`sabre.MissingExtraError` naming the extra. The message conversions, the inputs, the command
+limits and their stop logic, the descriptions and the QoS parsing are plain Python and import
+without ROS.
 """
 
 from __future__ import annotations
@@ -44,11 +45,14 @@ def require_ros():
     modules = (
         "diagnostic_msgs.msg",
         "geometry_msgs.msg",
-        "hdrh.histogram",
+        "nav_msgs.msg",
         "rosgraph_msgs.msg",
         "sensor_msgs.msg",
         "std_msgs.msg",
+        "std_srvs.srv",
+        "visualization_msgs.msg",
         "threadpoolctl",
+        "rclpy.lifecycle",
         "rclpy",
     )
     return require_extra("ros", "the ROS 2 bridge (ROS 2 from pip wheels)", *modules)[-1]
@@ -87,9 +91,11 @@ def realtime_middleware() -> bool:
     so that a message reaches a 1 kHz callback without waiting for the planner or any other
     normally scheduled thread to give up a core. Changes nothing and returns False where a
     profile is already chosen (``FASTDDS_DEFAULT_PROFILES_FILE``: the user's own wins), where
-    another middleware is selected, or where the OS does not permit SCHED_FIFO (probed on a
-    short-lived thread, so that Fast DDS never logs a refused priority)."""
-    if os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE"):
+    another middleware is selected, where the installed Fast DDS does not apply a profile's thread
+    settings (before 3.0: ROS 2 Jazzy's 2.14 reads them and leaves its threads as they were), or
+    where the OS does not permit SCHED_FIFO (probed on a short-lived thread, so that Fast DDS never
+    logs a refused priority)."""
+    if os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE") or not middleware_thread_settings():
         return False
     if os.environ.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp") != "rmw_fastrtps_cpp":
         return False
@@ -101,6 +107,18 @@ def realtime_middleware() -> bool:
         return False
     os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = MIDDLEWARE_PROFILE
     return True
+
+
+def middleware_thread_settings() -> bool:
+    """Whether the installed Fast DDS applies a profile's thread settings (version 3 or later, the
+    one ROS 2 Kilted's wheels bring)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        major = int(version("ros-fastdds").split(".")[0])
+    except (PackageNotFoundError, ValueError):
+        return False
+    return major >= 3
 
 
 class PeriodicThread:
@@ -164,14 +182,17 @@ def gil_priority(callback_priority: int) -> int:
 
 
 def make_executor(rclpy: Any) -> Any:
-    """rclpy's events executor where the installed rclpy has it: it dispatches each message from
-    C++ instead of rebuilding a Python wait set per message, which is what lets one interpreter
-    keep up with several 1 kHz topics; else the single-threaded executor."""
+    """rclpy's events executor where the installed rclpy has a settled one (Kilted's, rclpy 9): it
+    dispatches each message from C++ instead of rebuilding a Python wait set per message; else the
+    single-threaded executor (Jazzy's experimental events executor crashed a node's shutdown)."""
+    from importlib.metadata import PackageNotFoundError, version
+
     try:
+        settled = int(version("ros-rclpy").split(".")[0]) >= 9
         from rclpy.experimental import EventsExecutor
-    except ImportError:
-        return rclpy.executors.SingleThreadedExecutor()
-    return EventsExecutor()
+    except (ImportError, PackageNotFoundError, ValueError):
+        settled = False
+    return EventsExecutor() if settled else rclpy.executors.SingleThreadedExecutor()
 
 
 def spin_node(node: Any, shutdown: Callable[[], dict[str, Any]], done: threading.Event | None = None, priority: int = 0) -> None:

@@ -1,5 +1,6 @@
 """Message contents ↔ sabre arrays for the bridge, in plain NumPy (no ROS import): joint-name
-mapping, world ↔ base frame base rates, τ_ext from the wrist wrench, and a first-order low-pass."""
+mapping, world ↔ base frame base rates, quaternions ↔ roll, pitch, yaw; τ_ext from the wrist wrench
+and the first-order low-pass are the core's (:mod:`sabre.estimation`), re-exported here."""
 
 from __future__ import annotations
 
@@ -9,13 +10,20 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..errors import InvalidValueError
-from ..scene import Scene
+from ..estimation import SENSOR_FRAME, LowPass, tau_ext_from_wrench
 
-__all__ = ["MessageError", "JointMap", "world_to_base", "base_to_world", "tau_ext_from_wrench", "LowPass", "SENSOR_FRAME"]
-
-#: The frame the wrist wrench is measured at: force and torque (about this frame's origin) in the
-#: world frame, as :attr:`sabre.Plant.wrench` reports them.
-SENSOR_FRAME = "panda_link8"
+__all__ = [
+    "MessageError",
+    "JointMap",
+    "world_to_base",
+    "base_to_world",
+    "yaw_of",
+    "rpy_of",
+    "quaternion_of",
+    "tau_ext_from_wrench",
+    "LowPass",
+    "SENSOR_FRAME",
+]
 
 
 class MessageError(InvalidValueError):
@@ -79,25 +87,31 @@ def base_to_world(twist_base: Sequence[float] | np.ndarray, yaw: float) -> tuple
     return c * vx - s * vy, s * vx + c * vy, wz
 
 
-def tau_ext_from_wrench(scene: Scene, q: np.ndarray, wrench: np.ndarray, frame: str = SENSOR_FRAME) -> np.ndarray:
-    """(nq,) external joint torques J(q)ᵀ w of a wrist wrench w = [f; m] (world frame, moment about
-    ``frame``'s origin). Contacts on links before the sensor do not show in it."""
-    return scene.jacobian(q, frame).T @ np.asarray(wrench, dtype=np.float64)
+def yaw_of(x: float, y: float, z: float, w: float) -> float:
+    """The yaw (rad, about z) of a unit quaternion (x, y, z, w)."""
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
-class LowPass:
-    """First-order low-pass at ``cutoff`` Hz integrated with the measured step dt (exact
-    exponential update, so irregular message spacing is handled); None passes through."""
+def rpy_of(x: float, y: float, z: float, w: float) -> tuple[float, float, float]:
+    """(roll, pitch, yaw) in rad, R = Rz(yaw) Ry(pitch) Rx(roll), of a quaternion (x, y, z, w),
+    normalised first; a zero or non-finite quaternion raises :class:`MessageError`."""
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if not math.isfinite(n) or n < 1e-9:
+        raise MessageError(f"quaternion ({x}, {y}, {z}, {w}) is not a rotation")
+    x, y, z, w = x / n, y / n, z / n, w / n
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
+    return roll, pitch, yaw_of(x, y, z, w)
 
-    def __init__(self, cutoff: float | None) -> None:
-        self.cutoff = None if cutoff is None or cutoff <= 0 else float(cutoff)
-        self.value: np.ndarray | None = None
 
-    def update(self, x: np.ndarray, dt: float) -> np.ndarray:
-        x = np.asarray(x, dtype=np.float64)
-        if self.value is None or self.cutoff is None:
-            self.value = x.copy()
-        else:
-            a = 1.0 - math.exp(-2.0 * math.pi * self.cutoff * max(dt, 0.0))
-            self.value = self.value + a * (x - self.value)
-        return self.value
+def quaternion_of(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+        cr * cp * cy + sr * sp * sy,
+    )

@@ -110,7 +110,9 @@ def start_node(kind: str, domain_id: int, args: list[str] | None = None, params:
     if params:
         cmd.append("--ros-args")
         for k, v in params.items():
-            cmd += ["-p", f"{k}:={json.dumps(v) if not isinstance(v, str) else v}"]
+            # YAML values: an empty string must be written as '' (a bare `name:=` does not parse)
+            value = json.dumps(v) if not isinstance(v, str) else (v or "''")
+            cmd += ["-p", f"{k}:={value}"]
     log = tempfile.NamedTemporaryFile(prefix=f"sabre-{kind}-", suffix=".log", delete=False)
     process = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=ros_environment(domain_id))
     log.close()
@@ -134,16 +136,27 @@ def run_bridge(
     seed: int = 0,
     timeout: float = 60.0,
     *,
+    object_pose: list[float] | None = None,
+    plant: str = "rapier",
     sim_params: dict[str, Any] | None = None,
     controller_params: dict[str, Any] | None = None,
 ) -> BridgeRun:
-    """Starts the simulated robot and the controller, waits until the robot reports the object
-    open (plus its settle time) or ``timeout`` s of wall time, stops both with SIGINT."""
+    """Starts the simulated robot (the object at ``object_pose``, published on the pose topic as a
+    perception node would) and the controller (``autostart``: it configures once the robot
+    description, the pose and the inputs are there, then activates), waits until the robot
+    reports the object open (plus its settle time) or ``timeout`` s of wall time, stops both with
+    SIGINT."""
+    sim_overrides: dict[str, Any] = {"stop_on_success": True, "duration": float(timeout), "plant": plant}
+    if object_pose is not None:
+        sim_overrides["object_pose"] = [float(v) for v in object_pose]
     with Domain() as domain:
-        sim = start_node(
-            "sim-robot", domain.id, ["--object", obj], {"stop_on_success": True, "duration": float(timeout), **(sim_params or {})}
+        sim = start_node("sim-robot", domain.id, ["--object", obj], sim_overrides | (sim_params or {}))
+        ctrl = start_node(
+            "control",
+            domain.id,
+            ["--object", obj, "--variant", variant, "--seed", str(seed)],
+            {"autostart": True} | (controller_params or {}),
         )
-        ctrl = start_node("control", domain.id, ["--object", obj, "--variant", variant, "--seed", str(seed)], controller_params)
         try:
             deadline = time.monotonic() + timeout + 60.0
             while sim.process.poll() is None and ctrl.process.poll() is None and time.monotonic() < deadline:
@@ -180,7 +193,9 @@ def format_run(run: BridgeRun) -> str:
         f"{s['answered_window']} published while the controller ran ({100 * s['delivered_fraction']:.2f} %), dropped {dropped}, "
         f"late (> {s['period_ms']:.0f} ms) {s['late_echoes']}, rejected {c['rejected']}",
         f"  plant: {s['sim_time']:.2f} s simulated in {s['wall_time']:.2f} s wall, late ticks {s['late_ticks']}, "
-        f"skipped {s['skipped_ticks']}, loop work p99 {s['loop_work_p99_ms']:.3f} ms",
+        f"skipped {s['skipped_ticks']}, loop work p99 {s['loop_work_p99_ms']:.3f} ms; reflex aborts {s['reflex_aborts']}",
+        f"  CPU: controller node {100 * c.get('cpu_share', float('nan')):.1f} % of a core (planner process apart), "
+        f"simulated robot {100 * s['cpu_share']:.1f} %",
         f"  planner {c['planner_rate_hz']:.1f} Hz ({c['planner_iterations']} iterations), inner tick compute "
         f"p50 {c['tick_compute_p50_ms']:.3f} ms p99 {c['tick_compute_p99_ms']:.3f} ms, stale-state events {c['stale_events']}",
         f"  state age on arrival at the controller p50 {c['state_age_p50_ms']:.3f} ms, p99 {c['state_age_p99_ms']:.3f} ms",

@@ -1,88 +1,239 @@
-"""The ROS parameters of the two nodes, with their defaults (every topic name, joint order, rate
-and timeout), and the helper that declares them on a node and reads them back."""
+"""The ROS parameters of the two nodes, with their defaults (every topic name, QoS, joint order, limit,
+rate and timeout), and the helper that declares them on a node and reads them back.
+
+Topic names are relative, so that ``__ns`` and remappings apply; ``/diagnostics`` stays absolute, as
+every diagnostics tool expects it there. Each endpoint ``<name>_topic`` has a ``<name>_qos`` (see
+:mod:`sabre.ros.qos`)."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
-__all__ = ["CONTROLLER_PARAMETERS", "SIM_ROBOT_PARAMETERS", "TOPIC_DEFAULTS", "declare"]
+__all__ = [
+    "CONTROLLER_PARAMETERS",
+    "SIM_ROBOT_PARAMETERS",
+    "TOPIC_DEFAULTS",
+    "UNSET_DOUBLES",
+    "FRANKA_VELOCITY",
+    "FRANKA_ACCELERATION",
+    "FRANKA_JERK",
+    "ROBUST_FRACTION",
+    "BASE_ACCELERATION",
+    "BASE_JERK",
+    "declare",
+]
 
-#: Topics shared by both nodes (a real robot's drivers publish and subscribe the same names).
+#: A double-array parameter without a default (read back as []): ``object_pose`` and the limits,
+#: whose defaults come from the URDF or the robot's published limits.
+UNSET_DOUBLES = "<double array, unset>"
+
+#: Franka's published joint limits (Franka Control Interface specification; libfranka's
+#: rate_limiting.h): velocity (rad/s), acceleration (rad/s²), jerk (rad/s³) of joints 1–7.
+FRANKA_VELOCITY = (2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61)
+FRANKA_ACCELERATION = (15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0)
+FRANKA_JERK = (7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0)
+
+#: The share of Franka's jerk bound the default command limits keep, so that commands the robot
+#: misses still pass its checks: with m consecutive cycles missed it holds the last command for them
+#: and then sees m + 1 steps at once, accelerations a, 0, …, 0, (m + 1)·a, a jerk of (m + 1)·a/dt;
+#: so the default acceleration bound is ROBUST_FRACTION·j·dt/(m + 1) (never above a_max) with m =
+#: MISSES_TOLERATED, the default jerk bound ROBUST_FRACTION·j.
+ROBUST_FRACTION = 0.9
+MISSES_TOLERATED = 2
+
+#: The base's command limits (Ridgeback-like: its driver ramps at about 1 m/s² itself): acceleration
+#: of vx, vy (m/s²) and ωz (rad/s²) and their jerk; the velocity bounds come from the URDF.
+BASE_ACCELERATION = (1.0, 1.0, 2.0)
+BASE_JERK = (10.0, 10.0, 20.0)
+
+#: Topics both nodes share (a real robot's drivers publish and subscribe the same names).
 TOPIC_DEFAULTS: dict[str, str] = {
-    "joint_state_topic": "/joint_states",
-    "wrench_topic": "/wrist_wrench",
-    "object_state_topic": "/sabre/object/joint_states",
-    "arm_command_topic": "/forward_velocity_controller/commands",
-    "cmd_vel_topic": "/cmd_vel",
-    "command_echo_topic": "/sabre/command",
-    "obstacle_topic": "/sabre/obstacles",
+    "robot_description_topic": "robot_description",
+    "object_pose_topic": "sabre/object_pose",
+    "joint_state_topic": "joint_states",
+    "odometry_topic": "odom",
+    "wrench_topic": "wrist_wrench",
+    "tau_ext_topic": "",
+    "object_state_topic": "",
+    "arm_command_topic": "forward_velocity_controller/commands",
+    "cmd_vel_topic": "cmd_vel",
+    "command_echo_topic": "",
+    "obstacle_topic": "sabre/obstacles",
+    "estop_topic": "sabre/estop",
 }
 
-#: Controller node (``python -m sabre control``). Empty joint lists mean the scene's own: all
-#: robot joints in ``Scene.joint_names`` order, the arm joints (all but base_x, base_y, base_yaw)
-#: for the forward velocity controller's array and the three planar base joints.
+#: The QoS of each endpoint (:func:`sabre.ros.qos.profile`): sensor inputs best-effort, so that they
+#: match reliable and best-effort publishers alike; descriptions latched; commands reliable.
+QOS_DEFAULTS: dict[str, str] = {
+    "robot_description_qos": "latched",
+    "object_pose_qos": "latched",
+    "joint_state_qos": "sensor",
+    "odometry_qos": "sensor",
+    "wrench_qos": "sensor",
+    "tau_ext_qos": "sensor",
+    "object_state_qos": "sensor",
+    "arm_command_qos": "reliable",
+    "cmd_vel_qos": "reliable",
+    "command_echo_qos": "sensor",
+    "obstacle_qos": "reliable",
+    "estop_qos": "reliable",
+    "status_qos": "reliable",
+    "visualization_qos": "reliable",
+}
+
+#: Controller node (``python -m sabre control``). Empty joint lists mean the scene's own.
 CONTROLLER_PARAMETERS: dict[str, Any] = {
-    "object": "shelf",
+    # what to open, how
     "variant": "IO",
     "seed": 0,
     "threads": 0,  # 0: sabre.default_threads()
-    "joint_names": [""],
-    "arm_joints": [""],
+    # descriptions: the robot's from the robot_description topic unless a file is given; the object's
+    # from a file, else a string, else the built-in `object`
+    "robot_description_file": "",
+    "object": "shelf",
+    "object_urdf_file": "",
+    "object_urdf": "",
+    "object_joint": "",  # the joint to open in an object with several ("": its only one)
+    "hold_joints": [""],  # the other movable joints, fixed at hold_positions
+    "hold_positions": UNSET_DOUBLES,
+    "handle": "handle_frame",  # object frame or link to grasp (OpenObject(handle=...))
+    "object_pose": UNSET_DOUBLES,  # x, y, z, roll, pitch, yaw in world_frame; unset: from object_pose_topic
+    "world_frame": "odom",  # the frame of odometry and the object pose
+    # joints
+    "joint_names": [""],  # the robot's names for sabre's joints, in sabre's order
+    "arm_joints": [""],  # the arm command's joints, in its order (default: all but the base's)
     "base_joints": ["base_x", "base_y", "base_yaw"],
+    "odometry_twist_in_child_frame": True,  # as nav_msgs/Odometry defines it
+    # wrench: moment about wrench_point_frame (default: the header's frame), axes of the header's frame
+    "wrench_frame": "panda_link8",  # the frame of a wrench whose header names none
+    "wrench_point_frame": "",
+    "tau_ext_sign": 1.0,  # sign of the torque topic's efforts against sabre's τ_ext (environment on robot)
     **TOPIC_DEFAULTS,
     "status_topic": "/diagnostics",
-    "state_timeout": 0.05,  # s: older state → zero command
+    "hand_path_topic": "sabre/hand_path",
+    "base_path_topic": "sabre/base_path",
+    "markers_topic": "sabre/markers",
+    "object_estimate_topic": "sabre/object_estimate",
+    **QOS_DEFAULTS,
+    "cmd_vel_stamped": True,
+    "cmd_vel_frame": "base_link",
+    "cmd_vel_rate": 50.0,  # Hz
+    # command limits (unset: velocity from the URDF, acceleration and jerk from Franka's, robust)
+    "arm_velocity_limits": UNSET_DOUBLES,
+    "arm_acceleration_limits": UNSET_DOUBLES,
+    "arm_jerk_limits": UNSET_DOUBLES,
+    "base_velocity_limits": UNSET_DOUBLES,
+    "base_acceleration_limits": UNSET_DOUBLES,
+    "base_jerk_limits": UNSET_DOUBLES,
+    "command_period": 0.001,  # s: the arm command stream's step (the robot's control cycle)
+    # lifecycle and task
+    "autostart": False,  # configure and activate by itself (retrying until the inputs are there)
+    "start_on_activate": True,  # activating starts the task (else the start service does)
+    "require_publishers": True,  # configure fails while an input has no publisher
+    # timing
+    "state_timeout": 0.05,  # s: an arm joint older than this → ramp to zero
+    "base_state_timeout": 0.2,  # s: base odometry older than this → ramp to zero
     "wrench_timeout": 0.1,  # s: older wrench → τ_ext taken as zero and reported
-    "watchdog_period": 0.002,  # s
     "status_rate": 5.0,  # Hz
+    "visualization_rate": 4.0,  # Hz, 0: off
     "tau_ext_cutoff": 10.0,  # Hz, low-pass of the wrench-derived τ_ext the tank reads
     "max_tick_dt": 0.02,  # s: the tank integrates at most this long per state
-    "min_replan_period": 0.0,  # s: 0 plans as fast as the machine allows
-    "realtime_priority": 70,  # SCHED_FIFO priority of the state callbacks where permitted (0: normal scheduling)
-    "planner_process": True,  # plan in a process of its own (False: a thread sharing the interpreter)
-    "planner_nice": 10,  # niceness added to the planner process: the middleware's threads come first
-    "planner_idle": False,  # the planner process under SCHED_IDLE: only CPU time nothing else wants (a dedicated machine)
-    "delay_compensation": True,  # plan from the state predicted for when the plan takes over (its computation time ahead)
+    "min_replan_period": 0.0,
+    "realtime_priority": 70,
+    "planner_process": True,
+    "planner_nice": 10,
+    "planner_idle": False,
+    "delay_compensation": True,
 }
 
 #: Simulated robot node (``python -m sabre sim-robot``).
 SIM_ROBOT_PARAMETERS: dict[str, Any] = {
     "object": "shelf",
+    "object_pose": UNSET_DOUBLES,  # x, y, z, roll, pitch, yaw; unset: the built-in default
+    "publish_object_pose": True,  # as a perception node would, on object_pose_topic
+    "robot_description_file": "",  # a URDF published on robot_description instead of the built-in robot's
+    "plant": "rapier",  # or "mujoco" (sabre.MujocoPlant)
     "start": "paper",  # or "default"
-    "joint_names": [""],  # the published names of sabre's joints, in sabre's order; empty: the scene's
-    "publish_order": [""],  # the order they are published in (a permutation of joint_names); empty: that order
-    "extra_joints": [""],  # published with zeros (joints a real robot has and sabre ignores)
-    "arm_joints": [""],
+    "world_frame": "odom",
+    "base_frame": "base_link",
+    "finger_joints": ["panda_finger_joint1", "panda_finger_joint2"],
+    "finger_width": 0.04,  # m, published for each finger joint
     **TOPIC_DEFAULTS,
-    "clock_topic": "/clock",
-    "status_topic": "/sabre/sim/status",
-    "hold_topic": "/sabre/sim/hold_object",
-    "set_obstacles_topic": "/sabre/sim/set_obstacles",
-    "rate": 1000.0,  # Hz: plant step and state publication
-    "command_timeout": 0.05,  # s: older commands → the robot is stopped (zero velocity)
-    "max_catchup": 0.1,  # s: further behind the wall clock, the plant skips ahead (counted)
-    "status_rate": 2.0,  # Hz
-    "gain_inertia_floor": 0.03,  # kg m², the joint velocity controller's gain floor
-    "duration": 0.0,  # s of wall time, 0: run until stopped
+    **QOS_DEFAULTS,
+    "wrench_qos": "sensor",
+    "cmd_vel_stamped": True,
+    "clock_topic": "clock",
+    "sim_status_topic": "sabre/sim/status",
+    "error_topic": "sabre/sim/robot_error",
+    "hold_topic": "sabre/sim/hold_object",
+    "set_obstacles_topic": "sabre/sim/set_obstacles",
+    "ground_truth_topic": "sabre/sim/object_joint_states",
+    "rate": 1000.0,  # Hz: plant step and arm joint states
+    "odometry_rate": 50.0,  # Hz
+    "wrench_rate": 250.0,  # Hz (the tank reads τ_ext low-passed at 10 Hz)
+    "clock_rate": 100.0,  # Hz
+    "ground_truth_rate": 100.0,  # Hz
+    "position_noise": 1e-5,  # rad or m, standard deviation on published positions
+    "velocity_noise": 1e-3,  # rad/s or m/s
+    "force_noise": 0.1,  # N (torque: a tenth of it, N·m)
+    "noise_seed": 0,
+    "reflexes": True,  # Franka's discontinuity reflexes on the arm command
+    # "command": each arm command against the one before, one plant period apart (the stream as sent);
+    # "cycle": the command in effect at each plant tick (delivery jitter too, as the arm sees it; needs
+    # a plant loop that is never late itself)
+    "reflex_check": "command",
+    "command_timeout": 0.05,  # s: older commands → the robot is stopped (the robot side's timeout)
+    "max_catchup": 0.1,
+    "status_rate": 2.0,
+    "gain_inertia_floor": 0.03,
+    "duration": 0.0,
     "stop_on_success": False,
-    "settle_time": 0.5,  # s after success before stopping
-    "hold_at_opening": 0.0,  # fraction of the opening range at which the object is held, 0: never
-    "hold_duration": 5.0,  # s
-    "realtime_priority": 80,  # SCHED_FIFO priority of the plant loop; its command callbacks run 10 below (0: normal)
+    "settle_time": 0.5,
+    "hold_at_opening": 0.0,
+    "hold_duration": 5.0,
+    "realtime_priority": 80,
 }
 
 
 def declare(node: Any, defaults: dict[str, Any], overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     """Declares ``defaults`` as ROS parameters of ``node`` (a ``--params-file`` overrides them),
-    applies ``overrides`` (command-line flags, which win), and returns the values."""
+    applies ``overrides`` (command-line flags, which win), and returns the values; a string list of
+    one empty string and an unset double array read back as []."""
     from rclpy.parameter import Parameter
 
     for name, value in defaults.items():
-        node.declare_parameter(name, value)
+        if value == UNSET_DOUBLES:
+            node.declare_parameter(name, Parameter.Type.DOUBLE_ARRAY)
+        else:
+            node.declare_parameter(name, value)
     if overrides:
         node.set_parameters([Parameter(k, value=v) for k, v in overrides.items() if v is not None])
-    values = {name: node.get_parameter(name).value for name in defaults}
+    values = {name: node.get_parameter_or(name, None).value for name in defaults}
     for name, value in values.items():
-        if isinstance(value, (list, tuple)) and all(v == "" for v in value):
+        if value is None:
             values[name] = []
+        elif isinstance(value, (list, tuple)) and all(v == "" for v in value):
+            values[name] = []
+        elif not isinstance(value, (str, bool, int, float)):
+            values[name] = list(value)
     return values
+
+
+def robust_arm_limits(dt: float) -> tuple[list[float], list[float]]:
+    """(acceleration, jerk) bounds per arm joint that keep Franka's checks with up to
+    :data:`MISSES_TOLERATED` missed commands in a row at a control cycle of ``dt`` s (see
+    :data:`ROBUST_FRACTION`)."""
+    accel = [min(a, ROBUST_FRACTION * j * dt / (MISSES_TOLERATED + 1)) for a, j in zip(FRANKA_ACCELERATION, FRANKA_JERK)]
+    jerk = [ROBUST_FRACTION * j for j in FRANKA_JERK]
+    return accel, jerk
+
+
+def finite_list(name: str, values: list[float], size: int) -> list[float]:
+    """``values`` as floats, checked to be ``size`` positive finite numbers (a parameter's limits)."""
+    from ..errors import InvalidValueError
+
+    out = [float(v) for v in values]
+    if len(out) != size or not all(math.isfinite(v) and v > 0 for v in out):
+        raise InvalidValueError(f"parameter {name}: needs {size} positive finite values, got {out}")
+    return out

@@ -1,7 +1,8 @@
-"""The simulated robot node: the 1 kHz Rapier plant with the joint velocity controller inside,
-stepped against the wall clock, publishing what a robot's drivers would (joint states, object
-joint state, wrist wrench, clock) and following the commands a robot's controllers would take,
-with a command timeout and run-time fault injection (stuck door, obstacles)."""
+"""The simulated robot node: a plant (sabre.Plant, or sabre.MujocoPlant) stepped against the wall clock
+behind what a Franka arm's and a mobile base's drivers offer (:mod:`sabre.ros.sim_drivers`): arm
+joint velocities in, their stream checked by the arm's discontinuity reflexes
+(:mod:`sabre.ros.reflexes`; a violation aborts the motion and publishes the error), a base twist
+in, a command timeout on the robot side, and run-time faults (stuck door, obstacles)."""
 
 from __future__ import annotations
 
@@ -20,84 +21,106 @@ from ..inner_loop import LowLevelController
 from ..scene import Scene
 from ..sim import Plant
 from . import PeriodicThread, gil_priority, realtime_middleware, realtime_thread, require_ros, spin_node
-from .controller_node import BASE_JOINTS, stamp_seconds
 from .conversions import base_to_world
 from .durations import Durations
 from .params import SIM_ROBOT_PARAMETERS, declare
+from .qos import profile
+from .reflexes import FrankaReflexes
+from .sim_drivers import DriverOutputs
 
-__all__ = ["SimRobotNode", "run_sim_robot"]
+__all__ = ["SimRobotNode", "run_sim_robot", "make_plant"]
 
-#: How many of the newest states an echo is matched against (4 s at 1 kHz); an older echo is
-#: counted as unmatched, not as an answer.
+#: How many of the newest states an echo is matched against (4 s at 1 kHz).
 RECENT_STATES = 4096
 
 
+def make_plant(kind: str, scene: Scene, dt: float) -> Any:
+    """The plant ``kind`` ("rapier": :class:`sabre.Plant`; "mujoco": ``sabre.MujocoPlant``)."""
+    if kind == "rapier":
+        return Plant(scene, dt=dt)
+    if kind == "mujoco":
+        import sabre
+
+        plant_class = getattr(sabre, "MujocoPlant", None)
+        if plant_class is None:
+            raise SabreError("plant 'mujoco' needs sabre.MujocoPlant, which this sabre does not have")
+        return plant_class(scene, dt=dt)
+    raise SabreError(f"plant must be 'rapier' or 'mujoco', got {kind!r}")
+
+
 class SimRobotNode:
-    """The plant steps on its own thread at ``rate`` Hz of wall-clock time: each loop steps every
-    tick that is due (more than one is an overrun, counted as late ticks), then publishes the
-    state once. Commands older than ``command_timeout`` at a tick's scheduled time stop the robot
-    (zero velocity reference), so the stop comes at most one tick after the timeout."""
+    """The plant steps on its own thread at ``rate`` Hz of wall-clock time, each due tick with the
+    commands in effect at its scheduled time (an arm or base command older than
+    ``command_timeout`` stops that part), then publishes what the drivers publish at that tick."""
 
     def __init__(self, overrides: dict[str, Any] | None = None, node_name: str = "sabre_sim_robot") -> None:
-        rclpy = require_ros()
-        self._rclpy = rclpy
+        require_ros()
+        import rclpy
+
         self.node = rclpy.create_node(node_name)
         p = self.params = declare(self.node, SIM_ROBOT_PARAMETERS, overrides)
         self._build_plant(p)
-        names = self._map_joints(p)
         self._init_bookkeeping(p)
-        self._create_endpoints(p, names)
+        self.out = DriverOutputs(self.node, p, self.scene, self.arm_index, self._robot_urdf(p))
+        if p["publish_object_pose"]:
+            self.out.publish_object_pose(self.object_pose, str(p["world_frame"]))
+        self._create_inputs(p)
         self._status = PeriodicThread(
             1.0 / float(p["status_rate"]),
             self._publish_status,
             "sabre-status",
-            lambda exc: self.node.get_logger().error(f"status not published: {exc}"),
+            self._status_failed,
             priority=gil_priority(int(p["realtime_priority"]) - 10),
         )
         self._thread = threading.Thread(target=self._loop, name="sabre-sim-robot", daemon=True)
         self.done = threading.Event()
         self.error: Exception | None = None
 
+    def _status_failed(self, exc: Exception) -> None:
+        self.node.get_logger().error(f"status not published: {exc}")
+
     # Set-up ----------------------------------------------------------------------------------
     def _build_plant(self, p: dict[str, Any]) -> None:
-        """The scene, the plant at its start state and the joint velocity controller inside it."""
-        self.scene = scene = Scene.load(obj=p["object"])
+        pose = list(p["object_pose"])
+        self.scene = scene = Scene.load(obj=p["object"], obj_pose=pose or None)
+        self.object_pose = np.array(pose) if pose else _pose_of(scene.object_pose)
         self.task = tasks.OpenObject()
         self.period = 1.0 / float(p["rate"])
-        self.plant = Plant(scene, dt=self.period)
-        self.low = LowLevelController(scene, dt=self.period, gain_inertia_floor=float(p["gain_inertia_floor"]))
+        self.plant = make_plant(str(p["plant"]), scene, self.period)
+        torque = getattr(self.plant, "command_interface", "torque") == "torque"
+        self.low = (
+            LowLevelController(scene, dt=self.period, gain_inertia_floor=float(p["gain_inertia_floor"])) if torque else None
+        )
         x0 = paper_start_state(scene) if p["start"] == "paper" else scene.default_state()
         self.plant.reset(x0)
-        self._nq = scene.nq
+        self.arm_index = np.arange(3, scene.nq, dtype=np.intp)
+        self.base_index = np.arange(3, dtype=np.intp)
 
-    def _map_joints(self, p: dict[str, Any]) -> list[str]:
-        """The order the joint states are published in and the joints the arm and base commands
-        drive; returns the robot's names for sabre's joints, in sabre's order."""
-        scene = self.scene
-        names = list(p["joint_names"]) or list(scene.joint_names)
-        if len(names) != scene.nq:
-            raise SabreError(f"joint_names needs {scene.nq} names, got {names}")
-        order = list(p["publish_order"]) or names
-        if sorted(order) != sorted(names):
-            raise SabreError(f"publish_order must be a permutation of joint_names {names}, got {order}")
-        index = {n: i for i, n in enumerate(names)}
-        self.publish_index = np.array([index[n] for n in order], dtype=np.intp)
-        self.extra = list(p["extra_joints"])
-        arm = list(p["arm_joints"]) or [n for n, s in zip(names, scene.joint_names) if s not in BASE_JOINTS]
-        self.arm_index = np.array([index[n] for n in arm], dtype=np.intp)
-        self.base_index = np.array([scene.joint_names.index(n) for n in BASE_JOINTS], dtype=np.intp)
-        return names
+    @staticmethod
+    def _robot_urdf(p: dict[str, Any]) -> str:
+        if p["robot_description_file"]:
+            with open(str(p["robot_description_file"]), encoding="utf-8") as f:
+                return f.read()
+        from ..assets import urdf_text
+
+        return urdf_text("royalpanda")
 
     def _init_bookkeeping(self, p: dict[str, Any]) -> None:
-        """The latest commands, the hold fault's schedule and the statistics the summary reports."""
         self.command_timeout = float(p["command_timeout"])
-        self._arm_cmd = np.zeros(len(self.arm_index))
+        na = len(self.arm_index)
+        self._arm_cmd = np.zeros(na)
         self._arm_recv = -math.inf
         self._base_cmd = np.zeros(3)
         self._base_recv = -math.inf
         self._hold_request: bool | None = None
-        self._stopped = True
+        self._arm_stopped = self._base_stopped = True
         self._running = True
+        self.reflexes = FrankaReflexes(self.period) if p["reflexes"] else None
+        if p["reflex_check"] not in ("command", "cycle"):
+            raise SabreError(f"reflex_check must be 'command' or 'cycle', got {p['reflex_check']!r}")
+        self._per_cycle = p["reflex_check"] == "cycle"
+        self._last_arm_msg: np.ndarray | None = None
+        self._last_arm_step: np.ndarray | None = None
         self.stats: dict[str, Any] = {
             "ticks": 0,
             "loops": 0,
@@ -121,42 +144,39 @@ class SimRobotNode:
             "contact_steps": 0,
             "hold_started": None,
             "hold_ended": None,
+            "reflex_errors": [],
+            "arm_step_max": np.zeros(na),  # |Δv| between consecutive arm commands, per joint
+            "arm_step_change_max": np.zeros(na),  # |Δ²v|
+            "arm_speed_max": np.zeros(na),
         }
         scene = self.scene
         self._hold_at = float(p["hold_at_opening"]) * float(scene.o_upper[0] - scene.o_lower[0]) + float(scene.o_lower[0])
         self._hold_done = False
-        # The recent states by stamp (ns) → their index: an echo names the state it answers
-        self._published: dict[int, int] = {}
+        # the recent states' stamps (nanoseconds) → (index, time): an answer names the state it answers
+        self._published: dict[int, tuple[int, float]] = {}
+        from builtin_interfaces.msg import Time
 
-    def _create_endpoints(self, p: dict[str, Any], names: list[str]) -> None:
-        """The state, wrench, clock, status and obstacle publishers (with their reused messages) and
-        the command, echo and fault subscriptions."""
+        self._stamp = Time()
+
+    def _create_inputs(self, p: dict[str, Any]) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
-        from geometry_msgs.msg import Twist, WrenchStamped
-        from rosgraph_msgs.msg import Clock
+        from geometry_msgs.msg import Twist, TwistStamped
         from sensor_msgs.msg import JointState
-        from std_msgs.msg import Bool, Float64MultiArray
+        from std_msgs.msg import Bool, Float64MultiArray, String
+        from visualization_msgs.msg import MarkerArray
 
-        qos = 10
-        self.js_pub = self.node.create_publisher(JointState, p["joint_state_topic"], qos)
-        self.obj_pub = self.node.create_publisher(JointState, p["object_state_topic"] or "/sabre/object/joint_states", qos)
-        self.wrench_pub = self.node.create_publisher(WrenchStamped, p["wrench_topic"], qos)
-        self.clock_pub = self.node.create_publisher(Clock, p["clock_topic"], qos)
-        self.status_pub = self.node.create_publisher(DiagnosticArray, p["status_topic"], qos)
-        self.obstacle_pub = self.node.create_publisher(Float64MultiArray, p["obstacle_topic"], qos)
-        self._js = JointState()
-        self._js.name = [names[i] for i in self.publish_index] + self.extra
-        self._obj = JointState()
-        self._obj.name = list(self.scene.object_joint_names)
-        self._wrench = WrenchStamped()
-        self._wrench.header.frame_id = "world"
-        self._clock = Clock()
-        self._obstacles = Float64MultiArray()
-        self.node.create_subscription(Float64MultiArray, p["arm_command_topic"], self._on_arm, qos)
-        self.node.create_subscription(Twist, p["cmd_vel_topic"], self._on_twist, qos)
-        self.node.create_subscription(JointState, p["command_echo_topic"], self._on_echo, qos)
-        self.node.create_subscription(Bool, p["hold_topic"], self._on_hold, qos)
-        self.node.create_subscription(Float64MultiArray, p["set_obstacles_topic"], self._on_set_obstacles, qos)
+        node, reliable = self.node, profile("reliable")
+        self.status_pub = node.create_publisher(DiagnosticArray, p["sim_status_topic"], reliable)
+        self.error_pub = node.create_publisher(String, p["error_topic"], reliable)
+        self.obstacle_pub = node.create_publisher(MarkerArray, p["obstacle_topic"], reliable)
+        # a deep queue: every arm command is checked and recorded, also when this process falls behind
+        node.create_subscription(Float64MultiArray, p["arm_command_topic"], self._on_arm, profile("reliable:1000"))
+        stamped = bool(p["cmd_vel_stamped"])
+        node.create_subscription(TwistStamped if stamped else Twist, p["cmd_vel_topic"], self._on_twist, reliable)
+        if p["command_echo_topic"]:
+            node.create_subscription(JointState, p["command_echo_topic"], self._on_echo, profile("sensor"))
+        node.create_subscription(Bool, p["hold_topic"], self._on_hold, reliable)
+        node.create_subscription(MarkerArray, p["set_obstacles_topic"], self.obstacle_pub.publish, reliable)
 
     def start(self) -> None:
         self._start_wall = time.monotonic()
@@ -169,15 +189,35 @@ class SimRobotNode:
         if v.shape != self._arm_cmd.shape or not np.all(np.isfinite(v)):
             self.stats["rejected_commands"] += 1
             self.node.get_logger().error(
-                f"arm command rejected: need {len(self._arm_cmd)} finite values, got {list(v)}", throttle_duration_sec=1.0
+                f"arm command rejected: need {len(self._arm_cmd)} finite values", throttle_duration_sec=1.0
             )
             return
+        s = self.stats
+        self._match(msg.layout.data_offset)
+        if self._last_arm_msg is not None:
+            step = v - self._last_arm_msg
+            np.maximum(s["arm_step_max"], np.abs(step), out=s["arm_step_max"])
+            if self._last_arm_step is not None:
+                np.maximum(s["arm_step_change_max"], np.abs(step - self._last_arm_step), out=s["arm_step_change_max"])
+            self._last_arm_step = step
+        np.maximum(s["arm_speed_max"], np.abs(v), out=s["arm_speed_max"])
+        self._last_arm_msg = v
+        if self.reflexes is not None and not self._per_cycle and self.reflexes.aborted is None:
+            if time.monotonic() - self._arm_recv > self.command_timeout and not v.any():
+                # a stream that starts again from rest after the arm stopped (a new controller); a
+                # stream that goes on where it was is checked against its own previous command, even
+                # when this process received it late
+                self.reflexes.recover()
+            error = self.reflexes.check(v)
+            if error is not None:
+                self._on_reflex(error)
         self._arm_cmd = v
         self._arm_recv = time.monotonic()
-        self.stats["arm_commands"] += 1
+        s["arm_commands"] += 1
 
     def _on_twist(self, msg: Any) -> None:
-        v = np.array([msg.linear.x, msg.linear.y, msg.angular.z])
+        tw = msg.twist if hasattr(msg, "twist") else msg
+        v = np.array([tw.linear.x, tw.linear.y, tw.angular.z])
         if not np.all(np.isfinite(v)):
             self.stats["rejected_commands"] += 1
             return
@@ -186,96 +226,129 @@ class SimRobotNode:
         self.stats["base_commands"] += 1
 
     def _on_echo(self, msg: Any) -> None:
-        latency = time.time() - stamp_seconds(msg.header.stamp)
-        index = self._published.get(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
-        if index is None:  # a command the controller sent on its own (watchdog, shutdown), or a very late one
-            self.stats["unmatched_echoes"] += 1
-            return
+        self._match(msg.header.stamp.nanosec)
+
+    def _match(self, nanosec: int) -> None:
+        """Books the answer to the state whose stamp has these nanoseconds: its round trip, and
+        the window of states answered."""
+        now = time.time()
+        published = self._published.get(nanosec)
         s = self.stats
+        if published is None:  # a command the controller sent on its own (watchdog, shutdown ramp)
+            s["unmatched_echoes"] += 1
+            return
+        index, sent = published
+        latency = now - sent
         s["first_answered"] = index if s["first_answered"] is None else min(s["first_answered"], index)
         s["last_answered"] = index if s["last_answered"] is None else max(s["last_answered"], index)
-        self.stats["echoes"] += 1
-        self.stats["latency"].record(latency)
+        s["echoes"] += 1
+        s["latency"].record(latency)
         if latency > self.period:
-            self.stats["late_echoes"] += 1
+            s["late_echoes"] += 1
 
     def _on_hold(self, msg: Any) -> None:
         self._hold_request = bool(msg.data)
 
-    def _on_set_obstacles(self, msg: Any) -> None:
-        self._obstacles.data = list(msg.data)
-        self.obstacle_pub.publish(self._obstacles)
-
     def _reference(self, tick_time: float, yaw: float) -> np.ndarray:
-        """The joint velocity reference (nq,) at a tick's scheduled time: zero once either command
-        is older than the timeout (or none came yet)."""
-        fresh = tick_time - self._arm_recv <= self.command_timeout and tick_time - self._base_recv <= self.command_timeout
-        u = np.zeros(self._nq)
-        if not fresh:
-            if not self._stopped:
-                self._stopped = True
-                last = max(self._arm_recv, self._base_recv)
-                self.stats["stops"].append(tick_time - min(self._arm_recv, self._base_recv) if math.isfinite(last) else 0.0)
-            return u
-        self._stopped = False
-        u[self.arm_index] = self._arm_cmd
-        u[self.base_index] = base_to_world(self._base_cmd, yaw)
+        """The joint velocity reference (nq,) at a tick's scheduled time: each part zero once its
+        command is older than the timeout (or none came), the arm's zero after a reflex."""
+        u = np.zeros(self.scene.nq)
+        arm_fresh = tick_time - self._arm_recv <= self.command_timeout
+        base_fresh = tick_time - self._base_recv <= self.command_timeout
+        reflexes = self.reflexes
+        if arm_fresh:
+            arm = self._arm_cmd
+            if reflexes is not None and self._per_cycle and reflexes.aborted is None and reflexes.check(arm) is not None:
+                self._on_reflex(reflexes.aborted or "")
+            if reflexes is None or reflexes.aborted is None:
+                u[self.arm_index] = arm
+        elif reflexes is not None and self._per_cycle:
+            reflexes.follow(np.zeros(len(self.arm_index)))
+        if base_fresh:
+            u[self.base_index] = base_to_world(self._base_cmd, yaw)
+        self._note_stops(tick_time, arm_fresh, base_fresh)
         return u
+
+    def _note_stops(self, tick_time: float, arm_fresh: bool, base_fresh: bool) -> None:
+        """Books a stop when a stream goes stale: how long after its last command."""
+        for part, fresh, recv in (("arm", arm_fresh, self._arm_recv), ("base", base_fresh, self._base_recv)):
+            stopped = f"_{part}_stopped"
+            if not fresh and not getattr(self, stopped):
+                setattr(self, stopped, True)
+                self.stats["stops"].append(tick_time - recv if math.isfinite(recv) else 0.0)
+            elif fresh:
+                setattr(self, stopped, False)
+
+    def _on_reflex(self, error: str) -> None:
+        from std_msgs.msg import String
+
+        self.stats["reflex_errors"].append([self.plant.time, error])
+        self.error_pub.publish(String(data=error))
+        self.node.get_logger().error(f"reflex: {error}; the arm stops")
 
     # The plant loop --------------------------------------------------------------------------
     def _loop(self) -> None:
         p = self.params
         if int(p["realtime_priority"]) > 0 and not realtime_thread(int(p["realtime_priority"])):
             self.node.get_logger().warning("real-time priority not permitted for the plant loop: ticks may run late")
-        check_every = max(1, int(round(0.01 / self.period)))  # the task's success test is Python: 100 Hz
-        next_check = 0
-        max_behind = max(1, int(float(p["max_catchup"]) / self.period))
-        duration = float(p["duration"])
-        stop_on_success = bool(p["stop_on_success"])
-        settle = float(p["settle_time"])
-        start = self._start_wall
-        k = 0
+        self._schedule = {
+            name: max(1, int(round(float(p["rate"]) / float(p[f"{name}_rate"]))))
+            for name in ("odometry", "wrench", "clock", "ground_truth")
+        }
         try:
-            while self._running:
-                now = time.monotonic()
-                due = int((now - start) / self.period)
-                if due - k > max_behind:
-                    self.stats["skipped_ticks"] += due - k - 1
-                    k = due - 1
-                if due - k > 1:
-                    self.stats["late_ticks"] += due - k - 1
-                    self.stats["overrun_loops"] += 1
-                work = time.monotonic()
-                while k < due:
-                    self._apply_faults()
-                    x = self.plant.state
-                    u = self._reference(start + (k + 1) * self.period, x[2])
-                    self.low.track(self.plant, u, 1)
-                    k += 1
-                    self.stats["ticks"] += 1
-                if due:
-                    self._publish_state()
-                    self.stats["loop_work"].record(time.monotonic() - work)
-                self.stats["loops"] += 1
-                if self.plant.contact:
-                    self.stats["contact_force_sum"] += float(np.linalg.norm(self.plant.wrench[:3]))
-                    self.stats["contact_steps"] += 1
-                if k >= next_check and self.stats["success_time"] is None:
-                    next_check = k + check_every
-                    if self.task.success(self.scene, self.plant.state):
-                        self.stats["success_time"] = self.plant.time
-                opened_at = self.stats["success_time"]
-                if stop_on_success and opened_at is not None and self.plant.time > opened_at + settle:
-                    break
-                if duration > 0 and now - start > duration:
-                    break
-                rest = start + (k + 1) * self.period - time.monotonic()
-                if rest > 0:
-                    time.sleep(rest)
+            self._run(p)
         except Exception as exc:  # reported by the main thread; the process exits non-zero
             self.error = exc
         finally:
             self.done.set()
+
+    def _run(self, p: dict[str, Any]) -> None:
+        check_every = max(1, int(round(0.01 / self.period)))  # the task's success test is Python: 100 Hz
+        next_check = 0
+        max_behind = max(1, int(float(p["max_catchup"]) / self.period))
+        duration, settle = float(p["duration"]), float(p["settle_time"])
+        start, k = self._start_wall, 0
+        while self._running:
+            now = time.monotonic()
+            due = int((now - start) / self.period)
+            if due - k > max_behind:
+                self.stats["skipped_ticks"] += due - k - 1
+                k = due - 1
+            if due - k > 1:
+                self.stats["late_ticks"] += due - k - 1
+                self.stats["overrun_loops"] += 1
+            work = time.monotonic()
+            while k < due:
+                self._step(start + (k + 1) * self.period)
+                k += 1
+            if due:
+                self._publish(k)
+                self.stats["loop_work"].record(time.monotonic() - work)
+            self.stats["loops"] += 1
+            if k >= next_check and self.stats["success_time"] is None:
+                next_check = k + check_every
+                if self.task.success(self.scene, self.plant.state):
+                    self.stats["success_time"] = self.plant.time
+            opened_at = self.stats["success_time"]
+            if p["stop_on_success"] and opened_at is not None and self.plant.time > opened_at + settle:
+                break
+            if duration > 0 and now - start > duration:
+                break
+            rest = start + (k + 1) * self.period - time.monotonic()
+            if rest > 0:
+                time.sleep(rest)
+
+    def _step(self, tick_time: float) -> None:
+        self._apply_faults()
+        u = self._reference(tick_time, float(self.plant.state[2]))
+        if self.low is not None:
+            self.low.track(self.plant, u, 1)
+        else:
+            self.plant.step(u)
+        self.stats["ticks"] += 1
+        if self.plant.contact:
+            self.stats["contact_force_sum"] += math.hypot(*self.plant.wrench[:3])
+            self.stats["contact_steps"] += 1
 
     def _apply_faults(self) -> None:
         if self._hold_request is not None:
@@ -293,75 +366,67 @@ class SimRobotNode:
                 self.stats["hold_ended"] = self.plant.time
                 self._hold_done = True
 
-    def _publish_state(self) -> None:
-        """Publishes the state of this tick, the joint state first: it is what the controller
-        answers, and the wrench and object state of the same instant, right behind it, reach
-        the controller for its next tick (a robot's drivers publish on their own schedules too)."""
-        state = self.scene.split_state(self.plant.state)
-        stamp = self.node.get_clock().now().to_msg()
+    def _publish(self, k: int) -> None:
+        """Publishes tick k's joint state (what the controller answers) first, the rest behind it
+        at their own rates."""
+        x = np.asarray(self.plant.state)
+        nq, no = self.scene.nq, self.scene.no
+        q, dq = x[:nq], x[nq : 2 * nq]
+        ns = time.time_ns()
+        stamp = self._stamp
+        stamp.sec, stamp.nanosec = ns // 1_000_000_000, ns % 1_000_000_000
         published = self._published
-        published[stamp.sec * 1_000_000_000 + stamp.nanosec] = self.stats["states_published"]  # before an echo can come
+        published[stamp.nanosec] = (self.stats["states_published"], ns * 1e-9)  # before an answer can come
         if len(published) > RECENT_STATES:
             del published[next(iter(published))]
         self.stats["states_published"] += 1
-        js = self._js
-        js.header.stamp = stamp
-        extra = [0.0] * len(self.extra)
-        js.position = [float(v) for v in state.q[self.publish_index]] + extra
-        js.velocity = [float(v) for v in state.q_dot[self.publish_index]] + extra
-        self.js_pub.publish(js)
-        w = self.plant.wrench
-        m = self._wrench
-        m.header.stamp = stamp
-        m.wrench.force.x, m.wrench.force.y, m.wrench.force.z = float(w[0]), float(w[1]), float(w[2])
-        m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z = float(w[3]), float(w[4]), float(w[5])
-        self.wrench_pub.publish(m)
-        o = self._obj
-        o.header.stamp = stamp
-        o.position = [float(v) for v in state.o]
-        o.velocity = [float(v) for v in state.o_dot]
-        self.obj_pub.publish(o)
-        seconds = int(self.plant.time)
-        self._clock.clock.sec, self._clock.clock.nanosec = seconds, int(round((self.plant.time % 1.0) * 1e9)) % 1_000_000_000
-        self.clock_pub.publish(self._clock)
+        self.out.publish_joint_states(q, dq, stamp)
+        every = self._schedule
+        if k % every["odometry"] == 0:
+            self.out.publish_odometry(q, dq, stamp)
+        if k % every["wrench"] == 0:
+            self.out.publish_wrench(q, np.asarray(self.plant.wrench), stamp)
+        if k % every["ground_truth"] == 0:
+            self.out.publish_truth(x[2 * nq : 2 * nq + no], x[2 * nq + no :], stamp)
+        if k % every["clock"] == 0:
+            self.out.publish_clock(self.plant.time)
 
     # Reports ---------------------------------------------------------------------------------
     def summary(self) -> dict[str, Any]:
         s = self.stats
-        state = self.scene.split_state(self.plant.state)
+        state = self.scene.split_state(np.asarray(self.plant.state))
         lat = s["latency"]
         wall = time.monotonic() - self._start_wall
-        # The states published while the controller answered: from the first answered one to the
-        # last (before it, the controller was starting; after it, it had stopped)
         window = 0 if s["first_answered"] is None else s["last_answered"] - s["first_answered"] + 1
         return {
             "node": "sim_robot",
             "object": self.scene.object_name,
+            "object_pose": [float(v) for v in self.object_pose],
             "sim_time": self.plant.time,
             "wall_time": wall,
-            "ticks": s["ticks"],
-            "late_ticks": s["late_ticks"],
-            "skipped_ticks": s["skipped_ticks"],
-            "overrun_loops": s["overrun_loops"],
-            "loops": s["loops"],
+            "cpu_share": time.process_time() / wall if wall > 0 else 0.0,
+            **{k: s[k] for k in ("ticks", "late_ticks", "skipped_ticks", "overrun_loops", "loops", "states_published")},
+            **{
+                k: s[k]
+                for k in ("arm_commands", "base_commands", "rejected_commands", "echoes", "late_echoes", "unmatched_echoes")
+            },
             "loop_work_p50_ms": s["loop_work"].percentile_ms(50),
             "loop_work_p99_ms": s["loop_work"].percentile_ms(99),
-            "states_published": s["states_published"],
-            "arm_commands": s["arm_commands"],
-            "base_commands": s["base_commands"],
-            "rejected_commands": s["rejected_commands"],
-            "echoes": s["echoes"],
-            "late_echoes": s["late_echoes"],
             "latency_p50_ms": lat.percentile_ms(50),
             "latency_p99_ms": lat.percentile_ms(99),
             "latency_max_ms": lat.max_ms(),
             "latency_percentiles_ms": {q: lat.percentile_ms(q) for q in (50, 90, 95, 98, 99, 99.5, 99.9)},
             "answered_window": window,
-            "unmatched_echoes": s["unmatched_echoes"],
             "delivered_fraction": s["echoes"] / window if window else 0.0,
             "stop_delays_ms": [d * 1e3 for d in s["stops"]],
             "command_timeout_ms": self.command_timeout * 1e3,
             "period_ms": self.period * 1e3,
+            "reflex_aborts": 0 if self.reflexes is None else self.reflexes.aborts,
+            "reflex_errors": s["reflex_errors"],
+            "arm_accel_max": (s["arm_step_max"] / self.period).tolist(),
+            "arm_jerk_max": (s["arm_step_change_max"] / self.period**2).tolist(),
+            "arm_speed_max": s["arm_speed_max"].tolist(),
+            "last_arm_command": self._arm_cmd.tolist(),
             "opening": float(state.o[0]),
             "success": s["success_time"] is not None,
             "time_to_open": s["success_time"],
@@ -379,7 +444,6 @@ class SimRobotNode:
             "sim_time",
             "ticks",
             "late_ticks",
-            "skipped_ticks",
             "states_published",
             "arm_commands",
             "echoes",
@@ -391,14 +455,20 @@ class SimRobotNode:
             "opening",
             "success",
             "robot_speed",
+            "reflex_aborts",
+            "stop_delays_ms",
+            "arm_accel_max",
+            "arm_jerk_max",
+            "arm_speed_max",
+            "last_arm_command",
         )
+        aborted = self.reflexes is not None and self.reflexes.aborted is not None
         status = DiagnosticStatus(
             name="sabre/sim_robot",
             hardware_id="sim",
-            level=DiagnosticStatus.OK,
-            message="stopped: commands stale" if self._stopped else "following commands",
-            values=[KeyValue(key=k, value=json.dumps(s[k])) for k in keys]
-            + [KeyValue(key="stop_delays_ms", value=json.dumps(s["stop_delays_ms"]))],
+            level=DiagnosticStatus.ERROR if aborted else DiagnosticStatus.OK,
+            message=(self.reflexes.aborted or "") if aborted and self.reflexes is not None else "running",
+            values=[KeyValue(key=k, value=json.dumps(s[k])) for k in keys],
         )
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.node.get_clock().now().to_msg()
@@ -410,6 +480,13 @@ class SimRobotNode:
         if self._thread.is_alive():
             self._thread.join()
         return self.summary()
+
+
+def _pose_of(t: np.ndarray) -> np.ndarray:
+    """(x, y, z, roll, pitch, yaw) of a (4, 4) pose."""
+    r = t[:3, :3]
+    pitch = math.asin(max(-1.0, min(1.0, -float(r[2, 0]))))
+    return np.array([t[0, 3], t[1, 3], t[2, 3], math.atan2(r[2, 1], r[2, 2]), pitch, math.atan2(r[1, 0], r[0, 0])])
 
 
 def run_sim_robot(overrides: dict[str, Any] | None = None, ros_args: list[str] | None = None) -> int:

@@ -11,10 +11,10 @@ use super::{
     WorldLayout, OBJECT_GROUP, OWNER_OBJECT, OWNER_ROBOT, ROBOT_GROUP,
 };
 use crate::error::{Result, SabreError};
+use crate::model::collision_shape::shared_shape;
 use crate::model::dynamics::DynamicsWorkspace;
 use crate::model::kinematics::{JointKind, KinematicTree};
 use crate::model::scene::Scene;
-use crate::sim::collision_shape::shared_shape;
 use crate::sim::engine_clock::EngineClock;
 use crate::sim::interaction::Interaction;
 use crate::sim::proxy::{body_groups, effective_mass};

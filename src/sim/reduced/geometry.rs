@@ -6,8 +6,8 @@ use rapier3d_f64::parry::query::{ContactManifold, DefaultQueryDispatcher, Persis
 use rapier3d_f64::parry::shape::{Cuboid, PolygonalFeature, SharedShape, SupportMap};
 use rapier3d_f64::prelude::Pose;
 
+use crate::model::collision_shape::shared_shape;
 use crate::model::kinematics::{Frames, KinematicTree, Shape};
-use crate::sim::collision_shape::shared_shape;
 use crate::sim::quiescence::distance_to_shape;
 
 /// One collision primitive of a tree, placed in its link's frame.

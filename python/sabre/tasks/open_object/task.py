@@ -61,9 +61,12 @@ class OpenObject(Task):
     ``handle`` names the object frame or link to grasp: a frame without collision geometry (the
     shipped objects' ``handle_frame``) is used as the handle frame as it is; a link with geometry
     (anyone else's object) gets its handle frame inferred by :func:`sabre.handles.infer_handle_frame`.
+    The scene's one movable joint must move it: for a cabinet with several doors and drawers, load
+    the scene with ``Scene.from_urdf(..., handle=<the same link>)``, which keeps the joint that moves
+    the handle and holds the others (the check says so, naming that joint).
 
     Example: ``OpenObject(hook=HookConfig(backout=None))`` never restarts a backed-out hook;
-    ``OpenObject(handle="door_knob_link")`` opens an object whose handle is that link.
+    ``OpenObject(handle="pull_bar_link")`` opens an object whose handle is that link.
 
     Raises:
         InvalidValueError: a non-finite opening, a non-positive horizon, a negative contact weight.
@@ -104,17 +107,29 @@ class OpenObject(Task):
             self.opening = as_finite("opening", self.opening)
 
     def check(self, scene: Scene) -> None:
-        """The object must have one movable joint and the opening must lie within its travel; an
-        approach posture must have one entry per robot joint."""
-        swapped = " (are the robot and object files swapped?)" if scene.nq <= 1 < scene.no else ""
+        """The object must have one movable joint, which moves the handle, and the opening must lie
+        within its travel; an approach posture must have one entry per robot joint."""
+        moved_by = scene.object_joints_moving(self.handle) if self.handle in scene.object_frame_names else ()
         if scene.no != 1:
+            swapped = " (are the robot and object files swapped?)" if scene.nq <= 1 < scene.no else ""
+            if len(moved_by) == 1:
+                pick = (
+                    f"the handle {self.handle!r} is moved by {moved_by[0]!r}: load the scene with "
+                    f"Scene.from_urdf(..., handle={self.handle!r}) (or joint={moved_by[0]!r}), which keeps that joint"
+                )
+            else:
+                pick = "pick the one to open with Scene.from_urdf(..., joint=<name>) or handle=<its handle link>, which keeps it"
             raise InvalidValueError(
                 f"OpenObject needs an object with one movable joint; {scene.object_name!r} has {scene.no}: "
-                f"{list(scene.object_joint_names)}{swapped}; pick the one to open with "
-                f"Scene.from_urdf(..., joint=<name>), which holds the others"
+                f"{list(scene.object_joint_names)}{swapped}; {pick} and holds the others"
             )
         geometry.tool_frame(scene)  # the robot has a control frame to steer
         geometry.handle_frame(scene, self.handle)  # the handle exists and its frame can be inferred
+        if not moved_by:
+            raise InvalidValueError(
+                f"handle {self.handle!r} does not move with the scene's joint {scene.object_joint_names[0]!r}: it is on "
+                f"a held part or the carcass; load the scene with Scene.from_urdf(..., handle={self.handle!r})"
+            )
         lower, upper = float(scene.o_lower[0]), float(scene.o_upper[0])
         if self.opening is not None and not lower < self.opening <= upper:
             raise InvalidValueError(f"opening {self.opening} is outside the object's travel ({lower}, {upper}]")

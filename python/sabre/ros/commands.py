@@ -1,0 +1,175 @@
+"""What the controller node commands, in plain NumPy and the core's rate limiter (no ROS import): the
+arm's and the base's command streams through per-joint velocity, acceleration and jerk limits, and
+the gate that decides when they follow the plan and when they ramp to zero. Time comes in as an
+argument, so that the stop logic is tested with a fake clock."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import _core
+from ..errors import InvalidValueError
+from .params import BASE_ACCELERATION, BASE_JERK, finite_list, robust_arm_limits
+
+__all__ = ["Limits", "CommandLimits", "CommandShaper", "Command", "CommandGate", "command_limits"]
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Per-joint velocity, acceleration and jerk bounds of one command stream."""
+
+    velocity: tuple[float, ...]
+    acceleration: tuple[float, ...]
+    jerk: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class CommandLimits:
+    """The arm's limits (step ``period``) and the base's (step ``base_period``)."""
+
+    arm: Limits
+    base: Limits
+    period: float
+    base_period: float
+
+
+def command_limits(
+    arm_velocity: Sequence[float] | np.ndarray,
+    base_velocity: Sequence[float] | np.ndarray,
+    params: dict,
+) -> CommandLimits:
+    """The limits from the node's parameters, each unset one from its default: velocities from the
+    URDF (``arm_velocity``, ``base_velocity``), the arm's acceleration and jerk from Franka's
+    published limits kept robust to one missed command (:func:`sabre.ros.params.robust_arm_limits`),
+    the base's Ridgeback-like ones."""
+    period = float(params["command_period"])
+    rate = float(params["cmd_vel_rate"])
+    if not (period > 0 and math.isfinite(period)) or not (rate > 0 and math.isfinite(rate)):
+        raise InvalidValueError(f"command_period and cmd_vel_rate must be positive, got {period}, {rate}")
+    n = len(arm_velocity)
+    accel, jerk = robust_arm_limits(period)
+    if n != len(accel):
+        # not a Panda: the same robust rule on the slowest Franka joint's bounds
+        accel, jerk = [min(accel)] * n, [min(jerk)] * n
+
+    def pick(name: str, default: Sequence[float] | np.ndarray, size: int) -> tuple[float, ...]:
+        given = params.get(name) or []
+        return tuple(finite_list(name, list(given) if given else list(default), size))
+
+    arm = Limits(
+        pick("arm_velocity_limits", arm_velocity, n), pick("arm_acceleration_limits", accel, n), pick("arm_jerk_limits", jerk, n)
+    )
+    base = Limits(
+        pick("base_velocity_limits", base_velocity, 3),
+        pick("base_acceleration_limits", BASE_ACCELERATION, 3),
+        pick("base_jerk_limits", BASE_JERK, 3),
+    )
+    return CommandLimits(arm=arm, base=base, period=period, base_period=max(period, 1.0 / rate))
+
+
+@dataclass(frozen=True)
+class Command:
+    """One step of the command streams: the arm's (na,), and the base's twist (vx, vy, ωz) in the
+    base frame when a base command is due this step (else None)."""
+
+    arm: np.ndarray
+    base: np.ndarray | None
+
+
+class CommandShaper:
+    """The arm's and the base's command streams through their rate limiters: the arm steps every
+    call (``period``), the base every ``base_every``-th call (its own limiter at that step)."""
+
+    def __init__(self, limits: CommandLimits) -> None:
+        self.limits = limits
+        a, b = limits.arm, limits.base
+        self.base_every = max(1, int(round(limits.base_period / limits.period)))
+        self.arm = _core.RateLimiter(list(a.velocity), list(a.acceleration), list(a.jerk), limits.period)
+        self.base = _core.RateLimiter(list(b.velocity), list(b.acceleration), list(b.jerk), limits.period * self.base_every)
+        self._zero_arm = np.zeros(len(a.velocity))
+        self._zero_base = np.zeros(3)
+        self._calls = 0
+        self._base_target = self._zero_base
+
+    def step(self, arm: np.ndarray | None, base: np.ndarray | None) -> Command:
+        """One step toward the targets: ``arm`` None ramps both streams to zero; ``base`` None
+        keeps the base's last target."""
+        if arm is None:
+            self._base_target = self._zero_base
+        elif base is not None:
+            self._base_target = base
+        out_arm = self.arm.limit(self._zero_arm if arm is None else arm)
+        out_base = self.base.limit(self._base_target) if self._calls % self.base_every == 0 else None
+        self._calls += 1
+        return Command(out_arm, out_base)
+
+    @property
+    def at_rest(self) -> bool:
+        return bool(self.arm.at_rest and self.base.at_rest)
+
+    @property
+    def steps_to_rest(self) -> int:
+        """A bound on the arm steps a ramp to rest takes (the base's counted in arm steps)."""
+        return max(self.arm.steps_to_rest, self.base.steps_to_rest * self.base_every)
+
+    def reset(self) -> None:
+        self.arm.reset()
+        self.base.reset()
+        self._calls = 0
+        self._base_target = self._zero_base
+
+
+class CommandGate:
+    """Decides what the node commands on each tick and, between ticks, on each look of its watchdog.
+
+    A tick with targets follows them through the limiters; a tick without (a reason to stop holds:
+    e-stop, not active, stale joint, rejected message, stale plan, stopped planner) is one step of a
+    ramp to zero. When no tick has come for ``state_timeout`` s, :meth:`watchdog` returns the ramp's
+    steps that are due, one per ``period`` s counted from the last command, until the streams are at
+    rest: the ramp starts at most one period after the timeout and never steps."""
+
+    def __init__(self, shaper: CommandShaper, state_timeout: float) -> None:
+        self.shaper = shaper
+        self.period = shaper.limits.period
+        self.state_timeout = float(state_timeout)
+        self.last_tick = -math.inf
+        self.last_command = -math.inf
+        self.stale_since: float | None = None
+        self.stale_events = 0
+
+    def on_tick(self, now: float, arm: np.ndarray | None, base: np.ndarray | None) -> Command:
+        """The command answering a tick at ``now`` (targets None: a ramp step toward zero)."""
+        self.last_tick = now
+        self.last_command = now
+        self.stale_since = None
+        return self.shaper.step(arm, base)
+
+    def watchdog(self, now: float, limit: int = 10) -> list[Command]:
+        """The ramp steps due at ``now`` because no tick came for ``state_timeout`` (at most
+        ``limit`` at once: a late look catches up over the next ones)."""
+        if now - self.last_tick <= self.state_timeout or self.last_tick == -math.inf:
+            return []  # ticks are coming, or none came yet (nothing commanded, nothing to ramp)
+        if self.stale_since is None:
+            self.stale_since = now
+            self.stale_events += 1
+            # the ramp's first step is due one period after the last command, or now if that is past
+            self.last_command = max(self.last_command, now - self.period)
+        steps: list[Command] = []
+        while not self.shaper.at_rest and now - self.last_command >= self.period and len(steps) < limit:
+            self.last_command += self.period
+            steps.append(self.shaper.step(None, None))
+        return steps
+
+    def next_look(self, now: float) -> float:
+        """Seconds until the watchdog has something to do (a caller's sleep)."""
+        if self.last_tick == -math.inf:
+            return self.state_timeout
+        if now - self.last_tick <= self.state_timeout:
+            return self.last_tick + self.state_timeout - now + 1e-4
+        if self.shaper.at_rest:
+            return self.state_timeout
+        return max(0.0, self.last_command + self.period - now)

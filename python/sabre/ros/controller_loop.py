@@ -1,0 +1,573 @@
+"""The configured controller: the scene and cascade built from the descriptions, the measured inputs,
+the command gate and the endpoints of the 1 kHz path (receive a joint state, one tick, publish the
+rate-limited command), with the watchdog that ramps the commands to zero when states stop coming.
+The controller node builds one on configure and drops it on cleanup."""
+
+from __future__ import annotations
+
+import collections
+import functools
+import math
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from ..errors import SabreError
+from ..estimation import LowPass, ObjectStateEstimator
+from ..realtime import RealtimeCascade
+from . import gil_priority, realtime_thread
+from .commands import Command, CommandGate, CommandShaper, command_limits
+from .conversions import MessageError, world_to_base, yaw_of
+from .descriptions import Descriptions, build_controller
+from .durations import Durations
+from .inputs import JointStates, JointTorques, WrenchFrames, base_from_odometry
+from .qos import profile
+
+__all__ = ["ControllerLoop", "TASK_STATES"]
+
+BASE_JOINTS = ("base_x", "base_y", "base_yaw")
+
+#: idle: no task; starting: the planner starts on the next state; running; failed: the planner
+#: stopped on an error (reset to start again).
+TASK_STATES = ("idle", "starting", "running", "failed")
+
+
+def stamp_seconds(stamp: Any) -> float:
+    return stamp.sec + 1e-9 * stamp.nanosec
+
+
+class ControllerLoop:
+    """Everything between a configure and a cleanup of the controller node (see the module)."""
+
+    def __init__(self, node: Any, params: dict[str, Any], descriptions: Descriptions) -> None:
+        self.node = node
+        self.params = p = params
+        self.descriptions = descriptions
+        factory = functools.partial(build_controller, descriptions, str(p["variant"]), int(p["seed"]), int(p["threads"]))
+        self.controller = factory()
+        self.scene = self.controller.scene
+        self.cascade = RealtimeCascade(
+            self.controller,
+            min_replan_period=float(p["min_replan_period"]),
+            planner_process=factory if p["planner_process"] else None,
+            planner_nice=int(p["planner_nice"]),
+            planner_idle=bool(p["planner_idle"]),
+            delay_compensation=bool(p["delay_compensation"]),
+        )
+        self.horizon = float(self.controller.config.horizon)
+        self._map_joints(p)
+        self._init_inputs(p)
+        dq = self.scene.dq_limit
+        self.shaper = CommandShaper(command_limits(dq[self.arm_index], dq[self.base_index], p))
+        self.gate = CommandGate(self.shaper, float(p["state_timeout"]))
+        self._lock = threading.Lock()  # the gate, its limiters and the command publishers
+        self._init_state()
+        self._create_endpoints(p)
+        self._running = True
+        self._watchdog = threading.Thread(target=self._watch, name="sabre-command-watchdog", daemon=True)
+        self._watchdog.start()
+
+    # Set-up ----------------------------------------------------------------------------------
+    def _map_joints(self, p: dict[str, Any]) -> None:
+        """The robot's names for sabre's joints, the arm command's joints and the base's, as indices."""
+        scene = self.scene
+        names = list(p["joint_names"]) or list(scene.joint_names)
+        if len(names) != scene.nq:
+            raise SabreError(f"joint_names needs {scene.nq} names (for {scene.joint_names}), got {names}")
+        index = {n: i for i, n in enumerate(names)}
+        base = list(p["base_joints"])
+        arm = list(p["arm_joints"]) or [n for n, s in zip(names, scene.joint_names) if s not in BASE_JOINTS and n not in base]
+        for n in arm + base:
+            if n not in index:
+                raise SabreError(f"joint {n!r} is not one of joint_names {names}")
+        if len(base) != 3:
+            raise SabreError(f"base_joints needs the base's x, y and yaw joints, got {base}")
+        self.names, self.arm_joints, self.base_joints = names, arm, base
+        self.arm_index = np.array([index[n] for n in arm], dtype=np.intp)
+        self.base_index = np.array([index[n] for n in base], dtype=np.intp)
+
+    def _init_inputs(self, p: dict[str, Any]) -> None:
+        """The merged joint states (the base's from odometry when it has a topic), the wrench or
+        torque input and the object state (a topic, else the estimator)."""
+        timeouts = np.full(self.scene.nq, float(p["state_timeout"]))
+        self.base_from_odometry = bool(p["odometry_topic"])
+        if self.base_from_odometry:
+            timeouts[self.base_index] = float(p["base_state_timeout"])
+        self.joints = JointStates(self.names, self.arm_joints, timeouts)
+        self.wrench_frames = WrenchFrames(self.scene, str(p["world_frame"]), str(p["wrench_frame"]), str(p["wrench_point_frame"]))
+        self.torques = JointTorques(self.names, self.scene.nq, float(p["tau_ext_sign"])) if p["tau_ext_topic"] else None
+        self._wrench: tuple[np.ndarray, str | None, str] | None = None
+        self._tau_topic: np.ndarray | None = None
+        self._wrench_recv = -math.inf
+        self._tau_filter = LowPass(float(p["tau_ext_cutoff"]))
+        self._object: tuple[np.ndarray, np.ndarray] | None = None
+        self.estimator = None
+        if not p["object_state_topic"]:
+            self.estimator = ObjectStateEstimator(self.scene, handle=self.descriptions.handle)
+
+    def _init_state(self) -> None:
+        """The node's flags, the task's state and the statistics the summary reports."""
+        self.active = False
+        self.estop = False
+        self.task = "idle"
+        self.reason: str | None = "inactive"  # why the last tick did not follow the plan (None: it did)
+        self.failure = ""
+        self._last_stamp: float | None = None
+        self._t_origin: float | None = None
+        self._last_t: float | None = None
+        self._last_status = "none"
+        self._last_tank = float(self.controller.tank.energy)
+        self._min_tank = self._last_tank
+        self._phase = self.controller.phase
+        self._planner_started: float | None = None
+        self._x: np.ndarray | None = None
+        self._target: tuple[np.ndarray, np.ndarray] | None = None
+        self._ready = False  # the running planner has handed over a plan
+        self._stopper: threading.Thread | None = None  # stops the planner off the 1 kHz path
+        self.stats: dict[str, Any] = {
+            "ticks": 0,
+            "answered": 0,
+            "followed": 0,
+            "rejected": 0,
+            "plan_stale": 0,
+            "wrench_stale": 0,
+            "wrench_received": 0,
+            "compute": Durations(),
+            "state_age": Durations(),
+            "phase_changes": 0,
+            "recent_phases": collections.deque(maxlen=100),
+            "stops": collections.Counter(),
+            "cpu_start": (time.monotonic(), time.process_time()),
+        }
+
+    def _create_endpoints(self, p: dict[str, Any]) -> None:
+        from geometry_msgs.msg import Twist, TwistStamped, WrenchStamped
+        from nav_msgs.msg import Odometry
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import Float64MultiArray
+
+        node = self.node
+        self._subs: list[Any] = []
+        self._pubs: list[Any] = []
+        self.arm_pub = node.create_publisher(Float64MultiArray, p["arm_command_topic"], profile(p["arm_command_qos"]))
+        self.stamped = bool(p["cmd_vel_stamped"])
+        self.base_pub = node.create_publisher(
+            TwistStamped if self.stamped else Twist, p["cmd_vel_topic"], profile(p["cmd_vel_qos"])
+        )
+        self._pubs += [self.arm_pub, self.base_pub]
+        self.echo_pub = None
+        if p["command_echo_topic"]:
+            self.echo_pub = node.create_publisher(JointState, p["command_echo_topic"], profile(p["command_echo_qos"]))
+            self._pubs.append(self.echo_pub)
+        self._arm_msg = Float64MultiArray()
+        self._twist = TwistStamped() if self.stamped else Twist()
+        if self.stamped:
+            self._twist.header.frame_id = str(p["cmd_vel_frame"])
+        self._echo = JointState(name=list(self.arm_joints))
+        sub = node.create_subscription
+        self._subs.append(sub(JointState, p["joint_state_topic"], self.on_joint_state, profile(p["joint_state_qos"])))
+        if self.base_from_odometry:
+            self._subs.append(sub(Odometry, p["odometry_topic"], self.on_odometry, profile(p["odometry_qos"])))
+        if self.torques is not None:
+            self._subs.append(sub(JointState, p["tau_ext_topic"], self.on_torques, profile(p["tau_ext_qos"])))
+        elif p["wrench_topic"]:
+            self._subs.append(sub(WrenchStamped, p["wrench_topic"], self.on_wrench, profile(p["wrench_qos"])))
+        if p["object_state_topic"]:
+            self._subs.append(sub(JointState, p["object_state_topic"], self.on_object, profile(p["object_state_qos"])))
+
+    def input_topics(self) -> dict[str, str]:
+        """The inputs that must have a publisher: label → topic name as given."""
+        p = self.params
+        topics = {"joint states": p["joint_state_topic"]}
+        if self.base_from_odometry:
+            topics["odometry"] = p["odometry_topic"]
+        if self.torques is not None:
+            topics["joint torques"] = p["tau_ext_topic"]
+        elif p["wrench_topic"]:
+            topics["wrench"] = p["wrench_topic"]
+        if p["object_state_topic"]:
+            topics["object state"] = p["object_state_topic"]
+        return topics
+
+    # Inputs besides the joint states ---------------------------------------------------------
+    def on_odometry(self, msg: Any) -> None:
+        pose, twist = msg.pose.pose, msg.twist.twist
+        o = pose.orientation
+        try:
+            q, rates = base_from_odometry(
+                pose.position.x,
+                pose.position.y,
+                yaw_of(o.x, o.y, o.z, o.w),
+                (twist.linear.x, twist.linear.y, twist.angular.z),
+                bool(self.params["odometry_twist_in_child_frame"]),
+            )
+        except MessageError as exc:
+            self._log_rejected("odometry", exc)
+            return
+        self.joints.set(self.base_index, q, rates, time.monotonic())
+
+    def on_wrench(self, msg: Any) -> None:
+        w = msg.wrench
+        v = np.array([w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z])
+        try:
+            if not np.all(np.isfinite(v)):
+                raise MessageError("non-finite values")
+            axes, point = self.wrench_frames.resolve(msg.header.frame_id)
+        except MessageError as exc:
+            self._log_rejected("wrench", exc)
+            return
+        self._wrench = (v, axes, point)
+        self._wrench_recv = time.monotonic()
+        self.stats["wrench_received"] += 1
+
+    def on_torques(self, msg: Any) -> None:
+        assert self.torques is not None
+        try:
+            self._tau_topic = self.torques.update(msg.name, msg.effort)
+        except MessageError as exc:
+            self._log_rejected("joint torques", exc)
+            return
+        self._wrench_recv = time.monotonic()
+
+    def on_object(self, msg: Any) -> None:
+        names = list(self.scene.object_joint_names)
+        try:
+            lookup = {n: i for i, n in enumerate(msg.name)}
+            if any(n not in lookup for n in names):
+                raise MessageError(f"object state lacks {names}")
+            o = np.array([msg.position[lookup[n]] for n in names], dtype=np.float64)
+            od = np.array([msg.velocity[lookup[n]] if len(msg.velocity) else 0.0 for n in names], dtype=np.float64)
+            if not (np.isfinite(o).all() and np.isfinite(od).all()):
+                raise MessageError("object state: non-finite value")
+        except (MessageError, IndexError) as exc:
+            self._log_rejected("object state", exc)
+            return
+        self._object = (o, od)
+
+    def _log_rejected(self, what: str, exc: Exception) -> None:
+        self.node.get_logger().error(f"{what} rejected: {exc}", throttle_duration_sec=1.0)
+        self.stats["rejected"] += 1
+
+    # The 1 kHz path --------------------------------------------------------------------------
+    def on_joint_state(self, msg: Any) -> None:
+        """One tick per arm joint state: the command that follows the plan, or a ramp step."""
+        received = time.monotonic()
+        stamp = msg.header.stamp
+        try:
+            t_abs = stamp_seconds(stamp)
+            ticks = self.joints.update(msg.name, msg.position, msg.velocity, received)
+            if ticks and self._last_stamp is not None and t_abs <= self._last_stamp:
+                raise MessageError(f"joint state stamp {t_abs:.6f} is not after the previous one")
+        except MessageError as exc:
+            self._log_rejected("joint state", exc)
+            if self.joints.drives_tick(msg.name):
+                self.reason = "rejected state"
+                self._answer(received, None, stamp)  # a ramp step, never a step to zero
+            return
+        if not ticks:
+            return  # fingers, another driver's joints: merged, no tick
+        self.stats["state_age"].record(time.time() - t_abs)
+        self._last_stamp = t_abs
+        if self._t_origin is None:
+            self._t_origin = t_abs
+        t = t_abs - self._t_origin
+        self.reason = self._follow(received, t)
+        self._answer(received, self._target if self.reason is None else None, stamp)
+        if self.reason is None:
+            self.stats["compute"].record(time.monotonic() - received)
+            self._note_phase(t)
+
+    def _follow(self, received: float, t: float) -> str | None:
+        """Runs the task one tick at time t if nothing stops it (setting :attr:`_target`); else the
+        reason it does not follow the plan."""
+        if self.estop:
+            return "e-stop"
+        if not self.active:
+            return "inactive"
+        if not self.joints.fresh(received):
+            return "stale state"
+        if self.task in ("idle", "failed"):
+            return "planner stopped" if self.task == "failed" else "no task"
+        x = self._state(t)
+        if self.task == "starting":
+            if self._stopper is not None and self._stopper.is_alive():
+                return "planning"  # the previous planner is still stopping
+            self.cascade.start(x, t, wait=False)  # the planner process makes its first plan meanwhile
+            self._ready = False
+            self._planner_started = time.monotonic()
+            self.task = "running"
+            self._last_t = t
+            return "planning"
+        ready = self._ready or self.cascade.ready
+        self._ready = ready
+        plan_start = self.cascade.plan_start if ready else None
+        if not ready or (plan_start is not None and t - plan_start > self.horizon):
+            if ready:
+                self.stats["plan_stale"] += 1
+            self._observe(x, t)
+            self._last_t = t
+            return "plan stale" if ready else "planning"
+        dt = min(t - (t if self._last_t is None else self._last_t), float(self.params["max_tick_dt"]))
+        self._last_t = t
+        try:
+            result = self.cascade.tick(x, self._external_torque(x, received, dt), t, dt=dt)
+        except SabreError as exc:
+            self._fail(f"inner loop failed: {exc}")
+            return "planner stopped"
+        self._last_status, self._last_tank = result.status, result.tank_energy
+        self._min_tank = min(self._min_tank, result.tank_energy)
+        u = result.command
+        yaw = float(self.joints.position[self.base_index[2]])
+        self._target = (u[self.arm_index], np.array(world_to_base(u[self.base_index], yaw)))
+        self.stats["followed"] += 1
+        return None
+
+    def _state(self, t: float) -> np.ndarray:
+        q = self.joints.position.copy()
+        o, od = self._object_state(q, t)
+        x = np.concatenate((q, self.joints.velocity, o, od))
+        self._x = x
+        return x
+
+    def _object_state(self, q: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(o, ȯ): the estimator's from the hand pose, else the newest on the object topic (the
+        closed object before one came)."""
+        if self.estimator is not None:
+            force = 0.0 if self._wrench is None else math.hypot(*self._wrench[0][:3])
+            if self._tau_topic is not None:
+                force = math.inf  # torques only: contact assumed, the hook test is the distance
+            e = self.estimator.update(q, t, force)
+            return e.position, e.velocity
+        if self._object is None:
+            return np.asarray(self.scene.o_lower, dtype=np.float64), np.zeros(self.scene.no)
+        return self._object
+
+    def _external_torque(self, x: np.ndarray, received: float, dt: float) -> np.ndarray:
+        """The low-passed τ_ext of the wrist wrench or the torque topic (zero while stale)."""
+        fresh = received - self._wrench_recv <= float(self.params["wrench_timeout"])
+        raw = np.zeros(self.scene.nq)
+        if not fresh:
+            self.stats["wrench_stale"] += 1
+        elif self._tau_topic is not None:
+            raw = self._tau_topic
+        elif self._wrench is not None:
+            w, axes, point = self._wrench
+            raw = self.wrench_frames.tau_ext(x[: self.scene.nq], w, axes, point)
+        return self._tau_filter.update(raw, dt)
+
+    def _observe(self, x: np.ndarray, t: float) -> None:
+        try:
+            self.cascade.observe(x, t)
+        except SabreError as exc:
+            self._fail(f"planner failed: {exc}")
+
+    def _fail(self, message: str) -> None:
+        self.node.get_logger().error(message + "; ramping to zero, planner stopped (reset to start again)")
+        self.failure = message
+        self.task = "failed"
+        self.stop_planner()
+
+    def _answer(self, received: float, target: tuple[np.ndarray, np.ndarray] | None, stamp: Any) -> None:
+        with self._lock:
+            command = self.gate.on_tick(received, *(target or (None, None)))
+            self._publish(command, stamp, answers=True)
+        self.stats["ticks"] += 1
+        if target is None:
+            self.stats["stops"][self.reason or "rejected"] += 1
+
+    def _publish(self, command: Command, stamp: Any, answers: bool = False) -> None:
+        """Publishes one step of the streams (the caller holds the lock). A command that answers a
+        joint state carries that state's stamp's nanoseconds in ``layout.data_offset``, which a
+        velocity controller ignores and a robot (or the simulated one) can match to the state, to
+        measure the round trip without a message of its own; the watchdog's and the shutdown's carry 0."""
+        self._arm_msg.data = command.arm.tolist()
+        self._arm_msg.layout.data_offset = stamp.nanosec if answers else 0
+        self.arm_pub.publish(self._arm_msg)
+        if command.base is not None:
+            tw = self._twist.twist if self.stamped else self._twist
+            if self.stamped:
+                self._twist.header.stamp = stamp
+            tw.linear.x, tw.linear.y, tw.angular.z = (float(v) for v in command.base)
+            self.base_pub.publish(self._twist)
+        if self.echo_pub is not None:
+            self._echo.header.stamp = stamp
+            self._echo.velocity = self._arm_msg.data
+            self.echo_pub.publish(self._echo)
+        self.stats["answered"] += 1
+
+    def _note_phase(self, t: float) -> None:
+        if self.cascade.phase != self._phase:
+            self.node.get_logger().info(f"phase {self._phase} -> {self.cascade.phase} at t = {t:.3f} s")
+            self._phase = self.cascade.phase
+            self.stats["phase_changes"] += 1
+            self.stats["recent_phases"].append((t, self._phase))
+
+    def _watch(self) -> None:
+        """Ramps the commands to zero, one step per command period, once no joint state came for
+        ``state_timeout``."""
+        realtime_thread(gil_priority(int(self.params["realtime_priority"])))
+        events = 0
+        while self._running:
+            with self._lock:
+                steps = self.gate.watchdog(time.monotonic())
+                if steps:
+                    stamp = self.node.get_clock().now().to_msg()
+                    for command in steps:
+                        self._publish(command, stamp)
+                wait = self.gate.next_look(time.monotonic())
+            if self.gate.stale_events != events:
+                events = self.gate.stale_events
+                self.node.get_logger().warning(f"no joint state for {self.gate.state_timeout} s: ramping the commands to zero")
+            time.sleep(min(max(wait, 2e-4), 0.02))
+
+    def _stop_watchdog(self) -> None:
+        self._running = False
+        if self._watchdog.is_alive() and self._watchdog is not threading.current_thread():
+            self._watchdog.join()
+
+    def stop_planner(self) -> None:
+        """Stops the planner on a thread of its own: stopping a planner process takes long enough
+        to hold up the ticks behind it, and they must ramp the commands down meanwhile."""
+        if self._stopper is not None and self._stopper.is_alive():
+            return
+        self._stopper = threading.Thread(target=self.cascade.stop, name="sabre-planner-stop", daemon=True)
+        self._stopper.start()
+
+    # Task and lifecycle ----------------------------------------------------------------------
+    def activate(self) -> None:
+        """Commands follow the plan again (ramping in from wherever the streams are)."""
+        self.active = True
+        if self.params["start_on_activate"] and self.task == "idle":
+            self.task = "starting"
+
+    def deactivate(self) -> None:
+        """Commands ramp to zero; the planner pauses (stops; activating starts it afresh)."""
+        self.active = False
+        self.stop_planner()
+        if self.task in ("starting", "running"):
+            self.task = "idle"
+
+    def latch_estop(self) -> None:
+        """The e-stop: the commands ramp to zero from the next tick on, the planner stops, the task
+        is idle once reset."""
+        self.estop = True
+        self.stop_planner()
+        if self.task in ("starting", "running"):
+            self.task = "idle"
+
+    def start_task(self) -> str:
+        """Starts the task (the planner on the next state); '' or why not."""
+        if self.estop:
+            return "the e-stop is latched: reset first"
+        if self.task == "failed":
+            return f"the planner stopped ({self.failure}): reset first"
+        if not self.active:
+            return "not active: activate the node first"
+        if self.task in ("starting", "running"):
+            return "the task is already running"
+        self.task = "starting"
+        return ""
+
+    def cancel_task(self) -> None:
+        """Stops the task: the commands ramp to zero, the planner stops."""
+        self.stop_planner()
+        self.task = "idle"
+
+    def reset_task(self) -> None:
+        """Clears the e-stop and a planner failure; the task is idle until started."""
+        self.stop_planner()
+        self.estop = False
+        self.task = "idle"
+        self.failure = ""
+
+    def ramp_down(self, deadline: float) -> bool:
+        """Publishes the ramp to zero from this thread, one step per period, until the streams rest
+        (the shutdown's stop: no executor delivers states any more). The watchdog stops first: two
+        threads stepping the limiters would put two steps into one period. Returns whether they did."""
+        self._stop_watchdog()
+        period = self.gate.period
+        next_time = time.monotonic()
+        while time.monotonic() < deadline:
+            with self._lock:
+                if self.shaper.at_rest:
+                    return True
+                self._publish(self.shaper.step(None, None), self.node.get_clock().now().to_msg())
+            next_time += period
+            rest = next_time - time.monotonic()
+            if rest > 0:
+                time.sleep(rest)
+        return self.shaper.at_rest
+
+    def destroy(self) -> None:
+        """Stops the watchdog and the planner and removes the endpoints."""
+        self._stop_watchdog()
+        if self._stopper is not None:
+            self._stopper.join()
+        self.cascade.stop()
+        for s in self._subs:
+            self.node.destroy_subscription(s)
+        for pub in self._pubs:
+            self.node.destroy_publisher(pub)
+
+    # Reports ---------------------------------------------------------------------------------
+    def opening(self) -> float:
+        """The object's estimated (or received) coordinate."""
+        if self.estimator is not None:
+            return float(self.estimator.position)
+        return float("nan") if self._object is None else float(self._object[0][0])
+
+    def planner_rate(self) -> float:
+        if self._planner_started is None:
+            return 0.0
+        elapsed = time.monotonic() - self._planner_started
+        return self.cascade.iterations / elapsed if elapsed > 0 else 0.0
+
+    def cpu_share(self) -> float:
+        """This process's CPU time over wall time since configure (the planner process not counted)."""
+        wall0, cpu0 = self.stats["cpu_start"]
+        wall = time.monotonic() - wall0
+        return (time.process_time() - cpu0) / wall if wall > 0 else 0.0
+
+    def summary(self) -> dict[str, Any]:
+        s = self.stats
+        compute, age = s["compute"], s["state_age"]
+        f = self.controller.inner_filter
+        return {
+            "ticks": s["ticks"],
+            "followed": s["followed"],
+            "answered": s["answered"],
+            "rejected": s["rejected"],
+            "stale_events": self.gate.stale_events,
+            "stops": dict(s["stops"]),
+            "plan_stale": s["plan_stale"],
+            "wrench_stale": s["wrench_stale"],
+            "wrench_received": s["wrench_received"],
+            "planner_iterations": self.cascade.iterations,
+            "planner_rate_hz": self.planner_rate(),
+            "tick_compute_p50_ms": compute.percentile_ms(50),
+            "tick_compute_p99_ms": compute.percentile_ms(99),
+            "tick_compute_p999_ms": compute.percentile_ms(99.9),
+            "tick_compute_max_ms": compute.max_ms(),
+            "state_age_p50_ms": age.percentile_ms(50),
+            "state_age_p99_ms": age.percentile_ms(99),
+            "tank_energy": self._last_tank,
+            "tank_min": self._min_tank,
+            "tank_floor": self.controller.tank.floor,
+            "filter_fallbacks": int(f.stats.fallbacks) if f is not None else 0,
+            "phase": self.cascade.phase,
+            "phase_changes": s["phase_changes"],
+            "recent_phases": [[round(t, 3), ph] for t, ph in s["recent_phases"]],
+            "task": self.task,
+            "reason": self.reason,
+            "opening": self.opening(),
+            "estop": self.estop,
+            "cpu_share": self.cpu_share(),
+            "planner_process": self.cascade.planner_in_process,
+            "limits": {
+                "arm_velocity": list(self.shaper.limits.arm.velocity),
+                "arm_acceleration": list(self.shaper.limits.arm.acceleration),
+                "arm_jerk": list(self.shaper.limits.arm.jerk),
+            },
+        }
