@@ -111,7 +111,8 @@ impl LowLevelController {
             check_gain(name, v)?;
         }
         let nq = scene.nq();
-        let (apparent_inertia, diagonal_inertia) = apparent_inertias(&scene, &[scene.home_configuration(), scene.start_configuration()])?;
+        let (apparent_inertia, diagonal_inertia) =
+            apparent_inertias(&scene, &[scene.home_configuration(), scene.start_configuration()])?;
         Ok(Self {
             apparent_inertia,
             diagonal_inertia,
@@ -336,7 +337,10 @@ pub fn follow_reference_safe(
     }
     let (has_filter, has_tank) = (filter.is_some(), tank.is_some());
     let plant_dt = plant.dt();
-    controller.check_stable(plan.gain_inertia_floor().unwrap_or(controller.config().gain_inertia_floor), plant_dt)?;
+    controller.check_stable(
+        plan.gain_inertia_floor().unwrap_or(controller.config().gain_inertia_floor),
+        plant_dt,
+    )?;
     let mut inner = InnerLoop::new(controller, filter, tank)?;
     let mut out = TickOutput::new(nq, nq);
     let mut poll = crate::interrupt::Poll::new();

@@ -325,7 +325,10 @@ impl Cost {
                 Term::Power { weight, p_max } => finite("power cost", &[*weight, *p_max])?,
                 Term::BaseBox { lower, upper, .. } => {
                     if scene.roles.base.is_none() {
-                        return bad("base box cost", "the robot's base is fixed: it has no base coordinates".into());
+                        return bad(
+                            "base box cost",
+                            "the robot's base is fixed: it has no base coordinates".into(),
+                        );
                     }
                     finite("base box", &[lower[0], lower[1], upper[0], upper[1]])?
                 }
@@ -475,7 +478,8 @@ impl Cost {
                         .enumerate()
                         .map(|(i, &coordinate)| {
                             let v = q[coordinate];
-                            hinge_square(v - upper[i], *weight, *weight_slope) + hinge_square(lower[i] - v, *weight, *weight_slope)
+                            hinge_square(v - upper[i], *weight, *weight_slope)
+                                + hinge_square(lower[i] - v, *weight, *weight_slope)
                         })
                         .sum()
                 }

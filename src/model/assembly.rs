@@ -91,13 +91,19 @@ pub fn attach_tool(tree: KinematicTree, tool: &ToolSpec, source: &str) -> Result
     let part = fragment.tree;
     for l in &part.links {
         if tree.link_id(&l.name).is_some() {
-            return Err(SabreError::urdf(source, format!("the tool's link '{}' is also a link of the robot", l.name)));
+            return Err(SabreError::urdf(
+                source,
+                format!("the tool's link '{}' is also a link of the robot", l.name),
+            ));
         }
     }
     let mount_name = format!("{}_mount", part.links[part.root].name);
     for j in part.joints.iter().map(|j| &j.name).chain([&mount_name]) {
         if tree.joints.iter().any(|k| &k.name == j) {
-            return Err(SabreError::urdf(source, format!("the tool's joint '{j}' is also a joint of the robot")));
+            return Err(SabreError::urdf(
+                source,
+                format!("the tool's joint '{j}' is also a joint of the robot"),
+            ));
         }
     }
     let offset = tree.links.len();
@@ -337,7 +343,10 @@ pub fn assemble(tree: KinematicTree, decls: &RoleDecls, source: &str) -> Result<
         Some(name) => Some(tree.link_id(name).ok_or_else(|| {
             SabreError::urdf(
                 source,
-                format!("the tool frame '{name}' is not a link of the robot; its links are: {}", tree.link_names().join(", ")),
+                format!(
+                    "the tool frame '{name}' is not a link of the robot; its links are: {}",
+                    tree.link_names().join(", ")
+                ),
             )
         })?),
         None => detect_tool_frame(&tree),
@@ -347,7 +356,9 @@ pub fn assemble(tree: KinematicTree, decls: &RoleDecls, source: &str) -> Result<
     }
     let home = home_posture(&tree, &decls.home, source)?;
     let held = holds(&tree, &decls.hold, tool_frame, &home, source)?;
-    let kept: Vec<usize> = (0..tree.nq()).filter(|&i| !held.iter().any(|(j, _, _)| tree.active_joints[i] == *j)).collect();
+    let kept: Vec<usize> = (0..tree.nq())
+        .filter(|&i| !held.iter().any(|(j, _, _)| tree.active_joints[i] == *j))
+        .collect();
     let fixed: Vec<(usize, f64)> = held.iter().map(|&(j, v, _)| (j, v)).collect();
     let held_names: Vec<(String, f64)> = held.iter().map(|&(j, v, _)| (tree.joints[j].name.clone(), v)).collect();
     let tree = tree.with_joints_fixed(&fixed, source)?;
@@ -389,7 +400,12 @@ fn posture(tree: &KinematicTree, home: &[f64], declared: &[(String, f64)], what:
 
 /// The wrist sensor's link: declared; else the link the tool is fixed to; else the link after the
 /// last movable joint that moves the tool frame; else the child of the last movable joint.
-fn wrist_sensor(tree: &KinematicTree, decls: &RoleDecls, tool_frame: Option<usize>, source: &str) -> Result<(usize, &'static str)> {
+fn wrist_sensor(
+    tree: &KinematicTree,
+    decls: &RoleDecls,
+    tool_frame: Option<usize>,
+    source: &str,
+) -> Result<(usize, &'static str)> {
     if let Some(name) = &decls.wrist_sensor {
         let link = tree
             .link_id(name)

@@ -159,13 +159,17 @@ fn cover(points: &[Point3<f64>]) -> Vec<(Point3<f64>, f64)> {
     let eigen = covariance.symmetric_eigen();
     let axis = eigen.eigenvectors.column(eigen.eigenvalues.imax()).into_owned();
     let along: Vec<f64> = points.iter().map(|p| (p.coords - mean).dot(&axis)).collect();
-    let (lo, hi) = along.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &t| (a.min(t), b.max(t)));
+    let (lo, hi) = along
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &t| (a.min(t), b.max(t)));
     let across = points
         .iter()
         .zip(&along)
         .map(|(p, t)| (p.coords - mean - axis * *t).norm())
         .fold(0.0, f64::max);
-    let slices = ((hi - lo) / (2.0 * across.max(SURFACE_SPACING))).round().clamp(1.0, MAX_SPHERES_PER_LINK as f64) as usize;
+    let slices = ((hi - lo) / (2.0 * across.max(SURFACE_SPACING)))
+        .round()
+        .clamp(1.0, MAX_SPHERES_PER_LINK as f64) as usize;
     let width = (hi - lo) / slices as f64;
     let mut out = Vec::with_capacity(slices);
     for k in 0..slices {
@@ -305,7 +309,9 @@ pub fn collision_pairs(tree: &KinematicTree, spheres: &[Sphere], postures: &[&[f
                 })
                 .collect();
             let share = overlapping_samples.len() as f64 / PAIR_SAMPLES as f64;
-            if !(RARELY_OVERLAPPING..=ALWAYS_OVERLAPPING).contains(&share) || postures.iter().any(|q| overlapping(tree, spheres, q, a, b)) {
+            if !(RARELY_OVERLAPPING..=ALWAYS_OVERLAPPING).contains(&share)
+                || postures.iter().any(|q| overlapping(tree, spheres, q, a, b))
+            {
                 return false;
             }
             let meeting = overlapping_samples
@@ -333,7 +339,9 @@ pub fn contact_links(tree: &KinematicTree, tool_frame: Option<usize>) -> Vec<usi
     let chain = tree.ancestor_active_joints(frame);
     let mut kept: Vec<usize> = chain.iter().rev().take(3).map(|&j| body[tree.joints[j].child]).collect();
     kept.push(body[frame]);
-    (0..tree.links.len()).filter(|l| kept.contains(&body[*l]) && with_geometry(l)).collect()
+    (0..tree.links.len())
+        .filter(|l| kept.contains(&body[*l]) && with_geometry(l))
+        .collect()
 }
 
 /// The configuration within the limits near `start` that takes `measure` highest: a hill climb of
@@ -376,7 +384,9 @@ pub fn arm_reach(tree: &KinematicTree, roles: &RobotRoles) -> Option<ArmReach> {
             base.indices().iter().for_each(|&i| q[i] = 0.0);
         }
         let poses = tree.link_poses(&Isometry3::identity(), &q);
-        (poses[frame].translation.vector - poses[base_link].translation.vector).xy().norm()
+        (poses[frame].translation.vector - poses[base_link].translation.vector)
+            .xy()
+            .norm()
     };
     let mut rng = ChaCha8Rng::seed_from_u64(1);
     let farthest = (0..PAIR_SAMPLES)

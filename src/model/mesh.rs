@@ -179,16 +179,27 @@ pub fn load_triangles(path: &Path, scale: [f64; 3]) -> std::result::Result<(Vec<
             for m in &models {
                 let offset = vertices.len() as u32;
                 vertices.extend(m.mesh.positions.chunks_exact(3).map(|p| [p[0], p[1], p[2]].map(f64::from)));
-                faces.extend(m.mesh.indices.chunks_exact(3).map(|t| [t[0] + offset, t[1] + offset, t[2] + offset]));
+                faces.extend(
+                    m.mesh
+                        .indices
+                        .chunks_exact(3)
+                        .map(|t| [t[0] + offset, t[1] + offset, t[2] + offset]),
+                );
             }
             (vertices, faces)
         }
         other => return Err(format!("mesh format '.{other}' is not supported (STL, OBJ and COLLADA are)")),
     };
     if vertices.len() > MAX_MESH_VERTICES || faces.iter().flatten().any(|&i| i as usize >= vertices.len()) {
-        return Err(format!("mesh {} is too large or its faces name missing vertices", path.display()));
+        return Err(format!(
+            "mesh {} is too large or its faces name missing vertices",
+            path.display()
+        ));
     }
-    let scaled = vertices.iter().map(|v| [v[0] * scale[0], v[1] * scale[1], v[2] * scale[2]]).collect();
+    let scaled = vertices
+        .iter()
+        .map(|v| [v[0] * scale[0], v[1] * scale[1], v[2] * scale[2]])
+        .collect();
     Ok((scaled, faces))
 }
 

@@ -74,7 +74,11 @@ impl RoleDecls {
     /// one; held joints and postures are merged joint by joint.
     pub fn overridden_by(&self, options: &RoleDecls) -> RoleDecls {
         let merge = |base: &[(String, f64)], over: &[(String, f64)]| {
-            let mut out: Vec<(String, f64)> = base.iter().filter(|(n, _)| !over.iter().any(|(m, _)| m == n)).cloned().collect();
+            let mut out: Vec<(String, f64)> = base
+                .iter()
+                .filter(|(n, _)| !over.iter().any(|(m, _)| m == n))
+                .cloned()
+                .collect();
             out.extend(over.iter().cloned());
             out
         };
@@ -135,7 +139,9 @@ fn tool(source: &str, node: &roxmltree::Node) -> Result<ToolSpec> {
         (Some(name), None) => ToolSource::Builtin(name.to_string()),
         (None, Some(file)) => {
             let path = PathBuf::from(file);
-            let dir = std::path::Path::new(source).parent().filter(|_| std::path::Path::new(source).is_file());
+            let dir = std::path::Path::new(source)
+                .parent()
+                .filter(|_| std::path::Path::new(source).is_file());
             ToolSource::File(match dir {
                 Some(dir) if path.is_relative() => dir.join(path),
                 _ => path,
@@ -162,11 +168,17 @@ fn base(source: &str, node: &roxmltree::Node) -> Result<BaseDecl> {
     match node.attribute("type").map(str::trim) {
         Some("fixed") => Ok(BaseDecl::Fixed { link }),
         Some("planar") => {
-            let joints: Vec<String> = attribute(source, node, "joints")?.split_whitespace().map(str::to_string).collect();
+            let joints: Vec<String> = attribute(source, node, "joints")?
+                .split_whitespace()
+                .map(str::to_string)
+                .collect();
             let joints: [String; 3] = joints.try_into().map_err(|j: Vec<String>| {
                 SabreError::urdf(
                     source,
-                    format!("<sabre><base type=\"planar\"> needs three joints (x, y, yaw), got {}", j.len()),
+                    format!(
+                        "<sabre><base type=\"planar\"> needs three joints (x, y, yaw), got {}",
+                        j.len()
+                    ),
                 )
             })?;
             Ok(BaseDecl::Planar { joints, link })
@@ -208,7 +220,8 @@ pub fn tool_text(tool: &ToolSpec) -> Result<(String, String)> {
             }),
         ToolSource::File(path) => {
             let name = path.display().to_string();
-            let text = std::fs::read_to_string(path).map_err(|e| SabreError::urdf(&name, format!("cannot read tool file: {e}")))?;
+            let text =
+                std::fs::read_to_string(path).map_err(|e| SabreError::urdf(&name, format!("cannot read tool file: {e}")))?;
             Ok((name, text))
         }
         ToolSource::Text { name, text } => Ok((name.clone(), text.clone())),
@@ -238,7 +251,10 @@ mod tests {
         )
         .unwrap();
         let tool = decls.tool.unwrap();
-        assert_eq!((tool.parent.as_str(), tool.xyz, tool.frame.as_deref()), ("hand", [0.0, 0.0, 0.05], Some("grasp")));
+        assert_eq!(
+            (tool.parent.as_str(), tool.xyz, tool.frame.as_deref()),
+            ("hand", [0.0, 0.0, 0.05], Some("grasp"))
+        );
         assert_eq!(tool.source, ToolSource::Builtin("hook".into()));
         assert_eq!(decls.tool_frame.as_deref(), Some("tcp"));
         assert_eq!(decls.hold, vec![("finger".to_string(), 0.04)]);

@@ -2,9 +2,9 @@
 
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
+use super::assembly::{assemble as assemble_robot, RobotRoles};
 use super::collision_shape::closest_point;
 use super::dynamics::{joint_space_terms, DynamicsWorkspace};
-use super::assembly::{assemble as assemble_robot, RobotRoles};
 use super::generated;
 use super::inertials::{assume_missing, AssumedInertial, DEFAULT_DENSITY};
 use super::kinematics::{Frames, JointKind, JointLimits, KinematicTree};
@@ -183,7 +183,8 @@ impl Scene {
                 ));
             }
         }
-        let declared = !(ext.spheres.is_empty() && ext.pairs.is_empty() && ext.rollout_contact_links.is_empty() && ext.arm_reach.is_none());
+        let declared =
+            !(ext.spheres.is_empty() && ext.pairs.is_empty() && ext.rollout_contact_links.is_empty() && ext.arm_reach.is_none());
         let (spheres, sphere_pairs, rollout_contact_links, arm_reach) = if declared {
             declared_geometry(&tree, &ext)
         } else {
@@ -477,7 +478,10 @@ fn poses_many(
 /// The spheres, pairs, contact links and reach a robot's `<sabre>` block declares (checked by
 /// `check_extension`); without declared contact links every link with collision geometry touches.
 #[allow(clippy::type_complexity)]
-fn declared_geometry(tree: &KinematicTree, ext: &SabreExtension) -> (Vec<Sphere>, Vec<(usize, usize)>, Vec<usize>, Option<ArmReach>) {
+fn declared_geometry(
+    tree: &KinematicTree,
+    ext: &SabreExtension,
+) -> (Vec<Sphere>, Vec<(usize, usize)>, Vec<usize>, Option<ArmReach>) {
     let spheres: Vec<Sphere> = ext
         .spheres
         .iter()
@@ -497,7 +501,9 @@ fn declared_geometry(tree: &KinematicTree, ext: &SabreExtension) -> (Vec<Sphere>
         .map(|n| tree.link_id(n).expect("checked"))
         .collect();
     if contact.is_empty() {
-        contact = (0..tree.links.len()).filter(|&l| !tree.links[l].collisions.is_empty()).collect();
+        contact = (0..tree.links.len())
+            .filter(|&l| !tree.links[l].collisions.is_empty())
+            .collect();
     }
     let reach = ext.arm_reach.as_ref().map(|a| ArmReach {
         base_link: tree.link_id(&a.base).expect("checked"),

@@ -73,7 +73,10 @@ impl RobotOptions {
         };
         for (name, value) in self.hold.iter().chain(&self.home).chain(&self.start).chain(&self.work) {
             if !value.is_finite() {
-                return Err(SabreError::invalid(format!("joint '{name}'"), format!("value {value} is not finite")));
+                return Err(SabreError::invalid(
+                    format!("joint '{name}'"),
+                    format!("value {value} is not finite"),
+                ));
             }
         }
         Ok(RoleDecls {
@@ -117,9 +120,19 @@ pub(crate) fn visual_rows(tree: &KinematicTree) -> Vec<VisualRow> {
                 VisualGeometry::Sphere { radius } => ("sphere", vec![*radius], None, [1.0; 3]),
                 VisualGeometry::Cylinder { radius, length } => ("cylinder", vec![*radius, *length], None, [1.0; 3]),
                 VisualGeometry::Capsule { radius, length } => ("capsule", vec![*radius, *length], None, [1.0; 3]),
-                VisualGeometry::Mesh { path, scale, .. } => ("mesh", vec![], path.as_ref().map(|p| p.display().to_string()), *scale),
+                VisualGeometry::Mesh { path, scale, .. } => {
+                    ("mesh", vec![], path.as_ref().map(|p| p.display().to_string()), *scale)
+                }
             };
-            out.push((link.name.clone(), kind.into(), size, matrix_entries(&v.origin), v.rgba, file, scale));
+            out.push((
+                link.name.clone(),
+                kind.into(),
+                size,
+                matrix_entries(&v.origin),
+                v.rgba,
+                file,
+                scale,
+            ));
         }
     }
     out

@@ -123,7 +123,9 @@ impl PyScene {
             let parsed_robot = parsed(&robot_source.0, &robot_source.1, true)?;
             let parsed_object = parsed(&obj_source.0, &obj_source.1, false)?;
             let default_pose = crate::model::scene::default_object_pose(&obj_source.1);
-            let pose = obj_pose.as_deref().or((obj_source.0 == "builtin").then_some(&default_pose[..]));
+            let pose = obj_pose
+                .as_deref()
+                .or((obj_source.0 == "builtin").then_some(&default_pose[..]));
             Scene::from_parts(parsed_robot, parsed_object, pose, &robot.decls()?)?
                 .with_object_joint(joint.as_deref(), &hold.unwrap_or_default(), handle.as_deref())?
                 .with_density(density)
