@@ -393,7 +393,7 @@ pub fn arm_reach(tree: &KinematicTree, roles: &RobotRoles) -> Option<ArmReach> {
         .map(|_| random_configuration(tree, &mut rng))
         .max_by(|a, b| measure(a).total_cmp(&measure(b)))?;
     let longest = climb(tree, farthest, &measure, &mut rng);
-    (longest > 0.0).then(|| ArmReach {
+    (longest > 0.0).then_some(ArmReach {
         base_link,
         frame_link: frame,
         max: REACH_SHARE * longest,

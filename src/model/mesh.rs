@@ -138,9 +138,12 @@ fn read_pieces(path: &Path, bytes: &[u8]) -> std::result::Result<Vec<Vec<[f64; 3
     }
 }
 
+/// A triangle mesh as vertices and vertex-index triples.
+pub type Triangles = (Vec<[f64; 3]>, Vec<[u32; 3]>);
+
 /// The vertices and triangles of a COLLADA document, each geometry placed by the transforms of the
 /// scene nodes that instance it and scaled by the document's `<unit meter>`.
-fn read_collada(bytes: &[u8]) -> std::result::Result<(Vec<[f64; 3]>, Vec<[u32; 3]>), String> {
+fn read_collada(bytes: &[u8]) -> std::result::Result<Triangles, String> {
     let scene = mesh_loader::collada::from_slice(bytes).map_err(|e| format!("cannot read COLLADA: {e}"))?;
     let mut vertices = Vec::new();
     let mut faces = Vec::new();
@@ -154,7 +157,7 @@ fn read_collada(bytes: &[u8]) -> std::result::Result<(Vec<[f64; 3]>, Vec<[u32; 3
 
 /// The triangles of the mesh at `path` (STL, OBJ or COLLADA), scaled per axis, as vertices and
 /// vertex-index triples: what a viewer draws.
-pub fn load_triangles(path: &Path, scale: [f64; 3]) -> std::result::Result<(Vec<[f64; 3]>, Vec<[u32; 3]>), String> {
+pub fn load_triangles(path: &Path, scale: [f64; 3]) -> std::result::Result<Triangles, String> {
     let bytes = std::fs::read(path).map_err(|e| format!("cannot read mesh {}: {e}", path.display()))?;
     let extension = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     let (vertices, faces) = match extension.as_str() {

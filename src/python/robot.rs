@@ -184,9 +184,6 @@ pub(crate) fn roles_row(scene: &Scene) -> RolesRow {
 
 /// The triangles of a mesh file (STL, OBJ or COLLADA) scaled per axis: (vertices (V, 3), faces (F, 3)).
 #[pyfunction]
-#[allow(clippy::type_complexity)]
-pub(crate) fn mesh_triangles(path: PathBuf, scale: [f64; 3]) -> PyResult<(Vec<[f64; 3]>, Vec<[u32; 3]>)> {
-    Ok(run(|| {
-        crate::model::mesh::load_triangles(&path, scale).map_err(|e| SabreError::urdf(path.display().to_string(), e))
-    })?)
+pub(crate) fn mesh_triangles(path: PathBuf, scale: [f64; 3]) -> PyResult<crate::model::mesh::Triangles> {
+    run(|| crate::model::mesh::load_triangles(&path, scale).map_err(|e| SabreError::urdf(path.display().to_string(), e)))
 }
