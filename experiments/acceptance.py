@@ -10,6 +10,7 @@ one success needs), mean wrench, real-time factor, planning time, and the seeds 
 
     .venv/bin/python experiments/acceptance.py --seeds 10
     .venv/bin/python experiments/acceptance.py --objects shelf drawer --seeds 3 --variant N IO
+    .venv/bin/python experiments/acceptance.py --robot panda_pedestal --seeds 5 --variant N IO
 """
 
 from __future__ import annotations
@@ -20,11 +21,13 @@ from pathlib import Path
 import sabre
 from sabre.experiments.figures import acceptance_table
 from sabre.experiments.runner import acceptance_specs, run_specs
+from sabre.robot_examples import EXAMPLE_ROBOTS
 
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--objects", nargs="+", choices=sabre.OBJECTS, default=list(sabre.OBJECTS))
+    parser.add_argument("--robot", choices=("royalpanda", *EXAMPLE_ROBOTS), default="royalpanda", help="the robot")
+    parser.add_argument("--objects", nargs="+", choices=sabre.OBJECTS, default=None, help="default: the robot's objects")
     parser.add_argument("--variant", nargs="+", choices=sabre.VARIANTS, default=["IO"], help="one or more variants")
     parser.add_argument("--seeds", type=int, default=10, help="seeds per object and variant")
     parser.add_argument("--first-seed", type=int, default=0)
@@ -35,10 +38,11 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     runs = acceptance_specs(
         range(args.first_seed, args.first_seed + args.seeds),
-        objects=args.objects,
+        objects=args.objects or sabre.OBJECTS,
         variants=args.variant,
         duration=args.duration,
         replan_rate=args.replan_rate,
+        robot=args.robot,
     )
     records = run_specs(runs, Path(args.out) / "acceptance", workers=args.workers)
     print(

@@ -29,6 +29,7 @@ from .mujoco import MujocoPlant
 from .planner import VARIANTS, Controller, ControllerConfig, IterationStats, likelihood_weights
 from .plants import PlantInterface
 from .realtime import RealtimeCascade, TickResult
+from .robots import TOOLS, Tool
 from .safety import (
     ConstraintRows,
     EnergyTank,
@@ -55,6 +56,8 @@ __all__ = [
     "Scene",
     "ROBOTS",
     "OBJECTS",
+    "Tool",
+    "TOOLS",
     "RolloutModel",
     "RolloutResult",
     "CONTACT_MODELS",

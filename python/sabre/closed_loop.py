@@ -31,26 +31,11 @@ __all__ = ["run_episode", "paper_start_state"]
 
 
 def paper_start_state(scene: Scene) -> np.ndarray:
-    """The paper's starting condition: base at (−3, −3), arm folded near its joint limits and close
-    to self-collision (shoulder back, elbow fully bent), everything at rest, object closed."""
-    x = scene.default_state()
-    names = scene.joint_names
-    start = {
-        "base_x": -3.0,
-        "base_y": -3.0,
-        "base_yaw": 0.0,
-        "panda_joint1": 0.0,
-        "panda_joint2": -1.6,
-        "panda_joint3": 0.0,
-        "panda_joint4": -2.95,
-        "panda_joint5": 0.0,
-        "panda_joint6": 1.6,
-        "panda_joint7": 0.785,
-    }
-    for i, name in enumerate(names):
-        if name in start:
-            x[i] = np.clip(start[name], scene.q_lower[i], scene.q_upper[i])
-    return x
+    """The robot's start state (:meth:`Scene.start_state`): its declared ``<start>`` posture over its
+    home posture, at rest, object closed. For the RoyalPanda it is the paper's starting condition:
+    base at (−3, −3), arm folded near its joint limits and close to self-collision (shoulder back,
+    elbow fully bent); a robot that declares no start begins at its home posture."""
+    return scene.start_state()
 
 
 def run_episode(

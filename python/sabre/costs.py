@@ -84,7 +84,7 @@ def _weight(name: str, value: float) -> float:
 
 @dataclass(frozen=True)
 class TargetPose(Term):
-    """(29) ‖log(T⁻¹ T*)‖²_W of robot frame ``frame``.
+    """(29) ‖log(T⁻¹ T*)‖²_W of robot frame ``frame`` (None: the scene's tool frame).
 
     The target is ``target`` (4, 4) in the world, or, with ``object_frame``, the pose
     ``object_frame ∘ target`` that moves with the object (e.g. a grasp pose on the handle).
@@ -96,7 +96,7 @@ class TargetPose(Term):
     """
 
     target: np.ndarray = field(default_factory=lambda: np.eye(4))
-    frame: str = "grasp"
+    frame: str | None = None
     object_frame: str | None = None
     linear_weight: float = 100.0
     angular_weight: float = 100.0
@@ -121,7 +121,7 @@ class TargetPose(Term):
             weights = [_weight("linear_weight", self.linear_weight)] * 3 + [_weight("angular_weight", self.angular_weight)] * 3
         return {
             "kind": "pose",
-            "frame": self.frame,
+            "frame": self.frame if self.frame is not None else scene.require_tool_frame("TargetPose"),
             "target": target.ravel().tolist(),
             "object_frame": self.object_frame,
             "weights": weights,
@@ -255,7 +255,9 @@ class Power(Term):
 
 @dataclass(frozen=True)
 class BaseBox(Term):
-    """Base position limits [x_min, x_max] × [y_min, y_max] (experiments use ±2 m): w + w_s · excess²."""
+    """Base position limits [x_min, x_max] × [y_min, y_max] (experiments use ±2 m): w + w_s · excess²,
+    on the coordinates of the scene's holonomic base (:attr:`~sabre.Scene.base_indices`); a robot
+    with a fixed base has none, and compiling the term for it raises :class:`InvalidValueError`."""
 
     lower: Sequence[float] = (-2.0, -2.0)
     upper: Sequence[float] = (2.0, 2.0)
@@ -306,7 +308,8 @@ class Obstacles(Term):
 class BaseClearance(Term):
     """Keeps the robot base's footprint clear of the object's moving parts: w + w_s · p².
 
-    The footprint is a vertical cylinder about ``link``'s origin, (radius, bottom, top) in metres
+    The footprint is a vertical cylinder about ``link``'s origin (None: the scene's
+    :attr:`~sabre.Scene.base_link`), (radius, bottom, top) in metres
     with heights relative to the link origin; by default the cylinder that bounds the link's URDF
     collision primitives. It is grown by ``margin`` on every side. The moving parts are points
     spread at most ``spacing`` apart over the collision primitives of the object's moving links; p
@@ -315,7 +318,7 @@ class BaseClearance(Term):
     without this term the sampler cannot see the door landing on the base.
     """
 
-    link: str = "base_link"
+    link: str | None = None
     footprint: Sequence[float] | None = None
     margin: float = 0.05
     spacing: float = 0.1
@@ -332,7 +335,7 @@ class BaseClearance(Term):
             raise InvalidValueError(f"spacing must be positive and finite, got {self.spacing}")
         return {
             "kind": "base_clearance",
-            "link": str(self.link),
+            "link": str(self.link) if self.link is not None else scene.base_link,
             "footprint": footprint,
             "margin": _weight("margin", self.margin),
             "spacing": float(self.spacing),

@@ -226,8 +226,8 @@ class PlanRecorder:
 
     def __init__(self, scene: Scene) -> None:
         self.scene = scene
-        #: the frame whose path is recorded: "grasp" where the robot has one, else its last frame
-        self.frame = "grasp" if "grasp" in scene.frame_names else scene.frame_names[-1]
+        #: the frame whose path is recorded: the robot's tool frame where it has one, else its last frame
+        self.frame = scene.tool_frame or scene.frame_names[-1]
         self._plans: list[RecordedPlan] = []
 
     def __len__(self) -> int:

@@ -17,8 +17,8 @@ from .scene import Scene
 
 __all__ = ["LowPass", "tau_ext_from_wrench", "SENSOR_FRAME", "ObjectEstimate", "ObjectStateEstimator"]
 
-#: The frame the wrist wrench is measured at (its moment is about this frame's origin), as
-#: :attr:`sabre.Plant.wrench` reports it (force and torque in world axes).
+#: The RoyalPanda's wrist-sensor frame: the wrench is measured about its origin, as :attr:`sabre.Plant.wrench`
+#: reports it (force and torque in world axes). Any robot's is :attr:`sabre.Scene.wrist_sensor_link`.
 SENSOR_FRAME = "panda_link8"
 
 
@@ -26,11 +26,12 @@ def tau_ext_from_wrench(
     scene: Scene,
     q: Sequence[float] | np.ndarray,
     wrench: Sequence[float] | np.ndarray,
-    frame: str = SENSOR_FRAME,
+    frame: str | None = None,
     axes: str | None = None,
 ) -> np.ndarray:
     """(nq,) external joint torques J(q)ᵀ w of a wrist wrench w = [f; m] that the environment
-    exerts on the hand, its moment about ``frame``'s origin. ``axes`` names the robot frame whose
+    exerts on the hand, its moment about ``frame``'s origin (None: the scene's wrist sensor,
+    :attr:`sabre.Scene.wrist_sensor_link`). ``axes`` names the robot frame whose
     axes the components are given in (a sensor's own frame, as an F/T driver publishes it); None:
     world axes. Contacts on links before the sensor do not show in it."""
     w = as_float_array("wrench", wrench, (6,))
@@ -38,7 +39,7 @@ def tau_ext_from_wrench(
     if axes is not None:
         rotation = scene.fk(q, axes)[:3, :3]
         w = np.concatenate([rotation @ w[:3], rotation @ w[3:]])
-    return scene.jacobian(q, frame).T @ w
+    return scene.jacobian(q, scene.wrist_sensor_link if frame is None else frame).T @ w
 
 
 class LowPass:
@@ -80,7 +81,7 @@ class ObjectStateEstimator:
     Assumptions (docs/ros2.md): the object is the scene's single-joint articulation at its known
     pose; once the hand hooks the handle, the hook point stays fixed in the handle frame (no
     sliding), so o is the coordinate that puts the handle-frame point recorded at hooking where the
-    hand's ``hand_frame`` measures it. ``handle`` is the object frame or link to grasp, as
+    hand's ``hand_frame`` (None: the scene's tool frame) measures it. ``handle`` is the object frame or link to grasp, as
     :class:`sabre.tasks.OpenObject`'s ``handle`` (a link with geometry gets its inferred handle
     frame). Hooking is declared when the hand frame is within ``hook_distance`` m of the handle
     frame and the wrist force exceeds ``contact_force`` N; it ends when the best fit is still
@@ -95,7 +96,7 @@ class ObjectStateEstimator:
         scene: Scene,
         initial: np.ndarray | None = None,
         *,
-        hand_frame: str = "grasp",
+        hand_frame: str | None = None,
         handle: str = "handle_frame",
         hook_distance: float = 0.08,
         release_distance: float = 0.04,
@@ -105,6 +106,7 @@ class ObjectStateEstimator:
     ) -> None:
         if scene.no != 1:
             raise InvalidValueError(f"the estimator handles single-joint objects, this one has {scene.no} joints")
+        hand_frame = scene.require_tool_frame("ObjectStateEstimator") if hand_frame is None else hand_frame
         if hand_frame not in scene.frame_names:
             raise InvalidValueError(f"hand_frame {hand_frame!r} is not a robot frame: {scene.frame_names}")
         self.scene = scene

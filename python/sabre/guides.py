@@ -44,7 +44,7 @@ def servo_guide(
     q0: np.ndarray,
     targets: np.ndarray,
     dt: float,
-    frame: str = "grasp",
+    frame: str | None = None,
     gain: float = _GUIDE.gain,
     max_linear: float = _GUIDE.max_linear,
     max_angular: float = _GUIDE.max_angular,
@@ -53,7 +53,8 @@ def servo_guide(
     joint_margin: float = _GUIDE.joint_margin,
     limit_weighting: bool = _GUIDE.limit_weighting,
 ) -> np.ndarray:
-    """(K, nu) joint velocities that servo ``frame`` along ``targets`` (K+1, 4, 4) from q0 (nq,).
+    """(K, nu) joint velocities that servo ``frame`` (None: the scene's tool frame) along ``targets``
+    (K+1, 4, 4) from q0 (nq,).
 
     Step k commands v_k = J⁺(ξ_k + gain·e_k): ξ_k the targets' own motion from k to k+1 (feed
     forward), e_k the pose error at k (world frame, linear then rotation vector), the Cartesian
@@ -82,4 +83,5 @@ def servo_guide(
         joint_margin=float(joint_margin),
         limit_weighting=bool(limit_weighting),
     )
+    frame = frame if frame is not None else scene.require_tool_frame("servo_guide")
     return _core.servo_guide(scene._core, q0, targets, float(dt), frame, config)

@@ -41,7 +41,10 @@ class LowLevelController:
     last wrist joint turns only the hand (M_ii ≈ 0.007 kg m²), and with K = M Λ alone it would give
     0.27 N m per rad/s and 0.27 N m of integral torque, so a hook pulling on a held door twists the
     hand until the finger slides off the bar. ``gain_inertia_floor=0`` (the default) is plain (53);
-    a task can ask for a floor per phase (:meth:`sabre.tasks.Task.gain_inertia_floor`).
+    ``"auto"`` chooses one from the robot's dynamics and the step (:attr:`max_stable_floor`); a
+    task can ask for a floor per phase (:meth:`sabre.tasks.Task.gain_inertia_floor`). A floor too
+    large for the step, one that would make a light joint diverge, is refused when the controller
+    drives the plant (:meth:`track`, :meth:`follow`).
     """
 
     def __init__(
@@ -52,20 +55,33 @@ class LowLevelController:
         bandwidth: float = _LOW_LEVEL.bandwidth,
         integral_gain: float = _LOW_LEVEL.integral_gain,
         integral_limit: float = _LOW_LEVEL.integral_limit,
-        gain_inertia_floor: float = _LOW_LEVEL.gain_inertia_floor,
+        gain_inertia_floor: float | str = _LOW_LEVEL.gain_inertia_floor,
     ) -> None:
         if not isinstance(scene, Scene):
             raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
         self.scene = scene
-        dt = as_positive("dt", dt)
+        self.dt = dt = as_positive("dt", dt)
+        auto = gain_inertia_floor == "auto"
         config = core_config(
             _core.LowLevelConfig,
             bandwidth=as_positive("bandwidth", bandwidth),
             integral_gain=as_non_negative("integral_gain", integral_gain),
             integral_limit=as_non_negative("integral_limit", integral_limit),
-            gain_inertia_floor=as_non_negative("gain_inertia_floor", gain_inertia_floor),
+            gain_inertia_floor=0.0 if auto else as_non_negative("gain_inertia_floor", gain_inertia_floor),
         )
         self._core = _core.LowLevelController(scene._core, dt, config)
+        if auto:
+            self._core.gain_inertia_floor = 0.5 * self.max_stable_floor
+
+    @property
+    def max_stable_floor(self) -> float:
+        """The largest gain inertia floor (kg m²) at which no joint's loop overshoots at the step ``dt``:
+        a joint of inertia m (felt with the others free) and diagonal mass-matrix entry M_jj gets a
+        loop gain Λ_D·dt·(1 + max(0, floor − M_jj)/m) per step, at most 1 (above 2 it diverges).
+        Driving the plant with a larger floor raises :class:`InvalidValueError` naming the joint.
+        ``gain_inertia_floor="auto"`` takes half of it: light joints stiff enough to hold a hook on
+        its bar, every joint well within its stable gain."""
+        return float(self._core.max_stable_floor(self.dt))
 
     @property
     def gain_inertia_floor(self) -> float:

@@ -79,14 +79,16 @@ class SafetyConfig:
     that class's h (rad for joint limits, m for the base box, m² for self-collision, arm reach and
     obstacles); the defaults keep the slack that the
     penalties allow inside the true limits. ``enabled``: classes without rows. ``base_box``:
-    (x_min, x_max, y_min, y_max) in m, or None for no box. ``passivity_alpha``: α of (56)
+    (x_min, x_max, y_min, y_max) in m on a holonomic base's x and y, or None for no box (a
+    fixed-base robot never has base-box rows). ``passivity_alpha``: α of (56)
     (1/s; the paper's 1 avoids chattering). ``tank_floor``: ε (J). ``max_obstacles``: obstacle
     slots (fixed QP structure). ``max_iterations``, ``tolerance``: Clarabel's bounds.
     ``screening``: take the exact shortcuts (projected command, remembered active set, rows that
     cannot bind left out); off, every call runs Clarabel on the full QP. Same solution either way.
     ``task_weight``, ``sequential_task_weight`` (λ in 1/m², beyond the paper): the QP measures
     the change of the command in the metric M = (I + λJ_wᵀJ_w) / (1 + λσ²_max(J_w)), J_w the
-    Jacobian of ``task_frame`` with its angular rows scaled by ℓ = 0.1 m, so that a constraint is
+    Jacobian of ``task_frame`` (None: the scene's tool frame; a robot without one gets the plain
+    metric) with its angular rows scaled by ℓ = 0.1 m, so that a constraint is
     met by moving what keeps the hand on its path (the base, the elbow) before the hand itself,
     and no correction costs more than in the paper's ‖ũ − u‖² (41), which λ = 0 gives.
     ``task_weight`` applies to :meth:`SafetyFilter.filter` (default 0: the paper's, in the 1 kHz
@@ -107,7 +109,7 @@ class SafetyConfig:
     screening: bool = _SAFETY.screening
     task_weight: float = _SAFETY.task_weight
     sequential_task_weight: float = _SAFETY.sequential_task_weight
-    task_frame: str = _SAFETY.task_frame
+    task_frame: str | None = None
 
     def __post_init__(self) -> None:
         kinematic = CLASSES[:-1]
@@ -150,8 +152,8 @@ class SafetyConfig:
             raise InvalidValueError(f"screening: expected a bool, got {self.screening!r}")
         object.__setattr__(self, "task_weight", as_non_negative("task_weight", self.task_weight))
         object.__setattr__(self, "sequential_task_weight", as_non_negative("sequential_task_weight", self.sequential_task_weight))
-        if not isinstance(self.task_frame, str):
-            raise InvalidValueError(f"task_frame: expected a frame name, got {self.task_frame!r}")
+        if self.task_frame is not None and not isinstance(self.task_frame, str):
+            raise InvalidValueError(f"task_frame: expected a frame name or None, got {self.task_frame!r}")
 
     def _core_config(self) -> _core.SafetyConfig:
         """The settings as the core's config object; without a base box its class is disabled
@@ -168,7 +170,7 @@ class SafetyConfig:
             "screening": bool(self.screening),
             "task_weight": self.task_weight,
             "sequential_task_weight": self.sequential_task_weight,
-            "task_frame": self.task_frame,
+            "task_frame": self.task_frame or "",
         }
         if self.base_box is not None:
             fields["base_box"] = list(self.base_box)

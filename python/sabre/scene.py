@@ -6,15 +6,16 @@ import os
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from . import _core
 from ._validate import as_array, as_finite, as_float_array, as_positive, readonly
-from .errors import AssumedInertialWarning, InvalidValueError, ShapeError, UrdfError
+from .errors import AssumedInertialWarning, InvalidValueError, ShapeError, UnknownFrameError, UrdfError
+from .robots import Tool, robot_options
 
-__all__ = ["Scene", "StateParts", "CollisionShape", "AssumedInertial", "ROBOTS", "OBJECTS", "DEFAULT_DENSITY"]
+__all__ = ["Scene", "StateParts", "CollisionShape", "AssumedInertial", "Visual", "ROBOTS", "OBJECTS", "DEFAULT_DENSITY"]
 
 #: Built-in robots (compiled into the library).
 ROBOTS: tuple[str, ...] = ("royalpanda",)
@@ -60,12 +61,34 @@ def _warn_assumed(scene: Scene) -> Scene:
     return scene
 
 
+def _object_source(obj: str) -> tuple[str, str]:
+    """(kind, value) of an object given as a file or a built-in name."""
+    if os.path.isfile(obj):
+        return "file", obj
+    if obj in OBJECTS:
+        return "builtin", obj
+    raise UrdfError(f"URDF {obj}: object file does not exist (nor is it a built-in object: {', '.join(OBJECTS)})")
+
+
+def _collision_shapes(rows: list) -> tuple[CollisionShape, ...]:
+    return tuple(
+        CollisionShape(
+            link=link,
+            kind=kind,
+            size=tuple(size),
+            pose=readonly(np.asarray(pose, dtype=float).reshape(4, 4)),
+            points=readonly(np.asarray(points, dtype=float).reshape(-1, 3)),
+        )
+        for link, kind, size, pose, points in rows
+    )
+
+
 class StateParts(NamedTuple):
     """The parts of a state ``x = [q, q̇, o, ȯ]`` (:meth:`Scene.split_state`), each a view into x
     with x's leading axes."""
 
     q: np.ndarray
-    """(..., nq) robot joint positions (base x, y, yaw, then the arm)."""
+    """(..., nq) robot joint positions, in the order of :attr:`Scene.joint_names`."""
     q_dot: np.ndarray
     """(..., nq) robot joint velocities."""
     o: np.ndarray
@@ -109,32 +132,66 @@ class AssumedInertial(NamedTuple):
     (mass, centre of mass, inertia) the file declared and were kept."""
 
 
+@dataclass(frozen=True)
+class Visual:
+    """One URDF ``<visual>`` of a link.
+
+    Attributes:
+        link: the link it belongs to. kind: "box", "sphere", "cylinder", "capsule" or "mesh".
+        size: box extents (x, y, z); sphere (radius,); cylinder and capsule (radius, length); mesh ().
+        pose: (4, 4) pose in the link frame. rgba: colour in [0, 1].
+        mesh: a mesh's file (None when it was not found or for primitives); scale: its per-axis scale.
+    """
+
+    link: str
+    kind: str
+    size: tuple[float, ...]
+    pose: np.ndarray
+    rgba: tuple[float, float, float, float]
+    mesh: str | None
+    scale: tuple[float, float, float]
+
+    @staticmethod
+    def of(row: tuple) -> Visual:
+        link, kind, size, pose, rgba, mesh, scale = row
+        return Visual(
+            link, kind, tuple(size), readonly(np.asarray(pose, dtype=float).reshape(4, 4)), tuple(rgba), mesh, tuple(scale)
+        )
+
+
 class Scene:
     """A robot and an articulated object.
 
-    State layout: ``x = [q, q̇, o, ȯ]`` with ``nq`` robot coordinates (base x, y, yaw, then the arm),
-    ``no`` object coordinates (hinge angle in rad or slide in m). Input ``u = q̇*`` (``nu = nq``):
-    commanded joint velocities; base velocities are world-frame rates (ẋ, ẏ, yaw rate).
+    State layout: ``x = [q, q̇, o, ȯ]`` with ``nq`` robot coordinates (its movable joints in URDF
+    order, held joints left out), ``no`` object coordinates (hinge angle in rad or slide in m). Input
+    ``u = q̇*`` (``nu = nq``): commanded joint velocities; a holonomic base's velocities are
+    world-frame rates (ẋ, ẏ, yaw rate) at :attr:`base_indices`.
 
     Build one with :meth:`load` (built-in assets) or :meth:`from_urdf` (your own files).
     """
 
-    __slots__ = ("__weakref__", "_core")
+    __slots__ = ("__weakref__", "_core", "_roles")
 
     def __init__(self, core: _core.Scene) -> None:
         if not isinstance(core, _core.Scene):
             raise TypeError("use Scene.load(...) or Scene.from_urdf(...) to build a scene")
         self._core = core
+        self._roles = core.roles()
 
     # -- construction -------------------------------------------------------------------------
     @classmethod
-    def load(cls, robot: str = "royalpanda", obj: str = "shelf", obj_pose: Sequence[float] | None = None) -> Scene:
+    def load(
+        cls, robot: str = "royalpanda", obj: str = "shelf", obj_pose: Sequence[float] | None = None, **options: Any
+    ) -> Scene:
         """A scene from built-in assets; ``obj_pose`` is (x, y, z, roll, pitch, yaw) of the object.
 
         Without ``obj_pose`` the object stands in front of the robot's default base pose
-        (shelf and microwave at x = 1.0 m, dishwasher and drawer at x = 1.2 m).
+        (shelf and microwave at x = 1.0 m, dishwasher and drawer at x = 1.2 m). ``options`` are
+        the robot options of :meth:`from_urdf` (``tool``, ``robot_hold``, ...).
         """
-        return cls(_core.Scene.load(str(robot), str(obj), _pose(obj_pose)))
+        if not options:
+            return cls(_core.Scene.load(str(robot), str(obj), _pose(obj_pose)))
+        return cls._build(("builtin", str(robot)), ("builtin", str(obj)), obj_pose, (None, None, None, DEFAULT_DENSITY), options)
 
     @classmethod
     def from_urdf(
@@ -147,10 +204,20 @@ class Scene:
         hold: Mapping[str, float] | None = None,
         handle: str | None = None,
         density: float = DEFAULT_DENSITY,
+        tool: Tool | None = None,
+        tool_frame: str | None = None,
+        robot_hold: Mapping[str, float] | None = None,
+        base: str | Sequence[str] | None = None,
+        base_link: str | None = None,
+        home: Mapping[str, float] | None = None,
+        start: Mapping[str, float] | None = None,
+        work: Mapping[str, float] | None = None,
+        wrist_sensor: str | None = None,
     ) -> Scene:
-        """A scene from a robot URDF and an object URDF on disk. Collision geometry: boxes, spheres,
-        cylinders, capsules, and STL or OBJ meshes as convex hulls (docs/objects.md says where mesh
-        files are looked for, ``package://`` included).
+        """A scene from a robot URDF and an object URDF on disk (or a built-in object's name, see
+        :data:`OBJECTS`). Collision geometry: boxes, spheres, cylinders, capsules, and STL, OBJ or
+        COLLADA meshes as convex hulls (docs/objects.md says where mesh files are looked for,
+        ``package://`` included).
 
         An object with several movable joints (a cabinet with two doors and two drawers) is opened
         one joint at a time: ``joint`` names the one that stays movable, or ``handle`` names a link
@@ -163,19 +230,39 @@ class Scene:
         lists them (:attr:`assumed_inertials`) and an :class:`~sabre.errors.AssumedInertialWarning`
         names each such link.
 
+        The robot's options override what its URDF's ``<sabre>`` block declares (docs/robots.md):
+        ``tool`` attaches a :class:`~sabre.Tool` (e.g. the shipped hook) to one of its links;
+        ``tool_frame`` names the control frame tasks steer (default: the tool's, else the one
+        frame-only leaf link the most joints move); ``robot_hold`` fixes robot joints at a value
+        like the object's ``hold`` (by default every joint that does not move the tool frame, a
+        gripper's fingers for instance, is held at its home value); ``base`` is ``"fixed"`` or the
+        three planar joints (x, y, yaw) of a holonomic base carrying ``base_link`` (default:
+        detected); ``home``, ``start`` and ``work`` give joint values of the home, start and
+        working postures (the last: hand forward, what scripted motions pull toward);
+        ``wrist_sensor`` names the link of the wrist force-torque sensor.
+
         Raises:
             UrdfError: a missing or malformed file, a mesh not found (the message lists where it
                 looked), a ``joint`` or ``handle`` that does not pick one movable joint (the message
-                lists the candidates).
+                lists the candidates), a robot role that names what the robot does not have.
             InvalidValueError: a non-finite held value, a non-positive density.
         """
-        for label, path in (("robot", robot_path), ("object", obj_path)):
-            if not os.path.isfile(path):
-                raise UrdfError(f"URDF {path}: {label} file does not exist")
-        core = _core.Scene.from_urdf(
-            os.fspath(robot_path), os.fspath(obj_path), _pose(obj_pose), *_selection(joint, hold, handle), _density(density)
+        robot_path = os.fspath(robot_path)
+        if not os.path.isfile(robot_path):
+            raise UrdfError(f"URDF {robot_path}: robot file does not exist")
+        obj_source = _object_source(os.fspath(obj_path))
+        options = dict(
+            tool=tool,
+            tool_frame=tool_frame,
+            robot_hold=robot_hold,
+            base=base,
+            base_link=base_link,
+            home=home,
+            start=start,
+            work=work,
+            wrist_sensor=wrist_sensor,
         )
-        return _warn_assumed(cls(core))
+        return cls._build(("file", robot_path), obj_source, obj_pose, (joint, hold, handle, density), options)
 
     @classmethod
     def from_urdf_strings(
@@ -188,12 +275,32 @@ class Scene:
         hold: Mapping[str, float] | None = None,
         handle: str | None = None,
         density: float = DEFAULT_DENSITY,
+        **options: Any,
     ) -> Scene:
-        """A scene from URDF text; ``joint``, ``hold``, ``handle`` and ``density`` as in
-        :meth:`from_urdf` (relative mesh paths resolve against the working directory and
+        """A scene from URDF text; ``joint``, ``hold``, ``handle``, ``density`` and the robot ``options``
+        as in :meth:`from_urdf` (relative mesh paths resolve against the working directory and
         ``SABRE_MESH_PATH``, ``package://`` only through the package paths)."""
+        if options:
+            return cls._build(
+                ("text", str(robot_urdf)), ("text", str(obj_urdf)), obj_pose, (joint, hold, handle, density), options
+            )
         core = _core.Scene.from_urdf_strings(
             robot_urdf, obj_urdf, _pose(obj_pose), *_selection(joint, hold, handle), _density(density)
+        )
+        return _warn_assumed(cls(core))
+
+    @classmethod
+    def _build(
+        cls,
+        robot: tuple[str, str],
+        obj: tuple[str, str],
+        obj_pose: Sequence[float] | None,
+        selection: tuple[str | None, Mapping[str, float] | None, str | None, float],
+        options: Mapping[str, Any],
+    ) -> Scene:
+        joint, hold, handle, density = selection
+        core = _core.Scene.build(
+            robot, obj, robot_options(**options), _pose(obj_pose), *_selection(joint, hold, handle), _density(density)
         )
         return _warn_assumed(cls(core))
 
@@ -229,7 +336,7 @@ class Scene:
 
     @property
     def frame_names(self) -> tuple[str, ...]:
-        """Every robot link of the URDF (including the ``grasp`` control frame)."""
+        """Every robot link of the URDF, the attached tool's included (and so its control frame)."""
         return tuple(self._core.frame_names)
 
     @property
@@ -243,16 +350,12 @@ class Scene:
     @property
     def object_collisions(self) -> tuple[CollisionShape, ...]:
         """The object's collision primitives, each with its link and pose in that link's frame."""
-        return tuple(
-            CollisionShape(
-                link=link,
-                kind=kind,
-                size=tuple(size),
-                pose=readonly(np.asarray(pose, dtype=float).reshape(4, 4)),
-                points=readonly(np.asarray(points, dtype=float).reshape(-1, 3)),
-            )
-            for link, kind, size, pose, points in self._core.object_collisions()
-        )
+        return _collision_shapes(self._core.object_collisions())
+
+    @property
+    def robot_collisions(self) -> tuple[CollisionShape, ...]:
+        """The robot's collision primitives (its tool's included), each with its link and pose in that link's frame."""
+        return _collision_shapes(self._core.robot_collisions())
 
     @property
     def density(self) -> float:
@@ -364,14 +467,101 @@ class Scene:
         """(arm base link, frame, maximum planar reach in m), if the robot declares one."""
         return self._core.arm_reach()
 
+    # -- roles ------------------------------------------------------------------------------------
+    @property
+    def tool_frame(self) -> str | None:
+        """The control frame tasks steer (the attached tool's, declared or detected), or None."""
+        return self._roles[0]
+
+    def require_tool_frame(self, user: str) -> str:
+        """The tool frame, or an :class:`UnknownFrameError` telling ``user`` (e.g. "OpenObject") how to name one."""
+        if self._roles[0] is None:
+            raise UnknownFrameError(
+                f"{user} needs a tool frame, and the robot declares none and has no single frame-only leaf link "
+                f"to take: attach a tool (Scene.from_urdf(..., tool=sabre.Tool(...))) or name one with tool_frame=...; "
+                f"its links are: {', '.join(self.frame_names)}"
+            )
+        return self._roles[0]
+
+    @property
+    def base_indices(self) -> tuple[int, int, int] | None:
+        """q indices of a holonomic base's (x, y, yaw) joints, or None for a fixed-base robot."""
+        base = self._roles[1]
+        return None if base is None else (int(base[0]), int(base[1]), int(base[2]))
+
+    @property
+    def base_joints(self) -> tuple[str, str, str] | None:
+        """Names of a holonomic base's (x, y, yaw) joints, or None for a fixed-base robot."""
+        base = self.base_indices
+        return None if base is None else (self.joint_names[base[0]], self.joint_names[base[1]], self.joint_names[base[2]])
+
+    @property
+    def base_link(self) -> str:
+        """The link of the base's body (a planar base's, else the robot's root)."""
+        return self._roles[2]
+
+    @property
+    def held_joints(self) -> dict[str, float]:
+        """Robot joints fixed at a value (rad or m), by name: those held by ``robot_hold`` or the
+        ``<sabre>`` block, and those that do not move the tool frame."""
+        return dict(self._roles[3])
+
+    @property
+    def wrist_sensor_link(self) -> str:
+        """The link carrying the wrist force-torque sensor (the plant's wrench is about its origin)."""
+        return self._roles[4]
+
+    @property
+    def role_origins(self) -> dict[str, str]:
+        """How each role was found: "declared", "detected", "tool" (the tool's own declaration),
+        "generated" (safety geometry) or "none"; keys ``tool_frame``, ``base``, ``wrist_sensor``,
+        ``geometry`` and ``hold:<joint>``."""
+        return dict(self._roles[5])
+
+    @property
+    def tool(self) -> Tool | None:
+        """The tool attached to the robot, or None."""
+        row = self._roles[6]
+        if row is None:
+            return None
+        parent, _kind, value, xyz, rpy, frame = row
+        return Tool(parent, value, xyz, rpy, frame)
+
+    @property
+    def robot_visuals(self) -> tuple[Visual, ...]:
+        """The robot links' URDF visuals (with the attached tool's), for viewers."""
+        return tuple(Visual.of(row) for row in self._core.visuals()[0])
+
+    @property
+    def object_visuals(self) -> tuple[Visual, ...]:
+        """The object links' URDF visuals, for viewers."""
+        return tuple(Visual.of(row) for row in self._core.visuals()[1])
+
     # -- states -----------------------------------------------------------------------------------
     def default_state(self) -> np.ndarray:
         """(nx,) base at the origin, arm in its home pose, everything at rest, object closed."""
         return np.asarray(self._core.default_state(), dtype=np.float64)
 
     def home_configuration(self) -> np.ndarray:
-        """(nq,) the robot's home configuration."""
+        """(nq,) the robot's home configuration: the ``<home>`` values the robot declares, else 0 where
+        0 lies within a joint's limits, else the middle of its limits."""
         return np.asarray(self._core.home_configuration(), dtype=np.float64)
+
+    def start_configuration(self) -> np.ndarray:
+        """(nq,) the robot's start configuration: its declared ``<start>`` values over the home configuration."""
+        return np.asarray(self._core.start_configuration(), dtype=np.float64)
+
+    def work_configuration(self) -> np.ndarray:
+        """(nq,) the robot's working configuration (hand forward, margins on every joint limit), which
+        scripted motions pull toward: its declared ``<work>`` values over the home configuration."""
+        return np.asarray(self._core.work_configuration(), dtype=np.float64)
+
+    def start_state(self) -> np.ndarray:
+        """(nx,) the start configuration at rest, object closed: where episodes begin by default
+        (for the RoyalPanda the paper's start, base at (−3, −3) with the arm folded)."""
+        x = self.default_state()
+        x[: self.nq] = self.start_configuration()
+        return x
 
     def split_state(self, x: np.ndarray) -> StateParts:
         """The parts of a state x (nx,) or of a batch of states (..., nx).

@@ -119,7 +119,7 @@ def _segments(
         return o0 + (target - o0) * (0.5 - 0.5 * np.cos(np.pi * np.clip(s, 0, 1)))
 
     h0 = handle(o0)
-    grasp0 = scene.fk(q0, "grasp")
+    grasp0 = scene.fk(q0, scene.require_tool_frame("hook_and_pull"))
     segments = [
         _Segment(0, approach_time, lambda s: _blend(grasp0, _offset(h0, _PRE_INSERT), s), closed),
         _Segment(1, 1.2, lambda s: _blend(_offset(h0, _PRE_INSERT), _offset(h0, _INSERTED), s), closed),
@@ -135,47 +135,45 @@ def _segments(
 
 
 class _DifferentialIK:
-    """Damped least-squares differential IK of the grasp frame on the robot's Jacobian (base and
-    arm, the base weighted to move less), with a null-space pull of the arm toward a posture and
-    the base kept ``standoff`` in front of the object."""
+    """Damped least-squares differential IK of the tool frame on the robot's Jacobian (a holonomic
+    base and the arm, the base weighted to move less), with a null-space pull of the arm toward the
+    robot's working posture (:meth:`Scene.work_configuration`) and the base kept ``standoff`` in
+    front of the object."""
 
     DAMPING = 1e-4
 
     def __init__(self, scene: Scene, dt: float, standoff: float) -> None:
         self.scene = scene
+        self.frame = scene.require_tool_frame("hook_and_pull")
         self.dt = dt
         self.standoff = standoff
         self.lower, self.upper, self.vmax = scene.q_lower, scene.q_upper, scene.dq_limit
-        weights = np.ones(scene.nq)
-        weights[:3] = 4.0  # moving the 165 kg base is costlier than moving the arm
+        base = list(scene.base_indices or ())
+        self.arm = np.ones(scene.nq, dtype=bool)
+        self.arm[base] = False
+        weights = np.where(self.arm, 1.0, 4.0)  # moving a heavy base is costlier than moving the arm
         self.w_inv = 1.0 / weights
-        self.home = scene.home_configuration()
-        # Null-space posture: for a Panda, elbow up and wrist pitched so the hand points forward
-        # with margin on every joint limit; other robots keep their home configuration.
-        if scene.joint_names[3:] == tuple(f"panda_joint{i}" for i in range(1, 8)):
-            self.home = self.home.copy()
-            self.home[3:] = [0.0, 0.3, 0.0, -1.9, 0.0, 2.2, 0.785]
-        # Keep the base footprint (radius 0.53 m) clear of the cabinet front: its centre stays
-        # `standoff` in front of the object's front plane (the plane x = 0 of the object frame).
+        self.home = scene.work_configuration()
+        # Keep the base footprint clear of the cabinet front: its centre stays `standoff` in front of
+        # the object's front plane (the plane x = 0 of the object frame).
         pose = scene.object_pose
         self.front_normal = -pose[:3, 0]  # points from the object toward the robot
         self.front_point = pose[:3, 3]
-        self.base_joints = [i for i, n in enumerate(scene.joint_names) if n in ("base_x", "base_y")]
+        self.base_joints = base[:2]
 
     def step(self, q: np.ndarray, desired: np.ndarray) -> np.ndarray:
         """The configuration one step on from q toward the grasp pose ``desired``, within the
         joints' velocity and position limits and the base's standoff."""
         scene, dt, w_inv = self.scene, self.dt, self.w_inv
-        current = scene.fk(q, "grasp")
+        current = scene.fk(q, self.frame)
         err = np.concatenate([desired[:3, 3] - current[:3, 3], rotation_log(desired[:3, :3] @ current[:3, :3].T)])
         twist = err / dt * 0.5
-        J = scene.jacobian(q, "grasp")
+        J = scene.jacobian(q, self.frame)
         Jw = J * w_inv
         u = w_inv * (J.T @ np.linalg.solve(Jw @ J.T + self.DAMPING * np.eye(6), twist))
         # Secondary task: stay near the home posture and away from the joint limits (arm only).
         null = np.eye(scene.nq) - (w_inv[:, None] * J.T) @ np.linalg.solve(Jw @ J.T + self.DAMPING * np.eye(6), J)
-        posture = np.zeros(scene.nq)
-        posture[3:] = 0.5 * (self.home[3:] - q[3:])
+        posture = np.where(self.arm, 0.5 * (self.home - q), 0.0)
         u = u + null @ posture
         u = np.clip(u, -0.8 * self.vmax, 0.8 * self.vmax)
         q_next = np.clip(q + dt * u, self.lower + 1e-3, self.upper - 1e-3)

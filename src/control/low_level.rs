@@ -69,6 +69,32 @@ pub struct LowLevelController {
     pi_acceleration: DVector<f64>,
     /// M(q) q̈ of the current call.
     inertial_torque: DVector<f64>,
+    /// Per joint, the inertia it feels with every other joint free, 1 / (M⁻¹)_ii, and M_ii, both
+    /// where that inertia is smallest among the home and start configurations (for
+    /// [`Self::loop_gain`]).
+    apparent_inertia: Vec<f64>,
+    diagonal_inertia: Vec<f64>,
+}
+
+/// Largest loop gain per plant step a joint may have (see [`LowLevelController::loop_gain`]): above 1
+/// each step overshoots the velocity error, above 2 the loop diverges.
+pub const MAX_LOOP_GAIN: f64 = 1.0;
+
+/// (1 / (M⁻¹)_ii, M_ii) per joint, at the configuration of the smaller first value among `qs`.
+fn apparent_inertias(scene: &Scene, qs: &[Vec<f64>]) -> Result<(Vec<f64>, Vec<f64>)> {
+    let nq = scene.nq();
+    let (mut apparent, mut diagonal) = (vec![f64::INFINITY; nq], vec![0.0; nq]);
+    for q in qs {
+        let (m, _) = scene.mass_matrix_and_gravity(q)?;
+        let Some(inverse) = m.clone().try_inverse() else { continue };
+        for i in 0..nq {
+            let felt = 1.0 / inverse[(i, i)].max(f64::MIN_POSITIVE);
+            if felt < apparent[i] {
+                (apparent[i], diagonal[i]) = (felt, m[(i, i)]);
+            }
+        }
+    }
+    Ok((apparent, diagonal))
 }
 
 impl LowLevelController {
@@ -85,7 +111,11 @@ impl LowLevelController {
             check_gain(name, v)?;
         }
         let nq = scene.nq();
+        let (apparent_inertia, diagonal_inertia) =
+            apparent_inertias(&scene, &[scene.home_configuration(), scene.start_configuration()])?;
         Ok(Self {
+            apparent_inertia,
+            diagonal_inertia,
             scene,
             config,
             dt,
@@ -116,6 +146,53 @@ impl LowLevelController {
         check_gain("gain_inertia_floor", floor)?;
         self.config.gain_inertia_floor = floor;
         Ok(())
+    }
+
+    /// The largest loop gain per step `plant_dt` among the joints with gain inertia floor `floor`,
+    /// and the joint that has it: Λ_D dt (1 + A_ii / m_i), the share of a joint's velocity error one
+    /// step removes, with m_i = 1 / (M⁻¹)_ii the inertia the joint feels (the M(q) part of the gains
+    /// gives Λ_D exactly; the floor's A_ii = max(0, floor − M_ii) adds A_ii / m_i times more).
+    pub fn loop_gain(&self, floor: f64, plant_dt: f64) -> (f64, usize) {
+        (0..self.apparent_inertia.len())
+            .map(|i| {
+                let extra = (floor - self.diagonal_inertia[i]).max(0.0) / self.apparent_inertia[i];
+                (self.config.bandwidth * plant_dt * (1.0 + extra), i)
+            })
+            .fold((0.0, 0), |best, g| if g.0 > best.0 { g } else { best })
+    }
+
+    /// The largest gain inertia floor (kg m²) whose loop gain stays within [`MAX_LOOP_GAIN`] at plant
+    /// step `plant_dt` (0 when the bandwidth alone exceeds it).
+    pub fn max_stable_floor(&self, plant_dt: f64) -> f64 {
+        let allowed = MAX_LOOP_GAIN / (self.config.bandwidth * plant_dt) - 1.0;
+        if allowed < 0.0 {
+            return 0.0;
+        }
+        (0..self.apparent_inertia.len())
+            .map(|i| self.diagonal_inertia[i] + allowed * self.apparent_inertia[i])
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// Refuses gains that would make a joint's loop diverge at plant step `plant_dt` (see
+    /// [`Self::loop_gain`]), naming the joint and the largest floor that would do.
+    pub fn check_stable(&self, floor: f64, plant_dt: f64) -> Result<()> {
+        let (gain, joint) = self.loop_gain(floor, plant_dt);
+        if gain <= MAX_LOOP_GAIN + 1e-12 {
+            return Ok(());
+        }
+        let name = &self.scene.robot.joints[self.scene.robot.active_joints[joint]].name;
+        Err(SabreError::invalid(
+            "low-level gains",
+            format!(
+                "joint '{name}' (inertia {:.3e} kg m² with the others free) would get a loop gain of {gain:.2} per {plant_dt} s \
+                 plant step with bandwidth {} 1/s and gain inertia floor {floor} kg m²: above {MAX_LOOP_GAIN} each step \
+                 overshoots and above 2 the joint diverges; use a floor of at most {:.4} kg m², a lower bandwidth or a \
+                 shorter step",
+                self.apparent_inertia[joint],
+                self.config.bandwidth,
+                self.max_stable_floor(plant_dt)
+            ),
+        ))
     }
 
     pub fn reset(&mut self) {
@@ -259,9 +336,13 @@ pub fn follow_reference_safe(
         }
     }
     let (has_filter, has_tank) = (filter.is_some(), tank.is_some());
+    let plant_dt = plant.dt();
+    controller.check_stable(
+        plan.gain_inertia_floor().unwrap_or(controller.config().gain_inertia_floor),
+        plant_dt,
+    )?;
     let mut inner = InnerLoop::new(controller, filter, tank)?;
     let mut out = TickOutput::new(nq, nq);
-    let plant_dt = plant.dt();
     let mut poll = crate::interrupt::Poll::new();
     for step in 0..steps {
         poll.check()?;

@@ -85,7 +85,8 @@ pub enum Term {
     ObjectState { target: Vec<f64>, weights: Vec<f64> },
     /// (36) w_p · max(0, −τ_extᵀ u − p_max).
     Power { weight: f64, p_max: f64 },
-    /// Base position box [x_min, x_max] × [y_min, y_max] (Cartesian limits, Sec. VI-A2): w + w_s · excess².
+    /// Base position box [x_min, x_max] × [y_min, y_max] (Cartesian limits, Sec. VI-A2) on the
+    /// coordinates of the scene's holonomic base: w + w_s · excess².
     BaseBox {
         lower: [f64; 2],
         upper: [f64; 2],
@@ -322,7 +323,15 @@ impl Cost {
                 }
                 Term::Contact { weight } => finite("contact weight", &[*weight])?,
                 Term::Power { weight, p_max } => finite("power cost", &[*weight, *p_max])?,
-                Term::BaseBox { lower, upper, .. } => finite("base box", &[lower[0], lower[1], upper[0], upper[1]])?,
+                Term::BaseBox { lower, upper, .. } => {
+                    if scene.roles.base.is_none() {
+                        return bad(
+                            "base box cost",
+                            "the robot's base is fixed: it has no base coordinates".into(),
+                        );
+                    }
+                    finite("base box", &[lower[0], lower[1], upper[0], upper[1]])?
+                }
                 Term::Obstacles { spheres, .. } => {
                     for (c, r) in spheres {
                         finite("obstacle", &[c.x, c.y, c.z, *r])?;
@@ -462,12 +471,18 @@ impl Cost {
                     upper,
                     weight,
                     weight_slope,
-                } => (0..2)
-                    .map(|i| {
-                        hinge_square(q[i] - upper[i], *weight, *weight_slope)
-                            + hinge_square(lower[i] - q[i], *weight, *weight_slope)
-                    })
-                    .sum(),
+                } => {
+                    let base = scene.roles.base.expect("validated: the robot has a holonomic base");
+                    [base.x, base.y]
+                        .iter()
+                        .enumerate()
+                        .map(|(i, &coordinate)| {
+                            let v = q[coordinate];
+                            hinge_square(v - upper[i], *weight, *weight_slope)
+                                + hinge_square(lower[i] - v, *weight, *weight_slope)
+                        })
+                        .sum()
+                }
                 Term::Obstacles {
                     spheres,
                     weight,

@@ -494,8 +494,15 @@ fn base_box() -> Term {
 
 #[test]
 fn base_box_charges_each_coordinate_outside() {
+    // The box reads the base's x and y coordinates; the probe's slide and turn stand in for them.
+    let with_base = || {
+        let mut scene = (*probe_and_drawer()).clone();
+        scene.roles.base = Some(crate::model::assembly::PlanarBase { x: 0, y: 1, yaw: 1 });
+        std::sync::Arc::new(scene)
+    };
     assert_eq!(
-        value(
+        value_in(
+            with_base(),
             base_box(),
             Step {
                 q: [0.5, -0.5],
@@ -505,7 +512,8 @@ fn base_box_charges_each_coordinate_outside() {
         0.0
     );
     assert_close(
-        value(
+        value_in(
+            with_base(),
             base_box(),
             Step {
                 q: [0.7, 0.0],
@@ -515,7 +523,8 @@ fn base_box_charges_each_coordinate_outside() {
         2.0 + 30.0 * 0.04,
     );
     assert_close(
-        value(
+        value_in(
+            with_base(),
             base_box(),
             Step {
                 q: [0.3, -0.6],
@@ -525,7 +534,8 @@ fn base_box_charges_each_coordinate_outside() {
         2.0 + 30.0 * 0.01,
     );
     assert_close(
-        value(
+        value_in(
+            with_base(),
             base_box(),
             Step {
                 q: [-0.6, 0.8],

@@ -106,6 +106,8 @@ pub struct Link {
     /// file's); a scene fills the rest in for moving object links (see `super::inertials`).
     pub declared_inertial: Option<super::inertials::DeclaredInertial>,
     pub collisions: Vec<Collision>,
+    /// What the link looks like (URDF `<visual>`), for viewers.
+    pub visuals: Vec<super::visual::Visual>,
 }
 
 /// Link poses and world joint axes of one configuration, reused while the configuration is unchanged.
@@ -266,6 +268,25 @@ impl KinematicTree {
                 ));
             }
         }
+        let values: Vec<(usize, f64)> = self
+            .active_joints
+            .iter()
+            .filter(|&&j| self.joints[j].name != keep)
+            .map(|&j| {
+                let joint = &self.joints[j];
+                let value = held
+                    .iter()
+                    .find(|(n, _)| n == &joint.name)
+                    .map_or(0.0_f64.clamp(joint.limits.lower, joint.limits.upper), |(_, v)| *v);
+                (j, value)
+            })
+            .collect();
+        self.with_joints_fixed(&values, source)
+    }
+
+    /// The same tree with each movable joint of `values` (joint index, value in rad or m) fixed at
+    /// its value; link indices are unchanged, q loses those coordinates.
+    pub fn with_joints_fixed(&self, values: &[(usize, f64)], source: &str) -> Result<Self> {
         let mut links = self.links.clone();
         for link in &mut links {
             link.parent_joint = None;
@@ -273,19 +294,14 @@ impl KinematicTree {
         let joints = self
             .joints
             .iter()
-            .map(|joint| {
-                if joint.kind == JointKind::Fixed || joint.name == keep {
-                    return joint.clone();
-                }
-                let value = held
-                    .iter()
-                    .find(|(n, _)| n == &joint.name)
-                    .map_or(0.0_f64.clamp(joint.limits.lower, joint.limits.upper), |(_, v)| *v);
-                Joint {
+            .enumerate()
+            .map(|(j, joint)| match values.iter().find(|(k, _)| *k == j) {
+                Some(&(_, value)) if joint.kind != JointKind::Fixed => Joint {
                     kind: JointKind::Fixed,
                     origin: joint.origin * Self::joint_motion(joint, value),
                     ..joint.clone()
-                }
+                },
+                _ => joint.clone(),
             })
             .collect();
         Self::new(self.name.clone(), links, joints, source)

@@ -1,5 +1,5 @@
-//! Mesh collision geometry: URDF `<mesh>` files (STL, OBJ) found on a search path and reduced to
-//! convex hulls, which are cached on disk.
+//! Mesh geometry: URDF `<mesh>` files (STL, OBJ, COLLADA) found on a search path and reduced to
+//! convex hulls, which are cached on disk, or read as triangles for viewers.
 //!
 //! A filename resolves as: an absolute path; `package://<pkg>/<rest>` under each directory of
 //! `SABRE_PACKAGE_PATH` and `ROS_PACKAGE_PATH` (as `<dir>/<pkg>/<rest>`) and of
@@ -98,8 +98,8 @@ pub fn resolve(filename: &str, urdf_dir: Option<&Path>) -> std::result::Result<P
     })
 }
 
-/// The vertices of each convex piece of the mesh file at `path`: all of an STL's, each OBJ
-/// object's or group's own.
+/// The vertices of each convex piece of the mesh file at `path`: all of an STL's or a COLLADA
+/// document's, each OBJ object's or group's own.
 fn read_pieces(path: &Path, bytes: &[u8]) -> std::result::Result<Vec<Vec<[f64; 3]>>, String> {
     let extension = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     match extension.as_str() {
@@ -132,8 +132,78 @@ fn read_pieces(path: &Path, bytes: &[u8]) -> std::result::Result<Vec<Vec<[f64; 3
                 })
                 .collect())
         }
-        other => Err(format!("mesh format '.{other}' is not supported (STL and OBJ are)")),
+        // one hull, as for an STL: a description's visual parts are pieces of a surface, not convex solids
+        "dae" => Ok(vec![read_collada(bytes)?.0]),
+        other => Err(format!("mesh format '.{other}' is not supported (STL, OBJ and COLLADA are)")),
     }
+}
+
+/// A triangle mesh as vertices and vertex-index triples.
+pub type Triangles = (Vec<[f64; 3]>, Vec<[u32; 3]>);
+
+/// The vertices and triangles of a COLLADA document, each geometry placed by the transforms of the
+/// scene nodes that instance it and scaled by the document's `<unit meter>`.
+fn read_collada(bytes: &[u8]) -> std::result::Result<Triangles, String> {
+    let scene = mesh_loader::collada::from_slice(bytes).map_err(|e| format!("cannot read COLLADA: {e}"))?;
+    let mut vertices = Vec::new();
+    let mut faces = Vec::new();
+    for mesh in &scene.meshes {
+        let offset = vertices.len() as u32;
+        vertices.extend(mesh.vertices.iter().map(|v| v.map(f64::from)));
+        faces.extend(mesh.faces.iter().map(|f| f.map(|i| i + offset)));
+    }
+    Ok((vertices, faces))
+}
+
+/// The triangles of the mesh at `path` (STL, OBJ or COLLADA), scaled per axis, as vertices and
+/// vertex-index triples: what a viewer draws.
+pub fn load_triangles(path: &Path, scale: [f64; 3]) -> std::result::Result<Triangles, String> {
+    let bytes = std::fs::read(path).map_err(|e| format!("cannot read mesh {}: {e}", path.display()))?;
+    let extension = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    let (vertices, faces) = match extension.as_str() {
+        "dae" => read_collada(&bytes)?,
+        "stl" => {
+            let mesh = stl_io::read_stl(&mut std::io::Cursor::new(&bytes)).map_err(|e| format!("cannot read STL: {e}"))?;
+            let vertices = mesh.vertices.iter().map(|v| [v[0], v[1], v[2]].map(f64::from)).collect();
+            let faces = mesh.faces.iter().map(|f| f.vertices.map(|i| i as u32)).collect();
+            (vertices, faces)
+        }
+        "obj" => {
+            let options = tobj::LoadOptions {
+                triangulate: true,
+                single_index: true,
+                ..Default::default()
+            };
+            let (models, _) = tobj::load_obj_buf(&mut std::io::Cursor::new(&bytes), &options, |_| {
+                Ok((Vec::new(), Default::default()))
+            })
+            .map_err(|e| format!("cannot read OBJ: {e}"))?;
+            let (mut vertices, mut faces) = (Vec::new(), Vec::new());
+            for m in &models {
+                let offset = vertices.len() as u32;
+                vertices.extend(m.mesh.positions.chunks_exact(3).map(|p| [p[0], p[1], p[2]].map(f64::from)));
+                faces.extend(
+                    m.mesh
+                        .indices
+                        .chunks_exact(3)
+                        .map(|t| [t[0] + offset, t[1] + offset, t[2] + offset]),
+                );
+            }
+            (vertices, faces)
+        }
+        other => return Err(format!("mesh format '.{other}' is not supported (STL, OBJ and COLLADA are)")),
+    };
+    if vertices.len() > MAX_MESH_VERTICES || faces.iter().flatten().any(|&i| i as usize >= vertices.len()) {
+        return Err(format!(
+            "mesh {} is too large or its faces name missing vertices",
+            path.display()
+        ));
+    }
+    let scaled = vertices
+        .iter()
+        .map(|v| [v[0] * scale[0], v[1] * scale[1], v[2] * scale[2]])
+        .collect();
+    Ok((scaled, faces))
 }
 
 fn cache_dir() -> Option<PathBuf> {

@@ -1,12 +1,16 @@
 //! Robot and object models: URDF parsing, kinematic trees, rigid-body dynamics terms and the scene.
 
+pub mod assembly;
 pub(crate) mod collision_shape;
 pub mod dynamics;
+pub mod generated;
 pub mod inertials;
 pub mod kinematics;
 pub mod mesh;
+pub mod roles;
 pub mod scene;
 pub mod urdf;
+pub mod visual;
 
 pub use kinematics::{JointKind, JointLimits, KinematicTree};
 pub use scene::Scene;

@@ -2,11 +2,14 @@
 
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
+use super::assembly::{assemble as assemble_robot, RobotRoles};
 use super::collision_shape::closest_point;
 use super::dynamics::{joint_space_terms, DynamicsWorkspace};
+use super::generated;
 use super::inertials::{assume_missing, AssumedInertial, DEFAULT_DENSITY};
 use super::kinematics::{Frames, JointKind, JointLimits, KinematicTree};
-use super::urdf::{parse_urdf, ParsedUrdf};
+use super::roles::RoleDecls;
+use super::urdf::{check_extension, parse_urdf, ParsedUrdf, SabreExtension};
 use crate::error::{ensure_coordinates, ensure_finite, ensure_len, Result, SabreError};
 
 /// Built-in robots, compiled into the library so that installed wheels need no data files.
@@ -51,6 +54,11 @@ pub struct ArmReach {
     pub max: f64,
 }
 
+/// Where the scene's safety geometry came from: "declared" in the robot's `<sabre>` block or
+/// "generated" from its tree (`super::generated`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct GeometryOrigin(pub &'static str);
+
 /// Robot, object and their placement; all kinematic queries go through here.
 #[derive(Debug, Clone)]
 pub struct Scene {
@@ -63,6 +71,10 @@ pub struct Scene {
     /// Robot links whose colliders touch the object in the reduced-order rollout model.
     pub rollout_contact_links: Vec<usize>,
     pub arm_reach: Option<ArmReach>,
+    /// What the robot's parts are for: tool frame, base, postures, held joints, wrist sensor.
+    pub roles: RobotRoles,
+    /// Where the spheres, pairs, contact links and reach came from.
+    pub geometry_origin: GeometryOrigin,
     pub robot_source: String,
     pub object_source: String,
     /// Density (kg/m³) of moving object parts whose file gives no inertial (see [`super::inertials`]).
@@ -81,7 +93,8 @@ pub fn pose_from_xyzrpy(p: &[f64]) -> Result<Isometry3<f64>> {
     ))
 }
 
-fn builtin<'a>(kind: &str, table: &'a [(&str, &str)], name: &str) -> Result<&'a str> {
+/// The URDF text of a built-in robot or object by name.
+pub fn builtin<'a>(kind: &str, table: &'a [(&str, &str)], name: &str) -> Result<&'a str> {
     table
         .iter()
         .find(|(n, _)| *n == name)
@@ -113,25 +126,38 @@ impl Scene {
         let robot = parse_urdf(robot, robot_text)?;
         let default_pose = default_object_pose(object);
         let obj = parse_urdf(object, object_text)?;
-        Self::assemble(robot, obj, Some(object_pose.unwrap_or(&default_pose)))
+        Self::from_parts(robot, obj, Some(object_pose.unwrap_or(&default_pose)), &RoleDecls::default())
     }
 
     /// Scene from URDF files on disk.
     pub fn from_urdf_files(robot: &std::path::Path, object: &std::path::Path, object_pose: Option<&[f64]>) -> Result<Self> {
         let robot = super::urdf::load_urdf_file(robot)?;
         let obj = super::urdf::load_urdf_file(object)?;
-        Self::assemble(robot, obj, object_pose)
+        Self::from_parts(robot, obj, object_pose, &RoleDecls::default())
     }
 
     /// Scene from URDF text (robot, object).
     pub fn from_urdf_strings(robot: &str, object: &str, object_pose: Option<&[f64]>) -> Result<Self> {
-        Self::assemble(parse_urdf("robot", robot)?, parse_urdf("object", object)?, object_pose)
+        Self::from_parts(
+            parse_urdf("robot", robot)?,
+            parse_urdf("object", object)?,
+            object_pose,
+            &RoleDecls::default(),
+        )
     }
 
-    fn assemble(robot: ParsedUrdf, obj: ParsedUrdf, object_pose: Option<&[f64]>) -> Result<Self> {
+    /// Scene from parsed URDFs, with `options` over the roles the robot's `<sabre>` block declares
+    /// (the tool to attach, its control frame, held joints, the base, postures).
+    ///
+    /// Safety geometry: a robot whose block declares none (no sphere, pair, rollout_contact or
+    /// arm_reach element) gets all of it generated (`super::generated`); one that declares any gets
+    /// exactly what it declares.
+    pub fn from_parts(robot: ParsedUrdf, obj: ParsedUrdf, object_pose: Option<&[f64]>, options: &RoleDecls) -> Result<Self> {
         let object_pose = pose_from_xyzrpy(object_pose.unwrap_or(&DEFAULT_OBJECT_POSE))?;
         let ext = robot.extension;
-        let tree = robot.tree;
+        let source = robot.tree.name.clone();
+        let (tree, roles) = assemble_robot(robot.tree, &ext.roles.overridden_by(options), &source)?;
+        check_extension(&source, &tree, &ext)?;
         if tree.nq() == 0 {
             return Err(SabreError::urdf(&tree.name, "the robot has no movable joint"));
         }
@@ -157,35 +183,17 @@ impl Scene {
                 ));
             }
         }
-        let spheres: Vec<Sphere> = ext
-            .spheres
-            .iter()
-            .map(|s| Sphere {
-                name: s.name.clone(),
-                link: tree.link_id(&s.link).expect("validated by the parser"),
-                center: s.center,
-                radius: s.radius,
-                obstacles: s.obstacles,
-            })
-            .collect();
-        let sphere_index = |name: &str| spheres.iter().position(|s| s.name == name).expect("validated by the parser");
-        let sphere_pairs = ext.pairs.iter().map(|(a, b)| (sphere_index(a), sphere_index(b))).collect();
-        let mut rollout_contact_links: Vec<usize> = ext
-            .rollout_contact_links
-            .iter()
-            .map(|n| tree.link_id(n).expect("validated by the parser"))
-            .collect();
-        if rollout_contact_links.is_empty() {
-            // Without a declaration every link with collision geometry may touch the object.
-            rollout_contact_links = (0..tree.links.len())
-                .filter(|&l| !tree.links[l].collisions.is_empty())
-                .collect();
-        }
-        let arm_reach = ext.arm_reach.as_ref().map(|a| ArmReach {
-            base_link: tree.link_id(&a.base).expect("validated"),
-            frame_link: tree.link_id(&a.frame).expect("validated"),
-            max: a.max,
-        });
+        let declared =
+            !(ext.spheres.is_empty() && ext.pairs.is_empty() && ext.rollout_contact_links.is_empty() && ext.arm_reach.is_none());
+        let (spheres, sphere_pairs, rollout_contact_links, arm_reach) = if declared {
+            declared_geometry(&tree, &ext)
+        } else {
+            let spheres = generated::cover_spheres(&tree);
+            let pairs = generated::collision_pairs(&tree, &spheres, &[&roles.home, &roles.start]);
+            let contact = generated::contact_links(&tree, roles.tool_frame);
+            let reach = generated::arm_reach(&tree, &roles);
+            (spheres, pairs, contact, reach)
+        };
         Self {
             robot_source: tree.name.clone(),
             object_source: obj.tree.name.clone(),
@@ -196,6 +204,8 @@ impl Scene {
             sphere_pairs,
             rollout_contact_links,
             arm_reach,
+            roles,
+            geometry_origin: GeometryOrigin(if declared { "declared" } else { "generated" }),
             density: DEFAULT_DENSITY,
             assumed_inertials: Vec::new(),
         }
@@ -320,7 +330,7 @@ impl Scene {
         self.object.active_limits()
     }
 
-    /// Mid-range robot configuration, or zero where zero is admissible; arm at rest, object closed.
+    /// The home configuration at rest, object closed.
     pub fn default_state(&self) -> Vec<f64> {
         let mut x = vec![0.0; self.nx()];
         let home = self.home_configuration();
@@ -334,30 +344,25 @@ impl Scene {
         x
     }
 
-    /// The robot's resting configuration: for the built-in Panda the manufacturer's "ready" pose.
+    /// The robot's home configuration (nq): the declared `<home>` values, else 0 where it lies
+    /// within a joint's limits, else the middle of finite limits.
     pub fn home_configuration(&self) -> Vec<f64> {
-        let names = self.robot.active_joint_names();
-        self.robot
-            .active_limits()
-            .iter()
-            .zip(names.iter())
-            .map(|(l, name)| {
-                let preferred = match name.as_str() {
-                    "panda_joint2" => -0.785,
-                    "panda_joint4" => -2.356,
-                    "panda_joint6" => 1.571,
-                    "panda_joint7" => 0.785,
-                    _ => 0.0,
-                };
-                if preferred >= l.lower && preferred <= l.upper {
-                    preferred
-                } else if l.lower.is_finite() && l.upper.is_finite() {
-                    0.5 * (l.lower + l.upper)
-                } else {
-                    0.0_f64.clamp(l.lower, l.upper)
-                }
-            })
-            .collect()
+        self.roles.home.clone()
+    }
+
+    /// The robot's start configuration (nq): the declared `<start>` values over the home configuration.
+    pub fn start_configuration(&self) -> Vec<f64> {
+        self.roles.start.clone()
+    }
+
+    /// The robot's working configuration (nq): the declared `<work>` values over the home configuration.
+    pub fn work_configuration(&self) -> Vec<f64> {
+        self.roles.work.clone()
+    }
+
+    /// The control frame's link name, if the robot has one.
+    pub fn tool_frame_name(&self) -> Option<&str> {
+        self.roles.tool_frame.map(|l| self.robot.links[l].name.as_str())
     }
 
     fn check_q(&self, q: &[f64]) -> Result<()> {
@@ -468,6 +473,44 @@ fn poses_many(
             frames.poses[link]
         })
         .collect())
+}
+
+/// The spheres, pairs, contact links and reach a robot's `<sabre>` block declares (checked by
+/// `check_extension`); without declared contact links every link with collision geometry touches.
+#[allow(clippy::type_complexity)]
+fn declared_geometry(
+    tree: &KinematicTree,
+    ext: &SabreExtension,
+) -> (Vec<Sphere>, Vec<(usize, usize)>, Vec<usize>, Option<ArmReach>) {
+    let spheres: Vec<Sphere> = ext
+        .spheres
+        .iter()
+        .map(|s| Sphere {
+            name: s.name.clone(),
+            link: tree.link_id(&s.link).expect("checked"),
+            center: s.center,
+            radius: s.radius,
+            obstacles: s.obstacles,
+        })
+        .collect();
+    let sphere_index = |name: &str| spheres.iter().position(|s| s.name == name).expect("checked");
+    let pairs = ext.pairs.iter().map(|(a, b)| (sphere_index(a), sphere_index(b))).collect();
+    let mut contact: Vec<usize> = ext
+        .rollout_contact_links
+        .iter()
+        .map(|n| tree.link_id(n).expect("checked"))
+        .collect();
+    if contact.is_empty() {
+        contact = (0..tree.links.len())
+            .filter(|&l| !tree.links[l].collisions.is_empty())
+            .collect();
+    }
+    let reach = ext.arm_reach.as_ref().map(|a| ArmReach {
+        base_link: tree.link_id(&a.base).expect("checked"),
+        frame_link: tree.link_id(&a.frame).expect("checked"),
+        max: a.max,
+    });
+    (spheres, pairs, contact, reach)
 }
 
 #[cfg(test)]

@@ -37,6 +37,8 @@ pub struct SabreExtension {
     pub spheres: Vec<SphereDecl>,
     pub pairs: Vec<(String, String)>,
     pub arm_reach: Option<ArmReachDecl>,
+    /// The tool, control frame, held joints, base and postures it declares.
+    pub roles: super::roles::RoleDecls,
 }
 
 /// A parsed URDF: its kinematic tree and sabre's extension block.
@@ -254,6 +256,7 @@ fn convert_link(source: &str, link: &urdf_rs::Link, present: (bool, bool, bool))
         inertial,
         declared_inertial,
         collisions,
+        visuals: Vec::new(),
     })
 }
 
@@ -475,7 +478,11 @@ fn parse_extension(source: &str, doc: &roxmltree::Document) -> Result<SabreExten
                     max: parse_f64(source, &node, "max")?,
                 })
             }
-            other => return Err(SabreError::urdf(source, format!("unknown element <sabre><{other}>"))),
+            other => {
+                if !super::roles::parse_role(source, &node, &mut ext.roles)? {
+                    return Err(SabreError::urdf(source, format!("unknown element <sabre><{other}>")));
+                }
+            }
         }
     }
     Ok(ext)
@@ -493,11 +500,14 @@ pub fn parse_urdf(source: &str, text: &str) -> Result<ParsedUrdf> {
     if robot.links.is_empty() {
         return Err(SabreError::urdf(source, "no <link> elements"));
     }
-    let links = robot
+    let mut links = robot
         .links
         .iter()
         .map(|l| convert_link(source, l, present.get(&l.name).copied().unwrap_or_default()))
         .collect::<Result<Vec<_>>>()?;
+    for (link, urdf_link) in links.iter_mut().zip(&robot.links) {
+        link.visuals = super::visual::convert(source, urdf_link, &robot.materials);
+    }
     let names: std::collections::HashMap<&str, usize> =
         robot.links.iter().enumerate().map(|(i, l)| (l.name.as_str(), i)).collect();
     let lookup = |name: &str| names.get(name).copied();
@@ -507,6 +517,12 @@ pub fn parse_urdf(source: &str, text: &str) -> Result<ParsedUrdf> {
         .map(|j| convert_joint(source, j, &lookup))
         .collect::<Result<Vec<_>>>()?;
     let tree = KinematicTree::new(robot.name.clone(), links, joints, source)?;
+    Ok(ParsedUrdf { tree, extension })
+}
+
+/// Checks that every link and sphere the `<sabre>` block names exists in `tree` (the robot with its
+/// tool attached).
+pub fn check_extension(source: &str, tree: &KinematicTree, extension: &SabreExtension) -> Result<()> {
     for name in extension
         .rollout_contact_links
         .iter()
@@ -527,7 +543,7 @@ pub fn parse_urdf(source: &str, text: &str) -> Result<ParsedUrdf> {
             }
         }
     }
-    Ok(ParsedUrdf { tree, extension })
+    Ok(())
 }
 
 /// Reads and parses a URDF file.

@@ -88,6 +88,19 @@ impl PyLowLevelController {
         run(|| controller.set_gain_inertia_floor(floor))
     }
 
+    /// The largest gain inertia floor (kg m²) that keeps every joint's loop stable at plant step `plant_dt` (s).
+    fn max_stable_floor(&self, plant_dt: f64) -> f64 {
+        lock(&self.inner).max_stable_floor(plant_dt)
+    }
+
+    /// (largest loop gain per plant step `plant_dt`, the joint with it) at gain inertia floor `floor`.
+    fn loop_gain(&self, floor: f64, plant_dt: f64) -> (f64, String) {
+        let controller = lock(&self.inner);
+        let (gain, joint) = controller.loop_gain(floor, plant_dt);
+        let scene = controller.scene();
+        (gain, scene.robot.joints[scene.robot.active_joints[joint]].name.clone())
+    }
+
     /// Joint torques (nq) that make the robot at state x (nx,) track the velocities u_ref (nq,).
     fn torque(&self, x: PyReadonlyArrayDyn<'_, f64>, u_ref: PyReadonlyArrayDyn<'_, f64>) -> PyResult<Vec<f64>> {
         let mut controller = lock(&self.inner);
@@ -102,6 +115,7 @@ impl PyLowLevelController {
             // Always plant, then controller: one lock order for every call.
             let mut plant = lock(plant);
             let mut controller = lock(controller);
+            controller.check_stable(controller.config().gain_inertia_floor, plant.dt())?;
             let mut poll = crate::interrupt::Poll::new();
             for _ in 0..steps {
                 poll.check()?;

@@ -227,6 +227,11 @@ fn term_from_spec(scene: &Scene, spec: &Bound<'_, PyAny>) -> crate::Result<Term>
         }
         "base_box" => {
             let s: BaseBoxSpec = fields(spec, &kind)?;
+            if scene.roles.base.is_none() {
+                return Err(spec_error(
+                    "BaseBox needs a robot with a holonomic base; this robot's base is fixed (it has no base coordinates)",
+                ));
+            }
             Term::BaseBox {
                 lower: s.lower,
                 upper: s.upper,

@@ -10,6 +10,7 @@ mod convert;
 mod cost;
 mod error;
 mod mppi;
+mod robot;
 mod safety;
 mod scene;
 mod sim;
@@ -51,6 +52,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(scene::builtin_urdf, m)?)?;
     m.add_function(wrap_pyfunction!(mppi::likelihood_weights, m)?)?;
     m.add_function(wrap_pyfunction!(mppi::servo_guide, m)?)?;
+    m.add_function(wrap_pyfunction!(robot::mesh_triangles, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("DEFAULT_TAU_EXT_CUTOFF", crate::sim::DEFAULT_TAU_EXT_CUTOFF)?;
     let contact_models: Vec<&str> = crate::sim::ContactModel::ALL.iter().map(|m| m.name()).collect();

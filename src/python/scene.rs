@@ -8,12 +8,41 @@ use pyo3::prelude::*;
 
 use super::convert::{array, pose_array, poses_array, view};
 use super::error::run;
+use super::robot::{parsed, roles_row, visual_rows, RobotOptions, RolesRow, VisualRow};
 use crate::model::inertials::DEFAULT_DENSITY;
 use crate::model::scene::Scene;
 use nalgebra::Point3;
 
 /// A self-collision sphere: (name, link, centre xyz in the link frame, radius).
 type SphereRow = (String, String, [f64; 3], f64);
+/// A collision primitive: (link, kind, size, pose row-major, hull vertices).
+type CollisionRow = (String, String, Vec<f64>, Vec<f64>, Vec<[f64; 3]>);
+
+/// The collision primitives of every link of `tree` (see `PyScene::object_collisions`).
+fn collision_rows(tree: &crate::model::KinematicTree) -> Vec<CollisionRow> {
+    use crate::model::kinematics::Shape;
+    let mut out = Vec::new();
+    for link in &tree.links {
+        for c in &link.collisions {
+            let (kind, size) = match &c.shape {
+                Shape::Box { half_extents } => ("box", vec![half_extents.x, half_extents.y, half_extents.z]),
+                Shape::Sphere { radius } => ("sphere", vec![*radius]),
+                Shape::Cylinder { radius, half_length } => ("cylinder", vec![*radius, *half_length]),
+                Shape::Capsule { radius, half_length } => ("capsule", vec![*radius, *half_length]),
+                Shape::Hull { half_extents, .. } => ("mesh", vec![half_extents.x, half_extents.y, half_extents.z]),
+            };
+            let m = c.origin.to_homogeneous();
+            let pose = (0..4).flat_map(|r| (0..4).map(move |col| m[(r, col)])).collect();
+            let points = match &c.shape {
+                Shape::Hull { points, .. } => points.iter().map(|p| [p.x, p.y, p.z]).collect(),
+                _ => Vec::new(),
+            };
+            out.push((link.name.clone(), kind.to_string(), size, pose, points));
+        }
+    }
+    out
+}
+
 /// A float64 array handed to Python.
 type Array<'py> = Bound<'py, PyArrayDyn<f64>>;
 
@@ -67,6 +96,37 @@ impl PyScene {
     ) -> PyResult<Self> {
         run(|| {
             Scene::from_urdf_files(&robot_path, &obj_path, obj_pose.as_deref())?
+                .with_object_joint(joint.as_deref(), &hold.unwrap_or_default(), handle.as_deref())?
+                .with_density(density)
+        })
+        .map(Self::wrap)
+    }
+
+    /// A scene from a robot and an object, each given as (kind, value): ("builtin", name), ("file",
+    /// path) or ("text", URDF); `robot` holds the robot's options (tool, held joints, base, postures)
+    /// over what its `<sabre>` block declares. A built-in object without `obj_pose` stands at its
+    /// default place; `joint`, `hold`, `handle` and `density` as in `from_urdf`.
+    #[staticmethod]
+    #[pyo3(signature = (robot_source, obj_source, robot, obj_pose=None, joint=None, hold=None, handle=None, density=DEFAULT_DENSITY))]
+    #[allow(clippy::too_many_arguments)]
+    fn build(
+        robot_source: (String, String),
+        obj_source: (String, String),
+        robot: RobotOptions,
+        obj_pose: Option<Vec<f64>>,
+        joint: Option<String>,
+        hold: Option<Vec<(String, f64)>>,
+        handle: Option<String>,
+        density: f64,
+    ) -> PyResult<Self> {
+        run(|| {
+            let parsed_robot = parsed(&robot_source.0, &robot_source.1, true)?;
+            let parsed_object = parsed(&obj_source.0, &obj_source.1, false)?;
+            let default_pose = crate::model::scene::default_object_pose(&obj_source.1);
+            let pose = obj_pose
+                .as_deref()
+                .or((obj_source.0 == "builtin").then_some(&default_pose[..]));
+            Scene::from_parts(parsed_robot, parsed_object, pose, &robot.decls()?)?
                 .with_object_joint(joint.as_deref(), &hold.unwrap_or_default(), handle.as_deref())?
                 .with_density(density)
         })
@@ -207,6 +267,27 @@ impl PyScene {
     fn home_configuration(&self) -> Vec<f64> {
         self.inner.home_configuration()
     }
+    fn start_configuration(&self) -> Vec<f64> {
+        self.inner.start_configuration()
+    }
+    fn work_configuration(&self) -> Vec<f64> {
+        self.inner.roles.work.clone()
+    }
+    /// What the robot's parts are for (see `robot::RolesRow`).
+    fn roles(&self) -> RolesRow {
+        roles_row(&self.inner)
+    }
+    /// The visuals of the robot's and of the object's links (see `robot::VisualRow`).
+    fn visuals(&self) -> (Vec<VisualRow>, Vec<VisualRow>) {
+        (visual_rows(&self.inner.robot), visual_rows(&self.inner.object))
+    }
+    /// The same scene with no robot link touching the object in the rollout model (to watch the
+    /// object move by itself).
+    fn without_robot_contact(&self) -> Self {
+        let mut scene = (*self.inner).clone();
+        scene.rollout_contact_links.clear();
+        Self::wrap(scene)
+    }
     fn rollout_contact_links(&self) -> Vec<String> {
         self.inner
             .rollout_contact_links
@@ -218,30 +299,23 @@ impl PyScene {
     /// 4 × 4): kind "box" (size = half extents x, y, z), "sphere" (radius), "cylinder" and "capsule"
     /// (radius, half length along the primitive's z), "mesh" (a mesh's convex hull: half extents of
     /// its bounding box, which the pose centres), and for meshes the hull's vertices (else empty).
-    #[allow(clippy::type_complexity)]
-    fn object_collisions(&self) -> Vec<(String, String, Vec<f64>, Vec<f64>, Vec<[f64; 3]>)> {
-        use crate::model::kinematics::Shape;
-        let tree = &self.inner.object;
-        let mut out = Vec::new();
-        for link in &tree.links {
-            for c in &link.collisions {
-                let (kind, size) = match &c.shape {
-                    Shape::Box { half_extents } => ("box", vec![half_extents.x, half_extents.y, half_extents.z]),
-                    Shape::Sphere { radius } => ("sphere", vec![*radius]),
-                    Shape::Cylinder { radius, half_length } => ("cylinder", vec![*radius, *half_length]),
-                    Shape::Capsule { radius, half_length } => ("capsule", vec![*radius, *half_length]),
-                    Shape::Hull { half_extents, .. } => ("mesh", vec![half_extents.x, half_extents.y, half_extents.z]),
-                };
-                let m = c.origin.to_homogeneous();
-                let pose = (0..4).flat_map(|r| (0..4).map(move |col| m[(r, col)])).collect();
-                let points = match &c.shape {
-                    Shape::Hull { points, .. } => points.iter().map(|p| [p.x, p.y, p.z]).collect(),
-                    _ => Vec::new(),
-                };
-                out.push((link.name.clone(), kind.to_string(), size, pose, points));
-            }
-        }
-        out
+    fn object_collisions(&self) -> Vec<CollisionRow> {
+        collision_rows(&self.inner.object)
+    }
+    /// The robot's collision primitives (its tool's included), as `object_collisions`.
+    fn robot_collisions(&self) -> Vec<CollisionRow> {
+        collision_rows(&self.inner.robot)
+    }
+    /// Every collision sphere, in order: (name, link, centre xyz, radius, checked against obstacles).
+    fn spheres(&self) -> Vec<(String, String, [f64; 3], f64, bool)> {
+        self.inner
+            .spheres
+            .iter()
+            .map(|sp| {
+                let (name, link, centre, radius) = self.sphere_row(sp);
+                (name, link, centre, radius, sp.obstacles)
+            })
+            .collect()
     }
     /// The collision spheres checked against run-time obstacles as (name, link, centre xyz, radius).
     fn obstacle_spheres(&self) -> Vec<SphereRow> {

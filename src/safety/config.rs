@@ -105,7 +105,8 @@ pub struct SafetyConfig {
     /// λ of the Sequential FILTER-QP (Algorithm 1): the filtered sequence becomes the plan, and a
     /// plan corrected by moving the hand off its path loses the handle.
     pub sequential_task_weight: f64,
-    /// The robot frame whose velocity `task_weight` protects.
+    /// The robot frame whose velocity `task_weight` protects; empty: the scene's tool frame (none:
+    /// the paper's plain metric).
     pub task_frame: String,
 }
 
@@ -139,7 +140,7 @@ impl Default for SafetyConfig {
             screening: true,
             task_weight: 0.0,
             sequential_task_weight: 100.0,
-            task_frame: "grasp".to_string(),
+            task_frame: String::new(),
         }
     }
 }

@@ -20,9 +20,10 @@ pub(crate) enum RowKind {
         pair: usize,
     },
     ArmReach,
-    /// Coordinate `axis` (0 = base x, 1 = base y) of q inside the base box.
+    /// The base's `axis` (0 = x, 1 = y), coordinate `coordinate` of q, inside the base box.
     BaseBox {
         axis: usize,
+        coordinate: usize,
     },
     /// Obstacle slot `slot` against robot sphere `sphere`.
     Obstacle {
@@ -142,12 +143,13 @@ impl Rows {
                 });
             }
         }
-        if on(ConstraintClass::BaseBox) && nq >= 2 {
-            for axis in 0..2 {
+        // A fixed-base arm has no base to keep in the box.
+        if let (true, Some(base)) = (on(ConstraintClass::BaseBox), scene.roles.base) {
+            for (axis, coordinate) in [base.x, base.y].into_iter().enumerate() {
                 rows.push(Row {
-                    kind: RowKind::BaseBox { axis },
+                    kind: RowKind::BaseBox { axis, coordinate },
                     class: ConstraintClass::BaseBox,
-                    cols: vec![axis],
+                    cols: vec![coordinate],
                 });
             }
         }
@@ -207,7 +209,7 @@ impl Rows {
                 format!("self_collision:{}-{}", link_name(a), link_name(b))
             }
             RowKind::ArmReach => "arm_reach".into(),
-            RowKind::BaseBox { axis } => format!("base_box:{}", ["x", "y"][axis]),
+            RowKind::BaseBox { axis, .. } => format!("base_box:{}", ["x", "y"][axis]),
             RowKind::Obstacle { slot, sphere } => match obstacles.get(slot).copied().flatten() {
                 Some(o) => format!("obstacle:{}:{}", o.id, link_name(sphere)),
                 None => format!("obstacle:empty{slot}:{}", link_name(sphere)),
@@ -248,10 +250,10 @@ impl Rows {
                     a[joint] = dh;
                     Some(h)
                 }
-                RowKind::BaseBox { axis } => {
+                RowKind::BaseBox { axis, coordinate } => {
                     let (lo, hi) = (self.base_box[2 * axis], self.base_box[2 * axis + 1]);
-                    let (h, dh) = interval_barrier(q[axis], lo, hi);
-                    a[axis] = dh;
+                    let (h, dh) = interval_barrier(q[coordinate], lo, hi);
+                    a[coordinate] = dh;
                     Some(h)
                 }
                 RowKind::SelfCollision { pair } => {

@@ -263,8 +263,12 @@ impl SafetyFilter {
                 ),
             ));
         }
-        let metric = if config.task_weight > 0.0 || config.sequential_task_weight > 0.0 {
-            let link = scene.robot.link_id(&config.task_frame).ok_or_else(|| {
+        let weighted = config.task_weight > 0.0 || config.sequential_task_weight > 0.0;
+        // An empty name is the scene's tool frame; a robot without one gets the plain metric.
+        let task_link = if config.task_frame.is_empty() {
+            scene.roles.tool_frame
+        } else {
+            Some(scene.robot.link_id(&config.task_frame).ok_or_else(|| {
                 SabreError::invalid(
                     "task_frame",
                     format!(
@@ -273,7 +277,9 @@ impl SafetyFilter {
                         scene.robot.link_names().join(", ")
                     ),
                 )
-            })?;
+            })?)
+        };
+        let metric = if let (true, Some(link)) = (weighted, task_link) {
             Some(TaskMetric {
                 link,
                 weight: config.task_weight,

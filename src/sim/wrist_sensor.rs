@@ -3,13 +3,10 @@
 
 use crate::model::scene::Scene;
 
-/// The link carrying the wrist force-torque sensor (`panda_link8`, else the last joint's child) and,
-/// per robot link, whether the sensor measures the forces on it (the link is at or beyond it).
+/// The link carrying the wrist force-torque sensor (the scene's wrist-sensor role) and, per robot
+/// link, whether the sensor measures the forces on it (the link is at or beyond it).
 pub(crate) fn wrist_sensor(scene: &Scene) -> (usize, Vec<bool>) {
-    let sensor_link = scene
-        .robot
-        .link_id("panda_link8")
-        .unwrap_or_else(|| scene.robot.joints[*scene.robot.active_joints.last().expect("nq > 0")].child);
+    let sensor_link = scene.roles.wrist_sensor;
     let beyond = (0..scene.robot.links.len())
         .map(|l| {
             let mut cur = Some(l);

@@ -59,7 +59,17 @@ def _subcommands() -> dict:
 
 def test_every_subcommand_dispatches_through_one_run_function():
     commands = _subcommands()
-    assert set(commands) == {"demo", "episode", "scripted", "view", "experiment", "control", "sim-robot", "ros-demo"}
+    assert set(commands) == {
+        "demo",
+        "episode",
+        "scripted",
+        "view",
+        "experiment",
+        "control",
+        "sim-robot",
+        "ros-demo",
+        "robot-check",
+    }
     for name, sub in commands.items():
         run = sub.get_default("run")
         assert callable(run) and run.__module__.startswith("sabre.cli."), name

@@ -101,7 +101,7 @@ class _TwoPhaseReach(sabre.tasks.Reach):
         return "stiff" if t >= 0.1 - 1e-9 else "free"
 
     def gain_inertia_floor(self, phase):
-        return 0.2 if phase == "stiff" else None
+        return 0.1 if phase == "stiff" else None
 
 
 def test_run_episode_applies_the_task_gain_floor_per_phase_and_restores_the_controllers_own(scene):
@@ -125,7 +125,7 @@ def test_run_episode_applies_the_task_gain_floor_per_phase_and_restores_the_cont
         on_replan=lambda t, x, p, c: seen.append((round(t, 6), low.gain_inertia_floor)),
     )
     # Each entry is read before the re-plan at t, so it is the floor of the plan made at t − 0.05.
-    assert seen == [(0.0, 0.01), (0.05, 0.01), (0.1, 0.01), (0.15, 0.2)]
+    assert seen == [(0.0, 0.01), (0.05, 0.01), (0.1, 0.01), (0.15, 0.1)]
     assert low.gain_inertia_floor == 0.01
 
     # An episode that raises inside the task's phase with a floor still hands the controller back
@@ -168,7 +168,7 @@ def test_realtime_cascade_ticks_with_the_task_gain_floor_of_the_planned_phase(sc
     task = _TwoPhaseReach(target_pose=scene.fk(scene.default_state()[: scene.nq], "grasp"))
     x0 = scene.default_state()
     torques = {}
-    for t0, floor, expected in ((0.0, None, 0.01), (0.2, 0.2, 0.2)):
+    for t0, floor, expected in ((0.0, None, 0.01), (0.2, 0.1, 0.1)):
         controller = sabre.Controller(scene, task, sabre.ControllerConfig(rollouts=8, seed=0))
         low = sabre.LowLevelController(scene, gain_inertia_floor=0.01)
         with sabre.RealtimeCascade(controller, low_level=low).start(x0, t0=t0) as cascade:
@@ -178,7 +178,7 @@ def test_realtime_cascade_ticks_with_the_task_gain_floor_of_the_planned_phase(sc
         np.testing.assert_array_equal(r.torque, by_hand.torque(x0, r.command))
         assert low.gain_inertia_floor == 0.01
         torques[expected] = (r.torque, sabre.LowLevelController(scene, gain_inertia_floor=0.01).torque(x0, r.command))
-    with_floor, without = torques[0.2]
+    with_floor, without = torques[0.1]
     assert np.abs(with_floor - without).max() > 1e-3  # the floor changed the torque
 
 

@@ -227,7 +227,8 @@ def _live_viewer(scene: Scene, x0: np.ndarray) -> Viewer:
     from ..viz.viewer import Viewer
 
     viewer = Viewer(scene)
-    viewer.look_at(0.5 * (x0[:3] + scene.object_pose[:3, 3]), distance=6.0)
+    base = scene.fk(scene.split_state(x0).q, scene.base_link)[:3, 3]
+    viewer.look_at(0.5 * (base + scene.object_pose[:3, 3]), distance=6.0)
     print(f"  viewer: http://127.0.0.1:{viewer.port}")
     return viewer
 

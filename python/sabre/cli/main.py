@@ -6,6 +6,7 @@ drawers and dishwashers.
   python -m sabre scripted    open-loop hook-and-pull check of the rollout model and the plant
   python -m sabre view        replay a saved episode (.npz) in the browser viewer
   python -m sabre experiment  the paper's experiments over seeds: CSV, figure, summary
+  python -m sabre robot-check what sabre uses of a robot URDF, written as a <sabre> block to review
   python -m sabre ros-demo    the ROS 2 controller node and a simulated robot as two processes
   python -m sabre control     the ROS 2 controller node alone (sim-robot: the simulated robot)
 
@@ -17,7 +18,7 @@ import argparse
 import sys
 
 from ..errors import SabreError
-from . import episode, results, ros
+from . import episode, results, robot_check, ros
 from ._args import TopHelpFormatter
 
 __all__ = ["build_parser", "main"]
@@ -27,7 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The parser of every subcommand; each subcommand sets ``run`` (args -> exit code)."""
     parser = argparse.ArgumentParser(prog="python -m sabre", description=__doc__, formatter_class=TopHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
-    for group in (episode, results, ros):
+    for group in (episode, results, robot_check, ros):
         group.register(sub)
     return parser
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 
 from ..experiments.runner import NAMES, run_experiments
+from ..robot_examples import EXAMPLE_ROBOTS
 
 __all__ = ["register", "view_command", "experiment_command"]
 
@@ -38,6 +39,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="the 1 kHz plant of every episode: sabre (Rapier), mujoco (sabre.MujocoPlant), or module:factory "
         "naming a callable that builds a sabre.PlantInterface from a scene (transfer runs both plants itself)",
     )
+    exp.add_argument(
+        "--robot",
+        choices=("royalpanda", *EXAMPLE_ROBOTS),
+        default="royalpanda",
+        help="the acceptance's robot: an example robot opens its own objects (docs/robots.md)",
+    )
     exp.set_defaults(run=experiment_command)
 
 
@@ -53,6 +60,13 @@ def experiment_command(args: argparse.Namespace) -> int:
     """``experiment``: runs the named experiment (or all) and writes results/<name>/; 0."""
     plant = {"sabre": None, "mujoco": "sabre.mujoco:MujocoPlant"}.get(args.plant, args.plant)
     run_experiments(
-        args.name, seeds=args.seeds, workers=args.workers, ray_address=args.ray, out=args.out, short=args.short, plant=plant
+        args.name,
+        seeds=args.seeds,
+        workers=args.workers,
+        ray_address=args.ray,
+        out=args.out,
+        short=args.short,
+        plant=plant,
+        robot=args.robot,
     )
     return 0

@@ -210,10 +210,11 @@ def summary(name: str, records: list[dict], *, seeds: int, short: bool) -> str:
 def acceptance_table(records: list[dict]) -> str:
     """Markdown, one row per object and variant: episodes that opened, time to open, final opening
     against the one success needs, mean wrench, real-time factor, planning time (medians over seeds)
-    and the seeds that did not open."""
+    and the seeds that did not open. The object is prefixed with its robot when that is not the RoyalPanda."""
     groups: defaultdict[tuple[str, str], list[dict]] = defaultdict(list)
     for r in records:
-        groups[r["config"]["obj"], r["config"]["variant"]].append(r)
+        robot = r["config"].get("robot")
+        groups[r["config"]["obj"] if robot is None else f"{robot}: {r['config']['obj']}", r["config"]["variant"]].append(r)
     lines = [
         "| object | variant | opened | time to open (median, max) | final opening, median (needed) "
         "| mean wrench, median | real-time factor, median | planning, median | seeds not opened |",

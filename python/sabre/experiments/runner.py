@@ -77,10 +77,13 @@ def _plant_factory(plant: str | None) -> Callable | None:
     return factory
 
 
-def specs(name: str, seeds: int, short: bool, plant: str | None = None) -> list[RunSpec]:
-    """Every run of one experiment (on the plant ``plant`` names, "module:factory"; None: the Rapier plant)."""
+def specs(name: str, seeds: int, short: bool, plant: str | None = None, robot: str = "royalpanda") -> list[RunSpec]:
+    """Every run of one experiment (on the plant ``plant`` names, "module:factory"; None: the Rapier plant;
+    ``robot``: the acceptance's robot, the other experiments are the RoyalPanda's)."""
     if name == "acceptance":
-        return acceptance_specs(range(seeds), duration=8.0 if short else 60.0, plant=plant)
+        return acceptance_specs(range(seeds), duration=8.0 if short else 60.0, plant=plant, robot=robot)
+    if robot != "royalpanda":
+        raise InvalidValueError(f"experiment {name!r} runs on the RoyalPanda; only acceptance takes another robot")
     if name == "transfer":
         # its runs name their own plants (sabre's and MuJoCo's), so `plant` does not apply; short: a smoke test
         # of every object, variant and plant, nominal damping only
@@ -144,17 +147,28 @@ def acceptance_specs(
     duration: float = 60.0,
     replan_rate: float = 50.0,
     plant: str | None = None,
+    robot: str = "royalpanda",
 ) -> list[RunSpec]:
-    """The acceptance runs: every object opened from the paper's start by every variant at every seed,
+    """The acceptance runs: every object opened from the robot's start by every variant at every seed,
     for up to ``duration`` s of simulated time, re-planning at ``replan_rate`` Hz (on the plant ``plant``
-    names, "module:factory"; None: the Rapier plant)."""
+    names, "module:factory"; None: the Rapier plant). ``robot``: the RoyalPanda (the paper's start) or
+    an example robot (:data:`sabre.robot_examples.EXAMPLE_ROBOTS`), which opens its own objects
+    (``objects`` defaults to them)."""
     from ..planner import VARIANTS
+    from ..robot_examples import EXAMPLE_OBJECTS
 
-    unknown = [o for o in objects if o not in OBJECTS] + [v for v in variants if v not in VARIANTS]
+    if robot != "royalpanda" and robot not in EXAMPLE_OBJECTS:
+        raise InvalidValueError(f"acceptance: unknown robot {robot!r}; royalpanda or one of {list(EXAMPLE_OBJECTS)}")
+    known = OBJECTS if robot == "royalpanda" else tuple(EXAMPLE_OBJECTS[robot])
+    if robot != "royalpanda" and tuple(objects) == OBJECTS:
+        objects = known
+    unknown = [o for o in objects if o not in known] + [v for v in variants if v not in VARIANTS]
     if unknown:
-        raise InvalidValueError(f"acceptance: unknown objects or variants {unknown}; objects {OBJECTS}, variants {VARIANTS}")
+        raise InvalidValueError(f"acceptance: unknown objects or variants {unknown}; objects {known}, variants {VARIANTS}")
+    # the RoyalPanda's runs keep the configuration (and so the cache entries) they always had
+    mounted = {} if robot == "royalpanda" else {"robot": robot}
     runs = [
-        _spec("acceptance", seed, obj=o, variant=v, duration=float(duration), replan_rate=float(replan_rate))
+        _spec("acceptance", seed, obj=o, variant=v, duration=float(duration), replan_rate=float(replan_rate), **mounted)
         for o in objects
         for v in variants
         for seed in seeds
@@ -234,7 +248,9 @@ def run_one(spec: RunSpec) -> dict:
     if spec.name == "fig10":
         corridor = scenarios.obstacle_corridor(c["variant"], seed, c["duration"], plant=plant)
         ep = corridor.episode
-        hand = ep.scene.fk_many(ep.scene.split_state(ep.state).q, "grasp")[:, :3, 3]
+        q = ep.scene.split_state(ep.state).q
+        hand = ep.scene.fk_many(q, ep.scene.require_tool_frame("fig10"))[:, :3, 3]
+        base = ep.scene.fk_many(q, ep.scene.base_link)[:, :3, 3]
         # the scenario's obstacle sits half-way between the start and the target 0.5 m to the side
         centre = hand[0] + 0.5 * np.array([-0.15, 0.5, 0.0])
         appeared = corridor.appeared_at
@@ -246,7 +262,7 @@ def run_one(spec: RunSpec) -> dict:
             },
             "series": {
                 "hand_xy": _series(hand[:, 0], hand[:, 1]),
-                "base_xy": _series(ep.state[:, 0], ep.state[:, 1]),
+                "base_xy": _series(base[:, 0], base[:, 1]),
                 "obstacle": {"t": [float(centre[0])], "y": [float(centre[1])]},
             },
         }
@@ -270,7 +286,9 @@ def _acceptance_run(c: dict, seed: int, plant: Callable | None = None) -> dict:
     slipped off (open back to approach) or let go (into release), and how fast it ran."""
     from . import scenarios
 
-    run = scenarios.object_manipulation(c["variant"], c["obj"], seed, c["duration"], replan_rate=c["replan_rate"], plant=plant)
+    run = scenarios.object_manipulation(
+        c["variant"], c["obj"], seed, c["duration"], replan_rate=c["replan_rate"], plant=plant, robot=c.get("robot", "royalpanda")
+    )
     ep = run.episode
     phases = [ep.phases[i] for i in ep.phase]
     transitions = list(itertools.pairwise(phases))
@@ -345,18 +363,20 @@ def run_experiments(
     out: str | os.PathLike[str] = "results",
     short: bool = False,
     plant: str | None = None,
+    robot: str = "royalpanda",
 ) -> dict[str, list[dict]]:
     """Runs ``name`` (one of :data:`NAMES` or "all") over ``seeds`` seeds, reusing cached runs, and
     writes ``<out>/<name>/runs.csv``, ``<name>.png`` and ``summary.md``. Returns the run records.
     ``plant``: "module:factory" naming a callable that builds the plant of a scene (a
-    :class:`~sabre.PlantInterface`, e.g. a class taking the scene); None: the Rapier plant."""
+    :class:`~sabre.PlantInterface`, e.g. a class taking the scene); None: the Rapier plant.
+    ``robot`` other than the RoyalPanda: the acceptance of that example robot, in ``<out>/acceptance_<robot>/``."""
     if int(seeds) < 1:
         raise InvalidValueError(f"seeds must be at least 1, got {seeds}")
     names = NAMES if name == "all" else (name,)
     records = {}
     for n in names:
-        folder = Path(out) / n
-        ordered = run_specs(specs(n, int(seeds), short, plant), folder, workers=workers, ray_address=ray_address)
+        folder = Path(out) / (n if robot == "royalpanda" else f"{n}_{robot}")
+        ordered = run_specs(specs(n, int(seeds), short, plant, robot), folder, workers=workers, ray_address=ray_address)
         records[n] = ordered
         _write_csv(folder / "runs.csv", ordered)
         from .figures import draw, summary

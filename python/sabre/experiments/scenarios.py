@@ -26,7 +26,7 @@ from ..inner_loop import LowLevelController
 from ..planner import Controller, ControllerConfig
 from ..plants import PlantInterface, as_plant
 from ..safety import EnergyTank, SafetyConfig, SafetyFilter
-from ..scene import Scene
+from ..scene import ROBOTS, Scene
 from ..scripted import hook_and_pull
 from ..sim import Plant
 
@@ -43,6 +43,7 @@ __all__ = [
     "tank_chattering",
     "obstacle_corridor",
     "object_manipulation",
+    "manipulation_scene",
     "power_sign_changes_per_s",
     "tank_power",
     "FloorPower",
@@ -386,7 +387,8 @@ def obstacle_corridor(
     and base-box rows from the appearance on (m² for obstacle rows, m for the box)."""
     scene = Scene.load(obj="shelf")
     x0 = scene.default_state()
-    start = scene.fk(scene.split_state(x0).q, "grasp")
+    hand = scene.require_tool_frame("obstacle_corridor")
+    start = scene.fk(scene.split_state(x0).q, hand)
     target = start.copy()
     target[:3, 3] = start[:3, 3] + np.array([-0.15, 0.5, 0.0])
     center = 0.5 * (start[:3, 3] + target[:3, 3])
@@ -404,7 +406,7 @@ def obstacle_corridor(
     def appear(t, x, plant, controller):
         if appeared:
             return
-        p = scene.fk(scene.split_state(x).q, "grasp")[:3, 3]
+        p = scene.fk(scene.split_state(x).q, hand)[:3, 3]
         if np.linalg.norm(p - center) - obstacle_radius <= 0.01:
             appeared.append(t)
             controller.add_obstacle(center, obstacle_radius)
@@ -438,6 +440,15 @@ def obstacle_corridor(
 
 
 # -- object manipulation -----------------------------------------------------------------------
+def manipulation_scene(robot: str, obj: str) -> Scene:
+    """The scene of ``robot`` (built-in or example) opening built-in object ``obj``."""
+    if robot in ROBOTS:
+        return Scene.load(robot, obj)
+    from ..robot_examples import example_scene
+
+    return example_scene(robot, obj)
+
+
 @dataclass(frozen=True)
 class ManipulationResult:
     episode: Episode = field(repr=False)
@@ -455,9 +466,12 @@ def object_manipulation(
     *,
     replan_rate: float = 50.0,
     plant: PlantFactory | None = None,
+    robot: str = "royalpanda",
 ) -> ManipulationResult:
-    """OpenObject from :func:`~sabre.closed_loop.paper_start_state`; violations per ZBF class."""
-    scene = Scene.load(obj=obj)
+    """OpenObject from :func:`~sabre.closed_loop.paper_start_state`; violations per ZBF class. ``robot``:
+    a built-in robot (:data:`sabre.ROBOTS`) or an example robot
+    (:data:`sabre.robot_examples.EXAMPLE_ROBOTS`, with its objects where it opens them)."""
+    scene = manipulation_scene(robot, obj)
     ctrl = Controller(scene, tasks.OpenObject(), ControllerConfig(variant=variant, seed=seed))
     ep = run_episode(
         scene,

@@ -152,8 +152,9 @@ def layout(mujoco: Any, model: Any, scene: Scene) -> Layout:
     is_object = np.array([model.body(b).name.startswith(OBJECT_PREFIX) for b in range(model.nbody)])
     is_robot = ~is_object
     is_robot[0] = False
-    sensor_name = "panda_link8" if "panda_link8" in names else model.body(model.jnt_bodyid[robot_joints[-1]]).name
-    sensor = names.index(sensor_name)
+    # the scene's wrist-sensor link, or the body MuJoCo's importer merged it into (that of the last joint)
+    wrist = scene.wrist_sensor_link
+    sensor = names.index(wrist) if wrist in names else int(model.jnt_bodyid[robot_joints[-1]])
     beyond = np.zeros(model.nbody, dtype=bool)
     for b in range(model.nbody):
         walk = b

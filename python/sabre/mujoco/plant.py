@@ -96,8 +96,8 @@ class MujocoPlant:
     **Readings** (as :class:`sabre.Plant`): :attr:`tau_ext` = Σ J_cᵀ f_c over the step's robot–object contacts
     (35), f_c from ``mj_contactForce`` acting on the robot, J_c the robot's point Jacobian at the contact;
     :attr:`measured_tau_ext` its first-order low-pass at ``tau_ext_cutoff`` Hz (None: unfiltered); :attr:`wrench`
-    the force (world frame) and torque about the wrist sensor's origin (``panda_link8``) of the contacts on the
-    links at and beyond it. Fault injection: :meth:`hold_object` (a stuck door) and :meth:`push`.
+    the force (world frame) and torque about the wrist sensor's origin (:attr:`sabre.Scene.wrist_sensor_link`) of
+    the contacts on the links at and beyond it. Fault injection: :meth:`hold_object` (a stuck door) and :meth:`push`.
     """
 
     command_interface = "velocity"

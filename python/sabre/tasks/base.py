@@ -34,7 +34,9 @@ class SafetyWeights:
     #: :class:`sabre.costs.BaseClearance`). Zero weights leave it out.
     base_clearance: float = costs.BaseClearance.weight
     base_clearance_slope: float = costs.BaseClearance.weight_slope
-    base_link: str = "base_link"
+    #: The base's link for the clearance term (None: the scene's :attr:`~sabre.Scene.base_link`, for
+    #: a robot with a holonomic base; a fixed base has no clearance term: it cannot get out of the way).
+    base_link: str | None = None
 
     def terms(self, scene: Scene) -> costs.Cost:
         """The safety cost terms for the scene (arm reach and base clearance where the scene has them)."""
@@ -47,8 +49,9 @@ class SafetyWeights:
         )
         if scene.arm_reach is not None:
             out = out + costs.ArmReach(weight=self.reach, weight_slope=self.reach_slope)
-        if (self.base_clearance > 0.0 or self.base_clearance_slope > 0.0) and self.base_link in scene.frame_names:
-            out = out + costs.BaseClearance(self.base_link, weight=self.base_clearance, weight_slope=self.base_clearance_slope)
+        link = self.base_link if self.base_link is not None else scene.base_link if scene.base_indices is not None else None
+        if (self.base_clearance > 0.0 or self.base_clearance_slope > 0.0) and link in scene.frame_names:
+            out = out + costs.BaseClearance(link, weight=self.base_clearance, weight_slope=self.base_clearance_slope)
         return out
 
 
@@ -107,9 +110,10 @@ class Task:
 
 @dataclass
 class Reach(Task):
-    """Bring robot frame ``frame`` to ``target_pose`` (4, 4); success within 2 cm and 0.1 rad."""
+    """Bring robot frame ``frame`` (None: the scene's tool frame) to ``target_pose`` (4, 4); success
+    within 2 cm and 0.1 rad."""
 
-    frame: str = "grasp"
+    frame: str | None = None
     target_pose: np.ndarray = field(default_factory=lambda: np.eye(4))
     pose_weight: float = costs.TargetPose.linear_weight
     safety: SafetyWeights = field(default_factory=SafetyWeights)
@@ -122,12 +126,15 @@ class Reach(Task):
     def __post_init__(self) -> None:
         self.target_pose = as_pose("target_pose", self.target_pose)
 
+    def _frame(self, scene: Scene) -> str:
+        return self.frame if self.frame is not None else scene.require_tool_frame("Reach")
+
     def cost(self, scene: Scene, phase: str) -> costs.Cost:
-        pose = costs.TargetPose(self.target_pose, self.frame, None, self.pose_weight, self.pose_weight)
+        pose = costs.TargetPose(self.target_pose, self._frame(scene), None, self.pose_weight, self.pose_weight)
         return pose + self.safety.terms(scene) + self.extra
 
     def success(self, scene: Scene, x: np.ndarray) -> bool:
-        pose = scene.fk(scene.split_state(x).q, self.frame)
+        pose = scene.fk(scene.split_state(x).q, self._frame(scene))
         dp = np.linalg.norm(pose[:3, 3] - self.target_pose[:3, 3])
         cos = (np.trace(self.target_pose[:3, :3].T @ pose[:3, :3]) - 1.0) / 2.0
         return bool(dp < self.position_tolerance and np.arccos(np.clip(cos, -1.0, 1.0)) < self.angle_tolerance)

@@ -127,7 +127,9 @@ def plot_episode(episode: Episode, path: str | os.PathLike) -> None:
 
 def _plot_base_path(ax: Axes, episode: Episode) -> None:
     """The base's path in the plane (m), start, end and the object marked, on equal axes around all three."""
-    x, y = episode.state[:, 0], episode.state[:, 1]
+    scene = episode.scene
+    base = scene.fk_many(scene.split_state(episode.state).q, scene.base_link)[:, :3, 3]
+    x, y = base[:, 0], base[:, 1]
     ax.plot(x, y, color="C1")
     ax.plot(x[0], y[0], "o", color="C1", label="start")
     ax.plot(x[-1], y[-1], "s", color="C1", label="end")

@@ -3,14 +3,13 @@
 viser (the library judo uses) serves a three.js scene over a websocket, so any browser is the
 client, and ships GUI controls (timeline slider, play checkbox) in the same page; rerun needs its
 own viewer application and meshcat has no GUI controls. The robot and the object are drawn from
-the visual primitives of their URDFs, posed by sabre's own kinematics (:meth:`Scene.fk_many`).
+the visuals of their URDFs (primitives and meshes), posed by sabre's own kinematics (:meth:`Scene.fk_many`).
 Needs the ``viewer`` extra: ``pip install 'sabre-mpc[viewer]'``.
 """
 
 from __future__ import annotations
 
 import os
-import sys
 import threading
 import time
 import xml.etree.ElementTree as ET
@@ -20,10 +19,11 @@ from typing import Any
 
 import numpy as np
 
+from .. import _core
 from ..episode import Episode, RecordedPlan
-from ..errors import UnknownAssetError, UrdfError, require_extra
+from ..errors import SabreError, UnknownAssetError, UrdfError, require_extra
 from ..safety import SafetyConfig, SafetyFilter
-from ..scene import Scene
+from ..scene import Scene, Visual
 
 __all__ = ["Viewer", "VisualShape", "urdf_visuals", "asset_path", "replay"]
 
@@ -39,28 +39,6 @@ _FORCE_SCALE = 0.01  # m of arrow per N of contact force
 def _viser():
     viser, trimesh = require_extra("viewer", "the viewer", "viser", "trimesh")
     return viser, trimesh
-
-
-def panda_mesh_folder() -> Path | None:
-    """The Panda visual meshes (link0.dae … link7.dae) of the ``example-robot-data`` package, if installed."""
-    for entry in sys.path:
-        folder = Path(entry) / "cmeel.prefix/share/example-robot-data/robots/panda_description/meshes/visual"
-        if (folder / "link0.dae").is_file():
-            return folder
-    return None
-
-
-def _panda_meshes(trimesh: Any, folder: Path, link: str) -> list:
-    """The coloured parts of one Panda link's visual mesh, in the link frame (the robot's arm links
-    follow the Franka description's frames, so the meshes need no offset)."""
-    scene = trimesh.load(folder / f"link{link.removeprefix('panda_link')}.dae", force="scene")
-    parts = []
-    for node in scene.graph.nodes_geometry:
-        transform, geometry = scene.graph[node]
-        mesh = scene.geometry[geometry].copy()
-        mesh.apply_transform(transform)
-        parts.append(mesh)
-    return parts
 
 
 def asset_path(kind: str, name: str) -> Path:
@@ -140,7 +118,18 @@ def urdf_visuals(path: str | Path) -> list[VisualShape]:
     return shapes
 
 
-def _mesh(trimesh: Any, shape: VisualShape) -> Any:
+def _mesh(trimesh: Any, shape: VisualShape | Visual) -> Any:
+    """The triangle mesh of a visual in its link's frame; None for a mesh file that cannot be read."""
+    if isinstance(shape, Visual) and shape.kind == "mesh":
+        if shape.mesh is None:
+            return None
+        try:
+            vertices, faces = _core.mesh_triangles(shape.mesh, list(shape.scale))
+        except SabreError:
+            return None
+        mesh = trimesh.Trimesh(np.asarray(vertices).reshape(-1, 3), np.asarray(faces).reshape(-1, 3), process=False)
+        mesh.apply_transform(shape.pose)
+        return mesh
     if shape.kind == "box":
         mesh = trimesh.creation.box(extents=shape.size)
     elif shape.kind == "cylinder":
@@ -149,7 +138,7 @@ def _mesh(trimesh: Any, shape: VisualShape) -> Any:
         mesh = trimesh.creation.capsule(height=shape.size[1], radius=shape.size[0], count=[16, 16])
     else:
         mesh = trimesh.creation.icosphere(subdivisions=2, radius=shape.size[0])
-    mesh.apply_transform(shape.origin)
+    mesh.apply_transform(shape.pose if isinstance(shape, Visual) else shape.origin)
     return mesh
 
 
@@ -169,21 +158,18 @@ class Viewer:
     contact points with their forces, and the tank energy and phase in the side panel.
 
     Open ``http://<host>:<port>`` in a browser. :meth:`replay` adds a timeline; ``run_episode(...,
-    viewer=Viewer(scene))`` shows a run live. ``panda_meshes``: draw the arm links panda_link0 …
-    panda_link7 with the Panda's visual meshes from ``example-robot-data`` when it is installed
-    (the URDF's primitives otherwise, and always for the base, hand and hook).
+    viewer=Viewer(scene))`` shows a run live. Every link is drawn from its URDF visuals
+    (:attr:`Scene.robot_visuals`, :attr:`Scene.object_visuals`): primitives, and meshes (STL, OBJ,
+    COLLADA) read by sabre's core; a mesh file that was not found is left out.
     """
 
-    def __init__(self, scene: Scene, *, host: str = "127.0.0.1", port: int = 8080, panda_meshes: bool = True) -> None:
+    def __init__(self, scene: Scene, *, host: str = "127.0.0.1", port: int = 8080) -> None:
         viser, trimesh = _viser()
         self.scene = scene
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.port = self.server.get_port()
-        self._meshes = panda_mesh_folder() if panda_meshes else None
-        self._robot_links = self._add_links(trimesh, "robot", asset_path("robots", scene.robot_name), scene.frame_names)
-        self._object_links = self._add_links(
-            trimesh, "object", asset_path("objects", scene.object_name), scene.object_frame_names
-        )
+        self._robot_links = self._add_links(trimesh, "robot", scene.robot_visuals)
+        self._object_links = self._add_links(trimesh, "object", scene.object_visuals)
         self.server.scene.add_grid("/ground", width=12.0, height=12.0, cell_size=0.5)
         gui = self.server.gui
         self._time = gui.add_number("time (s)", 0.0, step=0.001, disabled=True)
@@ -197,22 +183,14 @@ class Viewer:
         self._shown_obstacles = 0
         self._lock = threading.Lock()
 
-    def _add_links(self, trimesh: Any, prefix: str, urdf: Path, frames: tuple[str, ...]) -> dict[str, Any]:
+    def _add_links(self, trimesh: Any, prefix: str, visuals: tuple[Visual, ...]) -> dict[str, Any]:
         handles = {}
-        shapes = [s for s in urdf_visuals(urdf) if s.link in frames]
-        meshed = set()
-        if prefix == "robot" and self._meshes is not None:
-            meshed = {f"panda_link{i}" for i in range(8)} & set(frames)
-            for link in sorted(meshed):
-                handles[link] = self.server.scene.add_frame(f"/{prefix}/{link}", show_axes=False)
-                for j, part in enumerate(_panda_meshes(trimesh, self._meshes, link)):
-                    self.server.scene.add_mesh_trimesh(f"/{prefix}/{link}/mesh{j}", part)
-        for i, shape in enumerate(shapes):
-            if shape.link in meshed:
+        for i, shape in enumerate(visuals):
+            mesh = _mesh(trimesh, shape)
+            if mesh is None:
                 continue
             if shape.link not in handles:
                 handles[shape.link] = self.server.scene.add_frame(f"/{prefix}/{shape.link}", show_axes=False)
-            mesh = _mesh(trimesh, shape)
             rgb = tuple(int(255 * c) for c in shape.rgba[:3])
             self.server.scene.add_mesh_simple(
                 f"/{prefix}/{shape.link}/visual{i}",
@@ -358,7 +336,7 @@ class Replay:
         self.slider = gui.add_slider("timeline (s)", 0.0, max(duration, 1e-3), 0.01, 0.0)
         self.playing = gui.add_checkbox("play", False)
         self.slider.on_update(lambda _event: self._show(self.slider.value))
-        base = episode.state[:, :2]
+        base = scene.fk_many(q, scene.base_link)[:, :2, 3]
         # nearer the object than the base: the door and the hand are what the viewer is for
         target = 0.4 * np.r_[base.mean(axis=0), 0.6] + 0.6 * np.r_[scene.object_pose[:2, 3], 0.6]
         extent = np.linalg.norm(np.ptp(np.vstack([base, scene.object_pose[None, :2, 3]]), axis=0))

@@ -39,8 +39,8 @@ class ApproachConfig:
         weight: pose weight of the reaching targets (the paper's approach weight).
         switch_position: distance (m) to the target that ends inserting (twice it ends the approach).
         switch_angle: angle (rad) to the target that ends approaching, inserting and hooking.
-        posture: preferred arm posture while approaching (nq joint targets), or None for a Panda
-            posture that holds a hand level with a handle.
+        posture: preferred arm posture while approaching (nq joint targets), or None for the robot's
+            home posture (:meth:`sabre.Scene.home_configuration`); a holonomic base's joints are free.
         posture_weight: its weight per rad² (0: off).
 
     Raises:
@@ -81,6 +81,9 @@ class HookConfig:
         drag_speed: handle speed (m/s) that counts as the finger already pulling while inserting or
             hooking (see :meth:`OpenObject.pulling`); 0: off.
         drag_distance: distance (m) of the handle from closed below which pulling never counts.
+        stall_depth: how far (m) short of the hook target's depth the grasp frame must be for a stalled
+            hook to start over however little the handle moved: that far out the finger's tip cannot
+            be holding the bar; None: only past ``drag_distance``.
 
     Raises:
         InvalidValueError: a negative or non-finite tolerance, speed or distance.
@@ -93,12 +96,13 @@ class HookConfig:
     along_tolerance: float = 0.03
     drag_speed: float = 0.02
     drag_distance: float = 0.03
+    stall_depth: float | None = 0.04
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "offset", xyz("hook.offset", self.offset))
         for name in ("tolerance", "along_tolerance", "drag_speed", "drag_distance"):
             object.__setattr__(self, name, as_non_negative(f"hook.{name}", getattr(self, name)))
-        for name in ("insert_depth_tolerance", "backout"):
+        for name in ("insert_depth_tolerance", "backout", "stall_depth"):
             object.__setattr__(self, name, optional_non_negative(f"hook.{name}", getattr(self, name)))
 
 

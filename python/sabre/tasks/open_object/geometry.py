@@ -18,6 +18,7 @@ from ...scene import Scene
 from .._per_scene import per_scene
 
 __all__ = [
+    "tool_frame",
     "GraspError",
     "PocketError",
     "handle_frame",
@@ -51,6 +52,11 @@ class PocketError:
 
     across: float
     along: float
+
+
+def tool_frame(scene: Scene) -> str:
+    """The robot's control frame (its tool's "grasp frame"), which every function here measures."""
+    return scene.require_tool_frame("OpenObject")
 
 
 def handle_frame(scene: Scene, handle: str) -> tuple[str, np.ndarray]:
@@ -97,7 +103,7 @@ def approach_error(scene: Scene, handle: str, x: np.ndarray, offset: np.ndarray)
     """Distance (m) and angle (rad) of the grasp frame from the target ``offset`` at state x."""
     q, _, o, _ = scene.split_state(x)
     target = handle_pose(scene, handle, o) @ offset
-    pose = scene.fk(q, "grasp")
+    pose = scene.fk(q, tool_frame(scene))
     dp = float(np.linalg.norm(pose[:3, 3] - target[:3, 3]))
     cos = (np.trace(target[:3, :3].T @ pose[:3, :3]) - 1.0) / 2.0
     return GraspError(distance=dp, angle=float(np.arccos(np.clip(cos, -1.0, 1.0))))
@@ -108,7 +114,7 @@ def _grasp_from_target(scene: Scene, handle: str, x: np.ndarray, offset: np.ndar
     q, _, o, _ = scene.split_state(x)
     pose = handle_pose(scene, handle, o)
     target = pose @ offset
-    return pose, scene.fk(q, "grasp")[:3, 3] - target[:3, 3]
+    return pose, scene.fk(q, tool_frame(scene))[:3, 3] - target[:3, 3]
 
 
 def pocket_error(scene: Scene, handle: str, x: np.ndarray, offset: np.ndarray) -> PocketError:
@@ -130,7 +136,7 @@ def depth_error(scene: Scene, handle: str, x: np.ndarray, offset: np.ndarray) ->
 def lateral_error(scene: Scene, handle: str, x: np.ndarray, sideways: float) -> float:
     """Sideways position (m) of the grasp frame along the handle frame's y axis, from ``sideways``."""
     q, _, o, _ = scene.split_state(x)
-    grasp = np.linalg.solve(handle_pose(scene, handle, o), scene.fk(q, "grasp"))
+    grasp = np.linalg.solve(handle_pose(scene, handle, o), scene.fk(q, tool_frame(scene)))
     return float(grasp[1, 3] - sideways)
 
 
@@ -178,7 +184,7 @@ def release_path(
     chase a falling door into the robot.
     """
     q, _, o, o_dot = scene.split_state(x)
-    relative = np.linalg.solve(handle_pose(scene, handle, o), scene.fk(q, "grasp"))
+    relative = np.linalg.solve(handle_pose(scene, handle, o), scene.fk(q, tool_frame(scene)))
     sideways = entry_side - relative[1, 3]
     hooked = abs(sideways) <= hooked_within  # else the finger slipped away: just back off
     unhook = abs(sideways) if hooked else 0.0
@@ -204,7 +210,7 @@ def release_direction(scene: Scene, handle: str, x: np.ndarray) -> np.ndarray:
     grasp frame's −z) and, for a hinged door, out of its sweep (away from the hinge axis, found as
     the centre of the circle through three handle positions about the current opening), half each."""
     q, _, o, _ = scene.split_state(x)
-    pose = scene.fk(q, "grasp")
+    pose = scene.fk(q, tool_frame(scene))
     back = -pose[:3, 2]
     if not scene.object_is_revolute:
         return back

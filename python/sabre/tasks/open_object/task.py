@@ -9,7 +9,7 @@ import numpy as np
 
 from ... import costs
 from ..._validate import as_finite, as_non_negative, as_positive
-from ...errors import InvalidValueError, UnknownFrameError
+from ...errors import InvalidValueError
 from ...guides import servo_guide
 from ...scene import Scene
 from ...sim import RolloutModel
@@ -20,6 +20,15 @@ from .config import ApproachConfig, GuideConfig, HookConfig, NoiseConfig, OpenCo
 from .geometry import GraspError, PocketError
 
 __all__ = ["OpenObject"]
+
+
+def _probe_model(scene: Scene) -> RolloutModel:
+    """The rollout model that watches the object alone: a fixed-base robot cannot be moved out of the
+    way, so its links are taken out of the contact instead."""
+    if scene.base_indices is None:
+        return RolloutModel(Scene(scene._core.without_robot_contact()))
+    return RolloutModel(scene)
+
 
 #: The phase that follows each reaching phase once its target is reached.
 _REACHED = {"approach": "insert", "insert": "hook", "hook": "open"}
@@ -114,8 +123,7 @@ class OpenObject(Task):
                 f"OpenObject needs an object with one movable joint; {scene.object_name!r} has {scene.no}: "
                 f"{list(scene.object_joint_names)}{swapped}; {pick} and holds the others"
             )
-        if "grasp" not in scene.frame_names:
-            raise UnknownFrameError(f"OpenObject needs the robot frame 'grasp'; the robot has: {', '.join(scene.frame_names)}")
+        geometry.tool_frame(scene)  # the robot has a control frame to steer
         geometry.handle_frame(scene, self.handle)  # the handle exists and its frame can be inferred
         if not moved_by:
             raise InvalidValueError(
@@ -165,25 +173,19 @@ class OpenObject(Task):
 
     def posture_term(self, scene: Scene) -> costs.Cost:
         """The posture cost of the approach (empty when ``approach.posture_weight`` is 0)."""
-        names = scene.joint_names
         if self.approach.posture_weight <= 0.0:
             return costs.Cost()
-        if self.approach.posture is not None:
-            target = np.asarray(self.approach.posture, dtype=float)
-            weights = np.where(np.arange(scene.nq) < 3, 0.0, self.approach.posture_weight)
-        elif all(f"panda_joint{i}" in names for i in (2, 4, 6)):
-            target = np.zeros(scene.nq)
-            weights = np.zeros(scene.nq)
-            for joint, value in (("panda_joint2", 1.0), ("panda_joint4", -1.2), ("panda_joint6", 2.9)):
-                i = names.index(joint)
-                target[i], weights[i] = value, self.approach.posture_weight
-        else:
-            return costs.Cost()
+        posture = self.approach.posture
+        target = scene.home_configuration() if posture is None else np.asarray(posture, dtype=float)
+        weights = np.full(scene.nq, self.approach.posture_weight)
+        if scene.base_indices is not None:
+            weights[list(scene.base_indices)] = 0.0  # the base goes where the handle is
         return costs.Cost([costs.Posture(target, weights)])
 
     def cost(self, scene: Scene, phase: str) -> costs.Cost:
         frame, offset = geometry.handle_frame(scene, self.handle)
         target = offset @ self.grasp_offset(scene, phase)
+        tool = geometry.tool_frame(scene)
         pull_object = costs.ObjectState([self.object_setpoint(scene)], self.open.object_weight)
         every_phase = self.safety.terms(scene) + self.extra
         if phase == "release":
@@ -191,13 +193,13 @@ class OpenObject(Task):
         if phase in ("approach", "insert", "hook"):
             # The object cost also before the hook holds: a door that can open by itself (a dishwasher
             # past its balance point, resting on the hand after a slip) should be let go, not held.
-            reach = costs.Cost([costs.TargetPose(target, "grasp", frame, self.approach.weight, self.approach.weight)])
+            reach = costs.Cost([costs.TargetPose(target, tool, frame, self.approach.weight, self.approach.weight)])
             if phase == "approach":
                 reach = reach + costs.Contact(self.contact_weight) + self.posture_term(scene)
             return reach + pull_object + every_phase
         hold = costs.TargetPose(
             target,
-            "grasp",
+            tool,
             frame,
             weights=tuple(self.open.pose_weights),
             lead=self.lead(scene),
@@ -277,16 +279,18 @@ class OpenObject(Task):
     def self_opening(self, scene: Scene, x: np.ndarray) -> bool:
         """Whether the object, left alone at rest, opens further by itself (a dishwasher door past
         its balance point): the rollout model run for ``release.probe`` s from x with the robot and
-        the object at rest and the robot moved 5 m away from the object, checked against
-        ``release.rate``."""
+        the object at rest and the robot out of its way (a holonomic base moved 5 m away from the
+        object; a fixed-base robot's links taken out of the contact), checked against ``release.rate``."""
         if self.success(scene, x) or self.opening_of(scene, x) >= scene.o_upper[0] - 1e-3:
             return False
-        model = per_scene(scene, "probe model", RolloutModel)
+        model = per_scene(scene, "probe model", _probe_model)
         free = np.array(x, dtype=np.float64)
         q, q_dot, _, o_dot = scene.split_state(free)
-        away = q[:2] - scene.object_pose[:2, 3]
-        norm = float(np.linalg.norm(away))
-        q[:2] = scene.object_pose[:2, 3] + 5.0 * (away / norm if norm > 1e-9 else np.array([-1.0, 0.0]))
+        if scene.base_indices is not None:
+            xy = list(scene.base_indices[:2])
+            away = q[xy] - scene.object_pose[:2, 3]
+            norm = float(np.linalg.norm(away))
+            q[xy] = scene.object_pose[:2, 3] + 5.0 * (away / norm if norm > 1e-9 else np.array([-1.0, 0.0]))
         q_dot[:] = 0.0
         o_dot[:] = 0.0  # from rest: a drawer still coasting from a pull does not open by itself
         steps = max(1, int(round(self.release.probe / model.dt)))
@@ -308,16 +312,21 @@ class OpenObject(Task):
         return not self._slipped(scene, x)
 
     def backed_out(self, scene: Scene, x: np.ndarray) -> bool:
-        """Whether the finger, hooking an object already opened, has backed out in front of the bar
-        without moving it: the grasp frame more than ``hook.backout`` (m) short of the hook target's
-        depth, the handle at least ``hook.drag_distance`` (m) from closed (as for ``pulling``) and opening
-        no faster than ``hook.drag_speed`` (m/s). A finger that catches the bar with its tip often drags
-        a free door open that way until the bar slides into the pocket (``pulling``), and on a closed
-        door that is how the drag starts; a door that was opened and does not move now (held, or
-        stuck) only takes the tank's energy for the catch."""
-        if self.hook.backout is None or self.depth_error(scene, x, "hook") >= -self.hook.backout:
+        """Whether the finger, hooking, has backed out in front of the bar and stalled: the grasp frame
+        more than ``hook.backout`` (m) short of the hook target's depth, the handle opening no faster
+        than ``hook.drag_speed`` (m/s), and either at least ``hook.drag_distance`` (m) from closed (as
+        for ``pulling``) or the frame more than ``hook.stall_depth`` (m) short. A finger that catches
+        the bar with its tip often drags a free door open that way until the bar slides into the
+        pocket (``pulling``), and on a closed door that is how the drag starts; a door that was opened
+        and does not move now (held, or stuck) only takes the tank's energy for the catch, and a
+        finger too far out for its tip to hold the bar starts over however little it dragged."""
+        if self.hook.backout is None:
             return False
-        if self.handle_from_closed(scene, x) < self.hook.drag_distance:
+        short = -self.depth_error(scene, x, "hook")
+        if short <= self.hook.backout:
+            return False
+        lost = self.hook.stall_depth is not None and short > self.hook.stall_depth
+        if not lost and self.handle_from_closed(scene, x) < self.hook.drag_distance:
             return False
         return self.handle_speed(scene, x) <= self.hook.drag_speed
 
