@@ -136,22 +136,29 @@ class ObjectStateEstimator:
         """The current estimate of o."""
         return self._o
 
-    # The core's kinematics without the wrappers' checks: update() checks q once, and the fit calls
-    # the object's kinematics a dozen times per update (the controller runs it at 1 kHz).
+    # The core's kinematics without the wrappers' checks: update() checks q once, and the fit needs
+    # the object's kinematics at three coordinates per step (the controller runs it at 1 kHz).
     def _hand_point(self, q: np.ndarray) -> np.ndarray:
         return self.scene._core.fk(q, self.hand_frame)[:3, 3]
 
     def _handle(self, o: float) -> np.ndarray:
         return self.scene._core.object_fk(np.array([o]), self.handle_frame) @ self._handle_offset
 
+    def _points(self, o: np.ndarray, local: np.ndarray) -> np.ndarray:
+        """(k, 3) where the handle-frame point ``local`` (homogeneous, the handle offset applied)
+        is at each of the k object coordinates ``o``, in one call into the core."""
+        return (self.scene._core.object_fk_many(o.reshape(-1, 1), self.handle_frame) @ local)[:, :3]
+
     def _fit(self, p: np.ndarray, offset: np.ndarray) -> tuple[float, float]:
         """o minimising |T(o)·offset − p| by Gauss–Newton from the last estimate, and its residual."""
         lo, hi = self._limits
         o = self._o
         h = 1e-5 if self.scene.object_is_revolute else 1e-6
+        local = self._handle_offset @ offset
         for _ in range(4):
-            r = (self._handle(o) @ offset)[:3] - p
-            d = ((self._handle(o + h) @ offset)[:3] - (self._handle(o - h) @ offset)[:3]) / (2 * h)
+            at, ahead, behind = self._points(np.array([o, o + h, o - h]), local)
+            r = at - p
+            d = (ahead - behind) / (2 * h)
             dd = float(d @ d)
             if dd < 1e-12:
                 break
@@ -159,7 +166,7 @@ class ObjectStateEstimator:
             o = min(max(o + step, lo), hi)
             if abs(step) < 1e-7:
                 break
-        r = (self._handle(o) @ offset)[:3] - p
+        r = self._points(np.array([o]), local)[0] - p
         return o, math.hypot(*r)
 
     def update(self, q: Sequence[float] | np.ndarray, t: float, force: float = math.inf) -> ObjectEstimate:
