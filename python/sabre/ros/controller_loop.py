@@ -5,6 +5,7 @@ The controller node builds one on configure and drops it on cleanup."""
 
 from __future__ import annotations
 
+import array
 import collections
 import functools
 import math
@@ -99,6 +100,7 @@ class ControllerLoop:
         self.wrench_frames = WrenchFrames(self.scene, str(p["world_frame"]), str(p["wrench_frame"]), str(p["wrench_point_frame"]))
         self.torques = JointTorques(self.names, self.scene.nq, float(p["tau_ext_sign"])) if p["tau_ext_topic"] else None
         self._wrench: tuple[np.ndarray, str | None, str] | None = None
+        self._tau_wrench = np.zeros(self.scene.nq)  # J(q)ᵀ w of the newest wrench
         self._tau_topic: np.ndarray | None = None
         self._wrench_recv = -math.inf
         self._tau_filter = LowPass(float(p["tau_ext_cutoff"]))
@@ -162,6 +164,10 @@ class ControllerLoop:
             self.echo_pub = node.create_publisher(JointState, p["command_echo_topic"], profile(p["command_echo_qos"]))
             self._pubs.append(self.echo_pub)
         self._arm_msg = Float64MultiArray()
+        # the arm command's values go into this buffer in place: the message converts it without
+        # a Python float per value
+        self._arm_msg.data = array.array("d", bytes(8 * len(self.arm_joints)))
+        self._arm_values = np.frombuffer(self._arm_msg.data, dtype=np.float64)
         self._twist = TwistStamped() if self.stamped else Twist()
         if self.stamped:
             self._twist.header.frame_id = str(p["cmd_vel_frame"])
@@ -219,6 +225,9 @@ class ControllerLoop:
             self._log_rejected("wrench", exc)
             return
         self._wrench = (v, axes, point)
+        # at the wrench's rate, not the states': the joints move little between two wrenches, and
+        # the tank reads τ_ext low-passed at tau_ext_cutoff
+        self._tau_wrench = self.wrench_frames.tau_ext(self.joints.position.copy(), v, axes, point)
         self._wrench_recv = time.monotonic()
         self.stats["wrench_received"] += 1
 
@@ -345,7 +354,8 @@ class ControllerLoop:
         return self._object
 
     def _external_torque(self, x: np.ndarray, received: float, dt: float) -> np.ndarray:
-        """The low-passed τ_ext of the wrist wrench or the torque topic (zero while stale)."""
+        """The low-passed τ_ext of the wrist wrench (at the joints where it came) or the torque
+        topic (zero while stale)."""
         fresh = received - self._wrench_recv <= float(self.params["wrench_timeout"])
         raw = np.zeros(self.scene.nq)
         if not fresh:
@@ -353,8 +363,7 @@ class ControllerLoop:
         elif self._tau_topic is not None:
             raw = self._tau_topic
         elif self._wrench is not None:
-            w, axes, point = self._wrench
-            raw = self.wrench_frames.tau_ext(x[: self.scene.nq], w, axes, point)
+            raw = self._tau_wrench
         return self._tau_filter.update(raw, dt)
 
     def _observe(self, x: np.ndarray, t: float) -> None:
@@ -382,7 +391,7 @@ class ControllerLoop:
         joint state carries that state's stamp's nanoseconds in ``layout.data_offset``, which a
         velocity controller ignores and a robot (or the simulated one) can match to the state, to
         measure the round trip without a message of its own; the watchdog's and the shutdown's carry 0."""
-        self._arm_msg.data = command.arm.tolist()
+        self._arm_values[:] = command.arm
         self._arm_msg.layout.data_offset = stamp.nanosec if answers else 0
         self.arm_pub.publish(self._arm_msg)
         if command.base is not None:
