@@ -33,6 +33,7 @@ class FrankaReflexes:
         self.v_max = np.asarray(velocity, dtype=np.float64) * (1 + LIMIT_TOLERANCE)
         self.a_max = np.asarray(acceleration, dtype=np.float64) * (1 + LIMIT_TOLERANCE)
         self.j_max = np.asarray(jerk, dtype=np.float64) * (1 + LIMIT_TOLERANCE)
+        self._limits = np.concatenate((self.v_max, self.a_max, self.j_max))
         self.aborted: str | None = None
         self.aborts = 0
         self.recover()
@@ -55,6 +56,8 @@ class FrankaReflexes:
         a = (v - self._v) / self.dt
         jerk = (a - self._a) / self.dt
         self._v, self._a = v.copy(), a
+        if (np.abs(np.concatenate((v, a, jerk))) <= self._limits).all():
+            return None  # the common case, in one comparison
         for name, reflex, value, limit in (
             ("velocity", "velocity_limits_violation", v, self.v_max),
             ("acceleration", "velocity_discontinuity", a, self.a_max),

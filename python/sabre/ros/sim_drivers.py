@@ -6,6 +6,7 @@ only, the object's true joint state and a clock."""
 
 from __future__ import annotations
 
+import array
 import math
 from typing import Any
 
@@ -61,8 +62,14 @@ class DriverOutputs:
         self.pose_pub = node.create_publisher(PoseStamped, p["object_pose_topic"], latched)
         fingers = list(p["finger_joints"])
         self._js = JointState(name=[scene.joint_names[i] for i in arm_index] + fingers)
-        self._fingers = [float(p["finger_width"])] * len(fingers)
-        self._finger_zeros = [0.0] * len(fingers)
+        # the joint state's values are written into these buffers in place (the fingers' once): the
+        # message converts them without a Python float per value
+        width = len(arm_index) + len(fingers)
+        self._js.position = array.array("d", bytes(8 * width))
+        self._js.velocity = array.array("d", bytes(8 * width))
+        self._position = np.frombuffer(self._js.position, dtype=np.float64)
+        self._velocity = np.frombuffer(self._js.velocity, dtype=np.float64)
+        self._position[len(arm_index) :] = float(p["finger_width"])
         self._odom = Odometry()
         self._odom.header.frame_id = str(p["world_frame"])
         self._odom.child_frame_id = str(p["base_frame"])
@@ -94,8 +101,8 @@ class DriverOutputs:
         na = len(self.arm_index)
         js = self._js
         js.header.stamp = stamp
-        js.position = (q[self.arm_index] + noise[:na]).tolist() + self._fingers
-        js.velocity = (dq[self.arm_index] + noise[na:]).tolist() + self._finger_zeros
+        np.add(q[self.arm_index], noise[:na], out=self._position[:na])
+        np.add(dq[self.arm_index], noise[na:], out=self._velocity[:na])
         self.js_pub.publish(js)
 
     def publish_odometry(self, q: np.ndarray, dq: np.ndarray, stamp: Any) -> None:
