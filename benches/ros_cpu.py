@@ -79,7 +79,7 @@ def main() -> None:
             for n in nodes.values():
                 n.kill()
     print(f"window {wall:.1f} s after {args.warmup:.0f} s; load average (1 min) {load_before:.2f} → {load_after:.2f}")
-    for key, n in nodes.items():
+    for key in nodes:
         share, ranked = shares(before[key], after[key], wall)
         top = ", ".join(f"{name} ×{k} {100 * s:.1f} %" for name, k, s in ranked[:5])
         print(f"{key}: {100 * share:.1f} % of a core ({top})")

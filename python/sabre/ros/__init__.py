@@ -61,6 +61,9 @@ def require_ros():
 #: Seconds between the interpreter's GIL hand-overs in a bridge process (see :func:`spin_node`).
 GIL_SWITCH_INTERVAL = 1e-4
 
+#: Seconds between :func:`spin_node`'s looks at its stop conditions besides a signal.
+SPIN_CHECK_PERIOD = 0.1
+
 
 def realtime_thread(priority: int) -> bool:
     """Puts the calling thread under SCHED_FIFO at ``priority`` (1–99), as a robot's control loop
@@ -215,14 +218,23 @@ def spin_node(node: Any, shutdown: Callable[[], dict[str, Any]], done: threading
     gc.collect()
     gc.freeze()
     single_threaded_blas()
-    stop = threading.Event()
+    from rclpy.task import Future
+
+    stop: Future[bool] = Future()  # completed by SIGINT or SIGTERM (their handlers run on this thread)
+
+    def on_signal(*_: object) -> None:
+        if not stop.done():
+            stop.set_result(True)
+
     for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+        signal.signal(sig, on_signal)
     executor = make_executor(rclpy)
     executor.add_node(node.node)
     try:
-        while not stop.is_set() and not (done is not None and done.is_set()) and rclpy.ok():
-            executor.spin_once(timeout_sec=0.05)
+        # The executor's own loop between the checks (a tenth of a second), not one Python call
+        # and one check per message.
+        while not stop.done() and not (done is not None and done.is_set()) and rclpy.ok():
+            executor.spin_until_future_complete(stop, timeout_sec=SPIN_CHECK_PERIOD)
     finally:
         summary = shutdown()
         print("SABRE_SUMMARY " + json.dumps(summary), flush=True)
