@@ -21,120 +21,13 @@ use std::time::Instant;
 use clarabel::solver::SolverStatus;
 
 use super::active_set::ActiveSet;
-use super::config::{ConstraintClass, SafetyConfig, TASK_ANGULAR_LENGTH};
+use super::config::{ConstraintClass, SafetyConfig};
 use super::constraints::{Obstacle, Rows};
+use super::output::{FilterOutput, FilterStats, FilterStatus, QpMatrices, SolveMethod};
 use super::qp::{SlotQp, EMPTY};
+use super::task_metric::TaskMetric;
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
 use crate::model::scene::Scene;
-
-/// How a call ended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum FilterStatus {
-    /// Clarabel converged to the requested tolerance.
-    #[default]
-    Solved,
-    /// Clarabel converged to its reduced tolerance; the solution is used (clipped to the input limits).
-    AlmostSolved,
-    /// Clarabel did not converge (iteration limit, numerical trouble): the output is the safe stop
-    /// u = 0, which meets the input limits; counted in [`FilterStats::fallbacks`].
-    Fallback,
-}
-
-impl FilterStatus {
-    pub fn name(self) -> &'static str {
-        match self {
-            FilterStatus::Solved => "solved",
-            FilterStatus::AlmostSolved => "almost_solved",
-            FilterStatus::Fallback => "fallback",
-        }
-    }
-}
-
-/// How a call found its command.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum SolveMethod {
-    /// The command projected onto the input limits met every row.
-    #[default]
-    Projection,
-    /// The previous active set, re-solved and checked against every optimality condition.
-    ActiveSet,
-    /// Clarabel's interior-point method (also when it failed and the call fell back).
-    InteriorPoint,
-}
-
-impl SolveMethod {
-    pub fn name(self) -> &'static str {
-        match self {
-            SolveMethod::Projection => "projection",
-            SolveMethod::ActiveSet => "active_set",
-            SolveMethod::InteriorPoint => "interior_point",
-        }
-    }
-}
-
-/// The outcome of one call; owned by the filter and overwritten by the next call.
-#[derive(Debug, Clone, Default)]
-pub struct FilterOutput {
-    /// Filtered command ũ (nq), always within the input limits.
-    pub u: Vec<f64>,
-    /// Slack δ_r ≥ 0 of each row (R): how far the row's ZBF condition is relaxed.
-    pub slack: Vec<f64>,
-    /// Largest slack of each class, in [`ConstraintClass::ALL`] order (0 for classes without rows).
-    pub class_slack: [f64; ConstraintClass::COUNT],
-    /// Barrier value h of each row (without the margin); NaN for rows switched off in this call.
-    pub barrier: Vec<f64>,
-    /// Active constraints: row indices r < R, or R + j for the input limit of joint j.
-    pub active: Vec<usize>,
-    pub status: FilterStatus,
-    /// Clarabel's own verdict (also for fallbacks).
-    pub solver_status: SolverStatus,
-    /// Wall time of the whole call (rows, update, solve, post-processing), seconds.
-    pub solve_time: f64,
-    pub iterations: u32,
-    /// Rows in the QP that was solved (0: the projected command met every row, no solver ran;
-    /// for the active-set method the number of active rows).
-    pub qp_rows: usize,
-    pub method: SolveMethod,
-}
-
-/// Running statistics of a filter.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct FilterStats {
-    pub calls: u64,
-    pub fallbacks: u64,
-    pub total_time: f64,
-    pub max_time: f64,
-    pub total_iterations: u64,
-    /// Calls that ran Clarabel.
-    pub interior_point_calls: u64,
-    /// Calls whose command the hard-limit guard changed (a joint at or beyond its URDF limit was
-    /// commanded further out).
-    pub hard_limit_holds: u64,
-}
-
-impl FilterStats {
-    pub fn mean_time(&self) -> f64 {
-        if self.calls == 0 {
-            0.0
-        } else {
-            self.total_time / self.calls as f64
-        }
-    }
-}
-
-/// The QP data in Clarabel's form, for inspection and for cross-checking with other solvers:
-/// minimise ½xᵀPx + qᵀx subject to A x ≤ b, with x = [ũ; δ].
-#[derive(Debug, Clone, PartialEq)]
-pub struct QpMatrices {
-    pub n: usize,
-    pub m: usize,
-    pub nu: usize,
-    /// Dense row-major n × n, m × n.
-    pub p: Vec<f64>,
-    pub q: Vec<f64>,
-    pub a: Vec<f64>,
-    pub b: Vec<f64>,
-}
 
 /// Row-slot counts of the pre-built reduced problems, smallest first.
 const REDUCED_SIZES: [usize; 4] = [2, 4, 8, 16];
@@ -183,69 +76,6 @@ fn load(
         u_ref,
         metric.map(|m| m.m.as_slice()),
     )
-}
-
-/// The QP's metric on ũ that protects a frame's velocity (`SafetyConfig::task_weight`).
-struct TaskMetric {
-    link: usize,
-    /// λ of single calls and of calls inside a sequence.
-    weight: f64,
-    sequential_weight: f64,
-    /// Whether M ≠ I in this call.
-    active: bool,
-    m: Vec<f64>,
-    /// A lower bound on M's smallest eigenvalue: 1 / (1 + λ σ²_max).
-    smallest: f64,
-}
-
-impl TaskMetric {
-    /// M = (I + λ J_wᵀJ_w) / (1 + λ σ²_max(J_w)) with J_w = [J_v; ℓ J_ω]: divided by its largest
-    /// eigenvalue, so that no correction costs more than in the paper's ‖ũ − u‖² and the slacks
-    /// never become the cheaper way out; the directions that leave the frame still cost least.
-    fn update(&mut self, scene: &Scene, q: &[f64], in_sequence: bool) {
-        let nq = q.len();
-        let weight = if in_sequence { self.sequential_weight } else { self.weight };
-        let was_active = std::mem::replace(&mut self.active, weight > 0.0);
-        if !self.active {
-            // The 1 kHz filter's calls land here: write the identity only when leaving a sequence.
-            if was_active {
-                self.m.fill(0.0);
-                (0..nq).for_each(|a| self.m[a * nq + a] = 1.0);
-                self.smallest = 1.0;
-            }
-            return;
-        }
-        let mut j = scene.robot.frame_jacobian(&nalgebra::Isometry3::identity(), q, self.link);
-        for r in 3..6 {
-            for c in 0..nq {
-                j[(r, c)] *= TASK_ANGULAR_LENGTH;
-            }
-        }
-        let jjt = &j * j.transpose();
-        let sigma2 = nalgebra::SymmetricEigen::new(jjt).eigenvalues.max().max(0.0);
-        let scale = 1.0 / (1.0 + weight * sigma2);
-        self.smallest = scale;
-        for a in 0..nq {
-            for b in a..nq {
-                let jj: f64 = (0..6).map(|r| j[(r, a)] * j[(r, b)]).sum();
-                let v = scale * (weight * jj + if a == b { 1.0 } else { 0.0 });
-                self.m[a * nq + b] = v;
-                self.m[b * nq + a] = v;
-            }
-        }
-    }
-
-    /// ½ (u − v)ᵀ M (u − v).
-    fn half_norm2(&self, u: &[f64], v: &[f64]) -> f64 {
-        let nq = u.len();
-        let mut s = 0.0;
-        for a in 0..nq {
-            for b in 0..nq {
-                s += (u[a] - v[a]) * self.m[a * nq + b] * (u[b] - v[b]);
-            }
-        }
-        0.5 * s
-    }
 }
 
 impl SafetyFilter {

@@ -8,12 +8,15 @@ mod active_set;
 pub mod config;
 mod constraints;
 pub mod filter;
+mod output;
 mod qp;
 pub mod sequential;
 pub mod tank;
+mod task_metric;
 
 pub use config::{ConstraintClass, PerClass, SafetyConfig, MAX_OBSTACLE_SLOTS, TASK_ANGULAR_LENGTH};
 pub use constraints::Obstacle;
-pub use filter::{FilterOutput, FilterStats, FilterStatus, QpMatrices, SafetyFilter, SolveMethod};
+pub use filter::SafetyFilter;
+pub use output::{FilterOutput, FilterStats, FilterStatus, QpMatrices, SolveMethod};
 pub use sequential::SequenceOutput;
 pub use tank::{EnergyTank, RefillConfig};

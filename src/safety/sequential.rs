@@ -1,6 +1,7 @@
 //! Sequential FILTER-QP (Algorithm 1): filter a whole input sequence step by step along its rollout.
 
-use super::filter::{FilterStatus, SafetyFilter};
+use super::filter::SafetyFilter;
+use super::output::FilterStatus;
 use crate::error::{ensure_finite, Result, SabreError};
 use crate::sim::{RolloutModel, RolloutWorld};
 

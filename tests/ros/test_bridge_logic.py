@@ -207,6 +207,25 @@ def test_franka_reflexes_trip_on_a_step_and_pass_the_robust_limiter_with_missed_
         assert reflexes.check(command) is None, reflexes.aborted
 
 
+def test_a_fixed_base_has_the_arms_stream_only_and_a_six_joint_arm_passes_its_own_reflexes():
+    """Without a base the shaper never emits a base twist and is at rest when the arm is; a UR-like
+    six-joint arm's default limits (the slowest Franka joint's on every joint) shape a stream that
+    its reflexes (the same rule, its own velocity limits) pass, while a step trips them."""
+    velocity = [3.15, 3.15, 3.15, 3.2, 3.2, 3.2]
+    lim = command_limits(velocity, None, {"command_period": 0.001, "cmd_vel_rate": 50.0})
+    assert lim.base is None and len(lim.arm.acceleration) == 6
+    shaper = CommandShaper(lim)
+    gate = CommandGate(shaper, state_timeout=0.05)
+    reflexes = FrankaReflexes.for_arm(0.001, velocity)
+    target = np.array([1.0, -1.0, 0.5, 2.0, -2.0, 1.0])
+    for k in range(6000):  # 2 s toward the target, then the ramp to rest (about 2 s at 1.125 rad/s²)
+        command = gate.on_tick(0.001 * k, target if k < 2000 else None, None)
+        assert command.base is None
+        assert reflexes.check(command.arm) is None, reflexes.aborted
+    assert shaper.at_rest
+    assert "velocity_discontinuity" in FrankaReflexes.for_arm(0.001, velocity).check(np.full(6, 0.1))
+
+
 def test_descriptions_wait_for_the_robot_and_the_pose_and_reject_a_pose_in_another_frame(tmp_path):
     p = params.CONTROLLER_PARAMETERS | {"object_pose": [], "hold_joints": [], "hold_positions": [], "joint_names": []}
     sources = DescriptionSources(p)

@@ -421,6 +421,28 @@ def test_the_sim_robot_matches_answers_by_stamp_and_stops_on_its_command_timeout
     assert sim_status(probe)["reflex_aborts"] == 0
 
 
+def test_a_fixed_base_arm_is_driven_by_the_roles_of_its_own_description(bridge):
+    """The simulated robot is the Panda of example-robot-data on a pedestal (no base, fingers held)
+    and publishes that description; the controller takes the roles from it: an arm command of the
+    Panda's seven joints, no base command and no odometry input, and the drawer in front of the
+    pedestal starts to open."""
+    domain, probe, processes = bridge
+    sim = start_node("sim-robot", domain.id, ["--robot", "panda_pedestal", "--object", "drawer"], {"duration": 90.0})
+    ctrl = start_node("control", domain.id, ["--object", "drawer", "--variant", "IO"], {"autostart": True})
+    processes += [sim, ctrl]
+    opening = probe.wait_for(
+        lambda: (lambda s: s if s.get("opening", 0.0) > 0.05 else None)(sim_status(probe)), "the drawer to start opening"
+    )
+    assert len(opening["last_arm_command"]) == 7
+    cmd_vel, odom = params.CONTROLLER_PARAMETERS["cmd_vel_topic"], params.CONTROLLER_PARAMETERS["odometry_topic"]
+    assert probe.node.count_publishers(cmd_vel) == 0 and probe.node.count_subscribers(odom) == 0
+    arm_publishers = probe.node.get_publishers_info_by_topic(params.CONTROLLER_PARAMETERS["arm_command_topic"])
+    assert "sabre_controller" in {p.node_name for p in arm_publishers}
+    sim.stop()
+    record = sim.summary()
+    assert record["reflex_aborts"] == 0, record["reflex_errors"]
+
+
 def test_using_the_bridge_without_ros_raises_a_sabre_error_naming_the_extra():
     import subprocess
     import sys

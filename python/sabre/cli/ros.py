@@ -27,6 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     sim.add_argument("--object", choices=OBJECTS, default=None)
     sim.add_argument("--start", choices=("paper", "default"), default=None)
     sim.add_argument("--plant", choices=("rapier", "mujoco"), default=None)
+    sim.add_argument("--robot", default=None, help=_ROBOT_HELP)
     sim.add_argument(
         "--object-pose", dest="object_pose", type=float, nargs=6, default=None, metavar=("X", "Y", "Z", "R", "P", "YAW")
     )
@@ -38,6 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     demo.add_argument("--seed", type=int, default=0)
     demo.add_argument("--timeout", type=float, default=60.0, help="wall-clock seconds before giving up")
     demo.add_argument("--plant", choices=("rapier", "mujoco"), default="rapier", help="the simulated robot's plant")
+    demo.add_argument("--robot", default=None, help=_ROBOT_HELP)
     demo.add_argument(
         "--object-pose",
         dest="object_pose",
@@ -48,6 +50,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="where the simulated robot places the object (the controller reads it from the pose topic)",
     )
     demo.set_defaults(run=ros_demo_command)
+
+
+_ROBOT_HELP = (
+    "the simulated robot: an example robot (panda_pedestal, ur5_mobile; the object where it opens it) or a URDF "
+    "file (default: the RoyalPanda); published as the robot description the controller reads"
+)
 
 
 def _ros_args(args: argparse.Namespace) -> list[str]:
@@ -71,7 +79,14 @@ def sim_robot_command(args: argparse.Namespace) -> int:
     from ..ros.sim_robot import run_sim_robot
 
     pose = None if args.object_pose is None else [float(v) for v in args.object_pose]
-    return run_sim_robot(_given(object=args.object, start=args.start, plant=args.plant, object_pose=pose), _ros_args(args))
+    robot = None
+    if args.robot is not None:
+        from ..ros.launch import robot_file
+
+        robot, example_pose = robot_file(args.robot, args.object or "shelf")
+        pose = example_pose if pose is None else pose
+    options = _given(object=args.object, start=args.start, plant=args.plant, object_pose=pose, robot_description_file=robot)
+    return run_sim_robot(options, _ros_args(args))
 
 
 def ros_demo_command(args: argparse.Namespace) -> int:
@@ -84,6 +99,8 @@ def ros_demo_command(args: argparse.Namespace) -> int:
         f"[{args.object}] variant {args.variant}, seed {args.seed}: simulated robot and controller as two processes "
         f"over ROS 2 (loopback only), up to {args.timeout:.0f} s of wall-clock time"
     )
-    run = run_bridge(args.object, args.variant, args.seed, args.timeout, object_pose=args.object_pose, plant=args.plant)
+    run = run_bridge(
+        args.object, args.variant, args.seed, args.timeout, object_pose=args.object_pose, plant=args.plant, robot=args.robot
+    )
     print(format_run(run))
     return 0 if run.sim.get("success") else 1

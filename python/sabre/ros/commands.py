@@ -29,23 +29,23 @@ class Limits:
 
 @dataclass(frozen=True)
 class CommandLimits:
-    """The arm's limits (step ``period``) and the base's (step ``base_period``)."""
+    """The arm's limits (step ``period``) and the base's (step ``base_period``; None: a fixed base)."""
 
     arm: Limits
-    base: Limits
+    base: Limits | None
     period: float
     base_period: float
 
 
 def command_limits(
     arm_velocity: Sequence[float] | np.ndarray,
-    base_velocity: Sequence[float] | np.ndarray,
+    base_velocity: Sequence[float] | np.ndarray | None,
     params: dict,
 ) -> CommandLimits:
     """The limits from the node's parameters, each unset one from its default: velocities from the
-    URDF (``arm_velocity``, ``base_velocity``), the arm's acceleration and jerk from Franka's
-    published limits kept robust to one missed command (:func:`sabre.ros.params.robust_arm_limits`),
-    the base's Ridgeback-like ones."""
+    URDF (``arm_velocity``, ``base_velocity``; None: the robot has no base), the arm's acceleration
+    and jerk from Franka's published limits kept robust to one missed command
+    (:func:`sabre.ros.params.robust_arm_limits`), the base's Ridgeback-like ones."""
     period = float(params["command_period"])
     rate = float(params["cmd_vel_rate"])
     if not (period > 0 and math.isfinite(period)) or not (rate > 0 and math.isfinite(rate)):
@@ -63,18 +63,20 @@ def command_limits(
     arm = Limits(
         pick("arm_velocity_limits", arm_velocity, n), pick("arm_acceleration_limits", accel, n), pick("arm_jerk_limits", jerk, n)
     )
-    base = Limits(
-        pick("base_velocity_limits", base_velocity, 3),
-        pick("base_acceleration_limits", BASE_ACCELERATION, 3),
-        pick("base_jerk_limits", BASE_JERK, 3),
-    )
+    base = None
+    if base_velocity is not None:
+        base = Limits(
+            pick("base_velocity_limits", base_velocity, 3),
+            pick("base_acceleration_limits", BASE_ACCELERATION, 3),
+            pick("base_jerk_limits", BASE_JERK, 3),
+        )
     return CommandLimits(arm=arm, base=base, period=period, base_period=max(period, 1.0 / rate))
 
 
 @dataclass(frozen=True)
 class Command:
     """One step of the command streams: the arm's (na,), and the base's twist (vx, vy, ωz) in the
-    base frame when a base command is due this step (else None)."""
+    base frame when a base command is due this step (else None, and always None without a base)."""
 
     arm: np.ndarray
     base: np.ndarray | None
@@ -82,14 +84,19 @@ class Command:
 
 class CommandShaper:
     """The arm's and the base's command streams through their rate limiters: the arm steps every
-    call (``period``), the base every ``base_every``-th call (its own limiter at that step)."""
+    call (``period``), the base every ``base_every``-th call (its own limiter at that step); a robot
+    without a base has the arm's stream only."""
 
     def __init__(self, limits: CommandLimits) -> None:
         self.limits = limits
         a, b = limits.arm, limits.base
         self.base_every = max(1, int(round(limits.base_period / limits.period)))
         self.arm = _core.RateLimiter(list(a.velocity), list(a.acceleration), list(a.jerk), limits.period)
-        self.base = _core.RateLimiter(list(b.velocity), list(b.acceleration), list(b.jerk), limits.period * self.base_every)
+        self.base = (
+            None
+            if b is None
+            else _core.RateLimiter(list(b.velocity), list(b.acceleration), list(b.jerk), limits.period * self.base_every)
+        )
         self._zero_arm = np.zeros(len(a.velocity))
         self._zero_base = np.zeros(3)
         self._calls = 0
@@ -103,22 +110,24 @@ class CommandShaper:
         elif base is not None:
             self._base_target = base
         out_arm = self.arm.limit(self._zero_arm if arm is None else arm)
-        out_base = self.base.limit(self._base_target) if self._calls % self.base_every == 0 else None
+        limiter = self.base
+        out_base = limiter.limit(self._base_target) if limiter is not None and self._calls % self.base_every == 0 else None
         self._calls += 1
         return Command(out_arm, out_base)
 
     @property
     def at_rest(self) -> bool:
-        return bool(self.arm.at_rest and self.base.at_rest)
+        return bool(self.arm.at_rest and (self.base is None or self.base.at_rest))
 
     @property
     def steps_to_rest(self) -> int:
         """A bound on the arm steps a ramp to rest takes (the base's counted in arm steps)."""
-        return max(self.arm.steps_to_rest, self.base.steps_to_rest * self.base_every)
+        return max(self.arm.steps_to_rest, 0 if self.base is None else self.base.steps_to_rest * self.base_every)
 
     def reset(self) -> None:
         self.arm.reset()
-        self.base.reset()
+        if self.base is not None:
+            self.base.reset()
         self._calls = 0
         self._base_target = self._zero_base
 

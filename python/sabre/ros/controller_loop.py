@@ -28,8 +28,6 @@ from .qos import profile
 
 __all__ = ["ControllerLoop", "TASK_STATES"]
 
-BASE_JOINTS = ("base_x", "base_y", "base_yaw")
-
 #: idle: no task; starting: the planner starts on the next state; running; failed: the planner
 #: stopped on an error (reset to start again).
 TASK_STATES = ("idle", "starting", "running", "failed")
@@ -61,7 +59,7 @@ class ControllerLoop:
         self._map_joints(p)
         self._init_inputs(p)
         dq = self.scene.dq_limit
-        self.shaper = CommandShaper(command_limits(dq[self.arm_index], dq[self.base_index], p))
+        self.shaper = CommandShaper(command_limits(dq[self.arm_index], dq[self.base_index] if self.has_base else None, p))
         self.gate = CommandGate(self.shaper, float(p["state_timeout"]))
         self._lock = threading.Lock()  # the gate, its limiters and the command publishers
         self._init_state()
@@ -72,19 +70,26 @@ class ControllerLoop:
 
     # Set-up ----------------------------------------------------------------------------------
     def _map_joints(self, p: dict[str, Any]) -> None:
-        """The robot's names for sabre's joints, the arm command's joints and the base's, as indices."""
+        """The robot's names for sabre's joints, the arm command's joints and the base's, as indices.
+        The base is the scene's (its planar joints, or none for a fixed base) unless ``base_joints``
+        names the driver's three; the arm command takes every joint that is not the base's."""
         scene = self.scene
         names = list(p["joint_names"]) or list(scene.joint_names)
         if len(names) != scene.nq:
             raise SabreError(f"joint_names needs {scene.nq} names (for {scene.joint_names}), got {names}")
         index = {n: i for i, n in enumerate(names)}
         base = list(p["base_joints"])
-        arm = list(p["arm_joints"]) or [n for n, s in zip(names, scene.joint_names) if s not in BASE_JOINTS and n not in base]
+        if not base and scene.base_indices is not None:
+            base = [names[i] for i in scene.base_indices]
+        arm = list(p["arm_joints"]) or [n for n in names if n not in base]
         for n in arm + base:
             if n not in index:
                 raise SabreError(f"joint {n!r} is not one of joint_names {names}")
-        if len(base) != 3:
+        if base and len(base) != 3:
             raise SabreError(f"base_joints needs the base's x, y and yaw joints, got {base}")
+        if base and scene.base_indices is None:
+            raise SabreError(f"base_joints {base}: the robot has a fixed base (docs/robots.md says how to declare one)")
+        self.has_base = bool(base)
         self.names, self.arm_joints, self.base_joints = names, arm, base
         self.arm_index = np.array([index[n] for n in arm], dtype=np.intp)
         self.base_index = np.array([index[n] for n in base], dtype=np.intp)
@@ -93,11 +98,12 @@ class ControllerLoop:
         """The merged joint states (the base's from odometry when it has a topic), the wrench or
         torque input and the object state (a topic, else the estimator)."""
         timeouts = np.full(self.scene.nq, float(p["state_timeout"]))
-        self.base_from_odometry = bool(p["odometry_topic"])
+        self.base_from_odometry = self.has_base and bool(p["odometry_topic"])
         if self.base_from_odometry:
             timeouts[self.base_index] = float(p["base_state_timeout"])
         self.joints = JointStates(self.names, self.arm_joints, timeouts)
-        self.wrench_frames = WrenchFrames(self.scene, str(p["world_frame"]), str(p["wrench_frame"]), str(p["wrench_point_frame"]))
+        wrench_frame = str(p["wrench_frame"]) or self.scene.wrist_sensor_link
+        self.wrench_frames = WrenchFrames(self.scene, str(p["world_frame"]), wrench_frame, str(p["wrench_point_frame"]))
         self.torques = JointTorques(self.names, self.scene.nq, float(p["tau_ext_sign"])) if p["tau_ext_topic"] else None
         self._wrench: tuple[np.ndarray, str | None, str] | None = None
         self._tau_wrench = np.zeros(self.scene.nq)  # J(q)ᵀ w of the newest wrench
@@ -125,7 +131,7 @@ class ControllerLoop:
         self._phase = self.controller.phase
         self._planner_started: float | None = None
         self._x: np.ndarray | None = None
-        self._target: tuple[np.ndarray, np.ndarray] | None = None
+        self._target: tuple[np.ndarray, np.ndarray | None] | None = None
         self._ready = False  # the running planner has handed over a plan
         self._stopper: threading.Thread | None = None  # stops the planner off the 1 kHz path
         self.stats: dict[str, Any] = {
@@ -155,10 +161,13 @@ class ControllerLoop:
         self._pubs: list[Any] = []
         self.arm_pub = node.create_publisher(Float64MultiArray, p["arm_command_topic"], profile(p["arm_command_qos"]))
         self.stamped = bool(p["cmd_vel_stamped"])
-        self.base_pub = node.create_publisher(
-            TwistStamped if self.stamped else Twist, p["cmd_vel_topic"], profile(p["cmd_vel_qos"])
-        )
-        self._pubs += [self.arm_pub, self.base_pub]
+        self.base_pub = None
+        if self.has_base:
+            self.base_pub = node.create_publisher(
+                TwistStamped if self.stamped else Twist, p["cmd_vel_topic"], profile(p["cmd_vel_qos"])
+            )
+            self._pubs.append(self.base_pub)
+        self._pubs.append(self.arm_pub)
         self.echo_pub = None
         if p["command_echo_topic"]:
             self.echo_pub = node.create_publisher(JointState, p["command_echo_topic"], profile(p["command_echo_qos"]))
@@ -328,8 +337,11 @@ class ControllerLoop:
         self._last_status, self._last_tank = result.status, result.tank_energy
         self._min_tank = min(self._min_tank, result.tank_energy)
         u = result.command
-        yaw = float(self.joints.position[self.base_index[2]])
-        self._target = (u[self.arm_index], np.array(world_to_base(u[self.base_index], yaw)))
+        if self.has_base:
+            yaw = float(self.joints.position[self.base_index[2]])
+            self._target = (u[self.arm_index], np.array(world_to_base(u[self.base_index], yaw)))
+        else:
+            self._target = (u[self.arm_index], None)
         self.stats["followed"] += 1
         return None
 
@@ -378,7 +390,7 @@ class ControllerLoop:
         self.task = "failed"
         self.stop_planner()
 
-    def _answer(self, received: float, target: tuple[np.ndarray, np.ndarray] | None, stamp: Any) -> None:
+    def _answer(self, received: float, target: tuple[np.ndarray, np.ndarray | None] | None, stamp: Any) -> None:
         with self._lock:
             command = self.gate.on_tick(received, *(target or (None, None)))
             self._publish(command, stamp, answers=True)
@@ -394,7 +406,7 @@ class ControllerLoop:
         self._arm_values[:] = command.arm
         self._arm_msg.layout.data_offset = stamp.nanosec if answers else 0
         self.arm_pub.publish(self._arm_msg)
-        if command.base is not None:
+        if command.base is not None and self.base_pub is not None:
             tw = self._twist.twist if self.stamped else self._twist
             if self.stamped:
                 self._twist.header.stamp = stamp

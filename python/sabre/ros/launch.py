@@ -13,7 +13,9 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["Domain", "ros_environment", "NodeProcess", "start_node", "BridgeRun", "run_bridge", "format_run"]
+from ..errors import SabreError
+
+__all__ = ["Domain", "ros_environment", "NodeProcess", "start_node", "BridgeRun", "run_bridge", "format_run", "robot_file"]
 
 #: Domain ids 1..100 work on every platform (Linux allows up to 101 with the default ports).
 DOMAIN_RANGE = range(1, 101)
@@ -130,6 +132,19 @@ class BridgeRun:
     logs: dict[str, str] = field(default_factory=dict)
 
 
+def robot_file(robot: str, obj: str) -> tuple[str, list[float] | None]:
+    """The URDF file of ``robot`` (an example robot's name, :data:`sabre.robot_examples.EXAMPLE_ROBOTS`,
+    or a URDF path) and where the example robot opens ``obj`` (None: the object's default pose)."""
+    from ..robot_examples import EXAMPLE_OBJECTS, EXAMPLE_ROBOTS, example_robot_urdf
+
+    if robot in EXAMPLE_ROBOTS:
+        pose = EXAMPLE_OBJECTS[robot].get(obj)
+        return str(example_robot_urdf(robot)), None if pose is None else [float(v) for v in pose]
+    if not os.path.isfile(robot):
+        raise SabreError(f"robot {robot!r} is neither an example robot ({', '.join(EXAMPLE_ROBOTS)}) nor a URDF file")
+    return robot, None
+
+
 def run_bridge(
     obj: str = "shelf",
     variant: str = "IO",
@@ -138,6 +153,7 @@ def run_bridge(
     *,
     object_pose: list[float] | None = None,
     plant: str = "rapier",
+    robot: str | None = None,
     sim_params: dict[str, Any] | None = None,
     controller_params: dict[str, Any] | None = None,
 ) -> BridgeRun:
@@ -145,8 +161,12 @@ def run_bridge(
     perception node would) and the controller (``autostart``: it configures once the robot
     description, the pose and the inputs are there, then activates), waits until the robot
     reports the object open (plus its settle time) or ``timeout`` s of wall time, stops both with
-    SIGINT."""
+    SIGINT. ``robot``: an example robot or a URDF file (see :func:`robot_file`; None: the
+    RoyalPanda), which the simulated robot is and publishes as the robot description."""
     sim_overrides: dict[str, Any] = {"stop_on_success": True, "duration": float(timeout), "plant": plant}
+    if robot is not None:
+        sim_overrides["robot_description_file"], example_pose = robot_file(robot, obj)
+        object_pose = example_pose if object_pose is None else object_pose
     if object_pose is not None:
         sim_overrides["object_pose"] = [float(v) for v in object_pose]
     with Domain() as domain:

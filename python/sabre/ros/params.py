@@ -103,10 +103,10 @@ CONTROLLER_PARAMETERS: dict[str, Any] = {
     # joints
     "joint_names": [""],  # the robot's names for sabre's joints, in sabre's order
     "arm_joints": [""],  # the arm command's joints, in its order (default: all but the base's)
-    "base_joints": ["base_x", "base_y", "base_yaw"],
+    "base_joints": [""],  # the driver's names of the base's x, y, yaw joints (default: the scene's; none for a fixed base)
     "odometry_twist_in_child_frame": True,  # as nav_msgs/Odometry defines it
     # wrench: moment about wrench_point_frame (default: the header's frame), axes of the header's frame
-    "wrench_frame": "panda_link8",  # the frame of a wrench whose header names none
+    "wrench_frame": "",  # the frame of a wrench whose header names none (default: the scene's wrist sensor link)
     "wrench_point_frame": "",
     "tau_ext_sign": 1.0,  # sign of the torque topic's efforts against sabre's τ_ext (environment on robot)
     **TOPIC_DEFAULTS,
@@ -157,8 +157,8 @@ SIM_ROBOT_PARAMETERS: dict[str, Any] = {
     "start": "paper",  # or "default"
     "world_frame": "odom",
     "base_frame": "base_link",
-    "finger_joints": ["panda_finger_joint1", "panda_finger_joint2"],
-    "finger_width": 0.04,  # m, published for each finger joint
+    "finger_joints": [""],  # gripper joints the arm's driver publishes (default: the scene's held joints at their values)
+    "finger_width": 0.04,  # m, published for each joint finger_joints names
     **TOPIC_DEFAULTS,
     **QOS_DEFAULTS,
     "wrench_qos": "sensor",

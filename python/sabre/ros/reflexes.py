@@ -38,6 +38,17 @@ class FrankaReflexes:
         self.aborts = 0
         self.recover()
 
+    @classmethod
+    def for_arm(cls, dt: float, velocity: Sequence[float] | np.ndarray) -> FrankaReflexes:
+        """Franka's checks for an arm with joint velocity limits ``velocity`` (its URDF's): a
+        seven-joint arm gets Franka's published limits; any other the slowest Franka joint's
+        acceleration and jerk on every joint and its own velocity limits (the controller's default
+        rate limits follow the same rule)."""
+        if len(velocity) == len(FRANKA_VELOCITY):
+            return cls(dt)
+        n = len(velocity)
+        return cls(dt, list(velocity), [min(FRANKA_ACCELERATION)] * n, [min(FRANKA_JERK)] * n)
+
     def recover(self) -> None:
         """Clears an abort; the next check starts from rest."""
         self.aborted = None

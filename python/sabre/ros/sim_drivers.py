@@ -1,6 +1,6 @@
 """What the simulated robot publishes, as a Franka arm's and a mobile base's drivers do: the arm's joint
-states with two finger joints at the plant's rate, the base's odometry with its twist in the base
-frame, the wrist wrench best effort in the sensor frame, measurement noise on all three, the robot
+states with the gripper's (held) joints at the plant's rate, the base's odometry with its twist in the
+base frame (a robot with a base), the wrist wrench best effort in the sensor frame, measurement noise on all three, the robot
 description latched, and (as a perception node would) the object's pose; besides, for evaluation
 only, the object's true joint state and a clock."""
 
@@ -12,7 +12,6 @@ from typing import Any
 
 import numpy as np
 
-from ..estimation import SENSOR_FRAME
 from ..scene import Scene
 from .conversions import quaternion_of
 from .qos import profile
@@ -53,14 +52,20 @@ class DriverOutputs:
         reliable, latched = profile("reliable"), profile("latched")
         # the drivers' own QoS: joint states and odometry reliable, the wrench best effort (franka_ros2)
         self.js_pub = node.create_publisher(JointState, p["joint_state_topic"], reliable)
-        self.odom_pub = node.create_publisher(Odometry, p["odometry_topic"], reliable)
+        base = scene.base_indices
+        self.base_index = None if base is None else np.array(list(base), dtype=np.intp)
+        self.odom_pub = None if base is None else node.create_publisher(Odometry, p["odometry_topic"], reliable)
         self.wrench_pub = node.create_publisher(WrenchStamped, p["wrench_topic"], profile(p["wrench_qos"]))
         self.truth_pub = node.create_publisher(JointState, p["ground_truth_topic"], reliable)
         self.clock_pub = node.create_publisher(Clock, p["clock_topic"], reliable)
         self.description_pub = node.create_publisher(String, p["robot_description_topic"], latched)
         self.description_pub.publish(String(data=robot_urdf))
         self.pose_pub = node.create_publisher(PoseStamped, p["object_pose_topic"], latched)
+        # a gripper's joints: the ones named (at finger_width), else the scene's held joints at their values
         fingers = list(p["finger_joints"])
+        held = [float(p["finger_width"])] * len(fingers)
+        if not fingers:
+            fingers, held = list(scene.held_joints), [float(v) for v in scene.held_joints.values()]
         self._js = JointState(name=[scene.joint_names[i] for i in arm_index] + fingers)
         # the joint state's values are written into these buffers in place (the fingers' once): the
         # message converts them without a Python float per value
@@ -69,12 +74,13 @@ class DriverOutputs:
         self._js.velocity = array.array("d", bytes(8 * width))
         self._position = np.frombuffer(self._js.position, dtype=np.float64)
         self._velocity = np.frombuffer(self._js.velocity, dtype=np.float64)
-        self._position[len(arm_index) :] = float(p["finger_width"])
+        self._position[len(arm_index) :] = held
         self._odom = Odometry()
         self._odom.header.frame_id = str(p["world_frame"])
         self._odom.child_frame_id = str(p["base_frame"])
         self._wrench = WrenchStamped()
-        self._wrench.header.frame_id = SENSOR_FRAME
+        self.sensor_frame = scene.wrist_sensor_link
+        self._wrench.header.frame_id = self.sensor_frame
         self._truth = JointState(name=list(scene.object_joint_names))
         self._clock = Clock()
         seed = int(p["noise_seed"])
@@ -107,9 +113,11 @@ class DriverOutputs:
 
     def publish_odometry(self, q: np.ndarray, dq: np.ndarray, stamp: Any) -> None:
         """The base's pose and its twist in the base frame (as nav_msgs/Odometry defines it)."""
+        if self.odom_pub is None or self.base_index is None:
+            return  # a fixed base: no base driver, no odometry
         noise = self.base_noise.next()
-        x, y, yaw = (float(v) for v in q[:3] + noise[:3])
-        vx, vy, wz = (float(v) for v in dq[:3] + noise[3:])
+        x, y, yaw = (float(v) for v in q[self.base_index] + noise[:3])
+        vx, vy, wz = (float(v) for v in dq[self.base_index] + noise[3:])
         c, s = math.cos(yaw), math.sin(yaw)
         m = self._odom
         m.header.stamp = stamp
@@ -122,7 +130,7 @@ class DriverOutputs:
 
     def publish_wrench(self, q: np.ndarray, wrench_world: np.ndarray, stamp: Any) -> None:
         """The wrist wrench in the sensor frame's axes (the plant reports it in world axes)."""
-        r = self.scene.fk(q, SENSOR_FRAME)[:3, :3]
+        r = self.scene.fk(q, self.sensor_frame)[:3, :3]
         w = np.concatenate([r.T @ wrench_world[:3], r.T @ wrench_world[3:]]) + self.wrench_noise.next()
         m = self._wrench
         m.header.stamp = stamp

@@ -82,7 +82,12 @@ class SimRobotNode:
     # Set-up ----------------------------------------------------------------------------------
     def _build_plant(self, p: dict[str, Any]) -> None:
         pose = list(p["object_pose"])
-        self.scene = scene = Scene.load(obj=p["object"], obj_pose=pose or None)
+        robot_file = str(p["robot_description_file"])
+        if robot_file:
+            scene = Scene.from_urdf(robot_file, str(p["object"]), pose or None)
+        else:
+            scene = Scene.load(obj=p["object"], obj_pose=pose or None)
+        self.scene = scene
         self.object_pose = np.array(pose) if pose else _pose_of(scene.object_pose)
         self.task = tasks.OpenObject()
         self.period = 1.0 / float(p["rate"])
@@ -96,8 +101,9 @@ class SimRobotNode:
         self._track = self.low._core.track if self.low is not None and isinstance(self.plant, Plant) else None
         x0 = paper_start_state(scene) if p["start"] == "paper" else scene.default_state()
         self.plant.reset(x0)
-        self.arm_index = np.arange(3, scene.nq, dtype=np.intp)
-        self.base_index = np.arange(3, dtype=np.intp)
+        base = scene.base_indices
+        self.base_index = np.array([] if base is None else list(base), dtype=np.intp)
+        self.arm_index = np.array([i for i in range(scene.nq) if i not in set(self.base_index)], dtype=np.intp)
 
     @staticmethod
     def _robot_urdf(p: dict[str, Any]) -> str:
@@ -119,7 +125,7 @@ class SimRobotNode:
         self._stopped = {"arm": True, "base": True}
         self._u = np.zeros(self.scene.nq)  # the reference of one tick, filled in place
         self._running = True
-        self.reflexes = FrankaReflexes(self.period) if p["reflexes"] else None
+        self.reflexes = FrankaReflexes.for_arm(self.period, self.scene.dq_limit[self.arm_index]) if p["reflexes"] else None
         if p["reflex_check"] not in ("command", "cycle"):
             raise SabreError(f"reflex_check must be 'command' or 'cycle', got {p['reflex_check']!r}")
         self._per_cycle = p["reflex_check"] == "cycle"
@@ -175,8 +181,9 @@ class SimRobotNode:
         self.obstacle_pub = node.create_publisher(MarkerArray, p["obstacle_topic"], reliable)
         # a deep queue: every arm command is checked and recorded, also when this process falls behind
         node.create_subscription(Float64MultiArray, p["arm_command_topic"], self._on_arm, profile("reliable:1000"))
-        stamped = bool(p["cmd_vel_stamped"])
-        node.create_subscription(TwistStamped if stamped else Twist, p["cmd_vel_topic"], self._on_twist, reliable)
+        if len(self.base_index):
+            stamped = bool(p["cmd_vel_stamped"])
+            node.create_subscription(TwistStamped if stamped else Twist, p["cmd_vel_topic"], self._on_twist, reliable)
         if p["command_echo_topic"]:
             node.create_subscription(JointState, p["command_echo_topic"], self._on_echo, profile("sensor"))
         node.create_subscription(Bool, p["hold_topic"], self._on_hold, reliable)
@@ -270,7 +277,7 @@ class SimRobotNode:
                 u[self.arm_index] = arm
         elif reflexes is not None and self._per_cycle:
             reflexes.follow(np.zeros(len(self.arm_index)))
-        if base_fresh:
+        if base_fresh and len(self.base_index):
             u[self.base_index] = base_to_world(self._base_cmd, yaw)
         self._note_stops(tick_time, arm_fresh, base_fresh)
         return u
@@ -346,13 +353,13 @@ class SimRobotNode:
 
     def _step(self, tick_time: float) -> None:
         self._apply_faults()
-        u = self._reference(tick_time, float(self.plant.state[2]))
+        u = self._reference(tick_time, float(self.plant.state[self.base_index[2]]) if len(self.base_index) else 0.0)
         if self._track is not None:
             self._track(self.plant._core, u, 1)
         elif self.low is not None:
             self.low.track(self.plant, u, 1)
         else:
-            self.plant.step(u)
+            self.plant.step(u.copy())  # u is reused by the next tick
         self.stats["ticks"] += 1
         if self.plant.contact:
             self.stats["contact_force_sum"] += math.hypot(*self.plant.wrench[:3])
@@ -390,7 +397,7 @@ class SimRobotNode:
         self.stats["states_published"] += 1
         self.out.publish_joint_states(q, dq, stamp)
         every = self._schedule
-        if k % every["odometry"] == 0:
+        if k % every["odometry"] == 0 and self.out.odom_pub is not None:
             self.out.publish_odometry(q, dq, stamp)
         if k % every["wrench"] == 0:
             self.out.publish_wrench(q, np.asarray(self.plant.wrench), stamp)
@@ -442,6 +449,7 @@ class SimRobotNode:
             "hold_started": s["hold_started"],
             "hold_ended": s["hold_ended"],
             "robot_speed": float(np.linalg.norm(state.q_dot)),
+            "configuration": dict(zip(self.scene.joint_names, state.q.tolist())),
         }
 
     def _publish_status(self) -> None:

@@ -70,15 +70,16 @@ class ObstacleRegistry:
 def planned_paths(
     scene: Scene, reference: Callable[[float], np.ndarray], q: np.ndarray, t: float, horizon: float, dt: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The hand's (grasp frame) and the base's planned positions, (K, 3) each: the plan's reference
-    velocities integrated from q over the horizon."""
+    """The hand's (the tool frame's) and the base link's planned positions, (K, 3) each: the plan's
+    reference velocities integrated from q over the horizon."""
     steps = max(2, int(round(horizon / dt)))
     qs = np.empty((steps + 1, scene.nq))
     qs[0] = q
     for k in range(steps):
         qs[k + 1] = qs[k] + dt * np.asarray(reference(t + k * dt))[: scene.nq]
-    hand = scene.fk_many(qs, "grasp")[:, :3, 3]
-    base = np.column_stack([qs[:, 0], qs[:, 1], np.zeros(steps + 1)])
+    hand = scene.fk_many(qs, scene.require_tool_frame("the planned hand path"))[:, :3, 3]
+    base = scene.fk_many(qs, scene.base_link)[:, :3, 3]
+    base[:, 2] = 0.0  # the base's path on the floor
     return hand, base
 
 
