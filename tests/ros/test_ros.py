@@ -347,12 +347,15 @@ def test_malformed_and_withheld_states_are_answered_with_ramps_never_steps(bridg
 
 def test_a_moved_and_turned_shelf_is_opened_through_the_pose_input_within_the_limits_and_without_reflexes():
     """The simulated robot places the shelf 0.3 m aside and turned by 20° and publishes that pose
-    as a perception node would; the controller takes it from the pose topic, opens the shelf, and
-    every arm command the robot received kept the limits (checked on its recording), no reflex."""
+    as a perception node would; the controller takes it from the pose topic and the door's angle
+    from a joint sensor's topic (the simulated robot's ground truth; the hand-pose estimator is
+    tested on its own), opens the shelf, and every arm command the robot received kept the limits
+    (checked on its recording), no reflex."""
     ros()
     pose = [1.0, 0.3, 0.0, 0.0, 0.0, math.radians(20.0)]
     # the planner at normal priority: on a machine shared with other jobs a niced planner starves
-    run = run_bridge("shelf", "IO", 0, timeout=90.0, object_pose=pose, controller_params={"planner_nice": 0})
+    sensor = {"object_state_topic": params.SIM_ROBOT_PARAMETERS["ground_truth_topic"]}
+    run = run_bridge("shelf", "IO", 0, timeout=90.0, object_pose=pose, controller_params={"planner_nice": 0} | sensor)
     s, c = run.sim, run.controller
     assert s and c, run.logs
     print({k: s[k] for k in ("success", "time_to_open", "latency_p99_ms", "delivered_fraction", "cpu_share", "reflex_aborts")})
