@@ -169,10 +169,12 @@ class ObjectStateEstimator:
         r = self._points(np.array([o]), local)[0] - p
         return o, math.hypot(*r)
 
-    def update(self, q: Sequence[float] | np.ndarray, t: float, force: float = math.inf) -> ObjectEstimate:
+    def update(self, q: Sequence[float] | np.ndarray, t: float, force: float = math.inf, may_hook: bool = True) -> ObjectEstimate:
         """The estimate at time t (s) from the robot's joint positions q (nq,) and the wrist force
         magnitude (N; default: assume contact). A time at or before the previous one counts as no
-        time passed.
+        time passed. ``may_hook`` False keeps the estimator from declaring a hook now: a controller
+        passes it while its task has not yet seated the hook (the hand touches the handle on its way
+        in, where the hook point is not yet the one it will pull at).
 
         Raises:
             ShapeError, InvalidValueError: q of the wrong size or not finite, t not finite, force
@@ -195,7 +197,7 @@ class ObjectStateEstimator:
         if self._offset is None:
             handle = self._handle(self._o)
             local = np.append(handle[:3, :3].T @ (p - handle[:3, 3]), 1.0)  # p in the handle frame
-            if math.hypot(*local[:3]) <= self.hook_distance and force >= self.contact_force:
+            if may_hook and math.hypot(*local[:3]) <= self.hook_distance and force >= self.contact_force:
                 self._offset = local
                 self._since_force = 0.0
                 self._rate_filter.reset()

@@ -82,6 +82,18 @@ def hooked_estimator(scene, **options):
     return estimator, q
 
 
+def test_estimator_hooks_only_when_allowed_and_the_hand_is_at_the_handle_in_contact():
+    """At the hooked state in contact the estimator hooks unless told it may not (the task's hook
+    not seated yet), and never without force."""
+    scene = sabre.Scene.load(obj="shelf")
+    q = sabre.scenarios.hooked_state(scene)[: scene.nq]
+    estimator = sabre.ObjectStateEstimator(scene)
+    for k in range(20):
+        assert not estimator.update(q, 0.01 * k, 10.0, may_hook=False).hooked
+    assert not estimator.update(q, 0.2, 0.0).hooked  # no contact force
+    assert estimator.update(q, 0.21, 10.0).hooked
+
+
 def test_estimator_releases_when_the_hand_leaves_the_handle_and_holds_the_last_state_at_rest():
     scene = sabre.Scene.load(obj="shelf")
     estimator, q = hooked_estimator(scene)

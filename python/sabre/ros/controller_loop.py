@@ -28,6 +28,9 @@ from .qos import profile
 
 __all__ = ["ControllerLoop", "TASK_STATES"]
 
+#: The task's phases in which its hook sits on the handle: the estimator declares a hook only then.
+HOOK_SEATED_PHASES = ("hook", "open")
+
 #: idle: no task; starting: the planner starts on the next state; running; failed: the planner
 #: stopped on an error (reset to start again).
 TASK_STATES = ("idle", "starting", "running", "failed")
@@ -359,7 +362,12 @@ class ControllerLoop:
             force = 0.0 if self._wrench is None else math.hypot(*self._wrench[0][:3])
             if self._tau_topic is not None:
                 force = math.inf  # torques only: contact assumed, the hook test is the distance
-            e = self.estimator.update(q, t, force)
+            was_hooked = self.estimator.hooked
+            e = self.estimator.update(q, t, force, may_hook=self.cascade.phase in HOOK_SEATED_PHASES)
+            if e.hooked != was_hooked:
+                what = "hooked" if e.hooked else "released"
+                message = f"object estimate: {what} at o = {e.position[0]:.3f} (t = {t:.3f} s, force {force:.1f} N)"
+                self.node.get_logger().info(message)
             return e.position, e.velocity
         if self._object is None:
             return np.asarray(self.scene.o_lower, dtype=np.float64), np.zeros(self.scene.no)
