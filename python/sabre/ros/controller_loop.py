@@ -20,7 +20,7 @@ from ..estimation import LowPass, ObjectStateEstimator
 from ..realtime import RealtimeCascade
 from . import gil_priority, realtime_thread
 from .commands import Command, CommandGate, CommandShaper, command_limits
-from .conversions import MessageError, world_to_base, yaw_of
+from .conversions import MessageError, stamp_seconds, world_to_base, yaw_of
 from .descriptions import Descriptions, build_controller
 from .durations import Durations
 from .inputs import JointStates, JointTorques, WrenchFrames, base_from_odometry
@@ -34,10 +34,6 @@ HOOK_SEATED_PHASES = ("hook", "open")
 #: idle: no task; starting: the planner starts on the next state; running; failed: the planner
 #: stopped on an error (reset to start again).
 TASK_STATES = ("idle", "starting", "running", "failed")
-
-
-def stamp_seconds(stamp: Any) -> float:
-    return stamp.sec + 1e-9 * stamp.nanosec
 
 
 class ControllerLoop:
