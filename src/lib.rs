@@ -2,6 +2,7 @@
 //!
 //! The core is plain Rust; the Python bindings live in `python` behind the `python` cargo feature.
 
+pub mod bridge;
 pub mod control;
 pub mod cost;
 pub mod error;

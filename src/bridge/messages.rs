@@ -1,0 +1,321 @@
+//! The ROS 2 messages the bridge's 1 kHz path reads and writes, in their serialized form (the
+//! 4-byte encapsulation header, then OMG CDR, as rmw hands them to a raw subscription): joint
+//! states, the arm's `Float64MultiArray` command, the base's `Twist` or `TwistStamped`. The layouts
+//! follow the messages' definitions in sensor_msgs, std_msgs and geometry_msgs.
+
+use byteorder::{BigEndian, LittleEndian};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Result, SabreError};
+
+/// The encapsulation header of little-endian plain CDR (what every ROS 2 middleware writes on x86
+/// and ARM); big-endian CDR (`00 00`) is read too.
+const CDR_LE: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
+
+/// builtin_interfaces/Time.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Stamp {
+    pub sec: i32,
+    pub nanosec: u32,
+}
+
+impl Stamp {
+    /// Seconds since the epoch of the stamp's clock.
+    pub fn seconds(&self) -> f64 {
+        f64::from(self.sec) + f64::from(self.nanosec) * 1e-9
+    }
+    /// The stamp of `seconds` (nanoseconds rounded, carried into the seconds at 1e9).
+    pub fn from_seconds(seconds: f64) -> Self {
+        let mut sec = seconds.floor();
+        let mut nanosec = ((seconds - sec) * 1e9).round();
+        if nanosec >= 1e9 {
+            sec += 1.0;
+            nanosec -= 1e9;
+        }
+        Self {
+            sec: sec as i32,
+            nanosec: nanosec as u32,
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+struct Header<'a> {
+    stamp: Stamp,
+    frame_id: &'a str,
+}
+
+/// A header as read (the CDR reader hands out owned strings).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+struct HeaderIn {
+    stamp: Stamp,
+    frame_id: String,
+}
+
+/// sensor_msgs/JointState.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct JointState {
+    header: HeaderIn,
+    pub name: Vec<String>,
+    pub position: Vec<f64>,
+    pub velocity: Vec<f64>,
+    pub effort: Vec<f64>,
+}
+
+impl JointState {
+    pub fn stamp(&self) -> Stamp {
+        self.header.stamp
+    }
+    pub fn frame_id(&self) -> &str {
+        &self.header.frame_id
+    }
+}
+
+#[derive(Serialize)]
+struct JointStateOut<'a, S: Serialize> {
+    header: Header<'a>,
+    name: &'a [S],
+    position: &'a [f64],
+    velocity: &'a [f64],
+    effort: &'a [f64],
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct MultiArrayDimension {
+    label: String,
+    size: u32,
+    stride: u32,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct MultiArrayLayout {
+    dim: Vec<MultiArrayDimension>,
+    data_offset: u32,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+struct Float64MultiArray {
+    layout: MultiArrayLayout,
+    data: Vec<f64>,
+}
+
+#[derive(Serialize)]
+struct Float64MultiArrayOut<'a> {
+    layout: MultiArrayLayout,
+    data: &'a [f64],
+}
+
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+struct Vector3 {
+    x: f64,
+    y: f64,
+    z: f64,
+}
+
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+struct Twist {
+    linear: Vector3,
+    angular: Vector3,
+}
+
+#[derive(Serialize)]
+struct TwistStampedOut<'a> {
+    header: Header<'a>,
+    twist: Twist,
+}
+
+#[derive(Deserialize)]
+struct TwistStamped {
+    header: HeaderIn,
+    twist: Twist,
+}
+
+/// A base twist: (vx, vy, vz) and (ωx, ωy, ωz), with the header of a `TwistStamped`.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct TwistValue {
+    pub linear: [f64; 3],
+    pub angular: [f64; 3],
+    pub stamp: Option<Stamp>,
+}
+
+fn malformed(what: &str, detail: impl std::fmt::Display) -> SabreError {
+    SabreError::invalid(what, format!("malformed serialized message: {detail}"))
+}
+
+/// The CDR payload of a serialized message and whether it is little-endian.
+fn payload<'a>(what: &str, raw: &'a [u8]) -> Result<(&'a [u8], bool)> {
+    if raw.len() < 4 {
+        return Err(malformed(what, format!("{} bytes, shorter than its header", raw.len())));
+    }
+    match raw[1] {
+        0x01 => Ok((&raw[4..], true)),
+        0x00 => Ok((&raw[4..], false)),
+        kind => Err(malformed(what, format!("encapsulation {kind:#04x} is not plain CDR"))),
+    }
+}
+
+fn decode<T: for<'de> Deserialize<'de>>(what: &str, raw: &[u8]) -> Result<T> {
+    let (body, little) = payload(what, raw)?;
+    let decoded = if little {
+        cdr_encoding::from_bytes::<T, LittleEndian>(body)
+    } else {
+        cdr_encoding::from_bytes::<T, BigEndian>(body)
+    };
+    decoded.map(|(value, _)| value).map_err(|e| malformed(what, e))
+}
+
+/// Writes `value` as a serialized message (header and little-endian CDR) into `out`, replacing
+/// its contents; the buffer's capacity is reused.
+fn encode<T: Serialize>(what: &str, value: &T, out: &mut Vec<u8>) -> Result<()> {
+    out.clear();
+    out.extend_from_slice(&CDR_LE);
+    cdr_encoding::to_writer::<T, LittleEndian, _>(&mut *out, value).map_err(|e| malformed(what, e))?;
+    // rmw pads a message to a multiple of four bytes.
+    while out.len() % 4 != 0 {
+        out.push(0);
+    }
+    Ok(())
+}
+
+/// A serialized sensor_msgs/JointState.
+pub fn decode_joint_state(raw: &[u8]) -> Result<JointState> {
+    decode("joint state", raw)
+}
+
+/// Serializes a sensor_msgs/JointState into `out`.
+pub fn encode_joint_state<S: Serialize>(
+    out: &mut Vec<u8>,
+    stamp: Stamp,
+    frame_id: &str,
+    name: &[S],
+    position: &[f64],
+    velocity: &[f64],
+    effort: &[f64],
+) -> Result<()> {
+    let header = Header { stamp, frame_id };
+    let message = JointStateOut {
+        header,
+        name,
+        position,
+        velocity,
+        effort,
+    };
+    encode("joint state", &message, out)
+}
+
+/// A serialized std_msgs/Float64MultiArray: (data, layout.data_offset).
+pub fn decode_float64_array(raw: &[u8]) -> Result<(Vec<f64>, u32)> {
+    let message: Float64MultiArray = decode("Float64MultiArray", raw)?;
+    Ok((message.data, message.layout.data_offset))
+}
+
+/// Serializes a std_msgs/Float64MultiArray without dimensions (a flat vector, as ros2_control's
+/// forward command controllers take it) into `out`.
+pub fn encode_float64_array(out: &mut Vec<u8>, data: &[f64], data_offset: u32) -> Result<()> {
+    let layout = MultiArrayLayout {
+        dim: Vec::new(),
+        data_offset,
+    };
+    encode("Float64MultiArray", &Float64MultiArrayOut { layout, data }, out)
+}
+
+/// A serialized geometry_msgs/Twist, or TwistStamped when `stamped`.
+pub fn decode_twist(raw: &[u8], stamped: bool) -> Result<TwistValue> {
+    let (twist, stamp) = if stamped {
+        let m: TwistStamped = decode("TwistStamped", raw)?;
+        (m.twist, Some(m.header.stamp))
+    } else {
+        (decode::<Twist>("Twist", raw)?, None)
+    };
+    let (l, a) = (twist.linear, twist.angular);
+    Ok(TwistValue {
+        linear: [l.x, l.y, l.z],
+        angular: [a.x, a.y, a.z],
+        stamp,
+    })
+}
+
+/// Serializes a geometry_msgs/Twist, or a TwistStamped in `frame_id` when `stamp` is given, into `out`.
+pub fn encode_twist(out: &mut Vec<u8>, linear: [f64; 3], angular: [f64; 3], stamp: Option<Stamp>, frame_id: &str) -> Result<()> {
+    let v = |a: [f64; 3]| Vector3 { x: a[0], y: a[1], z: a[2] };
+    let twist = Twist {
+        linear: v(linear),
+        angular: v(angular),
+    };
+    match stamp {
+        Some(stamp) => {
+            let header = Header { stamp, frame_id };
+            encode("TwistStamped", &TwistStampedOut { header, twist }, out)
+        }
+        None => encode("Twist", &twist, out),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A JointState as rclpy serialized it (stamp 12 s 345 ns, frame "f", names ["a", "bc"],
+    /// position [1.0, -2.5], velocity [0.5, 0.0], no effort), with the bytes it left in the
+    /// padding (here "pp") written as zeros: `rclpy.serialization.serialize_message`.
+    const RCLPY_JOINT_STATE: &str = "000100000c00000059010000020000006600pppp02000000020000006100pppp03000000626300pp\
+                                     02000000000000000000f03f00000000000004c002000000pppppppp000000000000e03f00000000\
+                                     0000000000000000pppppppp";
+
+    fn reference_joint_state() -> Vec<u8> {
+        let hex: String = RCLPY_JOINT_STATE.replace("pp", "00").split_whitespace().collect();
+        (0..hex.len()).step_by(2).map(|i| u8::from_str_radix(&hex[i..i + 2], 16).unwrap()).collect()
+    }
+
+    #[test]
+    fn joint_state_reads_and_writes_the_cdr_layout() {
+        let raw = reference_joint_state();
+        let js = decode_joint_state(&raw).unwrap();
+        assert_eq!(js.stamp(), Stamp { sec: 12, nanosec: 345 });
+        assert_eq!(js.frame_id(), "f");
+        assert_eq!(js.name, vec!["a", "bc"]);
+        assert_eq!(js.position, vec![1.0, -2.5]);
+        assert_eq!(js.velocity, vec![0.5, 0.0]);
+        assert!(js.effort.is_empty());
+        let mut out = Vec::new();
+        encode_joint_state(&mut out, js.stamp(), "f", &["a", "bc"], &[1.0, -2.5], &[0.5, 0.0], &[]).unwrap();
+        // the same bytes; rclpy pads the whole to 8 bytes, this to 4
+        assert_eq!(out[..], raw[..out.len()]);
+        assert_eq!(raw.len() - out.len(), 4);
+    }
+
+    #[test]
+    fn float_array_and_twists_round_trip() {
+        let mut out = Vec::new();
+        encode_float64_array(&mut out, &[1.0, 2.0, 3.0], 77).unwrap();
+        // layout: no dims (4), data_offset (4), count (4), padding to 8 (4), 3 doubles
+        assert_eq!(out.len(), 4 + 16 + 24);
+        assert_eq!(decode_float64_array(&out).unwrap(), (vec![1.0, 2.0, 3.0], 77));
+        encode_twist(&mut out, [0.1, 0.2, 0.0], [0.0, 0.0, 0.3], None, "").unwrap();
+        assert_eq!(out.len(), 4 + 48);
+        let t = decode_twist(&out, false).unwrap();
+        assert_eq!((t.linear, t.angular, t.stamp), ([0.1, 0.2, 0.0], [0.0, 0.0, 0.3], None));
+        let stamp = Stamp { sec: 3, nanosec: 9 };
+        encode_twist(&mut out, [0.1, 0.2, 0.0], [0.0, 0.0, 0.3], Some(stamp), "base_link").unwrap();
+        let t = decode_twist(&out, true).unwrap();
+        assert_eq!((t.linear, t.stamp), ([0.1, 0.2, 0.0], Some(stamp)));
+    }
+
+    #[test]
+    fn truncated_or_foreign_messages_are_errors() {
+        let raw = reference_joint_state();
+        assert!(decode_joint_state(&raw[..20]).is_err());
+        assert!(decode_joint_state(&raw[..2]).is_err());
+        let mut xcdr = raw.clone();
+        xcdr[1] = 0x07;
+        assert!(decode_joint_state(&xcdr).is_err());
+    }
+
+    #[test]
+    fn stamps_convert_to_seconds_and_back() {
+        let s = Stamp::from_seconds(1.999_999_999_7);
+        assert_eq!(s, Stamp { sec: 2, nanosec: 0 });
+        assert_eq!(Stamp::from_seconds(5.25), Stamp { sec: 5, nanosec: 250_000_000 });
+        assert!((Stamp { sec: 5, nanosec: 250_000_000 }.seconds() - 5.25).abs() < 1e-12);
+    }
+}
