@@ -2,3 +2,4 @@
 //! that answers one joint state with one command (merge, object estimate, inner loop, rate limits).
 
 pub mod messages;
+pub mod tick;

@@ -443,6 +443,32 @@ impl PyInnerLoop {
     ) -> PyResult<Tick<'py>> {
         let x = run(|| view("x", &x, &[self.nx as isize]))?;
         let tau_ext = run(|| view("tau_ext", &tau_ext, &[self.nq as isize]))?;
+        self.tick_slices(py, plan, x, tau_ext, t, dt, |out| {
+            (
+                PyArray1::from_slice(py, &out.reference),
+                PyArray1::from_slice(py, &out.command),
+                PyArray1::from_slice(py, &out.torque),
+                out.tank_energy,
+                out.status_name(),
+            )
+        })
+    }
+}
+
+impl PyInnerLoop {
+    /// One tick on plain slices (see `tick`), handing its output to `then`: the bridge's tick runs
+    /// the inner loop this way between its own stages.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn tick_slices<R>(
+        &self,
+        py: Python<'_>,
+        plan: &PyPlan,
+        x: &[f64],
+        tau_ext: &[f64],
+        t: f64,
+        dt: f64,
+        then: impl FnOnce(&TickOutput) -> R,
+    ) -> PyResult<R> {
         let filter = match &self.filter {
             Some(f) => Some(f.bind(py).try_borrow()?),
             None => None,
@@ -468,13 +494,7 @@ impl PyInnerLoop {
                 )
             })?;
         }
-        Ok((
-            PyArray1::from_slice(py, &out.reference),
-            PyArray1::from_slice(py, &out.command),
-            PyArray1::from_slice(py, &out.torque),
-            out.tank_energy,
-            out.status_name(),
-        ))
+        Ok(then(&out))
     }
 }
 

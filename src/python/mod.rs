@@ -5,10 +5,12 @@
 //! never crosses into Python. Config objects (`RolloutConfig()`, `MppiConfig()`, …) hold the
 //! core's defaults: Python reads its defaults from them.
 
+mod bridge_tick;
 mod control;
 mod convert;
 mod cost;
 mod error;
+mod messages;
 mod mppi;
 mod robot;
 mod safety;
@@ -38,6 +40,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<control::PyPlan>()?;
     m.add_class::<control::PyInnerLoop>()?;
     m.add_class::<control::PyRateLimiter>()?;
+    m.add_class::<bridge_tick::PyBridgeTick>()?;
     m.add_class::<cost::PyCost>()?;
     m.add_class::<mppi::PyMppiConfig>()?;
     m.add_class::<mppi::PyServoGuideConfig>()?;
@@ -53,6 +56,12 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mppi::likelihood_weights, m)?)?;
     m.add_function(wrap_pyfunction!(mppi::servo_guide, m)?)?;
     m.add_function(wrap_pyfunction!(robot::mesh_triangles, m)?)?;
+    m.add_function(wrap_pyfunction!(messages::decode_joint_state, m)?)?;
+    m.add_function(wrap_pyfunction!(messages::encode_joint_state, m)?)?;
+    m.add_function(wrap_pyfunction!(messages::decode_float64_array, m)?)?;
+    m.add_function(wrap_pyfunction!(messages::encode_float64_array, m)?)?;
+    m.add_function(wrap_pyfunction!(messages::decode_twist, m)?)?;
+    m.add_function(wrap_pyfunction!(messages::encode_twist, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("DEFAULT_TAU_EXT_CUTOFF", crate::sim::DEFAULT_TAU_EXT_CUTOFF)?;
     let contact_models: Vec<&str> = crate::sim::ContactModel::ALL.iter().map(|m| m.name()).collect();

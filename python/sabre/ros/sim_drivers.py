@@ -6,12 +6,12 @@ only, the object's true joint state and a clock."""
 
 from __future__ import annotations
 
-import array
 import math
 from typing import Any
 
 import numpy as np
 
+from .. import _core
 from ..scene import Scene
 from .conversions import quaternion_of
 from .qos import profile
@@ -66,14 +66,11 @@ class DriverOutputs:
         held = [float(p["finger_width"])] * len(fingers)
         if not fingers:
             fingers, held = list(scene.held_joints), [float(v) for v in scene.held_joints.values()]
-        self._js = JointState(name=[scene.joint_names[i] for i in arm_index] + fingers)
-        # the joint state's values are written into these buffers in place (the fingers' once): the
-        # message converts them without a Python float per value
+        self._js_names = [scene.joint_names[i] for i in arm_index] + fingers
         width = len(arm_index) + len(fingers)
-        self._js.position = array.array("d", bytes(8 * width))
-        self._js.velocity = array.array("d", bytes(8 * width))
-        self._position = np.frombuffer(self._js.position, dtype=np.float64)
-        self._velocity = np.frombuffer(self._js.velocity, dtype=np.float64)
+        self._position = np.zeros(width)
+        self._velocity = np.zeros(width)
+        self._no_effort = np.zeros(0)
         self._position[len(arm_index) :] = held
         self._odom = Odometry()
         self._odom.header.frame_id = str(p["world_frame"])
@@ -102,14 +99,15 @@ class DriverOutputs:
         o.x, o.y, o.z, o.w = quaternion_of(roll, pitch, yaw)
         self.pose_pub.publish(msg)
 
-    def publish_joint_states(self, q: np.ndarray, dq: np.ndarray, stamp: Any) -> None:
+    def publish_joint_states(self, q: np.ndarray, dq: np.ndarray, stamp_ns: int) -> None:
+        """The arm's and the gripper's joint state, serialized in the core and published as bytes
+        (no message object per state at 1 kHz)."""
         noise = self.arm_noise.next()
         na = len(self.arm_index)
-        js = self._js
-        js.header.stamp = stamp
         np.add(q[self.arm_index], noise[:na], out=self._position[:na])
         np.add(dq[self.arm_index], noise[na:], out=self._velocity[:na])
-        self.js_pub.publish(js)
+        raw = _core.encode_joint_state(stamp_ns, "", self._js_names, self._position, self._velocity, self._no_effort)
+        self.js_pub.publish(raw)
 
     def publish_odometry(self, q: np.ndarray, dq: np.ndarray, stamp: Any) -> None:
         """The base's pose and its twist in the base frame (as nav_msgs/Odometry defines it)."""

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import tasks
+from .. import _core, tasks
 from ..closed_loop import paper_start_state
 from ..errors import SabreError
 from ..inner_loop import LowLevelController
@@ -166,7 +166,7 @@ class SimRobotNode:
         self._published: dict[int, tuple[int, float]] = {}
         from builtin_interfaces.msg import Time
 
-        self._stamp = Time()
+        self._time_msg = Time
 
     def _create_inputs(self, p: dict[str, Any]) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
@@ -180,10 +180,13 @@ class SimRobotNode:
         self.error_pub = node.create_publisher(String, p["error_topic"], reliable)
         self.obstacle_pub = node.create_publisher(MarkerArray, p["obstacle_topic"], reliable)
         # a deep queue: every arm command is checked and recorded, also when this process falls behind
-        node.create_subscription(Float64MultiArray, p["arm_command_topic"], self._on_arm, profile("reliable:1000"))
+        # the commands arrive serialized and are read in the core (no message object per command)
+        arm_qos = profile("reliable:1000")
+        node.create_subscription(Float64MultiArray, p["arm_command_topic"], self._on_arm, arm_qos, raw=True)
+        self._stamped = bool(p["cmd_vel_stamped"])
         if len(self.base_index):
-            stamped = bool(p["cmd_vel_stamped"])
-            node.create_subscription(TwistStamped if stamped else Twist, p["cmd_vel_topic"], self._on_twist, reliable)
+            kind = TwistStamped if self._stamped else Twist
+            node.create_subscription(kind, p["cmd_vel_topic"], self._on_twist, reliable, raw=True)
         if p["command_echo_topic"]:
             node.create_subscription(JointState, p["command_echo_topic"], self._on_echo, profile("sensor"))
         node.create_subscription(Bool, p["hold_topic"], self._on_hold, reliable)
@@ -196,8 +199,11 @@ class SimRobotNode:
         self._status.start()
 
     # Commands --------------------------------------------------------------------------------
-    def _on_arm(self, msg: Any) -> None:
-        v = np.asarray(msg.data, dtype=np.float64)
+    def _on_arm(self, raw: bytes) -> None:
+        try:
+            v, data_offset = _core.decode_float64_array(raw)
+        except SabreError:
+            v, data_offset = np.zeros(0), 0
         if v.shape != self._arm_cmd.shape or not np.all(np.isfinite(v)):
             self.stats["rejected_commands"] += 1
             self.node.get_logger().error(
@@ -205,7 +211,7 @@ class SimRobotNode:
             )
             return
         s = self.stats
-        self._match(msg.layout.data_offset)
+        self._match(data_offset)
         if self._last_arm_msg is not None:
             step = v - self._last_arm_msg
             np.maximum(s["arm_step_max"], np.abs(step), out=s["arm_step_max"])
@@ -227,9 +233,13 @@ class SimRobotNode:
         self._arm_recv = time.monotonic()
         s["arm_commands"] += 1
 
-    def _on_twist(self, msg: Any) -> None:
-        tw = msg.twist if hasattr(msg, "twist") else msg
-        v = np.array([tw.linear.x, tw.linear.y, tw.angular.z])
+    def _on_twist(self, raw: bytes) -> None:
+        try:
+            linear, angular, _ = _core.decode_twist(raw, self._stamped)
+        except SabreError:
+            self.stats["rejected_commands"] += 1
+            return
+        v = np.array([linear[0], linear[1], angular[2]])
         if not np.all(np.isfinite(v)):
             self.stats["rejected_commands"] += 1
             return
@@ -388,15 +398,17 @@ class SimRobotNode:
         nq, no = self.scene.nq, self.scene.no
         q, dq = x[:nq], x[nq : 2 * nq]
         ns = time.time_ns()
-        stamp = self._stamp
-        stamp.sec, stamp.nanosec = ns // 1_000_000_000, ns % 1_000_000_000
+        nanosec = ns % 1_000_000_000
         published = self._published
-        published[stamp.nanosec] = (self.stats["states_published"], ns * 1e-9)  # before an answer can come
+        published[nanosec] = (self.stats["states_published"], ns * 1e-9)  # before an answer can come
         if len(published) > RECENT_STATES:
             del published[next(iter(published))]
         self.stats["states_published"] += 1
-        self.out.publish_joint_states(q, dq, stamp)
+        self.out.publish_joint_states(q, dq, ns)
         every = self._schedule
+        if k % every["odometry"] and k % every["wrench"] and k % every["ground_truth"] and k % every["clock"]:
+            return
+        stamp = self._time_msg(sec=ns // 1_000_000_000, nanosec=nanosec)
         if k % every["odometry"] == 0 and self.out.odom_pub is not None:
             self.out.publish_odometry(q, dq, stamp)
         if k % every["wrench"] == 0:

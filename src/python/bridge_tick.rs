@@ -1,0 +1,232 @@
+//! Binding of the bridge's tick (`_core.BridgeTick`): a ROS node's 1 kHz callback hands it the
+//! serialized joint state and publishes the serialized commands it returns, with the inner loop
+//! run inside the same call.
+
+use std::sync::Mutex;
+
+use numpy::{PyArray1, PyReadonlyArrayDyn};
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyDict};
+
+use super::bridge::{PyCommandGate, PyJointMerge};
+use super::control::{PyInnerLoop, PyPlan};
+use super::convert::{lock, view};
+use super::error::run;
+use super::estimation::PyObjectStateEstimator;
+use super::messages::stamp_of;
+use crate::bridge::tick::{Answer, BridgeLayout, BridgeTick, Received};
+
+/// (arm command, base command or None) as bytes to publish.
+type Step<'py> = (Bound<'py, PyBytes>, Option<Bound<'py, PyBytes>>);
+
+fn step<'py>(py: Python<'py>, answer: &Answer) -> Step<'py> {
+    (
+        PyBytes::new(py, &answer.arm),
+        answer.base.as_ref().map(|b| PyBytes::new(py, b)),
+    )
+}
+
+/// The controller node's 1 kHz path (see `sabre.ros.controller_loop`): joint states merged by
+/// name, the object's state, τ_ext, the inner loop and the rate-limited command gate, on serialized
+/// messages. Takes copies of the merge, gate and estimator it is built from.
+#[pyclass(name = "BridgeTick", module = "sabre._core", frozen)]
+pub struct PyBridgeTick {
+    inner: Mutex<BridgeTick>,
+}
+
+#[pymethods]
+impl PyBridgeTick {
+    #[new]
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (joints, gate, estimator, object_position, object_velocity, arm_index, base_index, max_tick_dt, wrench_timeout, tau_cutoff, cmd_vel_stamped, cmd_vel_frame))]
+    fn new(
+        joints: &PyJointMerge,
+        gate: &PyCommandGate,
+        estimator: Option<&PyObjectStateEstimator>,
+        object_position: Vec<f64>,
+        object_velocity: Vec<f64>,
+        arm_index: Vec<usize>,
+        base_index: Option<[usize; 3]>,
+        max_tick_dt: f64,
+        wrench_timeout: f64,
+        tau_cutoff: Option<f64>,
+        cmd_vel_stamped: bool,
+        cmd_vel_frame: String,
+    ) -> PyResult<Self> {
+        let layout = BridgeLayout {
+            arm_index,
+            base_index,
+            max_tick_dt,
+            wrench_timeout,
+            tau_cutoff: tau_cutoff.filter(|c| *c > 0.0),
+            cmd_vel_stamped,
+            cmd_vel_frame,
+        };
+        let tick = run(|| {
+            BridgeTick::new(
+                layout,
+                joints.merge(),
+                gate.gate(),
+                estimator.map(PyObjectStateEstimator::inner),
+                (object_position, object_velocity),
+            )
+        })?;
+        Ok(Self { inner: Mutex::new(tick) })
+    }
+
+    /// Reads and merges a serialized joint state that arrived at `received` (s, monotonic):
+    /// ("merged", nan, None), ("tick" or "stale", t, None) for an arm state at t (s since the
+    /// first; "stale": a joint is past its timeout), or ("rejected" or "rejected-tick", nan,
+    /// why) ("rejected-tick": it still gets an answer, a ramp step).
+    fn receive(&self, raw: &[u8], received: f64) -> (&'static str, f64, Option<String>) {
+        match lock(&self.inner).receive(raw, received) {
+            Received::Merged => ("merged", f64::NAN, None),
+            Received::Tick { t, fresh } => (if fresh { "tick" } else { "stale" }, t, None),
+            Received::Rejected { error, ticks } => {
+                (if ticks { "rejected-tick" } else { "rejected" }, f64::NAN, Some(error.to_string()))
+            }
+        }
+    }
+
+    /// Follows `plan` at the newest state's time `t`: the state (the estimator hooking only when
+    /// `may_hook`), τ_ext, one tick of `inner_loop`, and the gate's step toward its command.
+    /// Returns (arm bytes, base bytes or None, x (nx,), tank energy or None, filter status).
+    #[allow(clippy::type_complexity)]
+    fn follow<'py>(
+        &self,
+        py: Python<'py>,
+        inner_loop: &PyInnerLoop,
+        plan: &PyPlan,
+        t: f64,
+        received: f64,
+        may_hook: bool,
+    ) -> PyResult<(
+        Bound<'py, PyBytes>,
+        Option<Bound<'py, PyBytes>>,
+        Bound<'py, PyArray1<f64>>,
+        Option<f64>,
+        &'static str,
+    )> {
+        let mut tick = lock(&self.inner);
+        let x = run(|| tick.state(t, may_hook).map(<[f64]>::to_vec))?;
+        let (dt, tau) = {
+            let (dt, tau) = tick.external_torque(t, received);
+            (dt, tau.to_vec())
+        };
+        let (command, energy, status) = inner_loop.tick_slices(py, plan, &x, &tau, t, dt, |out| {
+            (out.command.clone(), out.tank_energy, out.status_name())
+        })?;
+        let answer = run(|| tick.follow(received, &command))?;
+        let (arm, base) = step(py, &answer);
+        Ok((arm, base, PyArray1::from_vec(py, x), energy, status))
+    }
+
+    /// The state x (nx,) at the newest state's time `t` without a tick (a stale plan, or the
+    /// planner starting): the planner still sees it.
+    fn observe<'py>(&self, py: Python<'py>, t: f64, may_hook: bool) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let mut tick = lock(&self.inner);
+        let x = run(|| tick.state(t, may_hook).map(<[f64]>::to_vec))?;
+        tick.skip(t);
+        Ok(PyArray1::from_vec(py, x))
+    }
+
+    /// A ramp step toward zero answering the newest (or a rejected) state at `received`.
+    fn stop<'py>(&self, py: Python<'py>, received: f64) -> PyResult<Step<'py>> {
+        let answer = run(|| lock(&self.inner).stop(received))?;
+        Ok(step(py, &answer))
+    }
+
+    /// The ramp steps due at `now` (s, monotonic) because no state came for the state timeout
+    /// (at most `limit`), a stamped base command stamped `stamp_ns`.
+    #[pyo3(signature = (now, stamp_ns, limit=10))]
+    fn watchdog<'py>(&self, py: Python<'py>, now: f64, stamp_ns: i64, limit: usize) -> PyResult<Vec<Step<'py>>> {
+        let steps = run(|| lock(&self.inner).watchdog(now, limit, stamp_of(stamp_ns)))?;
+        Ok(steps.iter().map(|a| step(py, a)).collect())
+    }
+
+    /// Seconds until the watchdog has something to do.
+    fn next_look(&self, now: f64) -> f64 {
+        lock(&self.inner).gate().next_look(now)
+    }
+
+    /// One step of the ramp to zero outside the ticks (a shutdown's), None once at rest.
+    fn ramp_step<'py>(&self, py: Python<'py>, stamp_ns: i64) -> PyResult<Option<Step<'py>>> {
+        let answer = run(|| lock(&self.inner).ramp_step(stamp_of(stamp_ns)))?;
+        Ok(answer.map(|a| step(py, &a)))
+    }
+
+    /// Merges joints (sabre's indices) from another source, the base's from odometry.
+    fn set_joints(
+        &self,
+        indices: Vec<usize>,
+        position: PyReadonlyArrayDyn<'_, f64>,
+        velocity: PyReadonlyArrayDyn<'_, f64>,
+        received: f64,
+    ) -> PyResult<()> {
+        let n = indices.len() as isize;
+        run(|| {
+            let (p, v) = (view("position", &position, &[n])?, view("velocity", &velocity, &[n])?);
+            lock(&self.inner).set_joints(&indices, p, v, received)
+        })
+    }
+
+    /// The newest τ_ext (nq,) and wrist force magnitude (N; inf: torques only), arrived at `received`.
+    fn set_external_torque(&self, tau: PyReadonlyArrayDyn<'_, f64>, force: f64, received: f64) -> PyResult<()> {
+        run(|| lock(&self.inner).set_external_torque(view("tau_ext", &tau, &[-1])?, force, received))
+    }
+
+    /// The object's (o, ȯ) from its topic.
+    fn set_object(&self, position: PyReadonlyArrayDyn<'_, f64>, velocity: PyReadonlyArrayDyn<'_, f64>) -> PyResult<()> {
+        run(|| {
+            lock(&self.inner).set_object(view("position", &position, &[-1])?, view("velocity", &velocity, &[-1])?)
+        })
+    }
+
+    /// The merged joint positions (nq,).
+    #[getter]
+    fn position<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, lock(&self.inner).joints().position())
+    }
+    /// The object's estimate (o, ȯ, hooked, residual), None without an estimator or before a state.
+    #[getter]
+    fn estimate(&self) -> Option<(f64, f64, bool, f64)> {
+        lock(&self.inner)
+            .estimate()
+            .map(|e| (e.position, e.velocity, e.hooked, e.residual))
+    }
+    /// The object's coordinate as the controller knows it.
+    #[getter]
+    fn opening(&self) -> f64 {
+        lock(&self.inner).opening()
+    }
+    #[getter]
+    fn at_rest(&self) -> bool {
+        lock(&self.inner).gate().shaper().at_rest()
+    }
+    #[getter]
+    fn stale_events(&self) -> usize {
+        lock(&self.inner).gate().stale_events()
+    }
+    #[getter]
+    fn period(&self) -> f64 {
+        lock(&self.inner).gate().period()
+    }
+    #[getter]
+    fn state_timeout(&self) -> f64 {
+        lock(&self.inner).gate().state_timeout()
+    }
+    /// The counts: ticks (states answered), answered (commands sent), followed, rejected,
+    /// wrench_stale, wrench_received.
+    #[getter]
+    fn counts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let c = lock(&self.inner).counts().clone();
+        let d = PyDict::new(py);
+        d.set_item("ticks", c.ticks)?;
+        d.set_item("answered", c.answered)?;
+        d.set_item("followed", c.followed)?;
+        d.set_item("rejected", c.rejected)?;
+        d.set_item("wrench_stale", c.wrench_stale)?;
+        d.set_item("wrench_received", c.wrench_received)?;
+        Ok(d)
+    }
+}
