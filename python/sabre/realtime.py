@@ -409,6 +409,41 @@ class RealtimeCascade:
         plan = self._plan
         return None if plan is None else plan.t0
 
+    def _check_running(self) -> None:
+        if self._error is not None:
+            raise self._error
+        if self._stopped:
+            raise InvalidValueError("the cascade was stopped: its plan is frozen; start() it again")
+
+    @property
+    def inner_loop(self) -> _core.InnerLoop:
+        """The core's inner loop :meth:`tick` runs: a caller that ticks in the core itself (the ROS
+        bridge's ``_core.BridgeTick``) runs it on :meth:`plan_for`'s plan and reports the state with
+        :meth:`note_tick`."""
+        return self._inner
+
+    def plan_for(self, t: float) -> PlanSnapshot | None:
+        """The plan in force at time t (s) for a tick the caller runs on :attr:`inner_loop` (None
+        before the first plan), taking over a newer plan of the planner process first.
+
+        Raises:
+            InvalidValueError: a stopped cascade. PlannerError: the planner process failed.
+        """
+        self._check_running()
+        process = self._process
+        if process is not None:
+            self._take_newer_plan(process)
+        return self._plan_at(t)
+
+    def note_tick(self, x: np.ndarray, t: float) -> None:
+        """The state x (nx,) a tick on :attr:`inner_loop` answered at time t: the planner's next
+        starting point, as after :meth:`tick`."""
+        self._latest = (x, t)
+        process = self._process
+        if process is not None:
+            process.share_state(x, t)
+        self.ticks += 1
+
     def tick(
         self, x: Sequence[float] | np.ndarray, tau_ext: Sequence[float] | np.ndarray, t: float, dt: float | None = None
     ) -> TickResult:
@@ -428,10 +463,7 @@ class RealtimeCascade:
             ShapeError: x not (nx,), τ_ext not (nq,). InvalidValueError: non-finite input, dt not
             positive, no plan yet, a stopped cascade. PlannerError: the planner process failed.
         """
-        if self._error is not None:
-            raise self._error
-        if self._stopped:
-            raise InvalidValueError("the cascade was stopped: its plan is frozen; start() it again")
+        self._check_running()
         x = _vector("x", x, copy=True)  # kept as the planner's next state: the caller may reuse its array
         tau_ext = _vector("tau_ext", tau_ext, copy=False)
         t = _number("t", t)

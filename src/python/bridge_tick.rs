@@ -182,6 +182,11 @@ impl PyBridgeTick {
         })
     }
 
+    /// The newest arm state's stamp (s since its clock's epoch).
+    #[getter]
+    fn stamp(&self) -> f64 {
+        lock(&self.inner).stamp().seconds()
+    }
     /// The merged joint positions (nq,).
     #[getter]
     fn position<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
@@ -202,6 +207,11 @@ impl PyBridgeTick {
     #[getter]
     fn at_rest(&self) -> bool {
         lock(&self.inner).gate().shaper().at_rest()
+    }
+    /// Whether the watchdog is ramping the commands down because no state came.
+    #[getter]
+    fn ramping_for_stale_state(&self) -> bool {
+        lock(&self.inner).gate().stale_since().is_some()
     }
     #[getter]
     fn stale_events(&self) -> usize {

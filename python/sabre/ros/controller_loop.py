@@ -1,11 +1,13 @@
 """The configured controller: the scene and cascade built from the descriptions, the measured inputs,
-the command gate and the endpoints of the 1 kHz path (receive a joint state, one tick, publish the
-rate-limited command), with the watchdog that ramps the commands to zero when states stop coming.
-The controller node builds one on configure and drops it on cleanup."""
+the command gate and the endpoints of the 1 kHz path, with the watchdog that ramps the commands to
+zero when states stop coming. The controller node builds one on configure and drops it on cleanup.
+
+The 1 kHz path runs in the core (``_core.BridgeTick``): each arm joint state arrives serialized,
+and one call merges it, estimates the object, runs the inner loop and the rate-limited gate, and
+returns the serialized commands to publish; Python decides only whether the tick follows the plan."""
 
 from __future__ import annotations
 
-import array
 import collections
 import functools
 import math
@@ -15,12 +17,13 @@ from typing import Any
 
 import numpy as np
 
+from .. import _core
 from ..errors import SabreError
-from ..estimation import LowPass, ObjectStateEstimator
+from ..estimation import ObjectStateEstimator
 from ..realtime import RealtimeCascade
 from . import gil_priority, realtime_thread
-from .commands import Command, CommandGate, CommandShaper, command_limits
-from .conversions import MessageError, stamp_seconds, world_to_base, yaw_of
+from .commands import CommandGate, CommandShaper, command_limits
+from .conversions import MessageError, yaw_of
 from .descriptions import Descriptions, build_controller
 from .durations import Durations
 from .inputs import JointStates, JointTorques, WrenchFrames, base_from_odometry
@@ -58,9 +61,9 @@ class ControllerLoop:
         self._map_joints(p)
         self._init_inputs(p)
         dq = self.scene.dq_limit
-        self.shaper = CommandShaper(command_limits(dq[self.arm_index], dq[self.base_index] if self.has_base else None, p))
-        self.gate = CommandGate(self.shaper, float(p["state_timeout"]))
-        self._lock = threading.Lock()  # the gate, its limiters and the command publishers
+        self.limits = command_limits(dq[self.arm_index], dq[self.base_index] if self.has_base else None, p)
+        self._init_tick(p)
+        self._lock = threading.Lock()  # the tick's gate and the command publishers
         self._init_state()
         self._create_endpoints(p)
         self._running = True
@@ -100,19 +103,32 @@ class ControllerLoop:
         self.base_from_odometry = self.has_base and bool(p["odometry_topic"])
         if self.base_from_odometry:
             timeouts[self.base_index] = float(p["base_state_timeout"])
-        self.joints = JointStates(self.names, self.arm_joints, timeouts)
+        self._timeouts = timeouts
         wrench_frame = str(p["wrench_frame"]) or self.scene.wrist_sensor_link
         self.wrench_frames = WrenchFrames(self.scene, str(p["world_frame"]), wrench_frame, str(p["wrench_point_frame"]))
         self.torques = JointTorques(self.names, self.scene.nq, float(p["tau_ext_sign"])) if p["tau_ext_topic"] else None
-        self._wrench: tuple[np.ndarray, str | None, str] | None = None
-        self._tau_wrench = np.zeros(self.scene.nq)  # J(q)ᵀ w of the newest wrench
-        self._tau_topic: np.ndarray | None = None
-        self._wrench_recv = -math.inf
-        self._tau_filter = LowPass(float(p["tau_ext_cutoff"]))
-        self._object: tuple[np.ndarray, np.ndarray] | None = None
         self.estimator = None
         if not p["object_state_topic"]:
             self.estimator = ObjectStateEstimator(self.scene, handle=self.descriptions.handle)
+
+    def _init_tick(self, p: dict[str, Any]) -> None:
+        """The core's tick, on its own copies of the merge, the gate and the estimator."""
+        joints = JointStates(self.names, self.arm_joints, self._timeouts)
+        gate = CommandGate(CommandShaper(self.limits), float(p["state_timeout"]))
+        self.tick = _core.BridgeTick(
+            joints.core,
+            gate.core,
+            None if self.estimator is None else self.estimator.core,
+            [float(v) for v in self.scene.o_lower],
+            [0.0] * self.scene.no,
+            [int(i) for i in self.arm_index],
+            [int(i) for i in self.base_index] if self.has_base else None,
+            float(p["max_tick_dt"]),
+            float(p["wrench_timeout"]),
+            float(p["tau_ext_cutoff"]),
+            bool(p["cmd_vel_stamped"]),
+            str(p["cmd_vel_frame"]),
+        )
 
     def _init_state(self) -> None:
         """The node's flags, the task's state and the statistics the summary reports."""
@@ -121,26 +137,17 @@ class ControllerLoop:
         self.task = "idle"
         self.reason: str | None = "inactive"  # why the last tick did not follow the plan (None: it did)
         self.failure = ""
-        self._last_stamp: float | None = None
-        self._t_origin: float | None = None
-        self._last_t: float | None = None
         self._last_status = "none"
         self._last_tank = float(self.controller.tank.energy)
         self._min_tank = self._last_tank
         self._phase = self.controller.phase
         self._planner_started: float | None = None
-        self._x: np.ndarray | None = None
-        self._target: tuple[np.ndarray, np.ndarray | None] | None = None
-        self._ready = False  # the running planner has handed over a plan
+        self._hooked = False
+        self._x: np.ndarray | None = None  # the newest state and its time (the visualization's)
+        self._last_t: float | None = None
         self._stopper: threading.Thread | None = None  # stops the planner off the 1 kHz path
         self.stats: dict[str, Any] = {
-            "ticks": 0,
-            "answered": 0,
-            "followed": 0,
-            "rejected": 0,
             "plan_stale": 0,
-            "wrench_stale": 0,
-            "wrench_received": 0,
             "compute": Durations(),
             "state_age": Durations(),
             "phase_changes": 0,
@@ -159,29 +166,16 @@ class ControllerLoop:
         self._subs: list[Any] = []
         self._pubs: list[Any] = []
         self.arm_pub = node.create_publisher(Float64MultiArray, p["arm_command_topic"], profile(p["arm_command_qos"]))
-        self.stamped = bool(p["cmd_vel_stamped"])
         self.base_pub = None
         if self.has_base:
-            self.base_pub = node.create_publisher(
-                TwistStamped if self.stamped else Twist, p["cmd_vel_topic"], profile(p["cmd_vel_qos"])
-            )
+            kind = TwistStamped if p["cmd_vel_stamped"] else Twist
+            self.base_pub = node.create_publisher(kind, p["cmd_vel_topic"], profile(p["cmd_vel_qos"]))
             self._pubs.append(self.base_pub)
         self._pubs.append(self.arm_pub)
-        self.echo_pub = None
-        if p["command_echo_topic"]:
-            self.echo_pub = node.create_publisher(JointState, p["command_echo_topic"], profile(p["command_echo_qos"]))
-            self._pubs.append(self.echo_pub)
-        self._arm_msg = Float64MultiArray()
-        # the arm command's values go into this buffer in place: the message converts it without
-        # a Python float per value
-        self._arm_msg.data = array.array("d", bytes(8 * len(self.arm_joints)))
-        self._arm_values = np.frombuffer(self._arm_msg.data, dtype=np.float64)
-        self._twist = TwistStamped() if self.stamped else Twist()
-        if self.stamped:
-            self._twist.header.frame_id = str(p["cmd_vel_frame"])
-        self._echo = JointState(name=list(self.arm_joints))
         sub = node.create_subscription
-        self._subs.append(sub(JointState, p["joint_state_topic"], self.on_joint_state, profile(p["joint_state_qos"])))
+        # the joint states arrive serialized: the core reads them (no message object at 1 kHz)
+        qos = profile(p["joint_state_qos"])
+        self._subs.append(sub(JointState, p["joint_state_topic"], self.on_joint_state, qos, raw=True))
         if self.base_from_odometry:
             self._subs.append(sub(Odometry, p["odometry_topic"], self.on_odometry, profile(p["odometry_qos"])))
         if self.torques is not None:
@@ -220,7 +214,7 @@ class ControllerLoop:
         except MessageError as exc:
             self._log_rejected("odometry", exc)
             return
-        self.joints.set(self.base_index, q, rates, time.monotonic())
+        self.tick.set_joints([int(i) for i in self.base_index], np.asarray(q), np.asarray(rates), time.monotonic())
 
     def on_wrench(self, msg: Any) -> None:
         w = msg.wrench
@@ -232,21 +226,20 @@ class ControllerLoop:
         except MessageError as exc:
             self._log_rejected("wrench", exc)
             return
-        self._wrench = (v, axes, point)
-        # at the wrench's rate, not the states': the joints move little between two wrenches, and
-        # the tank reads τ_ext low-passed at tau_ext_cutoff
-        self._tau_wrench = self.wrench_frames.tau_ext(self.joints.position.copy(), v, axes, point)
-        self._wrench_recv = time.monotonic()
-        self.stats["wrench_received"] += 1
+        # τ_ext at the wrench's rate, not the states': the joints move little between two wrenches,
+        # and the tank reads τ_ext low-passed at tau_ext_cutoff
+        tau = self.wrench_frames.tau_ext(self.tick.position, v, axes, point)
+        self.tick.set_external_torque(tau, math.hypot(*v[:3]), time.monotonic())
 
     def on_torques(self, msg: Any) -> None:
         assert self.torques is not None
         try:
-            self._tau_topic = self.torques.update(msg.name, msg.effort)
+            tau = self.torques.update(msg.name, msg.effort)
         except MessageError as exc:
             self._log_rejected("joint torques", exc)
             return
-        self._wrench_recv = time.monotonic()
+        # torques only: contact assumed (the estimator's hook test is then the distance)
+        self.tick.set_external_torque(tau, math.inf, time.monotonic())
 
     def on_object(self, msg: Any) -> None:
         names = list(self.scene.object_joint_names)
@@ -261,126 +254,100 @@ class ControllerLoop:
         except (MessageError, IndexError) as exc:
             self._log_rejected("object state", exc)
             return
-        self._object = (o, od)
+        self.tick.set_object(o, od)
 
-    def _log_rejected(self, what: str, exc: Exception) -> None:
+    def _log_rejected(self, what: str, exc: Exception | str) -> None:
         self.node.get_logger().error(f"{what} rejected: {exc}", throttle_duration_sec=1.0)
-        self.stats["rejected"] += 1
 
     # The 1 kHz path --------------------------------------------------------------------------
-    def on_joint_state(self, msg: Any) -> None:
+    def on_joint_state(self, raw: bytes) -> None:
         """One tick per arm joint state: the command that follows the plan, or a ramp step."""
         received = time.monotonic()
-        stamp = msg.header.stamp
-        try:
-            t_abs = stamp_seconds(stamp)
-            ticks = self.joints.update(msg.name, msg.position, msg.velocity, received)
-            if ticks and self._last_stamp is not None and t_abs <= self._last_stamp:
-                raise MessageError(f"joint state stamp {t_abs:.6f} is not after the previous one")
-        except MessageError as exc:
-            self._log_rejected("joint state", exc)
-            if self.joints.drives_tick(msg.name):
-                self.reason = "rejected state"
-                self._answer(received, None, stamp)  # a ramp step, never a step to zero
-            return
-        if not ticks:
-            return  # fingers, another driver's joints: merged, no tick
-        self.stats["state_age"].record(time.time() - t_abs)
-        self._last_stamp = t_abs
-        if self._t_origin is None:
-            self._t_origin = t_abs
-        t = t_abs - self._t_origin
-        self.reason = self._follow(received, t)
-        self._answer(received, self._target if self.reason is None else None, stamp)
+        tick = self.tick
+        with self._lock:
+            kind, t, error = tick.receive(raw, received)
+            if kind == "merged":
+                return  # fingers, another driver's joints: merged, no tick
+            if error is not None:
+                self._log_rejected("joint state", error)
+                if kind == "rejected-tick":
+                    self.reason = "rejected state"
+                    self._publish(*tick.stop(received))  # a ramp step, never a step to zero
+                    self.stats["stops"]["rejected state"] += 1
+                return
+            self.reason = self._follow(received, t, kind == "tick")
+        self.stats["state_age"].record(time.time() - tick.stamp)
         if self.reason is None:
             self.stats["compute"].record(time.monotonic() - received)
             self._note_phase(t)
+        else:
+            self.stats["stops"][self.reason] += 1
 
-    def _follow(self, received: float, t: float) -> str | None:
-        """Runs the task one tick at time t if nothing stops it (setting :attr:`_target`); else the
-        reason it does not follow the plan."""
+    def _follow(self, received: float, t: float, fresh: bool) -> str | None:
+        """Answers the state at time t: follows the plan if nothing stops it (None), else publishes
+        a ramp step and returns the reason. The caller holds the lock."""
+        reason = self._blocked(fresh)
+        if reason is None:
+            reason = self._run_task(received, t)
+        if reason is not None:
+            self._publish(*self.tick.stop(received))
+        return reason
+
+    def _blocked(self, fresh: bool) -> str | None:
         if self.estop:
             return "e-stop"
         if not self.active:
             return "inactive"
-        if not self.joints.fresh(received):
+        if not fresh:
             return "stale state"
         if self.task in ("idle", "failed"):
             return "planner stopped" if self.task == "failed" else "no task"
-        x = self._state(t)
+        return None
+
+    def _run_task(self, received: float, t: float) -> str | None:
+        """The running task's tick at time t: its command published (None), or why not."""
+        may_hook = self.cascade.phase in HOOK_SEATED_PHASES
         if self.task == "starting":
             if self._stopper is not None and self._stopper.is_alive():
                 return "planning"  # the previous planner is still stopping
+            x = self._x = self.tick.observe(t, may_hook)
+            self._last_t = t
             self.cascade.start(x, t, wait=False)  # the planner process makes its first plan meanwhile
-            self._ready = False
             self._planner_started = time.monotonic()
             self.task = "running"
-            self._last_t = t
             return "planning"
-        ready = self._ready or self.cascade.ready
-        self._ready = ready
-        plan_start = self.cascade.plan_start if ready else None
-        if not ready or (plan_start is not None and t - plan_start > self.horizon):
-            if ready:
-                self.stats["plan_stale"] += 1
-            self._observe(x, t)
-            self._last_t = t
-            return "plan stale" if ready else "planning"
-        dt = min(t - (t if self._last_t is None else self._last_t), float(self.params["max_tick_dt"]))
-        self._last_t = t
         try:
-            result = self.cascade.tick(x, self._external_torque(x, received, dt), t, dt=dt)
+            plan = self.cascade.plan_for(t)
+        except SabreError as exc:
+            self._fail(f"planner failed: {exc}")
+            return "planner stopped"
+        if plan is None or t - plan.t0 > self.horizon:
+            if plan is not None:
+                self.stats["plan_stale"] += 1
+            self._x, self._last_t = self.tick.observe(t, may_hook), t
+            self._observe(self._x, t)
+            return "plan stale" if plan is not None else "planning"
+        try:
+            arm, base, x, energy, status = self.tick.follow(self.cascade.inner_loop, plan.plan, t, received, may_hook)
         except SabreError as exc:
             self._fail(f"inner loop failed: {exc}")
             return "planner stopped"
-        self._last_status, self._last_tank = result.status, result.tank_energy
-        self._min_tank = min(self._min_tank, result.tank_energy)
-        u = result.command
-        if self.has_base:
-            yaw = float(self.joints.position[self.base_index[2]])
-            self._target = (u[self.arm_index], np.array(world_to_base(u[self.base_index], yaw)))
-        else:
-            self._target = (u[self.arm_index], None)
-        self.stats["followed"] += 1
+        self._publish(arm, base)
+        self.cascade.note_tick(x, t)
+        self._x, self._last_t = x, t
+        self._last_status, self._last_tank = status, float("nan") if energy is None else energy
+        self._min_tank = min(self._min_tank, self._last_tank)
+        if self.estimator is not None:
+            self._note_hook(t)
         return None
 
-    def _state(self, t: float) -> np.ndarray:
-        q = self.joints.position.copy()
-        o, od = self._object_state(q, t)
-        x = np.concatenate((q, self.joints.velocity, o, od))
-        self._x = x
-        return x
-
-    def _object_state(self, q: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """(o, ȯ): the estimator's from the hand pose, else the newest on the object topic (the
-        closed object before one came)."""
-        if self.estimator is not None:
-            force = 0.0 if self._wrench is None else math.hypot(*self._wrench[0][:3])
-            if self._tau_topic is not None:
-                force = math.inf  # torques only: contact assumed, the hook test is the distance
-            was_hooked = self.estimator.hooked
-            e = self.estimator.update(q, t, force, may_hook=self.cascade.phase in HOOK_SEATED_PHASES)
-            if e.hooked != was_hooked:
-                what = "hooked" if e.hooked else "released"
-                message = f"object estimate: {what} at o = {e.position[0]:.3f} (t = {t:.3f} s, force {force:.1f} N)"
-                self.node.get_logger().info(message)
-            return e.position, e.velocity
-        if self._object is None:
-            return np.asarray(self.scene.o_lower, dtype=np.float64), np.zeros(self.scene.no)
-        return self._object
-
-    def _external_torque(self, x: np.ndarray, received: float, dt: float) -> np.ndarray:
-        """The low-passed τ_ext of the wrist wrench (at the joints where it came) or the torque
-        topic (zero while stale)."""
-        fresh = received - self._wrench_recv <= float(self.params["wrench_timeout"])
-        raw = np.zeros(self.scene.nq)
-        if not fresh:
-            self.stats["wrench_stale"] += 1
-        elif self._tau_topic is not None:
-            raw = self._tau_topic
-        elif self._wrench is not None:
-            raw = self._tau_wrench
-        return self._tau_filter.update(raw, dt)
+    def _note_hook(self, t: float) -> None:
+        """Logs each hook and release of the object estimate."""
+        estimate = self.tick.estimate
+        if estimate is not None and estimate[2] != self._hooked:
+            self._hooked = estimate[2]
+            what = "hooked" if estimate[2] else "released"
+            self.node.get_logger().info(f"object estimate: {what} at o = {estimate[0]:.3f} (t = {t:.3f} s)")
 
     def _observe(self, x: np.ndarray, t: float) -> None:
         try:
@@ -394,33 +361,15 @@ class ControllerLoop:
         self.task = "failed"
         self.stop_planner()
 
-    def _answer(self, received: float, target: tuple[np.ndarray, np.ndarray | None] | None, stamp: Any) -> None:
-        with self._lock:
-            command = self.gate.on_tick(received, *(target or (None, None)))
-            self._publish(command, stamp, answers=True)
-        self.stats["ticks"] += 1
-        if target is None:
-            self.stats["stops"][self.reason or "rejected"] += 1
-
-    def _publish(self, command: Command, stamp: Any, answers: bool = False) -> None:
-        """Publishes one step of the streams (the caller holds the lock). A command that answers a
-        joint state carries that state's stamp's nanoseconds in ``layout.data_offset``, which a
-        velocity controller ignores and a robot (or the simulated one) can match to the state, to
-        measure the round trip without a message of its own; the watchdog's and the shutdown's carry 0."""
-        self._arm_values[:] = command.arm
-        self._arm_msg.layout.data_offset = stamp.nanosec if answers else 0
-        self.arm_pub.publish(self._arm_msg)
-        if command.base is not None and self.base_pub is not None:
-            tw = self._twist.twist if self.stamped else self._twist
-            if self.stamped:
-                self._twist.header.stamp = stamp
-            tw.linear.x, tw.linear.y, tw.angular.z = (float(v) for v in command.base)
-            self.base_pub.publish(self._twist)
-        if self.echo_pub is not None:
-            self._echo.header.stamp = stamp
-            self._echo.velocity = self._arm_msg.data
-            self.echo_pub.publish(self._echo)
-        self.stats["answered"] += 1
+    def _publish(self, arm: bytes, base: bytes | None) -> None:
+        """Publishes one step of the command streams, serialized by the core tick (the caller holds
+        the lock). A command that answers a joint state carries that state's stamp's nanoseconds in
+        ``layout.data_offset``, which a velocity controller ignores and a robot (or the simulated
+        one) can match to the state, to measure the round trip without a message of its own; the
+        watchdog's and the shutdown's carry 0."""
+        self.arm_pub.publish(arm)
+        if base is not None and self.base_pub is not None:
+            self.base_pub.publish(base)
 
     def _note_phase(self, t: float) -> None:
         if self.cascade.phase != self._phase:
@@ -436,15 +385,14 @@ class ControllerLoop:
         events = 0
         while self._running:
             with self._lock:
-                steps = self.gate.watchdog(time.monotonic())
-                if steps:
-                    stamp = self.node.get_clock().now().to_msg()
-                    for command in steps:
-                        self._publish(command, stamp)
-                wait = self.gate.next_look(time.monotonic())
-            if self.gate.stale_events != events:
-                events = self.gate.stale_events
-                self.node.get_logger().warning(f"no joint state for {self.gate.state_timeout} s: ramping the commands to zero")
+                now = time.monotonic()
+                if self.tick.next_look(now) <= 0.0:
+                    for arm, base in self.tick.watchdog(now, self.node.get_clock().now().nanoseconds):
+                        self._publish(arm, base)
+                wait = self.tick.next_look(time.monotonic())
+            if self.tick.stale_events != events:
+                events = self.tick.stale_events
+                self.node.get_logger().warning(f"no joint state for {self.tick.state_timeout} s: ramping the commands to zero")
             time.sleep(min(max(wait, 2e-4), 0.02))
 
     def _stop_watchdog(self) -> None:
@@ -512,18 +460,19 @@ class ControllerLoop:
         (the shutdown's stop: no executor delivers states any more). The watchdog stops first: two
         threads stepping the limiters would put two steps into one period. Returns whether they did."""
         self._stop_watchdog()
-        period = self.gate.period
+        period = self.tick.period
         next_time = time.monotonic()
         while time.monotonic() < deadline:
             with self._lock:
-                if self.shaper.at_rest:
+                step = self.tick.ramp_step(self.node.get_clock().now().nanoseconds)
+                if step is None:
                     return True
-                self._publish(self.shaper.step(None, None), self.node.get_clock().now().to_msg())
+                self._publish(*step)
             next_time += period
             rest = next_time - time.monotonic()
             if rest > 0:
                 time.sleep(rest)
-        return self.shaper.at_rest
+        return bool(self.tick.at_rest)
 
     def destroy(self) -> None:
         """Stops the watchdog and the planner and removes the endpoints."""
@@ -539,9 +488,7 @@ class ControllerLoop:
     # Reports ---------------------------------------------------------------------------------
     def opening(self) -> float:
         """The object's estimated (or received) coordinate."""
-        if self.estimator is not None:
-            return float(self.estimator.position)
-        return float("nan") if self._object is None else float(self._object[0][0])
+        return float(self.tick.opening)
 
     def planner_rate(self) -> float:
         if self._planner_started is None:
@@ -557,18 +504,19 @@ class ControllerLoop:
 
     def summary(self) -> dict[str, Any]:
         s = self.stats
+        counts = self.tick.counts
         compute, age = s["compute"], s["state_age"]
         f = self.controller.inner_filter
         return {
-            "ticks": s["ticks"],
-            "followed": s["followed"],
-            "answered": s["answered"],
-            "rejected": s["rejected"],
-            "stale_events": self.gate.stale_events,
+            "ticks": counts["ticks"],
+            "followed": counts["followed"],
+            "answered": counts["answered"],
+            "rejected": counts["rejected"],
+            "stale_events": self.tick.stale_events,
             "stops": dict(s["stops"]),
             "plan_stale": s["plan_stale"],
-            "wrench_stale": s["wrench_stale"],
-            "wrench_received": s["wrench_received"],
+            "wrench_stale": counts["wrench_stale"],
+            "wrench_received": counts["wrench_received"],
             "planner_iterations": self.cascade.iterations,
             "planner_rate_hz": self.planner_rate(),
             "tick_compute_p50_ms": compute.percentile_ms(50),
@@ -591,8 +539,8 @@ class ControllerLoop:
             "cpu_share": self.cpu_share(),
             "planner_process": self.cascade.planner_in_process,
             "limits": {
-                "arm_velocity": list(self.shaper.limits.arm.velocity),
-                "arm_acceleration": list(self.shaper.limits.arm.acceleration),
-                "arm_jerk": list(self.shaper.limits.arm.jerk),
+                "arm_velocity": list(self.limits.arm.velocity),
+                "arm_acceleration": list(self.limits.arm.acceleration),
+                "arm_jerk": list(self.limits.arm.jerk),
             },
         }

@@ -302,7 +302,7 @@ class ControllerNode:
             "iteration_time": f"{loop.cascade.iteration_time:.5f}",
             "filter_fallbacks": str(s["filter_fallbacks"]),
             "cpu_share": f"{s['cpu_share']:.3f}",
-            "at_rest": str(loop.shaper.at_rest).lower(),
+            "at_rest": str(loop.tick.at_rest).lower(),
         }
         silent = [f"{label} ({topic})" for label, topic in loop.input_topics().items() if not self._has_publisher(topic)]
         if self.estop:
@@ -311,7 +311,7 @@ class ControllerNode:
             return 2, f"planner stopped: {loop.failure}", values
         if silent:
             return 2, "no publisher for " + ", ".join(silent), values | {"silent_inputs": ", ".join(silent)}
-        if loop.reason == "stale state" or loop.gate.stale_since is not None:
+        if loop.reason == "stale state" or loop.tick.ramping_for_stale_state:
             return 1, "state stale: ramping to zero", values
         return 0, f"{self.state}, task {loop.task}" + (f" ({loop.reason})" if loop.reason else ""), values
 
@@ -344,7 +344,7 @@ class ControllerNode:
         summary = self.summary()
         if self.loop is not None:
             summary["ramped_to_rest"] = self.loop.ramp_down(deadline=_now() + 2.0)
-            summary |= {"answered": self.loop.stats["answered"]}
+            summary |= {"answered": self.loop.tick.counts["answered"]}
             self.loop.destroy()
             self.loop = None
         return summary
