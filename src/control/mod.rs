@@ -1,7 +1,9 @@
 //! The control cascade's inner loop: the low-level joint velocity controller that drives the plant, with an optional safety stage,
 //! and the rate limiter that shapes velocity commands for a robot's command interface.
 
+pub mod command_stream;
 pub mod inner_loop;
+pub mod joint_merge;
 pub mod low_level;
 pub mod rate_limit;
 

@@ -499,7 +499,7 @@ impl PyInnerLoop {
 }
 
 /// A float64 vector from a NumPy array (any layout, one dimension) or any sequence of numbers.
-fn vector(name: &str, values: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
+pub(super) fn vector(name: &str, values: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
     if let Ok(array) = values.cast::<PyArrayDyn<f64>>() {
         let array = array.readonly();
         let view = array.as_array();
@@ -517,6 +517,21 @@ fn vector(name: &str, values: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
 #[pyclass(name = "RateLimiter", module = "sabre._core", frozen)]
 pub struct PyRateLimiter {
     inner: Mutex<RateLimiter>,
+}
+
+impl PyRateLimiter {
+    /// The limiter's bounds and state, a copy for another core object to own.
+    pub(crate) fn limiter(&self) -> RateLimiter {
+        lock(&self.inner).clone()
+    }
+}
+
+impl From<RateLimiter> for PyRateLimiter {
+    fn from(inner: RateLimiter) -> Self {
+        Self {
+            inner: Mutex::new(inner),
+        }
+    }
 }
 
 #[pymethods]

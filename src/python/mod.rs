@@ -5,6 +5,7 @@
 //! never crosses into Python. Config objects (`RolloutConfig()`, `MppiConfig()`, …) hold the
 //! core's defaults: Python reads its defaults from them.
 
+mod bridge;
 mod bridge_tick;
 mod control;
 mod convert;
@@ -40,6 +41,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<control::PyPlan>()?;
     m.add_class::<control::PyInnerLoop>()?;
     m.add_class::<control::PyRateLimiter>()?;
+    m.add_class::<bridge::PyCommandGate>()?;
+    m.add_class::<bridge::PyJointMerge>()?;
     m.add_class::<bridge_tick::PyBridgeTick>()?;
     m.add_class::<cost::PyCost>()?;
     m.add_class::<mppi::PyMppiConfig>()?;

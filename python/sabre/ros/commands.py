@@ -85,51 +85,54 @@ class Command:
 class CommandShaper:
     """The arm's and the base's command streams through their rate limiters: the arm steps every
     call (``period``), the base every ``base_every``-th call (its own limiter at that step); a robot
-    without a base has the arm's stream only."""
+    without a base has the arm's stream only. The streams run in the core
+    (:class:`sabre._core.CommandGate`); a :class:`CommandGate` made on this shaper puts its clock on
+    them, and the shaper's steps are that gate's from then on (a shaper serves one gate)."""
 
     def __init__(self, limits: CommandLimits) -> None:
         self.limits = limits
         a, b = limits.arm, limits.base
         self.base_every = max(1, int(round(limits.base_period / limits.period)))
-        self.arm = _core.RateLimiter(list(a.velocity), list(a.acceleration), list(a.jerk), limits.period)
-        self.base = (
+        arm = _core.RateLimiter(list(a.velocity), list(a.acceleration), list(a.jerk), limits.period)
+        base = (
             None
             if b is None
             else _core.RateLimiter(list(b.velocity), list(b.acceleration), list(b.jerk), limits.period * self.base_every)
         )
-        self._zero_arm = np.zeros(len(a.velocity))
-        self._zero_base = np.zeros(3)
-        self._calls = 0
-        self._base_target = self._zero_base
+        # without a gate the streams have no clock: an infinite timeout, a watchdog that never ramps
+        self._core = _core.CommandGate(arm, base, self.base_every, math.inf)
+
+    @property
+    def arm(self) -> _core.RateLimiter:
+        """A copy of the arm's limiter (its bounds and state)."""
+        return self._core.arm
+
+    @property
+    def base(self) -> _core.RateLimiter | None:
+        """A copy of the base's limiter (None: a fixed base)."""
+        return self._core.base
 
     def step(self, arm: np.ndarray | None, base: np.ndarray | None) -> Command:
         """One step toward the targets: ``arm`` None ramps both streams to zero; ``base`` None
         keeps the base's last target."""
-        if arm is None:
-            self._base_target = self._zero_base
-        elif base is not None:
-            self._base_target = base
-        out_arm = self.arm.limit(self._zero_arm if arm is None else arm)
-        limiter = self.base
-        out_base = limiter.limit(self._base_target) if limiter is not None and self._calls % self.base_every == 0 else None
-        self._calls += 1
-        return Command(out_arm, out_base)
+        return Command(*self._core.step(arm, base))
 
     @property
     def at_rest(self) -> bool:
-        return bool(self.arm.at_rest and (self.base is None or self.base.at_rest))
+        return self._core.at_rest
 
     @property
     def steps_to_rest(self) -> int:
         """A bound on the arm steps a ramp to rest takes (the base's counted in arm steps)."""
-        return max(self.arm.steps_to_rest, 0 if self.base is None else self.base.steps_to_rest * self.base_every)
+        return self._core.steps_to_rest
 
     def reset(self) -> None:
-        self.arm.reset()
-        if self.base is not None:
-            self.base.reset()
-        self._calls = 0
-        self._base_target = self._zero_base
+        self._core.reset()
+
+    def _gated(self, state_timeout: float) -> _core.CommandGate:
+        """These streams, in their current state, under a gate's clock with ``state_timeout``."""
+        self._core = self._core.with_state_timeout(state_timeout)
+        return self._core
 
 
 class CommandGate:
@@ -139,46 +142,51 @@ class CommandGate:
     e-stop, not active, stale joint, rejected message, stale plan, stopped planner) is one step of a
     ramp to zero. When no tick has come for ``state_timeout`` s, :meth:`watchdog` returns the ramp's
     steps that are due, one per ``period`` s counted from the last command, until the streams are at
-    rest: the ramp starts at most one period after the timeout and never steps."""
+    rest: the ramp starts at most one period after the timeout and never steps. The gate runs in the
+    core (:class:`sabre._core.CommandGate`) on ``shaper``'s streams."""
 
     def __init__(self, shaper: CommandShaper, state_timeout: float) -> None:
         self.shaper = shaper
-        self.period = shaper.limits.period
-        self.state_timeout = float(state_timeout)
-        self.last_tick = -math.inf
-        self.last_command = -math.inf
-        self.stale_since: float | None = None
-        self.stale_events = 0
+        self._core = shaper._gated(float(state_timeout))
+
+    @property
+    def period(self) -> float:
+        return self._core.period
+
+    @property
+    def state_timeout(self) -> float:
+        return self._core.state_timeout
+
+    @property
+    def last_tick(self) -> float:
+        """When the last tick came (-inf before the first)."""
+        return self._core.last_tick
+
+    @property
+    def last_command(self) -> float:
+        """When the last command was due (a tick's, or a ramp step's one period after the one before)."""
+        return self._core.last_command
+
+    @property
+    def stale_since(self) -> float | None:
+        """When the watchdog found the ticks stopped (None while they come)."""
+        return self._core.stale_since
+
+    @property
+    def stale_events(self) -> int:
+        """How many times the ticks stopped for ``state_timeout``."""
+        return self._core.stale_events
 
     def on_tick(self, now: float, arm: np.ndarray | None, base: np.ndarray | None) -> Command:
         """The command answering a tick at ``now`` (targets None: a ramp step toward zero)."""
-        self.last_tick = now
-        self.last_command = now
-        self.stale_since = None
-        return self.shaper.step(arm, base)
+        return Command(*self._core.on_tick(now, arm, base))
 
     def watchdog(self, now: float, limit: int = 10) -> list[Command]:
         """The ramp steps due at ``now`` because no tick came for ``state_timeout`` (at most
-        ``limit`` at once: a late look catches up over the next ones)."""
-        if now - self.last_tick <= self.state_timeout or self.last_tick == -math.inf:
-            return []  # ticks are coming, or none came yet (nothing commanded, nothing to ramp)
-        if self.stale_since is None:
-            self.stale_since = now
-            self.stale_events += 1
-            # the ramp's first step is due one period after the last command, or now if that is past
-            self.last_command = max(self.last_command, now - self.period)
-        steps: list[Command] = []
-        while not self.shaper.at_rest and now - self.last_command >= self.period and len(steps) < limit:
-            self.last_command += self.period
-            steps.append(self.shaper.step(None, None))
-        return steps
+        ``limit`` at once: a late look catches up over the next ones); none before the first tick
+        (nothing commanded, nothing to ramp)."""
+        return [Command(arm, base) for arm, base in self._core.watchdog(now, limit)]
 
     def next_look(self, now: float) -> float:
         """Seconds until the watchdog has something to do (a caller's sleep)."""
-        if self.last_tick == -math.inf:
-            return self.state_timeout
-        if now - self.last_tick <= self.state_timeout:
-            return self.last_tick + self.state_timeout - now + 1e-4
-        if self.shaper.at_rest:
-            return self.state_timeout
-        return max(0.0, self.last_command + self.period - now)
+        return self._core.next_look(now)

@@ -10,6 +10,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .. import _core
+from ..errors import InvalidValueError, ShapeError
 from ..estimation import tau_ext_from_wrench
 from ..scene import Scene
 from .conversions import MessageError, base_to_world
@@ -25,71 +27,66 @@ class JointStates:
     (fingers, another arm): those are ignored. A message whose names and values differ in length,
     or with a non-finite value for a known joint, raises :class:`MessageError` and changes nothing.
     ``tick_joints``: a message that carries all of them drives a tick (the arm's joint states).
-    ``timeouts`` (per joint, s): a joint older than its timeout is stale."""
+    ``timeouts`` (per joint, s): a joint older than its timeout is stale. The merge runs in the core
+    (:class:`sabre._core.JointMerge`); the arrays are copies of its state."""
 
     def __init__(self, names: Sequence[str], tick_joints: Sequence[str], timeouts: float | Sequence[float] | np.ndarray) -> None:
         self.names = tuple(str(n) for n in names)
-        if len(set(self.names)) != len(self.names):
-            raise MessageError(f"joint names must be distinct, got {self.names}")
-        self._index = {n: i for i, n in enumerate(self.names)}
-        missing = [n for n in tick_joints if n not in self._index]
-        if missing:
-            raise MessageError(f"tick joints {missing} are not among {self.names}")
-        self._tick = frozenset(tick_joints)
-        self.timeouts = np.broadcast_to(np.asarray(timeouts, dtype=np.float64), (len(self.names),)).copy()
-        self.position = np.zeros(len(self.names))
-        self.velocity = np.zeros(len(self.names))
-        self.received = np.full(len(self.names), -math.inf)
-        # per distinct tuple of names: (positions in the message, positions in sabre's order, drives a tick)
-        self._routes: dict[tuple[str, ...], tuple[np.ndarray, np.ndarray, bool]] = {}
+        per_joint = np.broadcast_to(np.asarray(timeouts, dtype=np.float64), (len(self.names),))
+        try:
+            self._core = _core.JointMerge(list(self.names), [str(n) for n in tick_joints], per_joint.copy())
+        except (ShapeError, InvalidValueError) as exc:
+            raise MessageError(str(exc)) from exc
+
+    @property
+    def timeouts(self) -> np.ndarray:
+        return self._core.timeouts
+
+    @property
+    def position(self) -> np.ndarray:
+        return self._core.position
+
+    @property
+    def velocity(self) -> np.ndarray:
+        return self._core.velocity
+
+    @property
+    def received(self) -> np.ndarray:
+        """When each joint's newest value arrived (-inf: never)."""
+        return self._core.received
 
     def _route(self, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray, bool]:
-        key = tuple(names)
-        route = self._routes.get(key)
-        if route is None:
-            pairs = [(k, self._index[n]) for k, n in enumerate(key) if n in self._index]
-            src = np.array([k for k, _ in pairs], dtype=np.intp)
-            dst = np.array([i for _, i in pairs], dtype=np.intp)
-            route = (src, dst, self._tick.issubset(key))
-            if len(self._routes) < 64:  # publishers with a fixed order: a few distinct tuples
-                self._routes[key] = route
-        return route
+        """(positions in a message naming ``names`` of the joints sabre knows, their positions in
+        sabre's order, whether it drives a tick)."""
+        return self._core.route(names)
 
     def drives_tick(self, names: Sequence[str]) -> bool:
         """Whether a message naming ``names`` drives a tick."""
-        return self._route(names)[2]
+        return self._core.drives_tick(names)
 
     def update(self, names: Sequence[str], position: Sequence[float], velocity: Sequence[float], received: float) -> bool:
         """Takes a joint-state message's known joints (an empty velocity field: zeros); returns
         whether it drives a tick."""
-        src, dst, ticks = self._route(names)
-        n = len(names)
-        pos = np.asarray(position, dtype=np.float64)
-        vel = np.asarray(velocity, dtype=np.float64)
-        if pos.shape != (n,) or (vel.size and vel.shape != (n,)):
-            raise MessageError(f"joint state: {pos.size} positions and {vel.size} velocities for {n} names")
-        p = pos[src]
-        v = vel[src] if vel.size else np.zeros(len(src))
-        if not (np.isfinite(p).all() and np.isfinite(v).all()):
-            bad = [self.names[i] for i, a, b in zip(dst, p, v) if not (math.isfinite(a) and math.isfinite(b))]
-            raise MessageError(f"joint state: non-finite value for {bad}")
-        self.position[dst] = p
-        self.velocity[dst] = v
-        self.received[dst] = received
-        return ticks
+        try:
+            return self._core.update(names, position, velocity, received)
+        except (ShapeError, InvalidValueError) as exc:
+            raise MessageError(str(exc)) from exc
 
     def set(self, index: np.ndarray, position: Sequence[float], velocity: Sequence[float], received: float) -> None:
-        """Sets joints by their index in sabre's order (the base from odometry)."""
-        self.position[index] = position
-        self.velocity[index] = velocity
-        self.received[index] = received
+        """Sets joints by their index in sabre's order (the base from odometry); a bad index, length
+        or value raises :class:`MessageError` and changes nothing."""
+        try:
+            self._core.set(index, position, velocity, received)
+        except (ShapeError, InvalidValueError) as exc:
+            raise MessageError(str(exc)) from exc
 
     def stale(self, now: float) -> list[str]:
         """The joints older than their timeout at ``now`` (never received: stale)."""
-        return [self.names[i] for i in np.flatnonzero(now - self.received > self.timeouts)]
+        return self._core.stale(now)
 
     def fresh(self, now: float) -> bool:
-        return bool(np.all(now - self.received <= self.timeouts))
+        """Whether every joint is within its timeout at ``now``."""
+        return self._core.fresh(now)
 
 
 def base_from_odometry(
