@@ -26,6 +26,9 @@ pub struct BridgeLayout {
     /// The base command as TwistStamped in `cmd_vel_frame` (else Twist).
     pub cmd_vel_stamped: bool,
     pub cmd_vel_frame: String,
+    /// The arm joints' names for an echo of each arm command as a JointState (velocities, the
+    /// answered state's stamp) for a robot whose command interface drops `data_offset`; None: no echo.
+    pub echo_names: Option<Vec<String>>,
 }
 
 /// What a received joint state is.
@@ -45,6 +48,7 @@ pub enum Received {
 pub struct Answer {
     pub arm: Vec<u8>,
     pub base: Option<Vec<u8>>,
+    pub echo: Option<Vec<u8>>,
 }
 
 /// Counts the controller reports.
@@ -287,6 +291,11 @@ impl BridgeTick {
             let (b, stamped) = (&command.base, self.layout.cmd_vel_stamped);
             messages::encode_twist(&mut base, [b[0], b[1], 0.0], [0.0, 0.0, b[2]], stamped.then_some(stamp), &self.layout.cmd_vel_frame)?;
             out.base = Some(base);
+        }
+        if let Some(names) = &self.layout.echo_names {
+            let mut echo = Vec::new();
+            messages::encode_joint_state(&mut echo, stamp, "", names, &[], &command.arm, &[])?;
+            out.echo = Some(echo);
         }
         self.counts.answered += 1;
         Ok(out)

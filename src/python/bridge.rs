@@ -38,7 +38,6 @@ pub struct PyCommandGate {
 
 impl PyCommandGate {
     /// The gate with its streams' state, a copy for another core object to own.
-    #[allow(dead_code)] // for the bindings of loops that run the gate themselves
     pub(crate) fn gate(&self) -> CommandGate {
         lock(&self.inner).clone()
     }
@@ -208,7 +207,6 @@ pub struct PyJointMerge {
 
 impl PyJointMerge {
     /// The merge with its joints' values, a copy for another core object to own.
-    #[allow(dead_code)] // for the bindings of loops that run the merge themselves
     pub(crate) fn merge(&self) -> JointMerge {
         lock(&self.inner).clone()
     }

@@ -16,14 +16,12 @@ use super::estimation::PyObjectStateEstimator;
 use super::messages::stamp_of;
 use crate::bridge::tick::{Answer, BridgeLayout, BridgeTick, Received};
 
-/// (arm command, base command or None) as bytes to publish.
-type Step<'py> = (Bound<'py, PyBytes>, Option<Bound<'py, PyBytes>>);
+/// (arm command, base command or None, command echo or None) as bytes to publish.
+type Step<'py> = (Bound<'py, PyBytes>, Option<Bound<'py, PyBytes>>, Option<Bound<'py, PyBytes>>);
 
 fn step<'py>(py: Python<'py>, answer: &Answer) -> Step<'py> {
-    (
-        PyBytes::new(py, &answer.arm),
-        answer.base.as_ref().map(|b| PyBytes::new(py, b)),
-    )
+    let bytes = |b: &Option<Vec<u8>>| b.as_ref().map(|b| PyBytes::new(py, b));
+    (PyBytes::new(py, &answer.arm), bytes(&answer.base), bytes(&answer.echo))
 }
 
 /// The controller node's 1 kHz path (see `sabre.ros.controller_loop`): joint states merged by
@@ -38,7 +36,7 @@ pub struct PyBridgeTick {
 impl PyBridgeTick {
     #[new]
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (joints, gate, estimator, object_position, object_velocity, arm_index, base_index, max_tick_dt, wrench_timeout, tau_cutoff, cmd_vel_stamped, cmd_vel_frame))]
+    #[pyo3(signature = (joints, gate, estimator, object_position, object_velocity, arm_index, base_index, max_tick_dt, wrench_timeout, tau_cutoff, cmd_vel_stamped, cmd_vel_frame, echo_names=None))]
     fn new(
         joints: &PyJointMerge,
         gate: &PyCommandGate,
@@ -52,6 +50,7 @@ impl PyBridgeTick {
         tau_cutoff: Option<f64>,
         cmd_vel_stamped: bool,
         cmd_vel_frame: String,
+        echo_names: Option<Vec<String>>,
     ) -> PyResult<Self> {
         let layout = BridgeLayout {
             arm_index,
@@ -61,6 +60,7 @@ impl PyBridgeTick {
             tau_cutoff: tau_cutoff.filter(|c| *c > 0.0),
             cmd_vel_stamped,
             cmd_vel_frame,
+            echo_names,
         };
         let tick = run(|| {
             BridgeTick::new(
@@ -90,8 +90,7 @@ impl PyBridgeTick {
 
     /// Follows `plan` at the newest state's time `t`: the state (the estimator hooking only when
     /// `may_hook`), τ_ext, one tick of `inner_loop`, and the gate's step toward its command.
-    /// Returns (arm bytes, base bytes or None, x (nx,), tank energy or None, filter status).
-    #[allow(clippy::type_complexity)]
+    /// Returns ((arm, base or None, echo or None) bytes, x (nx,), tank energy or None, filter status).
     fn follow<'py>(
         &self,
         py: Python<'py>,
@@ -100,13 +99,7 @@ impl PyBridgeTick {
         t: f64,
         received: f64,
         may_hook: bool,
-    ) -> PyResult<(
-        Bound<'py, PyBytes>,
-        Option<Bound<'py, PyBytes>>,
-        Bound<'py, PyArray1<f64>>,
-        Option<f64>,
-        &'static str,
-    )> {
+    ) -> PyResult<(Step<'py>, Bound<'py, PyArray1<f64>>, Option<f64>, &'static str)> {
         let mut tick = lock(&self.inner);
         let x = run(|| tick.state(t, may_hook).map(<[f64]>::to_vec))?;
         let (dt, tau) = {
@@ -117,8 +110,7 @@ impl PyBridgeTick {
             (out.command.clone(), out.tank_energy, out.status_name())
         })?;
         let answer = run(|| tick.follow(received, &command))?;
-        let (arm, base) = step(py, &answer);
-        Ok((arm, base, PyArray1::from_vec(py, x), energy, status))
+        Ok((step(py, &answer), PyArray1::from_vec(py, x), energy, status))
     }
 
     /// The state x (nx,) at the newest state's time `t` without a tick (a stale plan, or the

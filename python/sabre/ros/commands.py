@@ -150,6 +150,11 @@ class CommandGate:
         self._core = shaper._gated(float(state_timeout))
 
     @property
+    def core(self) -> _core.CommandGate:
+        """The core gate this class runs: a loop in the core (``_core.BridgeTick``) takes a copy."""
+        return self._core
+
+    @property
     def period(self) -> float:
         return self._core.period
 

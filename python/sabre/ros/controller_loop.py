@@ -128,6 +128,7 @@ class ControllerLoop:
             float(p["tau_ext_cutoff"]),
             bool(p["cmd_vel_stamped"]),
             str(p["cmd_vel_frame"]),
+            list(self.arm_joints) if p["command_echo_topic"] else None,
         )
 
     def _init_state(self) -> None:
@@ -172,6 +173,10 @@ class ControllerLoop:
             self.base_pub = node.create_publisher(kind, p["cmd_vel_topic"], profile(p["cmd_vel_qos"]))
             self._pubs.append(self.base_pub)
         self._pubs.append(self.arm_pub)
+        self.echo_pub = None
+        if p["command_echo_topic"]:
+            self.echo_pub = node.create_publisher(JointState, p["command_echo_topic"], profile(p["command_echo_qos"]))
+            self._pubs.append(self.echo_pub)
         sub = node.create_subscription
         # the joint states arrive serialized: the core reads them (no message object at 1 kHz)
         qos = profile(p["joint_state_qos"])
@@ -328,11 +333,11 @@ class ControllerLoop:
             self._observe(self._x, t)
             return "plan stale" if plan is not None else "planning"
         try:
-            arm, base, x, energy, status = self.tick.follow(self.cascade.inner_loop, plan.plan, t, received, may_hook)
+            step, x, energy, status = self.tick.follow(self.cascade.inner_loop, plan.plan, t, received, may_hook)
         except SabreError as exc:
             self._fail(f"inner loop failed: {exc}")
             return "planner stopped"
-        self._publish(arm, base)
+        self._publish(*step)
         self.cascade.note_tick(x, t)
         self._x, self._last_t = x, t
         self._last_status, self._last_tank = status, float("nan") if energy is None else energy
@@ -361,7 +366,7 @@ class ControllerLoop:
         self.task = "failed"
         self.stop_planner()
 
-    def _publish(self, arm: bytes, base: bytes | None) -> None:
+    def _publish(self, arm: bytes, base: bytes | None, echo: bytes | None) -> None:
         """Publishes one step of the command streams, serialized by the core tick (the caller holds
         the lock). A command that answers a joint state carries that state's stamp's nanoseconds in
         ``layout.data_offset``, which a velocity controller ignores and a robot (or the simulated
@@ -370,6 +375,8 @@ class ControllerLoop:
         self.arm_pub.publish(arm)
         if base is not None and self.base_pub is not None:
             self.base_pub.publish(base)
+        if echo is not None and self.echo_pub is not None:
+            self.echo_pub.publish(echo)
 
     def _note_phase(self, t: float) -> None:
         if self.cascade.phase != self._phase:
@@ -387,8 +394,8 @@ class ControllerLoop:
             with self._lock:
                 now = time.monotonic()
                 if self.tick.next_look(now) <= 0.0:
-                    for arm, base in self.tick.watchdog(now, self.node.get_clock().now().nanoseconds):
-                        self._publish(arm, base)
+                    for step in self.tick.watchdog(now, self.node.get_clock().now().nanoseconds):
+                        self._publish(*step)
                 wait = self.tick.next_look(time.monotonic())
             if self.tick.stale_events != events:
                 events = self.tick.stale_events

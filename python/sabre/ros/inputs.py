@@ -39,6 +39,11 @@ class JointStates:
             raise MessageError(str(exc)) from exc
 
     @property
+    def core(self) -> _core.JointMerge:
+        """The core merge this class runs: a loop in the core (``_core.BridgeTick``) takes a copy."""
+        return self._core
+
+    @property
     def timeouts(self) -> np.ndarray:
         return self._core.timeouts
 
