@@ -3,6 +3,7 @@
 
 pub mod inner_loop;
 pub mod low_level;
+pub mod object_estimate;
 pub mod rate_limit;
 
 pub use inner_loop::{InnerLoop, Plan, TickOutput};
