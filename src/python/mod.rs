@@ -9,6 +9,7 @@ mod control;
 mod convert;
 mod cost;
 mod error;
+mod estimation;
 mod mppi;
 mod robot;
 mod safety;
@@ -38,6 +39,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<control::PyPlan>()?;
     m.add_class::<control::PyInnerLoop>()?;
     m.add_class::<control::PyRateLimiter>()?;
+    m.add_class::<estimation::PyObjectStateEstimator>()?;
     m.add_class::<cost::PyCost>()?;
     m.add_class::<mppi::PyMppiConfig>()?;
     m.add_class::<mppi::PyServoGuideConfig>()?;
