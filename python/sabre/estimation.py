@@ -1,6 +1,7 @@
 """Estimates a controller on a real robot needs besides its joint states: τ_ext from a wrist
-wrench, a first-order low-pass for it, and the object's state inferred from the hand pose while
-the hand holds the handle (no door sensor). Plain NumPy on the scene's kinematics."""
+wrench and a first-order low-pass for it (NumPy on the scene's kinematics), and the object's state
+inferred from the hand pose while the hand holds the handle (no door sensor), computed in the core
+(``_core.ObjectStateEstimator``) so that a loop in Rust runs the same estimator."""
 
 from __future__ import annotations
 
@@ -10,8 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validate import as_finite, as_float_array, as_non_negative, as_positive
-from .errors import InvalidValueError, ShapeError
+from . import _core
+from ._validate import as_float_array
+from .errors import InvalidValueError
 from .handles import handle_offset
 from .scene import Scene
 
@@ -84,12 +86,14 @@ class ObjectStateEstimator:
     hand's ``hand_frame`` (None: the scene's tool frame) measures it. ``handle`` is the object frame or link to grasp, as
     :class:`sabre.tasks.OpenObject`'s ``handle`` (a link with geometry gets its inferred handle
     frame). Hooking is declared when the hand frame is within ``hook_distance`` m of the handle
-    frame and the wrist force exceeds ``contact_force`` N; it ends when the best fit is still
+    frame and the wrist force reaches ``contact_force`` N; it ends when the best fit is still
     ``release_distance`` m off (the hand has left the handle) or the force stays below
     ``contact_force`` for ``release_time`` s. Before hooking and after release the last known state
     holds at rest. ȯ is the difference quotient low-passed at ``rate_cutoff`` Hz. A hook that slips
     along or off the handle reads as motion of the object until the release (a drawer coasts ahead
-    of a hand that no longer touches it, so the estimate keeps following the hand meanwhile)."""
+    of a hand that no longer touches it, so the estimate keeps following the hand meanwhile).
+
+    The estimator is the core's (:attr:`core`): a loop in Rust can take it over."""
 
     def __init__(
         self,
@@ -104,70 +108,82 @@ class ObjectStateEstimator:
         release_time: float = 0.5,
         rate_cutoff: float = 5.0,
     ) -> None:
-        if scene.no != 1:
+        if scene.no != 1:  # the fundamental mistake first, before any about the frames
             raise InvalidValueError(f"the estimator handles single-joint objects, this one has {scene.no} joints")
         hand_frame = scene.require_tool_frame("ObjectStateEstimator") if hand_frame is None else hand_frame
         if hand_frame not in scene.frame_names:
             raise InvalidValueError(f"hand_frame {hand_frame!r} is not a robot frame: {scene.frame_names}")
-        self.scene = scene
-        self.hand_frame = hand_frame
-        self.handle_frame, self._handle_offset = handle_offset(scene, handle)
-        self.hook_distance = as_positive("hook_distance", hook_distance)
-        self.release_distance = as_positive("release_distance", release_distance)
-        self.contact_force = as_non_negative("contact_force", contact_force)
-        self.release_time = as_non_negative("release_time", release_time)
-        self._rate_filter = LowPass(as_positive("rate_cutoff", rate_cutoff))
-        lo, hi = float(scene.o_lower[0]), float(scene.o_upper[0])
-        self._limits = (lo, hi)
-        o0 = np.asarray(scene.o_lower if initial is None else initial, dtype=np.float64).reshape(-1)
-        self._o = float(np.clip(as_finite("initial", o0[0]), lo, hi))
-        self._od = 0.0
-        self._offset: np.ndarray | None = None  # hook point in the handle frame (homogeneous)
-        self._t: float | None = None
-        self._since_force: float = 0.0
-        self._residual = math.nan
+        handle_frame, offset = handle_offset(scene, handle)
+        o0 = None if initial is None else float(np.asarray(initial, dtype=np.float64).reshape(-1)[0])
+        self._scene = scene
+        self._core = _core.ObjectStateEstimator(
+            scene._core,
+            hand_frame,
+            handle_frame,
+            np.ascontiguousarray(offset, dtype=np.float64),
+            o0,
+            hook_distance=float(hook_distance),
+            release_distance=float(release_distance),
+            contact_force=float(contact_force),
+            release_time=float(release_time),
+            rate_cutoff=float(rate_cutoff),
+        )
+
+    @property
+    def core(self) -> _core.ObjectStateEstimator:
+        """The core estimator this class runs (its state is this estimator's)."""
+        return self._core
+
+    @property
+    def scene(self) -> Scene:
+        return self._scene
 
     @property
     def hooked(self) -> bool:
-        return self._offset is not None
+        return self._core.hooked
 
     @property
     def position(self) -> float:
         """The current estimate of o."""
-        return self._o
+        return self._core.position
 
-    # The core's kinematics without the wrappers' checks: update() checks q once, and the fit needs
-    # the object's kinematics at three coordinates per step (the controller runs it at 1 kHz).
-    def _hand_point(self, q: np.ndarray) -> np.ndarray:
-        return self.scene._core.fk(q, self.hand_frame)[:3, 3]
+    @property
+    def velocity(self) -> float:
+        """The current estimate of ȯ."""
+        return self._core.velocity
 
-    def _handle(self, o: float) -> np.ndarray:
-        return self.scene._core.object_fk(np.array([o]), self.handle_frame) @ self._handle_offset
+    @property
+    def residual(self) -> float:
+        """The last fit's distance (m) from the hand point; NaN while not hooked."""
+        return self._core.residual
 
-    def _points(self, o: np.ndarray, local: np.ndarray) -> np.ndarray:
-        """(k, 3) where the handle-frame point ``local`` (homogeneous, the handle offset applied)
-        is at each of the k object coordinates ``o``, in one call into the core."""
-        return (self.scene._core.object_fk_many(o.reshape(-1, 1), self.handle_frame) @ local)[:, :3]
+    @property
+    def hand_frame(self) -> str:
+        return self._core.hand_frame
 
-    def _fit(self, p: np.ndarray, offset: np.ndarray) -> tuple[float, float]:
-        """o minimising |T(o)·offset − p| by Gauss–Newton from the last estimate, and its residual."""
-        lo, hi = self._limits
-        o = self._o
-        h = 1e-5 if self.scene.object_is_revolute else 1e-6
-        local = self._handle_offset @ offset
-        for _ in range(4):
-            at, ahead, behind = self._points(np.array([o, o + h, o - h]), local)
-            r = at - p
-            d = (ahead - behind) / (2 * h)
-            dd = float(d @ d)
-            if dd < 1e-12:
-                break
-            step = -float(d @ r) / dd
-            o = min(max(o + step, lo), hi)
-            if abs(step) < 1e-7:
-                break
-        r = self._points(np.array([o]), local)[0] - p
-        return o, math.hypot(*r)
+    @property
+    def handle_frame(self) -> str:
+        return self._core.handle_frame
+
+    @property
+    def hook_distance(self) -> float:
+        return self._core.hook_distance
+
+    @property
+    def release_distance(self) -> float:
+        return self._core.release_distance
+
+    @property
+    def contact_force(self) -> float:
+        return self._core.contact_force
+
+    @property
+    def release_time(self) -> float:
+        return self._core.release_time
+
+    @property
+    def rate_cutoff(self) -> float:
+        return self._core.rate_cutoff
 
     def update(self, q: Sequence[float] | np.ndarray, t: float, force: float = math.inf, may_hook: bool = True) -> ObjectEstimate:
         """The estimate at time t (s) from the robot's joint positions q (nq,) and the wrist force
@@ -180,45 +196,6 @@ class ObjectStateEstimator:
             ShapeError, InvalidValueError: q of the wrong size or not finite, t not finite, force
                 negative or NaN; the estimate is left as it was.
         """
-        q = np.asarray(q, dtype=np.float64)  # checked here, cheaper than the general checks at 1 kHz
-        if q.shape != (self.scene.nq,):
-            raise ShapeError(f"q: expected shape ({self.scene.nq},), got {q.shape}")
-        if not np.isfinite(q).all():
-            raise InvalidValueError(f"q: non-finite entry in {q}")
-        t = float(t)
-        if not math.isfinite(t):
-            raise InvalidValueError(f"t: must be finite, got {t}")
-        force = float(force)
-        if not force >= 0.0:
-            raise InvalidValueError(f"force: must be a magnitude ≥ 0, got {force}")
-        dt = 0.0 if self._t is None else max(t - self._t, 0.0)
-        self._t = max(t, self._t if self._t is not None else t)
-        p = self._hand_point(q)
-        if self._offset is None:
-            handle = self._handle(self._o)
-            local = np.append(handle[:3, :3].T @ (p - handle[:3, 3]), 1.0)  # p in the handle frame
-            if may_hook and math.hypot(*local[:3]) <= self.hook_distance and force >= self.contact_force:
-                self._offset = local
-                self._since_force = 0.0
-                self._rate_filter.reset()
-            self._od = 0.0
-            self._residual = math.nan
-        else:
-            self._follow(p, dt, force, self._offset)
-        return ObjectEstimate(
-            position=np.array([self._o]), velocity=np.array([self._od]), hooked=self.hooked, residual=self._residual
-        )
-
-    def _follow(self, p: np.ndarray, dt: float, force: float, offset: np.ndarray) -> None:
-        """One update while hooked: the fit, its rate, and the release tests."""
-        o, residual = self._fit(p, offset)
-        self._since_force = 0.0 if force >= self.contact_force else self._since_force + dt
-        if residual > self.release_distance or self._since_force > self.release_time:
-            self._offset = None
-            self._od = 0.0
-        else:
-            if dt > 0:
-                raw = (o - self._o) / dt
-                self._od = float(self._rate_filter.update(np.array([raw]), dt)[0])
-            self._o = o
-        self._residual = residual
+        q = np.ascontiguousarray(q, dtype=np.float64)
+        position, velocity, hooked, residual = self._core.update(q, float(t), float(force), bool(may_hook))
+        return ObjectEstimate(position=np.array([position]), velocity=np.array([velocity]), hooked=hooked, residual=residual)

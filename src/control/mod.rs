@@ -5,6 +5,7 @@ pub mod command_stream;
 pub mod inner_loop;
 pub mod joint_merge;
 pub mod low_level;
+pub mod object_estimate;
 pub mod rate_limit;
 
 pub use inner_loop::{InnerLoop, Plan, TickOutput};

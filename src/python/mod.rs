@@ -11,6 +11,7 @@ mod control;
 mod convert;
 mod cost;
 mod error;
+mod estimation;
 mod messages;
 mod mppi;
 mod robot;
@@ -44,6 +45,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<bridge::PyCommandGate>()?;
     m.add_class::<bridge::PyJointMerge>()?;
     m.add_class::<bridge_tick::PyBridgeTick>()?;
+    m.add_class::<estimation::PyObjectStateEstimator>()?;
     m.add_class::<cost::PyCost>()?;
     m.add_class::<mppi::PyMppiConfig>()?;
     m.add_class::<mppi::PyServoGuideConfig>()?;

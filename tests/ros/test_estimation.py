@@ -1,6 +1,7 @@
-"""The estimates a controller on a real robot needs (sabre.estimation, plain NumPy): τ_ext of a wrist
-wrench in world or sensor axes against the plant's contact torques, and the hand-pose object-state
-estimator while hooked, after release, on a force drop-out, on a held door and on bad input."""
+"""The estimates a controller on a real robot needs (sabre.estimation): τ_ext of a wrist wrench in
+world or sensor axes against the plant's contact torques, and the hand-pose object-state estimator
+while hooked, after release, on a force drop-out, on a held door, on bad input and as the core
+object a Rust loop takes over."""
 
 from __future__ import annotations
 
@@ -181,3 +182,23 @@ def test_the_ros_modules_re_export_the_core_estimates():
 
     assert conversions.LowPass is sabre.LowPass and conversions.tau_ext_from_wrench is sabre.tau_ext_from_wrench
     assert estimator.ObjectStateEstimator is sabre.ObjectStateEstimator
+
+
+def test_the_core_estimator_is_the_wrappers_state_and_a_copy_of_it_runs_on_alone():
+    """``core`` is the estimator the wrapper runs (its estimate is the wrapper's); a copy taken while
+    hooked continues from the same state, and what it is fed later leaves the original untouched."""
+    import copy
+
+    scene = sabre.Scene.load(obj="shelf")
+    estimator, q = hooked_estimator(scene)
+    core = estimator.core
+    assert core.hooked and core.hand_frame == estimator.hand_frame == "grasp"
+    assert core.hook_point is not None and np.linalg.norm(core.hook_point) <= estimator.hook_distance
+    twin = copy.copy(core)
+    lifted = q.copy()
+    lifted[4] += 0.4  # the shoulder lifts the hand off the handle
+    e = estimator.update(q, 0.01, 10.0)
+    assert (core.position, core.velocity, core.hooked) == (e.position[0], e.velocity[0], e.hooked)
+    assert twin.update(q, 0.01, 10.0, True) == (e.position[0], e.velocity[0], e.hooked, e.residual)
+    assert not twin.update(lifted, 0.02, 10.0, True)[2]
+    assert estimator.hooked and estimator.update(q, 0.02, 10.0).hooked

@@ -1,0 +1,706 @@
+//! The object's joint coordinate and rate inferred from the robot's joint positions while the hand
+//! holds the handle (no door sensor): the hook and release tests, a Gauss–Newton fit of the
+//! coordinate and a low-passed rate, cheap enough for a 1 kHz loop (no allocation per update).
+
+use std::sync::Arc;
+
+use nalgebra::{Isometry3, Point3};
+
+use crate::error::{ensure_coordinates, ensure_len, Result, SabreError};
+use crate::model::kinematics::Frames;
+use crate::model::Scene;
+
+/// Gauss–Newton iterations per fit: from the previous estimate one step of a 1 kHz loop away, two
+/// already reach the rounding floor.
+const FIT_ITERATIONS: usize = 4;
+/// A fit step below this (m or rad) has converged.
+const FIT_TOLERANCE: f64 = 1e-7;
+/// Below this squared length of dp/do (m²) the hook point does not move with the object (it sits
+/// on a hinge's axis) and the fit keeps its estimate.
+const FLAT_GRADIENT: f64 = 1e-12;
+
+/// When the estimator hooks and releases, and how it smooths the rate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObjectEstimatorConfig {
+    /// A hook needs the hand frame within this distance of the handle frame (m, positive).
+    pub hook_distance: f64,
+    /// A fit still this far from the hand point (m, positive) releases: the hand left the handle.
+    pub release_distance: f64,
+    /// The wrist force magnitude (N, ≥ 0) that counts as contact.
+    pub contact_force: f64,
+    /// Without contact for longer than this (s, ≥ 0) the hook releases.
+    pub release_time: f64,
+    /// Cutoff (Hz, positive) of the first-order low-pass on the rate's difference quotient.
+    pub rate_cutoff: f64,
+}
+
+impl Default for ObjectEstimatorConfig {
+    fn default() -> Self {
+        Self {
+            hook_distance: 0.08,
+            release_distance: 0.04,
+            contact_force: 0.2,
+            release_time: 0.5,
+            rate_cutoff: 5.0,
+        }
+    }
+}
+
+impl ObjectEstimatorConfig {
+    /// A checked config: distances and the cutoff finite and positive, force and time finite and ≥ 0.
+    pub fn new(
+        hook_distance: f64,
+        release_distance: f64,
+        contact_force: f64,
+        release_time: f64,
+        rate_cutoff: f64,
+    ) -> Result<Self> {
+        let config = Self {
+            hook_distance,
+            release_distance,
+            contact_force,
+            release_time,
+            rate_cutoff,
+        };
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Checks the bounds [`Self::new`] states.
+    pub fn validate(&self) -> Result<()> {
+        for (name, value) in [
+            ("hook_distance", self.hook_distance),
+            ("release_distance", self.release_distance),
+            ("rate_cutoff", self.rate_cutoff),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(SabreError::invalid(name, format!("must be finite and positive, got {value}")));
+            }
+        }
+        for (name, value) in [("contact_force", self.contact_force), ("release_time", self.release_time)] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(SabreError::invalid(
+                    name,
+                    format!("must be finite and non-negative, got {value}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One estimate: the object's coordinate (m or rad) and rate, whether they come from the hand
+/// (else the last known state, held at rest), and how far (m) the hand point is from where the
+/// estimated object puts it (NaN while not hooked).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObjectEstimate {
+    pub position: f64,
+    pub velocity: f64,
+    pub hooked: bool,
+    pub residual: f64,
+}
+
+/// Infers the coordinate o and rate ȯ of the scene's single-joint object from the robot's joint
+/// positions.
+///
+/// Once the hand hooks the handle, the hook point stays fixed in the handle frame (no sliding), so
+/// o is the coordinate that puts the handle-frame point recorded at hooking where the hand frame
+/// measures it. Hooking is declared when the hand frame is within `hook_distance` of the handle
+/// frame and the wrist force reaches `contact_force`; it ends when the best fit is still more than
+/// `release_distance` off or the force stays below `contact_force` for longer than
+/// `release_time`. Before hooking and after release the last known state holds at rest. ȯ is the
+/// difference quotient low-passed at `rate_cutoff` (exact exponential update on the measured step).
+#[derive(Debug, Clone)]
+pub struct ObjectStateEstimator {
+    scene: Arc<Scene>,
+    hand_frame: String,
+    handle_frame: String,
+    hand_link: usize,
+    handle_link: usize,
+    /// The handle frame in the object link `handle_frame`.
+    handle_offset: Isometry3<f64>,
+    config: ObjectEstimatorConfig,
+    lower: f64,
+    upper: f64,
+    /// Central-difference step of the fit's dp/do (rad or m).
+    difference_step: f64,
+    position: f64,
+    velocity: f64,
+    residual: f64,
+    /// The hook point in the handle frame while hooked.
+    hook_point: Option<Point3<f64>>,
+    /// The latest time seen.
+    time: Option<f64>,
+    /// How long the force has stayed below `contact_force` while hooked (s).
+    without_contact: f64,
+    /// The rate low-pass's state (None: the next raw rate starts it).
+    filtered_rate: Option<f64>,
+    robot_frames: Frames,
+    object_frames: Frames,
+}
+
+impl ObjectStateEstimator {
+    /// An estimator at `initial` (None: the lower limit; clipped to the limits), not hooked, with
+    /// the hand at the robot frame `hand_frame` and the handle frame at `handle_offset` in the
+    /// object frame `handle_frame`.
+    ///
+    /// Errors: an object with other than one movable joint, an unknown frame, a non-finite offset
+    /// or initial coordinate, a config out of its bounds.
+    pub fn new(
+        scene: Arc<Scene>,
+        hand_frame: &str,
+        handle_frame: &str,
+        handle_offset: Isometry3<f64>,
+        initial: Option<f64>,
+        config: ObjectEstimatorConfig,
+    ) -> Result<Self> {
+        if scene.no() != 1 {
+            return Err(SabreError::invalid(
+                "scene",
+                format!(
+                    "the estimator handles single-joint objects, this one has {} joints",
+                    scene.no()
+                ),
+            ));
+        }
+        let hand_link = scene.robot.require_link(hand_frame)?;
+        let handle_link = scene.object.require_link(handle_frame)?;
+        let offset = handle_offset.to_homogeneous();
+        if offset.iter().any(|v| !v.is_finite()) {
+            return Err(SabreError::invalid("handle_offset", "entries must be finite"));
+        }
+        config.validate()?;
+        let limits = scene.object_limits()[0];
+        let position = match initial {
+            None => limits.lower,
+            Some(o) if o.is_finite() => o.clamp(limits.lower, limits.upper),
+            Some(o) => return Err(SabreError::invalid("initial", format!("must be finite, got {o}"))),
+        };
+        let difference_step = if scene.object_is_revolute() { 1e-5 } else { 1e-6 };
+        Ok(Self {
+            scene,
+            hand_frame: hand_frame.to_string(),
+            handle_frame: handle_frame.to_string(),
+            hand_link,
+            handle_link,
+            handle_offset,
+            config,
+            lower: limits.lower,
+            upper: limits.upper,
+            difference_step,
+            position,
+            velocity: 0.0,
+            residual: f64::NAN,
+            hook_point: None,
+            time: None,
+            without_contact: 0.0,
+            filtered_rate: None,
+            robot_frames: Frames::default(),
+            object_frames: Frames::default(),
+        })
+    }
+
+    /// The estimate at time `t` (s) from the robot's joint positions `q` (nq) and the wrist force
+    /// magnitude `force` (N; infinity: assume contact). A time at or before the latest one counts
+    /// as no time passed. `may_hook` false keeps the estimator from declaring a hook now (a task
+    /// whose hook is not seated yet: the hand touches the handle on its way in elsewhere than where
+    /// it will pull).
+    ///
+    /// Errors: q of the wrong length or not finite, t not finite, force negative or NaN; the
+    /// estimate is left as it was.
+    pub fn update(&mut self, q: &[f64], t: f64, force: f64, may_hook: bool) -> Result<ObjectEstimate> {
+        ensure_len("q", q, self.scene.nq())?;
+        ensure_coordinates("q", q)?;
+        if !t.is_finite() {
+            return Err(SabreError::invalid("t", format!("must be finite, got {t}")));
+        }
+        if force.is_nan() || force < 0.0 {
+            return Err(SabreError::invalid("force", format!("must be a magnitude ≥ 0, got {force}")));
+        }
+        self.scene
+            .robot
+            .update_frames(&Isometry3::identity(), q, &mut self.robot_frames);
+        let hand = Point3::from(self.robot_frames.poses[self.hand_link].translation.vector);
+        Ok(self.observe(&hand, t, force, may_hook))
+    }
+
+    /// [`Self::update`] on the hand point `hand` (world), its inputs checked.
+    fn observe(&mut self, hand: &Point3<f64>, t: f64, force: f64, may_hook: bool) -> ObjectEstimate {
+        let dt = self.time.map_or(0.0, |last| (t - last).max(0.0));
+        self.time = Some(self.time.map_or(t, |last| last.max(t)));
+        match self.hook_point {
+            None => {
+                let handle = self.handle_pose(self.position);
+                let local = handle.inverse_transform_point(hand);
+                if may_hook && local.coords.norm() <= self.config.hook_distance && force >= self.config.contact_force {
+                    self.hook_point = Some(local);
+                    self.without_contact = 0.0;
+                    self.filtered_rate = None;
+                }
+                self.velocity = 0.0;
+                self.residual = f64::NAN;
+            }
+            Some(hook_point) => self.follow(hand, dt, force, &hook_point),
+        }
+        self.estimate()
+    }
+
+    /// One update while hooked: the fit, its rate, and the release tests.
+    fn follow(&mut self, hand: &Point3<f64>, dt: f64, force: f64, hook_point: &Point3<f64>) {
+        let (position, residual) = self.fit(hand, hook_point);
+        self.without_contact = if force >= self.config.contact_force {
+            0.0
+        } else {
+            self.without_contact + dt
+        };
+        if residual > self.config.release_distance || self.without_contact > self.config.release_time {
+            self.hook_point = None;
+            self.velocity = 0.0;
+        } else {
+            if dt > 0.0 {
+                self.velocity = self.filter_rate((position - self.position) / dt, dt);
+            }
+            self.position = position;
+        }
+        self.residual = residual;
+    }
+
+    /// The coordinate (within the limits) minimising |T(o)·hook_point − hand| by Gauss–Newton from
+    /// the current estimate, and that distance.
+    fn fit(&mut self, hand: &Point3<f64>, hook_point: &Point3<f64>) -> (f64, f64) {
+        let local = self.handle_offset * hook_point;
+        let h = self.difference_step;
+        let mut o = self.position;
+        for _ in 0..FIT_ITERATIONS {
+            let r = self.link_point(o, &local) - hand;
+            let d = (self.link_point(o + h, &local) - self.link_point(o - h, &local)) / (2.0 * h);
+            let dd = d.norm_squared();
+            if dd < FLAT_GRADIENT {
+                break;
+            }
+            let step = -d.dot(&r) / dd;
+            o = (o + step).clamp(self.lower, self.upper);
+            if step.abs() < FIT_TOLERANCE {
+                break;
+            }
+        }
+        let residual = (self.link_point(o, &local) - hand).norm();
+        (o, residual)
+    }
+
+    /// The world position of `local` (in the object link `handle_frame`) at coordinate `o`.
+    fn link_point(&mut self, o: f64, local: &Point3<f64>) -> Point3<f64> {
+        let scene = &self.scene;
+        scene.object.update_frames(&scene.object_pose, &[o], &mut self.object_frames);
+        self.object_frames.poses[self.handle_link] * local
+    }
+
+    /// The handle frame's world pose at coordinate `o`.
+    fn handle_pose(&mut self, o: f64) -> Isometry3<f64> {
+        let scene = &self.scene;
+        scene.object.update_frames(&scene.object_pose, &[o], &mut self.object_frames);
+        self.object_frames.poses[self.handle_link] * self.handle_offset
+    }
+
+    /// The rate low-pass: exact first-order update over the step `dt` (> 0).
+    fn filter_rate(&mut self, raw: f64, dt: f64) -> f64 {
+        let filtered = match self.filtered_rate {
+            None => raw,
+            Some(previous) => {
+                let gain = 1.0 - (-2.0 * std::f64::consts::PI * self.config.rate_cutoff * dt).exp();
+                previous + gain * (raw - previous)
+            }
+        };
+        self.filtered_rate = Some(filtered);
+        filtered
+    }
+
+    /// Starts over at `position` (clipped to the limits), not hooked, at rest, with no time seen.
+    pub fn reset_to(&mut self, position: f64) -> Result<()> {
+        if !position.is_finite() {
+            return Err(SabreError::invalid("position", format!("must be finite, got {position}")));
+        }
+        self.position = position.clamp(self.lower, self.upper);
+        self.velocity = 0.0;
+        self.residual = f64::NAN;
+        self.hook_point = None;
+        self.time = None;
+        self.without_contact = 0.0;
+        self.filtered_rate = None;
+        Ok(())
+    }
+
+    /// The current estimate.
+    pub fn estimate(&self) -> ObjectEstimate {
+        ObjectEstimate {
+            position: self.position,
+            velocity: self.velocity,
+            hooked: self.hooked(),
+            residual: self.residual,
+        }
+    }
+    pub fn hooked(&self) -> bool {
+        self.hook_point.is_some()
+    }
+    pub fn position(&self) -> f64 {
+        self.position
+    }
+    pub fn velocity(&self) -> f64 {
+        self.velocity
+    }
+    /// The last fit's distance from the hand point (m; NaN while not hooked).
+    pub fn residual(&self) -> f64 {
+        self.residual
+    }
+    /// The hook point in the handle frame while hooked.
+    pub fn hook_point(&self) -> Option<Point3<f64>> {
+        self.hook_point
+    }
+    pub fn scene(&self) -> &Arc<Scene> {
+        &self.scene
+    }
+    pub fn hand_frame(&self) -> &str {
+        &self.hand_frame
+    }
+    pub fn handle_frame(&self) -> &str {
+        &self.handle_frame
+    }
+    pub fn handle_offset(&self) -> &Isometry3<f64> {
+        &self.handle_offset
+    }
+    pub fn config(&self) -> &ObjectEstimatorConfig {
+        &self.config
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Translation3, UnitQuaternion, Vector3};
+
+    fn scene(object: &str) -> Arc<Scene> {
+        let scene = Scene::load("royalpanda", object, None).expect("built-in scene loads");
+        assert_eq!(scene.robot.active_joint_names()[..3], ["base_x", "base_y", "base_yaw"]);
+        Arc::new(scene)
+    }
+
+    /// An estimator on the shipped handle frame that hooks wherever the hand is (the fits below
+    /// follow a hook point recorded away from the handle just as well).
+    fn estimator(scene: &Arc<Scene>, initial: f64, config: ObjectEstimatorConfig) -> ObjectStateEstimator {
+        let config = ObjectEstimatorConfig {
+            hook_distance: 5.0,
+            ..config
+        };
+        ObjectStateEstimator::new(
+            scene.clone(),
+            "grasp",
+            "handle_frame",
+            Isometry3::identity(),
+            Some(initial),
+            config,
+        )
+        .unwrap()
+    }
+
+    /// `q` with the robot moved rigidly: turned by `angle` about the vertical line through
+    /// `pivot` (x, y), then shifted by `shift` (x, y), through the holonomic base's joints.
+    fn moved(q: &[f64], pivot: [f64; 2], angle: f64, shift: [f64; 2]) -> Vec<f64> {
+        let (s, c) = angle.sin_cos();
+        let (dx, dy) = (q[0] - pivot[0], q[1] - pivot[1]);
+        let mut out = q.to_vec();
+        out[0] = pivot[0] + c * dx - s * dy + shift[0];
+        out[1] = pivot[1] + s * dx + c * dy + shift[1];
+        out[2] += angle;
+        out
+    }
+
+    /// The world (x, y) of the object's hinge.
+    fn hinge(scene: &Scene) -> [f64; 2] {
+        let poses = scene.object.link_poses(&scene.object_pose, &[0.0]);
+        let (axis, origin) = scene.object.joint_axis_world(&poses, scene.object.active_joints[0]);
+        assert!(
+            (axis - Vector3::new(0.0, 0.0, -1.0)).norm() < 1e-12,
+            "the shelf's hinge is vertical, opening for o > 0"
+        );
+        [origin.x, origin.y]
+    }
+
+    #[test]
+    fn a_drawer_follows_the_hand_that_pulls_it_and_its_rate_is_the_low_passed_difference_quotient() {
+        let scene = scene("drawer");
+        let config = ObjectEstimatorConfig::default();
+        let mut estimator = estimator(&scene, 0.1, config);
+        let home = scene.home_configuration();
+        assert!(estimator.update(&home, 0.0, 10.0, true).unwrap().hooked);
+        // The drawer opens along −x: the base backing off by s opens it by s.
+        let dt = 1e-3;
+        let speed = |k: usize| if k <= 100 { 0.2 } else { 0.5 };
+        let mut opened = 0.0;
+        let mut filtered = f64::NAN;
+        for k in 1..=200 {
+            opened += speed(k) * dt;
+            let q = moved(&home, [0.0, 0.0], 0.0, [-opened, 0.0]);
+            let e = estimator.update(&q, k as f64 * dt, 10.0, true).unwrap();
+            assert!(e.hooked && e.residual < 1e-9, "step {k}: {e:?}");
+            assert!(
+                (e.position - (0.1 + opened)).abs() < 1e-9,
+                "step {k}: {} vs {}",
+                e.position,
+                0.1 + opened
+            );
+            let gain = 1.0 - (-2.0 * std::f64::consts::PI * config.rate_cutoff * dt).exp();
+            filtered = if k == 1 {
+                speed(k)
+            } else {
+                filtered + gain * (speed(k) - filtered)
+            };
+            assert!((e.velocity - filtered).abs() < 1e-8, "step {k}: {} vs {filtered}", e.velocity);
+        }
+        assert!(estimator.velocity() > 0.2 && estimator.velocity() < 0.5);
+    }
+
+    #[test]
+    fn a_door_follows_the_hand_turning_about_its_hinge() {
+        let scene = scene("shelf");
+        let mut estimator = estimator(&scene, 0.3, ObjectEstimatorConfig::default());
+        let home = scene.home_configuration();
+        let pivot = hinge(&scene);
+        let at = |o: f64| moved(&home, pivot, 0.3 - o, [0.0, 0.0]);
+        assert!(estimator.update(&at(0.3), 0.0, 10.0, true).unwrap().hooked);
+        for k in 1..=60 {
+            let o = 0.3 + 0.01 * k as f64;
+            let e = estimator.update(&at(o), 0.01 * k as f64, 10.0, true).unwrap();
+            assert!(e.hooked && e.residual < 1e-9, "step {k}: {e:?}");
+            assert!((e.position - o).abs() < 1e-9, "step {k}: {} vs {o}", e.position);
+        }
+        assert!((estimator.velocity() - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn the_fit_recovers_the_coordinate_that_places_the_hook_point_at_the_hand() {
+        for (object, start, target) in [("shelf", 0.2, 0.31), ("drawer", 0.05, 0.12)] {
+            let scene = scene(object);
+            let offset = Isometry3::from_parts(
+                Translation3::new(0.01, -0.02, 0.03),
+                UnitQuaternion::from_euler_angles(0.1, -0.2, 0.3),
+            );
+            let config = ObjectEstimatorConfig::default();
+            let mut estimator =
+                ObjectStateEstimator::new(scene.clone(), "grasp", "handle_frame", offset, Some(start), config).unwrap();
+            let hook_point = Point3::new(0.02, 0.01, -0.015);
+            let hand = |o: f64| scene.object_fk(&[o], "handle_frame").unwrap() * offset * hook_point;
+            assert!(estimator.observe(&hand(start), 0.0, 1.0, true).hooked);
+            assert!((estimator.hook_point().unwrap() - hook_point).norm() < 1e-12);
+            let e = estimator.observe(&hand(target), 0.01, 1.0, true);
+            assert!(e.hooked && e.residual < 1e-9, "{object}: {e:?}");
+            assert!((e.position - target).abs() < 1e-9, "{object}: {} vs {target}", e.position);
+            // on to the upper limit and past it: the fit stops there, the residual the distance left
+            let upper = scene.object_limits()[0].upper;
+            let (mut o, mut t) = (target, 0.01);
+            while o < upper - 0.05 {
+                (o, t) = (o + 0.05, t + 0.01);
+                let e = estimator.observe(&hand(o), t, 1.0, true);
+                assert!(e.hooked && (e.position - o).abs() < 1e-9, "{object}: {} vs {o}", e.position);
+            }
+            let e = estimator.observe(&hand(upper + 0.01), t + 0.01, 1.0, true);
+            assert!(
+                e.hooked && e.position == upper && e.residual > 1e-4 && e.residual < 0.04,
+                "{object}: {e:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_hook_needs_permission_proximity_and_contact() {
+        let scene = scene("shelf");
+        let mut estimator = ObjectStateEstimator::new(
+            scene.clone(),
+            "grasp",
+            "handle_frame",
+            Isometry3::identity(),
+            None,
+            ObjectEstimatorConfig::default(),
+        )
+        .unwrap();
+        let handle = scene.object_fk(&[0.0], "handle_frame").unwrap();
+        let near = handle * Point3::new(0.0, 0.0, 0.07);
+        let far = handle * Point3::new(0.0, 0.0, 0.09);
+        assert!(!estimator.observe(&near, 0.0, 1.0, false).hooked);
+        assert!(!estimator.observe(&far, 0.01, 1.0, true).hooked);
+        assert!(!estimator.observe(&near, 0.02, 0.1, true).hooked);
+        let e = estimator.observe(&near, 0.03, 0.2, true);
+        assert!(e.hooked && e.position == 0.0 && e.velocity == 0.0 && e.residual.is_nan());
+    }
+
+    #[test]
+    fn the_hook_releases_when_the_hand_leaves_the_handle_and_the_estimate_holds_at_rest() {
+        let scene = scene("shelf");
+        let mut estimator = estimator(&scene, 0.3, ObjectEstimatorConfig::default());
+        let home = scene.home_configuration();
+        let pivot = hinge(&scene);
+        estimator.update(&home, 0.0, 10.0, true).unwrap();
+        let before = estimator
+            .update(&moved(&home, pivot, -0.05, [0.0, 0.0]), 0.01, 10.0, true)
+            .unwrap();
+        assert!(before.hooked && before.velocity > 0.0);
+        // the shoulder lifts the hand off the handle: no turn of the door puts it back
+        let mut away = moved(&home, pivot, -0.05, [0.0, 0.0]);
+        away[4] += 0.4;
+        let lift = scene.fk(&away, "grasp").unwrap().translation.z - scene.fk(&home, "grasp").unwrap().translation.z;
+        assert!(lift.abs() > 0.05, "{lift}");
+        let e = estimator.update(&away, 0.02, 10.0, true).unwrap();
+        assert!(
+            !e.hooked && e.velocity == 0.0 && e.position == before.position && e.residual > 0.04,
+            "{e:?}"
+        );
+        // released, the estimate holds at rest wherever the hand goes (this estimator would hook
+        // anywhere, so the task holds it off) …
+        for k in 0..5 {
+            let wandering = moved(&away, pivot, -0.1 * k as f64, [0.0, 0.0]);
+            let e = estimator.update(&wandering, 0.03 + 0.01 * k as f64, 10.0, false).unwrap();
+            assert!(!e.hooked && e.velocity == 0.0 && e.position == before.position && e.residual.is_nan());
+        }
+        // … and a new hook starts from it at rest
+        let e = estimator.update(&away, 0.1, 10.0, true).unwrap();
+        assert!(e.hooked && e.velocity == 0.0 && e.position == before.position);
+    }
+
+    #[test]
+    fn the_hook_releases_after_the_force_stays_away_longer_than_release_time_only() {
+        let scene = scene("shelf");
+        let config = ObjectEstimatorConfig::new(5.0, 0.04, 1.0, 0.5, 5.0).unwrap();
+        let mut estimator = estimator(&scene, 0.0, config);
+        let q = scene.home_configuration();
+        assert!(estimator.update(&q, 0.0, 10.0, true).unwrap().hooked);
+        // 0.4 s without force, force back (the timer restarts), then 0.5 s without: still hooked
+        let mut t = 0.0;
+        for _ in 0..40 {
+            t += 0.01;
+            assert!(estimator.update(&q, t, 0.0, true).unwrap().hooked);
+        }
+        assert!(estimator.update(&q, t, 5.0, true).unwrap().hooked);
+        let restarted = t;
+        for _ in 0..49 {
+            t += 0.01;
+            assert!(
+                estimator.update(&q, t, 0.0, true).unwrap().hooked,
+                "{} s without force",
+                t - restarted
+            );
+        }
+        assert!(!estimator.update(&q, restarted + 0.51, 0.0, true).unwrap().hooked);
+    }
+
+    #[test]
+    fn bad_input_is_refused_and_leaves_the_estimate_and_its_clock_as_they_were() {
+        let scene = scene("shelf");
+        let mut estimator = estimator(&scene, 0.3, ObjectEstimatorConfig::default());
+        let home = scene.home_configuration();
+        let pivot = hinge(&scene);
+        estimator.update(&home, 0.0, 10.0, true).unwrap();
+        let good = estimator
+            .update(&moved(&home, pivot, -0.01, [0.0, 0.0]), 0.01, 10.0, true)
+            .unwrap();
+        let mut nan = home.clone();
+        nan[4] = f64::NAN;
+        let bad: [(&[f64], f64, f64); 6] = [
+            (&nan, 0.02, 1.0),
+            (&home[1..], 0.02, 1.0),
+            (&home, f64::NAN, 1.0),
+            (&home, f64::INFINITY, 1.0),
+            (&home, 0.02, -1.0),
+            (&home, 0.02, f64::NAN),
+        ];
+        for (k, (q, t, force)) in bad.into_iter().enumerate() {
+            let error = estimator.update(q, t, force, true).unwrap_err();
+            let expected_shape = k == 1;
+            assert_eq!(matches!(error, SabreError::Shape { .. }), expected_shape, "{error}");
+            assert_eq!(matches!(error, SabreError::InvalidValue { .. }), !expected_shape, "{error}");
+            let now = estimator.estimate();
+            assert!(
+                now.hooked && now.position == good.position && now.velocity == good.velocity && now.residual == good.residual
+            );
+        }
+        // the clock still stands at 0.01: the next step's rate, 2 rad/s, is filtered over 0.01 s
+        let e = estimator
+            .update(&moved(&home, pivot, -0.03, [0.0, 0.0]), 0.02, 10.0, true)
+            .unwrap();
+        let gain = 1.0 - (-2.0 * std::f64::consts::PI * 5.0 * 0.01_f64).exp();
+        assert!((good.velocity - 1.0).abs() < 1e-6, "{good:?}");
+        assert!((e.velocity - (1.0 + gain)).abs() < 1e-6, "{e:?}");
+        // a time going backwards counts as no time passed: the position follows, the rate holds
+        let back = estimator
+            .update(&moved(&home, pivot, -0.04, [0.0, 0.0]), 0.0, 10.0, true)
+            .unwrap();
+        assert!(back.hooked && (back.position - 0.34).abs() < 1e-9 && back.velocity == e.velocity);
+    }
+
+    #[test]
+    fn construction_refuses_bad_configs_frames_and_objects() {
+        let scene = scene("shelf");
+        assert_eq!(ObjectEstimatorConfig::default().validate(), Ok(()));
+        for (config, name) in [
+            (ObjectEstimatorConfig::new(0.0, 0.04, 0.2, 0.5, 5.0), "hook_distance"),
+            (
+                ObjectEstimatorConfig::new(0.08, f64::INFINITY, 0.2, 0.5, 5.0),
+                "release_distance",
+            ),
+            (ObjectEstimatorConfig::new(0.08, 0.04, -0.1, 0.5, 5.0), "contact_force"),
+            (ObjectEstimatorConfig::new(0.08, 0.04, 0.2, f64::NAN, 5.0), "release_time"),
+            (ObjectEstimatorConfig::new(0.08, 0.04, 0.2, 0.5, 0.0), "rate_cutoff"),
+        ] {
+            assert!(
+                matches!(config, Err(SabreError::InvalidValue { ref what, .. }) if what == name),
+                "{config:?}"
+            );
+        }
+        let build = |scene: &Arc<Scene>, hand: &str, handle: &str, initial: Option<f64>| {
+            ObjectStateEstimator::new(
+                scene.clone(),
+                hand,
+                handle,
+                Isometry3::identity(),
+                initial,
+                ObjectEstimatorConfig::default(),
+            )
+        };
+        assert!(matches!(
+            build(&scene, "nowhere", "handle_frame", None),
+            Err(SabreError::UnknownFrame { .. })
+        ));
+        assert!(matches!(
+            build(&scene, "grasp", "nowhere", None),
+            Err(SabreError::UnknownFrame { .. })
+        ));
+        assert!(matches!(
+            build(&scene, "grasp", "handle_frame", Some(f64::NAN)),
+            Err(SabreError::InvalidValue { .. })
+        ));
+        assert_eq!(build(&scene, "grasp", "handle_frame", Some(7.0)).unwrap().position(), 1.57);
+        assert_eq!(build(&scene, "grasp", "handle_frame", None).unwrap().position(), 0.0);
+        let cabinet = Scene::from_urdf_strings(
+            crate::model::scene::BUILTIN_ROBOTS[0].1,
+            include_str!("../../assets/objects/examples/double_cabinet.urdf"),
+            None,
+        )
+        .unwrap();
+        let error = build(&Arc::new(cabinet), "grasp", "left_pull", None).unwrap_err();
+        assert!(error.to_string().contains("single-joint"), "{error}");
+    }
+
+    #[test]
+    fn reset_to_starts_over_at_rest_and_unhooked() {
+        let scene = scene("drawer");
+        let mut estimator = estimator(&scene, 0.1, ObjectEstimatorConfig::default());
+        let home = scene.home_configuration();
+        estimator.update(&home, 0.0, 10.0, true).unwrap();
+        estimator
+            .update(&moved(&home, [0.0, 0.0], 0.0, [-0.01, 0.0]), 0.01, 10.0, true)
+            .unwrap();
+        assert!(estimator.hooked() && estimator.velocity() > 0.0);
+        estimator.reset_to(0.3).unwrap();
+        let e = estimator.estimate();
+        assert!(!e.hooked && e.position == 0.3 && e.velocity == 0.0 && e.residual.is_nan());
+        assert!(estimator.reset_to(f64::NAN).is_err() && estimator.position() == 0.3);
+    }
+}
