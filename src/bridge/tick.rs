@@ -153,6 +153,8 @@ impl BridgeTick {
         };
         let stamp = message.stamp();
         let t_abs = stamp.seconds();
+        // a rejected state is answered under its own stamp too
+        self.stamp = stamp;
         let ticks = match self.joints.update(&message.name, &message.position, &message.velocity, received) {
             Ok(ticks) => ticks,
             Err(error) => {
@@ -175,7 +177,6 @@ impl BridgeTick {
             }
         }
         self.last_stamp = Some(t_abs);
-        self.stamp = stamp;
         let origin = *self.origin.get_or_insert(t_abs);
         Received::Tick {
             t: t_abs - origin,
@@ -183,7 +184,7 @@ impl BridgeTick {
         }
     }
 
-    /// The stamp of the newest arm state (seconds since the epoch of its clock).
+    /// The stamp of the newest state received (its clock's time; a rejected one's too).
     pub fn stamp(&self) -> Stamp {
         self.stamp
     }
