@@ -33,6 +33,8 @@ def thread_times(pid: int) -> dict[int, tuple[str, float]]:
         except OSError:
             continue  # the thread ended meanwhile
         name = text[text.index("(") + 1 : text.rindex(")")]
+        if int(tid) == pid:
+            name += " (main: the executor)"
         fields = text[text.rindex(")") + 2 :].split()
         times[int(tid)] = (name, (int(fields[11]) + int(fields[12])) / TICKS)
     return times
@@ -92,7 +94,8 @@ def main() -> None:
         f"states {s['states_published']} for {s['ticks']} ticks, answered {100 * s['delivered_fraction']:.2f} %, "
         f"latency p50 {s['latency_p50_ms']:.2f} ms p99 {s['latency_p99_ms']:.2f} ms; opened {s['success']} "
         f"({s['time_to_open']} s); summaries' CPU (since start): controller {100 * c['cpu_share']:.1f} %, "
-        f"sim robot {100 * s['cpu_share']:.1f} %"
+        f"sim robot {100 * s['cpu_share']:.1f} %; the controller's tick (receive to publish) p50 "
+        f"{c['tick_compute_p50_ms']:.3f} ms p99 {c['tick_compute_p99_ms']:.3f} ms"
     )
 
 

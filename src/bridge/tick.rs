@@ -214,12 +214,14 @@ impl BridgeTick {
         self.estimate.as_ref()
     }
 
-    /// The step (s) to integrate over to time `t` (capped at `max_tick_dt`), and τ_ext low-passed
+    /// The step (s) to integrate over to time `t` from the previous state (capped at `max_tick_dt`;
+    /// one command period for the first), and τ_ext low-passed
     /// over it: the newest wrench's or torques' while fresh at `received`, else zero.
     pub fn external_torque(&mut self, t: f64, received: f64) -> (f64, &[f64]) {
         let dt = match self.last_t {
             Some(last) => (t - last).min(self.layout.max_tick_dt),
-            None => 0.0,
+            // the first state the inner loop sees: one command period
+            None => self.gate.period(),
         };
         self.last_t = Some(t);
         let fresh = received - self.tau_received <= self.layout.wrench_timeout;
