@@ -171,7 +171,7 @@ fn encode<T: Serialize>(what: &str, value: &T, out: &mut Vec<u8>) -> Result<()> 
     out.extend_from_slice(&CDR_LE);
     cdr_encoding::to_writer::<T, LittleEndian, _>(&mut *out, value).map_err(|e| malformed(what, e))?;
     // rmw pads a message to a multiple of four bytes.
-    while out.len() % 4 != 0 {
+    while !out.len().is_multiple_of(4) {
         out.push(0);
     }
     Ok(())
@@ -237,7 +237,11 @@ pub fn decode_twist(raw: &[u8], stamped: bool) -> Result<TwistValue> {
 
 /// Serializes a geometry_msgs/Twist, or a TwistStamped in `frame_id` when `stamp` is given, into `out`.
 pub fn encode_twist(out: &mut Vec<u8>, linear: [f64; 3], angular: [f64; 3], stamp: Option<Stamp>, frame_id: &str) -> Result<()> {
-    let v = |a: [f64; 3]| Vector3 { x: a[0], y: a[1], z: a[2] };
+    let v = |a: [f64; 3]| Vector3 {
+        x: a[0],
+        y: a[1],
+        z: a[2],
+    };
     let twist = Twist {
         linear: v(linear),
         angular: v(angular),
@@ -264,7 +268,10 @@ mod tests {
 
     fn reference_joint_state() -> Vec<u8> {
         let hex: String = RCLPY_JOINT_STATE.replace("pp", "00").split_whitespace().collect();
-        (0..hex.len()).step_by(2).map(|i| u8::from_str_radix(&hex[i..i + 2], 16).unwrap()).collect()
+        (0..hex.len())
+            .step_by(2)
+            .map(|i| u8::from_str_radix(&hex[i..i + 2], 16).unwrap())
+            .collect()
     }
 
     #[test]
@@ -315,7 +322,22 @@ mod tests {
     fn stamps_convert_to_seconds_and_back() {
         let s = Stamp::from_seconds(1.999_999_999_7);
         assert_eq!(s, Stamp { sec: 2, nanosec: 0 });
-        assert_eq!(Stamp::from_seconds(5.25), Stamp { sec: 5, nanosec: 250_000_000 });
-        assert!((Stamp { sec: 5, nanosec: 250_000_000 }.seconds() - 5.25).abs() < 1e-12);
+        assert_eq!(
+            Stamp::from_seconds(5.25),
+            Stamp {
+                sec: 5,
+                nanosec: 250_000_000
+            }
+        );
+        assert!(
+            (Stamp {
+                sec: 5,
+                nanosec: 250_000_000
+            }
+            .seconds()
+                - 5.25)
+                .abs()
+                < 1e-12
+        );
     }
 }

@@ -155,7 +155,10 @@ impl BridgeTick {
         let t_abs = stamp.seconds();
         // a rejected state is answered under its own stamp too
         self.stamp = stamp;
-        let ticks = match self.joints.update(&message.name, &message.position, &message.velocity, received) {
+        let ticks = match self
+            .joints
+            .update(&message.name, &message.position, &message.velocity, received)
+        {
             Ok(ticks) => ticks,
             Err(error) => {
                 self.counts.rejected += 1;
@@ -169,10 +172,7 @@ impl BridgeTick {
         if let Some(last) = self.last_stamp {
             if t_abs <= last {
                 self.counts.rejected += 1;
-                let error = SabreError::invalid(
-                    "joint state",
-                    format!("stamp {t_abs:.6} is not after the previous one"),
-                );
+                let error = SabreError::invalid("joint state", format!("stamp {t_abs:.6} is not after the previous one"));
                 return Received::Rejected { error, ticks: true };
             }
         }
@@ -264,7 +264,8 @@ impl BridgeTick {
             let yaw = self.joints.position()[iyaw];
             let (c, s) = (yaw.cos(), yaw.sin());
             let (vx, vy) = (command[ix], command[iy]);
-            self.base_target.copy_from_slice(&[c * vx + s * vy, -s * vx + c * vy, command[iyaw]]);
+            self.base_target
+                .copy_from_slice(&[c * vx + s * vy, -s * vx + c * vy, command[iyaw]]);
         }
         let base_target = self.layout.base_index.map(|_| self.base_target.as_slice());
         let out = self.gate.on_tick(received, Some(&self.arm_target), base_target)?.clone();
@@ -292,7 +293,13 @@ impl BridgeTick {
         if command.base_due && self.layout.base_index.is_some() {
             let mut base = Vec::new();
             let (b, stamped) = (&command.base, self.layout.cmd_vel_stamped);
-            messages::encode_twist(&mut base, [b[0], b[1], 0.0], [0.0, 0.0, b[2]], stamped.then_some(stamp), &self.layout.cmd_vel_frame)?;
+            messages::encode_twist(
+                &mut base,
+                [b[0], b[1], 0.0],
+                [0.0, 0.0, b[2]],
+                stamped.then_some(stamp),
+                &self.layout.cmd_vel_frame,
+            )?;
             out.base = Some(base);
         }
         if let Some(names) = &self.layout.echo_names {

@@ -19,6 +19,9 @@ use crate::bridge::tick::{Answer, BridgeLayout, BridgeTick, Received};
 /// (arm command, base command or None, command echo or None) as bytes to publish.
 type Step<'py> = (Bound<'py, PyBytes>, Option<Bound<'py, PyBytes>>, Option<Bound<'py, PyBytes>>);
 
+/// What `follow` returns: the step, x (nx,), the tank's energy (None without a tank), the filter's status.
+type Followed<'py> = (Step<'py>, Bound<'py, PyArray1<f64>>, Option<f64>, &'static str);
+
 fn step<'py>(py: Python<'py>, answer: &Answer) -> Step<'py> {
     let bytes = |b: &Option<Vec<u8>>| b.as_ref().map(|b| PyBytes::new(py, b));
     (PyBytes::new(py, &answer.arm), bytes(&answer.base), bytes(&answer.echo))
@@ -82,9 +85,11 @@ impl PyBridgeTick {
         match lock(&self.inner).receive(raw, received) {
             Received::Merged => ("merged", f64::NAN, None),
             Received::Tick { t, fresh } => (if fresh { "tick" } else { "stale" }, t, None),
-            Received::Rejected { error, ticks } => {
-                (if ticks { "rejected-tick" } else { "rejected" }, f64::NAN, Some(error.to_string()))
-            }
+            Received::Rejected { error, ticks } => (
+                if ticks { "rejected-tick" } else { "rejected" },
+                f64::NAN,
+                Some(error.to_string()),
+            ),
         }
     }
 
@@ -99,7 +104,7 @@ impl PyBridgeTick {
         t: f64,
         received: f64,
         may_hook: bool,
-    ) -> PyResult<(Step<'py>, Bound<'py, PyArray1<f64>>, Option<f64>, &'static str)> {
+    ) -> PyResult<Followed<'py>> {
         let mut tick = lock(&self.inner);
         let x = run(|| tick.state(t, may_hook).map(<[f64]>::to_vec))?;
         let (dt, tau) = {
@@ -169,9 +174,7 @@ impl PyBridgeTick {
 
     /// The object's (o, ȯ) from its topic.
     fn set_object(&self, position: PyReadonlyArrayDyn<'_, f64>, velocity: PyReadonlyArrayDyn<'_, f64>) -> PyResult<()> {
-        run(|| {
-            lock(&self.inner).set_object(view("position", &position, &[-1])?, view("velocity", &velocity, &[-1])?)
-        })
+        run(|| lock(&self.inner).set_object(view("position", &position, &[-1])?, view("velocity", &velocity, &[-1])?))
     }
 
     /// The newest arm state's stamp (s since its clock's epoch).

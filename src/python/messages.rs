@@ -79,7 +79,11 @@ pub fn decode_float64_array<'py>(py: Python<'py>, raw: &[u8]) -> PyResult<(Bound
 
 /// Serializes a flat std_msgs/Float64MultiArray.
 #[pyfunction]
-pub fn encode_float64_array<'py>(py: Python<'py>, data: PyReadonlyArrayDyn<'py, f64>, data_offset: u32) -> PyResult<Bound<'py, PyBytes>> {
+pub fn encode_float64_array<'py>(
+    py: Python<'py>,
+    data: PyReadonlyArrayDyn<'py, f64>,
+    data_offset: u32,
+) -> PyResult<Bound<'py, PyBytes>> {
     let mut out = Vec::new();
     run(|| messages::encode_float64_array(&mut out, view("data", &data, &[-1])?, data_offset))?;
     Ok(PyBytes::new(py, &out))
