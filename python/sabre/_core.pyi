@@ -451,6 +451,7 @@ class ObjectStateEstimator:
         *,
         hook_distance: float | None = None,
         release_distance: float | None = None,
+        slide_distance: float | None = None,
         contact_force: float | None = None,
         release_time: float | None = None,
         rate_cutoff: float | None = None,
@@ -480,6 +481,8 @@ class ObjectStateEstimator:
     def hook_distance(self) -> float: ...
     @property
     def release_distance(self) -> float: ...
+    @property
+    def slide_distance(self) -> float: ...
     @property
     def contact_force(self) -> float: ...
     @property

@@ -69,7 +69,8 @@ class LowPass:
 class ObjectEstimate:
     """position (no,) and velocity (no,) of the object's joints; hooked: whether they come from
     the hand (else the last known state, held at rest); residual (m): how far the hand point is
-    from where the estimated object puts it."""
+    from where the estimated object puts it, across the handle's bar (a hook sliding along the bar
+    does not move the object)."""
 
     position: np.ndarray
     velocity: np.ndarray
@@ -81,17 +82,19 @@ class ObjectStateEstimator:
     """Infers the object's joint coordinate o and rate ȯ from the robot's joint positions.
 
     Assumptions (docs/ros2.md): the object is the scene's single-joint articulation at its known
-    pose; once the hand hooks the handle, the hook point stays fixed in the handle frame (no
-    sliding), so o is the coordinate that puts the handle-frame point recorded at hooking where the
-    hand's ``hand_frame`` (None: the scene's tool frame) measures it. ``handle`` is the object frame or link to grasp, as
-    :class:`sabre.tasks.OpenObject`'s ``handle`` (a link with geometry gets its inferred handle
-    frame). Hooking is declared when the hand frame is within ``hook_distance`` m of the handle
-    frame and the wrist force reaches ``contact_force`` N; it ends when the best fit is still
-    ``release_distance`` m off (the hand has left the handle) or the force stays below
+    pose; once the hand hooks the handle, the hook point stays on the handle's bar (it may slide
+    along the bar, the handle frame's x, which does not move o: the bar runs along the hinge or
+    across the slide), so o is the coordinate that puts the handle-frame point recorded at hooking
+    where the hand's ``hand_frame`` (None: the scene's tool frame) measures it. ``handle`` is the
+    object frame or link to grasp, as :class:`sabre.tasks.OpenObject`'s ``handle`` (a link with
+    geometry gets its inferred handle frame). Hooking is declared when the hand frame is within
+    ``hook_distance`` m of the handle frame and the wrist force reaches ``contact_force`` N; it ends
+    when the best fit is still ``release_distance`` m off across the bar (the hand has left the
+    handle), the hook slid ``slide_distance`` m along it (off its end), or the force stays below
     ``contact_force`` for ``release_time`` s. Before hooking and after release the last known state
     holds at rest. ȯ is the difference quotient low-passed at ``rate_cutoff`` Hz. A hook that slips
-    along or off the handle reads as motion of the object until the release (a drawer coasts ahead
-    of a hand that no longer touches it, so the estimate keeps following the hand meanwhile).
+    off the handle reads as motion of the object until the release (a drawer coasts ahead of a hand
+    that no longer touches it, so the estimate keeps following the hand meanwhile).
 
     The estimator is the core's (:attr:`core`): a loop in Rust can take it over."""
 
@@ -104,6 +107,7 @@ class ObjectStateEstimator:
         handle: str = "handle_frame",
         hook_distance: float = 0.08,
         release_distance: float = 0.04,
+        slide_distance: float = 0.1,
         contact_force: float = 0.2,
         release_time: float = 0.5,
         rate_cutoff: float = 5.0,
@@ -124,6 +128,7 @@ class ObjectStateEstimator:
             o0,
             hook_distance=float(hook_distance),
             release_distance=float(release_distance),
+            slide_distance=float(slide_distance),
             contact_force=float(contact_force),
             release_time=float(release_time),
             rate_cutoff=float(rate_cutoff),
@@ -172,6 +177,10 @@ class ObjectStateEstimator:
     @property
     def release_distance(self) -> float:
         return self._core.release_distance
+
+    @property
+    def slide_distance(self) -> float:
+        return self._core.slide_distance
 
     @property
     def contact_force(self) -> float:

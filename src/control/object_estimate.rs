@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Point3, Vector3};
 
 use crate::error::{ensure_coordinates, ensure_len, Result, SabreError};
 use crate::model::kinematics::Frames;
@@ -24,8 +24,12 @@ const FLAT_GRADIENT: f64 = 1e-12;
 pub struct ObjectEstimatorConfig {
     /// A hook needs the hand frame within this distance of the handle frame (m, positive).
     pub hook_distance: f64,
-    /// A fit still this far from the hand point (m, positive) releases: the hand left the handle.
+    /// A fit still this far from the hand point across the bar (m, positive) releases: the hand
+    /// left the handle.
     pub release_distance: f64,
+    /// A hook that slid this far along the bar from where it hooked (m, positive) releases: it
+    /// came off the bar's end.
+    pub slide_distance: f64,
     /// The wrist force magnitude (N, ≥ 0) that counts as contact.
     pub contact_force: f64,
     /// Without contact for longer than this (s, ≥ 0) the hook releases.
@@ -39,6 +43,7 @@ impl Default for ObjectEstimatorConfig {
         Self {
             hook_distance: 0.08,
             release_distance: 0.04,
+            slide_distance: 0.1,
             contact_force: 0.2,
             release_time: 0.5,
             rate_cutoff: 5.0,
@@ -61,6 +66,7 @@ impl ObjectEstimatorConfig {
             contact_force,
             release_time,
             rate_cutoff,
+            ..Self::default()
         };
         config.validate()?;
         Ok(config)
@@ -71,6 +77,7 @@ impl ObjectEstimatorConfig {
         for (name, value) in [
             ("hook_distance", self.hook_distance),
             ("release_distance", self.release_distance),
+            ("slide_distance", self.slide_distance),
             ("rate_cutoff", self.rate_cutoff),
         ] {
             if !(value.is_finite() && value > 0.0) {
@@ -91,7 +98,7 @@ impl ObjectEstimatorConfig {
 
 /// One estimate: the object's coordinate (m or rad) and rate, whether they come from the hand
 /// (else the last known state, held at rest), and how far (m) the hand point is from where the
-/// estimated object puts it (NaN while not hooked).
+/// estimated object puts it, across the bar (NaN while not hooked).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ObjectEstimate {
     pub position: f64,
@@ -103,12 +110,13 @@ pub struct ObjectEstimate {
 /// Infers the coordinate o and rate ȯ of the scene's single-joint object from the robot's joint
 /// positions.
 ///
-/// Once the hand hooks the handle, the hook point stays fixed in the handle frame (no sliding), so
-/// o is the coordinate that puts the handle-frame point recorded at hooking where the hand frame
-/// measures it. Hooking is declared when the hand frame is within `hook_distance` of the handle
-/// frame and the wrist force reaches `contact_force`; it ends when the best fit is still more than
-/// `release_distance` off or the force stays below `contact_force` for longer than
-/// `release_time`. Before hooking and after release the last known state holds at rest. ȯ is the
+/// Once the hand hooks the handle, the hook point stays on the bar (it may slide along it, the
+/// handle frame's x, which does not move o), so o is the coordinate that puts the handle-frame point
+/// recorded at hooking where the hand frame measures it. Hooking is declared when the hand frame is
+/// within `hook_distance` of the handle frame and the wrist force reaches `contact_force`; it ends
+/// when the best fit is still more than `release_distance` off across the bar (the residual), the
+/// hook slid more than `slide_distance` along it, or the force stays below `contact_force` for
+/// longer than `release_time`. Before hooking and after release the last known state holds at rest. ȯ is the
 /// difference quotient low-passed at `rate_cutoff` (exact exponential update on the measured step).
 #[derive(Debug, Clone)]
 pub struct ObjectStateEstimator {
@@ -247,13 +255,16 @@ impl ObjectStateEstimator {
 
     /// One update while hooked: the fit, its rate, and the release tests.
     fn follow(&mut self, hand: &Point3<f64>, dt: f64, force: f64, hook_point: &Point3<f64>) {
-        let (position, residual) = self.fit(hand, hook_point);
+        let (position, residual, slide) = self.fit(hand, hook_point);
         self.without_contact = if force >= self.config.contact_force {
             0.0
         } else {
             self.without_contact + dt
         };
-        if residual > self.config.release_distance || self.without_contact > self.config.release_time {
+        if residual > self.config.release_distance
+            || slide > self.config.slide_distance
+            || self.without_contact > self.config.release_time
+        {
             self.hook_point = None;
             self.velocity = 0.0;
         } else {
@@ -266,8 +277,8 @@ impl ObjectStateEstimator {
     }
 
     /// The coordinate (within the limits) minimising |T(o)·hook_point − hand| by Gauss–Newton from
-    /// the current estimate, and that distance.
-    fn fit(&mut self, hand: &Point3<f64>, hook_point: &Point3<f64>) -> (f64, f64) {
+    /// the current estimate, and that distance across the bar and along it.
+    fn fit(&mut self, hand: &Point3<f64>, hook_point: &Point3<f64>) -> (f64, f64, f64) {
         let local = self.handle_offset * hook_point;
         let h = self.difference_step;
         let mut o = self.position;
@@ -284,8 +295,12 @@ impl ObjectStateEstimator {
                 break;
             }
         }
-        let residual = (self.link_point(o, &local) - hand).norm();
-        (o, residual)
+        // The hook may slide along the bar (the handle frame's x): that is not the hand leaving the
+        // handle, and it does not move o (the bar runs along the hinge, or across the slide).
+        let r = self.link_point(o, &local) - hand;
+        let bar = self.handle_pose(o).rotation * Vector3::x();
+        let along = bar.dot(&r);
+        (o, (r - bar * along).norm(), along.abs())
     }
 
     /// The world position of `local` (in the object link `handle_frame`) at coordinate `o`.

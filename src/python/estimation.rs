@@ -35,7 +35,8 @@ impl PyObjectStateEstimator {
     #[new]
     #[pyo3(signature = (
         scene, hand_frame, handle_frame, handle_offset, initial=None, *,
-        hook_distance=None, release_distance=None, contact_force=None, release_time=None, rate_cutoff=None,
+        hook_distance=None, release_distance=None, slide_distance=None, contact_force=None, release_time=None,
+        rate_cutoff=None,
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -46,6 +47,7 @@ impl PyObjectStateEstimator {
         initial: Option<f64>,
         hook_distance: Option<f64>,
         release_distance: Option<f64>,
+        slide_distance: Option<f64>,
         contact_force: Option<f64>,
         release_time: Option<f64>,
         rate_cutoff: Option<f64>,
@@ -54,6 +56,7 @@ impl PyObjectStateEstimator {
         let config = ObjectEstimatorConfig {
             hook_distance: hook_distance.unwrap_or(defaults.hook_distance),
             release_distance: release_distance.unwrap_or(defaults.release_distance),
+            slide_distance: slide_distance.unwrap_or(defaults.slide_distance),
             contact_force: contact_force.unwrap_or(defaults.contact_force),
             release_time: release_time.unwrap_or(defaults.release_time),
             rate_cutoff: rate_cutoff.unwrap_or(defaults.rate_cutoff),
@@ -130,6 +133,10 @@ impl PyObjectStateEstimator {
     #[getter]
     fn release_distance(&self) -> f64 {
         lock(&self.inner).config().release_distance
+    }
+    #[getter]
+    fn slide_distance(&self) -> f64 {
+        lock(&self.inner).config().slide_distance
     }
     #[getter]
     fn contact_force(&self) -> f64 {

@@ -110,6 +110,34 @@ def test_estimator_releases_when_the_hand_leaves_the_handle_and_holds_the_last_s
         assert not e.hooked and e.velocity[0] == 0.0 and e.position[0] == pytest.approx(before.position[0])
 
 
+def moved_hand(scene, q, frame, delta):
+    """q with the hand frame's origin moved by ``delta`` (3,) in the world: resolved-rate steps on
+    the position rows of the frame's Jacobian."""
+    q = q.copy()
+    target = scene.fk(q, frame)[:3, 3] + np.asarray(delta)
+    for _ in range(100):
+        error = target - scene.fk(q, frame)[:3, 3]
+        if np.linalg.norm(error) < 1e-7:
+            break
+        q += np.linalg.lstsq(scene.jacobian(q, frame)[:3], error, rcond=None)[0]
+    assert np.linalg.norm(target - scene.fk(q, frame)[:3, 3]) < 1e-6
+    return q
+
+
+def test_a_hook_sliding_along_the_bar_holds_until_it_slides_off_and_leaving_across_releases():
+    """The shelf's bar is the handle frame's x (vertical): sliding along it within slide_distance
+    keeps the hook and the closed door's estimate; past it, or as far across, releases."""
+    scene = sabre.Scene.load(obj="shelf")
+    handle = scene.object_fk(np.array([0.0]), "handle_frame")
+    bar, across = handle[:3, 0], handle[:3, 2]  # along the bar; the handle frame's z, off the bar
+    for delta, hooked in ((0.06 * bar, True), (-0.08 * bar, True), (0.15 * bar, False), (0.06 * across, False)):
+        estimator, q0 = hooked_estimator(scene, slide_distance=0.1, release_distance=0.04)
+        e = estimator.update(moved_hand(scene, q0, estimator.hand_frame, delta), 0.01, 10.0)
+        assert e.hooked == hooked, delta
+        if hooked:
+            assert abs(e.position[0]) < 1e-3 and e.residual < 1e-3
+
+
 def test_estimator_releases_after_the_force_stays_away_longer_than_release_time_only():
     scene = sabre.Scene.load(obj="shelf")
     estimator, q = hooked_estimator(scene, release_time=0.5, contact_force=1.0)

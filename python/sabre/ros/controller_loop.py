@@ -352,7 +352,8 @@ class ControllerLoop:
         if estimate is not None and estimate[2] != self._hooked:
             self._hooked = estimate[2]
             what = "hooked" if estimate[2] else "released"
-            self.node.get_logger().info(f"object estimate: {what} at o = {estimate[0]:.3f} (t = {t:.3f} s)")
+            residual = f", residual {estimate[3]:.3f} m" if not estimate[2] else ""
+            self.node.get_logger().info(f"object estimate: {what} at o = {estimate[0]:.3f} (t = {t:.3f} s{residual})")
 
     def _observe(self, x: np.ndarray, t: float) -> None:
         try:
