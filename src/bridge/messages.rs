@@ -130,6 +130,26 @@ struct TwistStamped {
     twist: Twist,
 }
 
+#[derive(Deserialize)]
+struct Wrench {
+    force: Vector3,
+    torque: Vector3,
+}
+
+#[derive(Deserialize)]
+struct WrenchStamped {
+    header: HeaderIn,
+    wrench: Wrench,
+}
+
+/// A geometry_msgs/WrenchStamped as read: [f; m] and its header's frame and stamp.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WrenchValue {
+    pub wrench: [f64; 6],
+    pub frame_id: String,
+    pub stamp: Stamp,
+}
+
 /// A base twist: (vx, vy, vz) and (ωx, ωy, ωz), with the header of a `TwistStamped`.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct TwistValue {
@@ -232,6 +252,17 @@ pub fn decode_twist(raw: &[u8], stamped: bool) -> Result<TwistValue> {
         linear: [l.x, l.y, l.z],
         angular: [a.x, a.y, a.z],
         stamp,
+    })
+}
+
+/// A serialized geometry_msgs/WrenchStamped.
+pub fn decode_wrench(raw: &[u8]) -> Result<WrenchValue> {
+    let m: WrenchStamped = decode("WrenchStamped", raw)?;
+    let (f, t) = (m.wrench.force, m.wrench.torque);
+    Ok(WrenchValue {
+        wrench: [f.x, f.y, f.z, t.x, t.y, t.z],
+        frame_id: m.header.frame_id,
+        stamp: m.header.stamp,
     })
 }
 

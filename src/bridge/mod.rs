@@ -3,3 +3,4 @@
 
 pub mod messages;
 pub mod tick;
+pub mod wrench;

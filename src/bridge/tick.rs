@@ -5,6 +5,7 @@
 //! [`BridgeTick::follow`] frame that call), and the rate-limited command gate.
 
 use crate::bridge::messages::{self, Stamp};
+use crate::bridge::wrench::WrenchFrames;
 use crate::control::command_stream::{Command, CommandGate};
 use crate::control::joint_merge::JointMerge;
 use crate::control::object_estimate::{ObjectEstimate, ObjectStateEstimator};
@@ -69,6 +70,7 @@ pub struct BridgeTick {
     joints: JointMerge,
     gate: CommandGate,
     estimator: Option<ObjectStateEstimator>,
+    wrench_frames: Option<WrenchFrames>,
     nq: usize,
     object: (Vec<f64>, Vec<f64>),
     tau_raw: Vec<f64>,
@@ -89,12 +91,14 @@ pub struct BridgeTick {
 
 impl BridgeTick {
     /// A tick on `joints` (sabre's joints by the robot's names, the arm's driving the ticks) with
-    /// `gate`, the object from `estimator` or, without one, `object` (o, ȯ) until [`Self::set_object`].
+    /// `gate`, the object from `estimator` or, without one, `object` (o, ȯ) until [`Self::set_object`],
+    /// and wrist wrenches read through `wrench_frames` ([`Self::set_wrench`]).
     pub fn new(
         layout: BridgeLayout,
         joints: JointMerge,
         gate: CommandGate,
         estimator: Option<ObjectStateEstimator>,
+        wrench_frames: Option<WrenchFrames>,
         object: (Vec<f64>, Vec<f64>),
     ) -> Result<Self> {
         let nq = joints.names().len();
@@ -122,6 +126,7 @@ impl BridgeTick {
             joints,
             gate,
             estimator,
+            wrench_frames,
             nq,
             object,
             tau_raw: vec![0.0; nq],
@@ -349,6 +354,20 @@ impl BridgeTick {
         Ok(())
     }
 
+    /// A serialized wrist wrench (geometry_msgs/WrenchStamped) that arrived at `received`: τ_ext
+    /// at the newest joint positions, in the frame its header names. Errors: no wrench frames, a
+    /// malformed message, non-finite values, an unknown frame; nothing changes then.
+    pub fn set_wrench(&mut self, raw: &[u8], received: f64) -> Result<()> {
+        let frames = self
+            .wrench_frames
+            .as_ref()
+            .ok_or_else(|| SabreError::invalid("wrench", "this tick reads no wrench (built without wrench frames)"))?;
+        let message = messages::decode_wrench(raw)?;
+        let tau = frames.tau_ext(self.joints.position(), &message.wrench, &message.frame_id)?;
+        let w = message.wrench;
+        self.set_external_torque(&tau, (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt(), received)
+    }
+
     /// The object's state from its topic.
     pub fn set_object(&mut self, position: &[f64], velocity: &[f64]) -> Result<()> {
         ensure_len("object position", position, self.object.0.len())?;
@@ -365,6 +384,10 @@ impl BridgeTick {
     }
     pub fn gate(&self) -> &CommandGate {
         &self.gate
+    }
+    /// The newest τ_ext as received (before the low-pass).
+    pub fn tau_ext(&self) -> &[f64] {
+        &self.tau_raw
     }
     pub fn counts(&self) -> &BridgeCounts {
         &self.counts

@@ -14,7 +14,9 @@ use super::convert::{lock, view};
 use super::error::run;
 use super::estimation::PyObjectStateEstimator;
 use super::messages::stamp_of;
+use super::scene::PyScene;
 use crate::bridge::tick::{Answer, BridgeLayout, BridgeTick, Received};
+use crate::bridge::wrench::WrenchFrames;
 
 /// (arm command, base command or None, command echo or None) as bytes to publish.
 type Step<'py> = (Bound<'py, PyBytes>, Option<Bound<'py, PyBytes>>, Option<Bound<'py, PyBytes>>);
@@ -39,8 +41,9 @@ pub struct PyBridgeTick {
 impl PyBridgeTick {
     #[new]
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (joints, gate, estimator, object_position, object_velocity, arm_index, base_index, max_tick_dt, wrench_timeout, tau_cutoff, cmd_vel_stamped, cmd_vel_frame, echo_names=None))]
+    #[pyo3(signature = (scene, joints, gate, estimator, object_position, object_velocity, arm_index, base_index, max_tick_dt, wrench_timeout, tau_cutoff, cmd_vel_stamped, cmd_vel_frame, echo_names=None, wrench_frames=None))]
     fn new(
+        scene: &PyScene,
         joints: &PyJointMerge,
         gate: &PyCommandGate,
         estimator: Option<&PyObjectStateEstimator>,
@@ -54,6 +57,7 @@ impl PyBridgeTick {
         cmd_vel_stamped: bool,
         cmd_vel_frame: String,
         echo_names: Option<Vec<String>>,
+        wrench_frames: Option<(String, String, String)>,
     ) -> PyResult<Self> {
         let layout = BridgeLayout {
             arm_index,
@@ -66,11 +70,15 @@ impl PyBridgeTick {
             echo_names,
         };
         let tick = run(|| {
+            let frames = wrench_frames
+                .map(|(world, default, point)| WrenchFrames::new(scene.inner.clone(), &world, &default, &point))
+                .transpose()?;
             BridgeTick::new(
                 layout,
                 joints.merge(),
                 gate.gate(),
                 estimator.map(PyObjectStateEstimator::inner),
+                frames,
                 (object_position, object_velocity),
             )
         })?;
@@ -172,6 +180,13 @@ impl PyBridgeTick {
         run(|| lock(&self.inner).set_external_torque(view("tau_ext", &tau, &[-1])?, force, received))
     }
 
+    /// A serialized wrist wrench (WrenchStamped) that arrived at `received` (s, monotonic): τ_ext at
+    /// the newest joint positions, in the frame its header names (`wrench_frames`: (world frame,
+    /// the sensor frame for an empty header, the moment's point frame or "")).
+    fn set_wrench(&self, raw: &[u8], received: f64) -> PyResult<()> {
+        run(|| lock(&self.inner).set_wrench(raw, received))
+    }
+
     /// The object's (o, ȯ) from its topic.
     fn set_object(&self, position: PyReadonlyArrayDyn<'_, f64>, velocity: PyReadonlyArrayDyn<'_, f64>) -> PyResult<()> {
         run(|| lock(&self.inner).set_object(view("position", &position, &[-1])?, view("velocity", &velocity, &[-1])?))
@@ -181,6 +196,11 @@ impl PyBridgeTick {
     #[getter]
     fn stamp(&self) -> f64 {
         lock(&self.inner).stamp().seconds()
+    }
+    /// The newest τ_ext (nq,) as received (before the low-pass).
+    #[getter]
+    fn tau_ext<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, lock(&self.inner).tau_ext())
     }
     /// The merged joint positions (nq,).
     #[getter]

@@ -81,7 +81,21 @@ class Pipeline:
         estimator = sabre.ObjectStateEstimator(scene)
         self.estimator = sabre.ObjectStateEstimator(scene)
         self.tick = _core.BridgeTick(
-            joints.core, self.gate.core, estimator.core, [0.0], [0.0], self.arm, self.base, 0.005, 0.1, 10.0, False, "", arm_names
+            scene._core,
+            joints.core,
+            self.gate.core,
+            estimator.core,
+            [0.0],
+            [0.0],
+            self.arm,
+            self.base,
+            0.005,
+            0.1,
+            10.0,
+            False,
+            "",
+            arm_names,
+            ("map", scene.wrist_sensor_link, ""),
         )
 
     def state(self, k: int, q: np.ndarray, qd: np.ndarray, names: list[str] | None = None) -> bytes:
@@ -142,3 +156,37 @@ def test_fingers_merge_bad_states_get_ramp_steps_and_a_stale_joint_stops_followi
     arm_only = [s.names[i] for i in s.arm]
     assert s.tick.receive(s.state(3, q[s.arm], qd[s.arm], arm_only), 0.010)[0] == "tick"
     assert s.tick.receive(s.state(4, q[s.arm], qd[s.arm], arm_only), 0.100)[0] == "stale"
+
+
+def test_wrenches_read_in_the_core_give_the_python_frames_tau_ext():
+    """τ_ext from a serialized WrenchStamped equals sabre.ros.inputs.WrenchFrames' J(q)ᵀ w for a
+    header in the world frame, in the sensor's, in another robot frame and empty; an unknown frame
+    is refused and changes nothing."""
+    pytest.importorskip("rclpy")
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.serialization import serialize_message
+
+    from sabre.ros.inputs import WrenchFrames
+
+    s = Pipeline()
+    nq, x = s.nq, s.x
+    q = x[:nq] + 0.05
+    assert s.tick.receive(s.state(1, q, x[nq : 2 * nq]), 0.0)[0] == "tick"
+    reference = WrenchFrames(s.scene, "map", s.scene.wrist_sensor_link)
+    rng = np.random.default_rng(5)
+    for k, frame in enumerate(["map", s.scene.wrist_sensor_link, "panda_link5", ""]):
+        w = rng.normal(size=6) * 10.0
+        m = WrenchStamped()
+        m.header.frame_id = frame
+        m.wrench.force.x, m.wrench.force.y, m.wrench.force.z = (float(v) for v in w[:3])
+        m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z = (float(v) for v in w[3:])
+        s.tick.set_wrench(serialize_message(m), 0.0)
+        axes, point = reference.resolve(frame)
+        expected = reference.tau_ext(q, w, axes, point)
+        assert s.tick.counts["wrench_received"] == k + 1
+        assert np.allclose(s.tick.tau_ext, expected, atol=1e-9), frame
+    m = WrenchStamped()
+    m.header.frame_id = "nowhere"
+    with pytest.raises(sabre.SabreError, match="nowhere"):
+        s.tick.set_wrench(serialize_message(m), 0.0)
+    assert s.tick.counts["wrench_received"] == 4

@@ -105,7 +105,9 @@ class ControllerLoop:
             timeouts[self.base_index] = float(p["base_state_timeout"])
         self._timeouts = timeouts
         wrench_frame = str(p["wrench_frame"]) or self.scene.wrist_sensor_link
-        self.wrench_frames = WrenchFrames(self.scene, str(p["world_frame"]), wrench_frame, str(p["wrench_point_frame"]))
+        # checked here for the parameter's message; the core tick reads the wrenches
+        WrenchFrames(self.scene, str(p["world_frame"]), wrench_frame, str(p["wrench_point_frame"]))
+        self._wrench_frames = (str(p["world_frame"]), wrench_frame, str(p["wrench_point_frame"]))
         self.torques = JointTorques(self.names, self.scene.nq, float(p["tau_ext_sign"])) if p["tau_ext_topic"] else None
         self.estimator = None
         if not p["object_state_topic"]:
@@ -116,6 +118,7 @@ class ControllerLoop:
         joints = JointStates(self.names, self.arm_joints, self._timeouts)
         gate = CommandGate(CommandShaper(self.limits), float(p["state_timeout"]))
         self.tick = _core.BridgeTick(
+            self.scene._core,
             joints.core,
             gate.core,
             None if self.estimator is None else self.estimator.core,
@@ -129,6 +132,7 @@ class ControllerLoop:
             bool(p["cmd_vel_stamped"]),
             str(p["cmd_vel_frame"]),
             list(self.arm_joints) if p["command_echo_topic"] else None,
+            self._wrench_frames,
         )
 
     def _init_state(self) -> None:
@@ -186,7 +190,7 @@ class ControllerLoop:
         if self.torques is not None:
             self._subs.append(sub(JointState, p["tau_ext_topic"], self.on_torques, profile(p["tau_ext_qos"])))
         elif p["wrench_topic"]:
-            self._subs.append(sub(WrenchStamped, p["wrench_topic"], self.on_wrench, profile(p["wrench_qos"])))
+            self._subs.append(sub(WrenchStamped, p["wrench_topic"], self.on_wrench, profile(p["wrench_qos"]), raw=True))
         if p["object_state_topic"]:
             self._subs.append(sub(JointState, p["object_state_topic"], self.on_object, profile(p["object_state_qos"])))
 
@@ -221,20 +225,14 @@ class ControllerLoop:
             return
         self.tick.set_joints([int(i) for i in self.base_index], np.asarray(q), np.asarray(rates), time.monotonic())
 
-    def on_wrench(self, msg: Any) -> None:
-        w = msg.wrench
-        v = np.array([w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z])
+    def on_wrench(self, raw: bytes) -> None:
+        """A wrist wrench, read serialized in the core: τ_ext at the wrench's rate, not the
+        states' (the joints move little between two wrenches, and the tank reads τ_ext low-passed
+        at tau_ext_cutoff)."""
         try:
-            if not np.all(np.isfinite(v)):
-                raise MessageError("non-finite values")
-            axes, point = self.wrench_frames.resolve(msg.header.frame_id)
-        except MessageError as exc:
+            self.tick.set_wrench(raw, time.monotonic())
+        except SabreError as exc:
             self._log_rejected("wrench", exc)
-            return
-        # τ_ext at the wrench's rate, not the states': the joints move little between two wrenches,
-        # and the tank reads τ_ext low-passed at tau_ext_cutoff
-        tau = self.wrench_frames.tau_ext(self.tick.position, v, axes, point)
-        self.tick.set_external_torque(tau, math.hypot(*v[:3]), time.monotonic())
 
     def on_torques(self, msg: Any) -> None:
         assert self.torques is not None

@@ -128,7 +128,7 @@ class DriverOutputs:
 
     def publish_wrench(self, q: np.ndarray, wrench_world: np.ndarray, stamp: Any) -> None:
         """The wrist wrench in the sensor frame's axes (the plant reports it in world axes)."""
-        r = self.scene.fk(q, self.sensor_frame)[:3, :3]
+        r = self.scene._core.fk(q, self.sensor_frame)[:3, :3]  # q is the plant's: finite, of size nq
         w = np.concatenate([r.T @ wrench_world[:3], r.T @ wrench_world[3:]]) + self.wrench_noise.next()
         m = self._wrench
         m.header.stamp = stamp
