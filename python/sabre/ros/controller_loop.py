@@ -109,7 +109,7 @@ class ControllerLoop:
         WrenchFrames(self.scene, str(p["world_frame"]), wrench_frame, str(p["wrench_point_frame"]))
         self._wrench_frames = (str(p["world_frame"]), wrench_frame, str(p["wrench_point_frame"]))
         self.torques = JointTorques(self.names, self.scene.nq, float(p["tau_ext_sign"])) if p["tau_ext_topic"] else None
-        self.estimator = None
+        self.estimator = None  # the estimator's settings and frames; a copy of its core runs in the tick
         if not p["object_state_topic"]:
             self.estimator = ObjectStateEstimator(self.scene, handle=self.descriptions.handle)
 
