@@ -197,9 +197,12 @@ class ObjectStateEstimator:
     def update(self, q: Sequence[float] | np.ndarray, t: float, force: float = math.inf, may_hook: bool = True) -> ObjectEstimate:
         """The estimate at time t (s) from the robot's joint positions q (nq,) and the wrist force
         magnitude (N; default: assume contact). A time at or before the previous one counts as no
-        time passed. ``may_hook`` False keeps the estimator from declaring a hook now: a controller
-        passes it while its task has not yet seated the hook (the hand touches the handle on its way
-        in, where the hook point is not yet the one it will pull at).
+        time passed. ``may_hook`` False says the task's hook is not seated (a controller passes its
+        task's phase): no hook is declared (the hand touches the handle on its way in, where the
+        hook point is not yet the one it will pull at), and a hook ends (a task that lost its hook
+        moves the hand away, and the object does not follow it). A hook the hand makes where the
+        estimate does not put the handle re-acquires the object's coordinate from the hand first
+        (an object that moved while nothing held it is hooked where it is).
 
         Raises:
             ShapeError, InvalidValueError: q of the wrong size or not finite, t not finite, force

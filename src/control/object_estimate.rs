@@ -15,6 +15,8 @@ use crate::model::Scene;
 const FIT_ITERATIONS: usize = 4;
 /// A fit step below this (m or rad) has converged.
 const FIT_TOLERANCE: f64 = 1e-7;
+/// Coordinates sampled over the range when the estimate looks for the handle at the hand.
+const REACQUIRE_SAMPLES: usize = 64;
 /// Below this squared length of dp/do (m²) the hook point does not move with the object (it sits
 /// on a hinge's axis) and the fit keeps its estimate.
 const FLAT_GRADIENT: f64 = 1e-12;
@@ -210,9 +212,9 @@ impl ObjectStateEstimator {
 
     /// The estimate at time `t` (s) from the robot's joint positions `q` (nq) and the wrist force
     /// magnitude `force` (N; infinity: assume contact). A time at or before the latest one counts
-    /// as no time passed. `may_hook` false keeps the estimator from declaring a hook now (a task
-    /// whose hook is not seated yet: the hand touches the handle on its way in elsewhere than where
-    /// it will pull).
+    /// as no time passed. `may_hook` false says the task's hook is not seated: no hook is declared
+    /// (the hand touches the handle on its way in elsewhere than where it will pull) and a hook
+    /// ends (a task that lost its hook moves the hand away, and the object does not follow).
     ///
     /// Errors: q of the wrong length or not finite, t not finite, force negative or NaN; the
     /// estimate is left as it was.
@@ -236,8 +238,16 @@ impl ObjectStateEstimator {
     fn observe(&mut self, hand: &Point3<f64>, t: f64, force: f64, may_hook: bool) -> ObjectEstimate {
         let dt = self.time.map_or(0.0, |last| (t - last).max(0.0));
         self.time = Some(self.time.map_or(t, |last| last.max(t)));
+        if !may_hook && self.hook_point.is_some() {
+            // the task says its hook is not seated: the hand's motion is no longer the object's
+            self.hook_point = None;
+            self.velocity = 0.0;
+        }
         match self.hook_point {
             None => {
+                if may_hook && force >= self.config.contact_force {
+                    self.reacquire(hand);
+                }
                 let handle = self.handle_pose(self.position);
                 let local = handle.inverse_transform_point(hand);
                 if may_hook && local.coords.norm() <= self.config.hook_distance && force >= self.config.contact_force {
@@ -251,6 +261,36 @@ impl ObjectStateEstimator {
             Some(hook_point) => self.follow(hand, dt, force, &hook_point),
         }
         self.estimate()
+    }
+
+    /// Before a hook: when the hand is at the handle (within twice `release_distance` of the
+    /// handle frame) for some coordinate o*, and the handle where the estimate puts it is more
+    /// than `release_distance` farther from the hand than at o*, the estimate moves to o*. An
+    /// object that moved while no hook held it (a door swinging on after a slip) is then hooked
+    /// where it is, not where it was last seen. o* is the coordinate whose handle frame is nearest
+    /// the hand, among samples of the range refined by the fit.
+    fn reacquire(&mut self, hand: &Point3<f64>) {
+        let origin = Point3::origin();
+        let distance = |this: &mut Self, o: f64| (this.handle_pose(o) * origin - hand).norm();
+        let now = distance(self, self.position);
+        let (mut best, mut best_distance) = (self.position, now);
+        for k in 0..=REACQUIRE_SAMPLES {
+            let o = self.lower + (self.upper - self.lower) * k as f64 / REACQUIRE_SAMPLES as f64;
+            let d = distance(self, o);
+            if d < best_distance {
+                (best, best_distance) = (o, d);
+            }
+        }
+        let previous = self.position;
+        self.position = best;
+        let (refined, _, _) = self.fit(hand, &origin);
+        let refined_distance = distance(self, refined);
+        let at_handle = refined_distance <= 2.0 * self.config.release_distance;
+        self.position = if at_handle && now - refined_distance > self.config.release_distance {
+            refined
+        } else {
+            previous
+        };
     }
 
     /// One update while hooked: the fit, its rate, and the release tests.
