@@ -138,6 +138,41 @@ def test_a_hook_sliding_along_the_bar_holds_until_it_slides_off_and_leaving_acro
             assert abs(e.position[0]) < 1e-3 and e.residual < 1e-3
 
 
+def turned_about_the_hinge(scene, q, angle):
+    """q with the holonomic base carried around the shelf's vertical hinge as the door turns by
+    ``angle`` (rad of o), so that the hand keeps its place on the handle. The hinge is found from
+    the handle's poses at two openings, independently of the estimator."""
+    h0, h1 = (scene.object_fk(np.array([o]), "handle_frame") for o in (0.0, angle))
+    turn = math.atan2(h1[1, 2], h1[0, 2]) - math.atan2(h0[1, 2], h0[0, 2])  # of the handle's horizontal normal
+    c, s = math.cos(turn), math.sin(turn)
+    rotation = np.array([[c, -s], [s, c]])
+    hinge = np.linalg.solve(np.eye(2) - rotation, h1[:2, 3] - rotation @ h0[:2, 3])
+    out = q.copy()
+    out[:2] = hinge + rotation @ (q[:2] - hinge)
+    out[2] += turn
+    return out
+
+
+def hand_in_handle(scene, q, o):
+    handle = scene.object_fk(np.array([o]), "handle_frame")
+    return handle[:3, :3].T @ (scene.fk(q, "grasp")[:3, 3] - handle[:3, 3])
+
+
+def test_a_lost_hook_holds_the_estimate_and_a_new_one_finds_the_object_where_the_hand_is():
+    """The task loses its hook (may_hook False): the estimate releases and holds, whatever the hand
+    does; the door swings on to 0.5 rad unheld, and the hand that hooks it there re-acquires 0.5."""
+    scene = sabre.Scene.load(obj="shelf")
+    estimator, q = hooked_estimator(scene)
+    assert estimator.update(q, 0.01, 10.0).hooked
+    for k, angle in enumerate((0.0, 0.2, 0.4)):  # the hand goes round with a door that is not there
+        e = estimator.update(turned_about_the_hinge(scene, q, angle), 0.02 + 0.01 * k, 10.0, may_hook=False)
+        assert not e.hooked and e.position[0] == pytest.approx(0.0, abs=1e-9) and e.velocity[0] == 0.0
+    there = turned_about_the_hinge(scene, q, 0.5)
+    assert np.allclose(hand_in_handle(scene, there, 0.5), hand_in_handle(scene, q, 0.0), atol=1e-9)
+    e = estimator.update(there, 0.1, 10.0)
+    assert e.hooked and e.position[0] == pytest.approx(0.5, abs=2e-3)
+
+
 def test_estimator_releases_after_the_force_stays_away_longer_than_release_time_only():
     scene = sabre.Scene.load(obj="shelf")
     estimator, q = hooked_estimator(scene, release_time=0.5, contact_force=1.0)
