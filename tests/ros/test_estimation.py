@@ -142,6 +142,8 @@ def turned_about_the_hinge(scene, q, angle):
     """q with the holonomic base carried around the shelf's vertical hinge as the door turns by
     ``angle`` (rad of o), so that the hand keeps its place on the handle. The hinge is found from
     the handle's poses at two openings, independently of the estimator."""
+    if angle == 0.0:
+        return q.copy()
     h0, h1 = (scene.object_fk(np.array([o]), "handle_frame") for o in (0.0, angle))
     turn = math.atan2(h1[1, 2], h1[0, 2]) - math.atan2(h0[1, 2], h0[0, 2])  # of the handle's horizontal normal
     c, s = math.cos(turn), math.sin(turn)
@@ -170,7 +172,11 @@ def test_a_lost_hook_holds_the_estimate_and_a_new_one_finds_the_object_where_the
     there = turned_about_the_hinge(scene, q, 0.5)
     assert np.allclose(hand_in_handle(scene, there, 0.5), hand_in_handle(scene, q, 0.0), atol=1e-9)
     e = estimator.update(there, 0.1, 10.0)
-    assert e.hooked and e.position[0] == pytest.approx(0.5, abs=2e-3)
+    # found again up to the hand's offset from the handle frame over the handle's radius about the
+    # hinge (the estimator takes the handle nearest the hand: it knows no other offset then)
+    h0, h1 = (scene.object_fk(np.array([o]), "handle_frame")[:3, 3] for o in (0.0, 0.5))
+    radius = np.linalg.norm(h1 - h0) / (2.0 * math.sin(0.25))
+    assert e.hooked and abs(e.position[0] - 0.5) <= np.linalg.norm(hand_in_handle(scene, q, 0.0)) / radius + 1e-3
 
 
 def test_estimator_releases_after_the_force_stays_away_longer_than_release_time_only():

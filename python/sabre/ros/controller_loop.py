@@ -31,8 +31,9 @@ from .qos import profile
 
 __all__ = ["ControllerLoop", "TASK_STATES"]
 
-#: The task's phases in which its hook sits on the handle: the estimator declares a hook only then.
-HOOK_SEATED_PHASES = ("hook", "open")
+#: The task's phases in which its hook sits on the handle (release: it lets go of a door that opens
+#: by itself, along that door's path): the estimator declares and keeps a hook only then.
+HOOK_SEATED_PHASES = ("hook", "open", "release")
 
 #: idle: no task; starting: the planner starts on the next state; running; failed: the planner
 #: stopped on an error (reset to start again).
