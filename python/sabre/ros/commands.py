@@ -1,6 +1,7 @@
-"""What the controller node commands, in plain NumPy and the core's rate limiter (no ROS import): the
+"""What the controller node commands, on the core's command streams and gate (no ROS import): the
 arm's and the base's command streams through per-joint velocity, acceleration and jerk limits, and
-the gate that decides when they follow the plan and when they ramp to zero. Time comes in as an
+the gate that decides when they follow the plan and when they ramp to zero (the core tick of the
+controller node runs a copy of the same gate). Time comes in as an
 argument, so that the stop logic is tested with a fake clock."""
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
-"""The controller's measured inputs as drivers publish them, in plain NumPy (no ROS import): joint
-states merged by name from several publishers with a staleness per joint, the base's pose and
-rates from odometry, and τ_ext from a wrist wrench in the frame its header names or from a
-joint-torque topic."""
+"""The controller's measured inputs as drivers publish them (no ROS import): joint states merged by
+name from several publishers with a staleness per joint (the core's merge), the base's pose and
+rates from odometry, and τ_ext from a wrist wrench in the frame its header names (plain NumPy: the
+reference the core tick's reading of the wrench is tested against) or from a joint-torque topic."""
 
 from __future__ import annotations
 
