@@ -31,6 +31,7 @@ __all__ = [
     "JointMerge",
     "ObjectStateEstimator",
     "BridgeTick",
+    "WrenchFrames",
     "Cost",
     "MppiConfig",
     "ServoGuideConfig",
@@ -725,3 +726,8 @@ class BridgeTick:
     def state_timeout(self) -> float: ...
     @property
     def counts(self) -> dict[str, int]: ...
+
+@final
+class WrenchFrames:
+    def __new__(cls, scene: Scene, world_frame: str, default_frame: str, point_frame: str) -> WrenchFrames: ...
+    def resolve(self, frame_id: str) -> tuple[str | None, str]: ...

@@ -255,3 +255,29 @@ impl PyBridgeTick {
         Ok(d)
     }
 }
+
+/// How a wrist wrench's header frame is read (`sabre.ros.inputs.WrenchFrames` runs it; the tick
+/// runs a copy built from the same three frames).
+#[pyclass(name = "WrenchFrames", module = "sabre._core", frozen)]
+pub struct PyWrenchFrames {
+    inner: WrenchFrames,
+}
+
+#[pymethods]
+impl PyWrenchFrames {
+    /// `world_frame` (and "world") name world axes, `default_frame` is an empty header's frame,
+    /// `point_frame` ("" : the axes frame's) the moment's point.
+    #[new]
+    fn new(scene: &PyScene, world_frame: &str, default_frame: &str, point_frame: &str) -> PyResult<Self> {
+        run(|| WrenchFrames::new(scene.inner.clone(), world_frame, default_frame, point_frame)).map(|inner| Self { inner })
+    }
+
+    /// (axes frame or None for world axes, moment point frame) of a header's frame id.
+    fn resolve(&self, frame_id: &str) -> PyResult<(Option<String>, String)> {
+        run(|| {
+            self.inner
+                .resolve(frame_id)
+                .map(|(axes, point)| (axes.map(str::to_owned), point.to_owned()))
+        })
+    }
+}

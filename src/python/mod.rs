@@ -45,6 +45,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<bridge::PyCommandGate>()?;
     m.add_class::<bridge::PyJointMerge>()?;
     m.add_class::<bridge_tick::PyBridgeTick>()?;
+    m.add_class::<bridge_tick::PyWrenchFrames>()?;
     m.add_class::<estimation::PyObjectStateEstimator>()?;
     m.add_class::<cost::PyCost>()?;
     m.add_class::<mppi::PyMppiConfig>()?;

@@ -159,9 +159,9 @@ def test_fingers_merge_bad_states_get_ramp_steps_and_a_stale_joint_stops_followi
 
 
 def test_wrenches_read_in_the_core_give_the_python_frames_tau_ext():
-    """τ_ext from a serialized WrenchStamped equals sabre.ros.inputs.WrenchFrames' J(q)ᵀ w for a
-    header in the world frame, in the sensor's, in another robot frame and empty; an unknown frame
-    is refused and changes nothing."""
+    """τ_ext from a serialized WrenchStamped equals sabre.estimation.tau_ext_from_wrench's J(q)ᵀ w
+    (NumPy on the scene's kinematics) for a header in the world frame, in the sensor's, in another
+    robot frame and empty; an unknown frame is refused and changes nothing."""
     pytest.importorskip("rclpy")
     from geometry_msgs.msg import WrenchStamped
     from rclpy.serialization import serialize_message

@@ -26,7 +26,7 @@ from .commands import CommandGate, CommandShaper, command_limits
 from .conversions import MessageError, yaw_of
 from .descriptions import Descriptions, build_controller
 from .durations import Durations
-from .inputs import JointStates, JointTorques, WrenchFrames, base_from_odometry
+from .inputs import JointStates, JointTorques, base_from_odometry
 from .qos import profile
 
 __all__ = ["ControllerLoop", "TASK_STATES"]
@@ -106,8 +106,6 @@ class ControllerLoop:
             timeouts[self.base_index] = float(p["base_state_timeout"])
         self._timeouts = timeouts
         wrench_frame = str(p["wrench_frame"]) or self.scene.wrist_sensor_link
-        # checked here for the parameter's message; the core tick reads the wrenches
-        WrenchFrames(self.scene, str(p["world_frame"]), wrench_frame, str(p["wrench_point_frame"]))
         self._wrench_frames = (str(p["world_frame"]), wrench_frame, str(p["wrench_point_frame"]))
         self.torques = JointTorques(self.names, self.scene.nq, float(p["tau_ext_sign"])) if p["tau_ext_topic"] else None
         self.estimator = None  # the estimator's settings and frames; a copy of its core runs in the tick

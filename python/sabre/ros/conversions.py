@@ -18,7 +18,6 @@ __all__ = [
     "JointMap",
     "world_to_base",
     "base_to_world",
-    "stamp_seconds",
     "yaw_of",
     "rpy_of",
     "quaternion_of",
@@ -87,11 +86,6 @@ def base_to_world(twist_base: Sequence[float] | np.ndarray, yaw: float) -> tuple
     vx, vy, wz = (float(v) for v in twist_base)
     c, s = math.cos(yaw), math.sin(yaw)
     return c * vx - s * vy, s * vx + c * vy, wz
-
-
-def stamp_seconds(stamp: Any) -> float:
-    """A builtin_interfaces/Time as seconds."""
-    return stamp.sec + 1e-9 * stamp.nanosec
 
 
 def yaw_of(x: float, y: float, z: float, w: float) -> float:

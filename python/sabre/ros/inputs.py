@@ -1,7 +1,7 @@
 """The controller's measured inputs as drivers publish them (no ROS import): joint states merged by
 name from several publishers with a staleness per joint (the core's merge), the base's pose and
-rates from odometry, and τ_ext from a wrist wrench in the frame its header names (plain NumPy: the
-reference the core tick's reading of the wrench is tested against) or from a joint-torque topic."""
+rates from odometry, and τ_ext from a wrist wrench in the frame its header names (the core's frame
+reading) or from a joint-torque topic."""
 
 from __future__ import annotations
 
@@ -113,32 +113,22 @@ class WrenchFrames:
     a robot frame of the scene (a sensor's, panda_link8, panda_link0) its axes at the measured
     configuration, an empty one ``default_frame``. The moment is about ``point_frame``'s origin if
     given, else about the axes frame's (world axes: ``default_frame``'s). Any other frame raises
-    :class:`MessageError`."""
+    :class:`MessageError`. The frames are read by the core (``_core.WrenchFrames``, which the
+    controller's tick runs too); τ_ext is :func:`sabre.estimation.tau_ext_from_wrench`."""
 
     def __init__(self, scene: Scene, world_frame: str, default_frame: str, point_frame: str = "") -> None:
         self.scene = scene
-        self.world = {str(world_frame), "world"}
-        frames = set(scene.frame_names)
-        for label, frame in (("wrench_frame", default_frame), ("wrench_point_frame", point_frame)):
-            if frame and frame not in frames and frame not in self.world:
-                raise MessageError(f"{label} {frame!r} is neither {world_frame!r} nor a robot frame: {scene.frame_names}")
-        self.default_frame = str(default_frame)
-        self.point_frame = str(point_frame)
-        self._frames = frames
+        try:
+            self._core = _core.WrenchFrames(scene._core, str(world_frame), str(default_frame), str(point_frame))
+        except InvalidValueError as exc:
+            raise MessageError(str(exc)) from exc
 
     def resolve(self, frame_id: str) -> tuple[str | None, str]:
         """(axes frame or None for world axes, moment point frame) of a header's frame id."""
-        frame = frame_id or self.default_frame
-        if frame in self.world:
-            axes = None
-        elif frame in self._frames:
-            axes = frame
-        else:
-            raise MessageError(f"wrench frame {frame!r} is neither the world frame nor a robot frame")
-        point = self.point_frame or (axes if axes is not None else self.default_frame)
-        if point in self.world:
-            point = "world"
-        return axes, point
+        try:
+            return self._core.resolve(str(frame_id))
+        except InvalidValueError as exc:
+            raise MessageError(str(exc)) from exc
 
     def tau_ext(self, q: np.ndarray, wrench: np.ndarray, axes: str | None, point: str) -> np.ndarray:
         """(nq,) J(q)ᵀ w of ``wrench`` (6,) in ``axes`` about ``point``'s origin."""
