@@ -441,6 +441,46 @@ def test_inserting_ends_only_once_the_hook_tip_is_behind_the_bar(scene):
     )
 
 
+def test_a_finger_stopped_a_few_millimetres_short_of_the_insert_depth_hooks(scene):
+    """A hand held a few millimetres short of the insert target's depth by something in front of it
+    (the planner cannot push it further) ends inserting once it has stopped, within
+    ``hook.blocked_depth``, where the tip's nearest corner still clears the bar's back face
+    (URDF boxes); the same finger still moving toward the target (grasp frame at 2 cm/s, from
+    joint rates through a least-squares inverse of the Jacobian) keeps inserting, and one stopped
+    12 mm short, tip level with the bar, keeps inserting too."""
+    tip = _urdf_box_corners(ASSETS / "robots" / "royalpanda.urdf", "hook_finger", "tip", "grasp_joint")
+    bar_back = 0.005  # half the bar's 1 cm depth (assets/objects/shelf.urdf, collision "bar")
+    task = sabre.tasks.OpenObject()
+    blocked = task.hook.blocked_depth
+    assert blocked > task.hook.insert_depth_tolerance
+    x = scene.default_state()
+    x[0] = 0.939 - 0.75
+    handle = scene.object_fk(np.zeros(1), "handle_frame")
+    target = handle @ task.grasp_offset(scene, "insert")
+
+    def at_depth(dz):
+        shifted = target.copy()
+        shifted[:3, 3] += dz * handle[:3, 2]
+        placed = _place_grasp(scene, x, shifted)
+        corners = np.linalg.solve(handle, scene.fk(placed[: scene.nq], "grasp") @ tip.T).T
+        return placed, float(corners[:, 2].min())
+
+    stopped, nearest = at_depth(-0.95 * blocked)
+    assert task.depth_error(scene, stopped, "insert") == pytest.approx(-0.95 * blocked, abs=1e-4)
+    assert nearest > bar_back
+    assert task.next_phase(scene, stopped, 0.0, "insert") == "hook"
+    moving = stopped.copy()
+    j = scene.jacobian(stopped[: scene.nq], "grasp")[:3, 3 : scene.nq]
+    toward = 0.02 * handle[:3, 2]
+    moving[scene.nq + 3 : 2 * scene.nq] = j.T @ np.linalg.solve(j @ j.T, toward)
+    assert np.linalg.norm(scene.jacobian(moving[: scene.nq], "grasp")[:3] @ moving[scene.nq : 2 * scene.nq]) == pytest.approx(0.02)
+    assert task.next_phase(scene, moving, 0.0, "insert") == "insert"
+    far, _ = at_depth(-0.012)
+    assert task.next_phase(scene, far, 0.0, "insert") == "insert"
+    never = sabre.tasks.OpenObject(hook=sabre.tasks.HookConfig(blocked_depth=None))
+    assert never.next_phase(scene, stopped, 0.0, "insert") == "insert"
+
+
 def test_a_finger_that_backs_out_in_front_of_a_held_bar_while_hooking_starts_over(scene):
     """Hooking a door already opened 0.2 rad that does not move, a hand that drifts back until the
     tip's nearest corner no longer clears the bar's back face (checked against the URDF's boxes)

@@ -75,6 +75,11 @@ class HookConfig:
         tolerance: distance (m) across the bar to the target that ends hooking.
         insert_depth_tolerance: distance (m) from the insert target's depth within which inserting
             may end; None: no depth test.
+        blocked_depth: how far (m) short of the insert target's depth a finger that has stopped (its
+            grasp frame slower than ``blocked_speed``) may end inserting all the same: something in
+            front of the hand holds it there, and this close the tip still clears the bar's back
+            face; None: never.
+        blocked_speed: grasp-frame speed (m/s) below which an inserting finger counts as stopped.
         backout: how far (m) short of the hook target's depth the grasp frame may back out while
             hooking an opened, unmoving object before the task starts over; None: never.
         along_tolerance: distance (m) along the bar from the target allowed when inserting and hooking.
@@ -92,6 +97,8 @@ class HookConfig:
     offset: tuple[float, float, float] = (0.0, 0.003, 0.0)
     tolerance: float = 0.006
     insert_depth_tolerance: float | None = 0.005
+    blocked_depth: float | None = 0.008
+    blocked_speed: float = 0.005
     backout: float | None = 0.010
     along_tolerance: float = 0.03
     drag_speed: float = 0.02
@@ -100,9 +107,9 @@ class HookConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "offset", xyz("hook.offset", self.offset))
-        for name in ("tolerance", "along_tolerance", "drag_speed", "drag_distance"):
+        for name in ("tolerance", "along_tolerance", "drag_speed", "drag_distance", "blocked_speed"):
             object.__setattr__(self, name, as_non_negative(f"hook.{name}", getattr(self, name)))
-        for name in ("insert_depth_tolerance", "backout", "stall_depth"):
+        for name in ("insert_depth_tolerance", "blocked_depth", "backout", "stall_depth"):
             object.__setattr__(self, name, optional_non_negative(f"hook.{name}", getattr(self, name)))
 
 

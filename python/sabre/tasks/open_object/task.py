@@ -372,9 +372,22 @@ class OpenObject(Task):
             return False
         if phase == "hook":
             return pocket.across < self.hook.tolerance
+        if pocket.across >= self.approach.switch_position:
+            return False
         depth = self.hook.insert_depth_tolerance
-        deep = depth is None or abs(self.depth_error(scene, x, phase)) < depth
-        return pocket.across < self.approach.switch_position and deep
+        depth_error = self.depth_error(scene, x, phase)
+        return depth is None or abs(depth_error) < depth or self._blocked(scene, x, depth_error)
+
+    def _blocked(self, scene: Scene, x: np.ndarray, depth_error: float) -> bool:
+        """Whether an inserting finger has stopped short of the target's depth, within
+        ``hook.blocked_depth`` of it: the hand rests against something (the door, the frame) and
+        the planner cannot push it the last millimetres, while its tip already clears the bar."""
+        blocked = self.hook.blocked_depth
+        if blocked is None or not -blocked < depth_error < 0.0:
+            return False
+        q, dq, _, _ = scene.split_state(x)
+        speed = float(np.linalg.norm(scene.jacobian(q, geometry.tool_frame(scene))[:3] @ dq))
+        return speed < self.hook.blocked_speed
 
     def _while_opening(self, scene: Scene, x: np.ndarray) -> str:
         """The phase after one of opening: releasing a door that opens by itself (holding it only
