@@ -724,6 +724,8 @@ def test_absurd_thread_count_starts_no_more_than_max_threads():
         lambda t: t.HookConfig(insert_depth_tolerance=-0.005),
         lambda t: t.HookConfig(insert_depth_tolerance=float("nan")),
         lambda t: t.HookConfig(backout=-0.01),
+        lambda t: t.HookConfig(blocked_depth=-0.008),
+        lambda t: t.HookConfig(blocked_speed=float("nan")),
         lambda t: t.HookConfig(backout=float("nan")),
         lambda t: t.ApproachConfig(pregrasp_offset=(0.0, float("nan"), 0.0)),
         lambda t: t.OpenConfig(pose_weights=(1.0, 1.0, 1.0, 1.0, 1.0, -1.0)),
