@@ -121,6 +121,8 @@ pub struct Mppi {
     rng: ChaCha8Rng,
     stats: IterationStats,
     scratch: Vec<f64>,
+    /// The rollouts of [`Self::iterate`], reused from one iteration to the next.
+    batch: RolloutBatch,
 }
 
 /// Value of a K × nu sequence at fractional index `s`, linearly interpolated, clamped at both ends.
@@ -258,6 +260,7 @@ impl Mppi {
             rng: ChaCha8Rng::seed_from_u64(config.seed),
             stats: IterationStats::default(),
             scratch: Vec::new(),
+            batch: RolloutBatch::default(),
             model,
             config,
             k,
@@ -429,18 +432,18 @@ impl Mppi {
 
     /// Rolls the current batch out from `x` with `cost`; records its timing in [`Self::stats`].
     pub fn rollout(&mut self, x: &[f64], cost: &Cost) -> Result<RolloutBatch> {
+        let mut batch = RolloutBatch::default();
+        self.rollout_into(x, cost, &mut batch)?;
+        Ok(batch)
+    }
+
+    fn rollout_into(&mut self, x: &[f64], cost: &Cost, batch: &mut RolloutBatch) -> Result<()> {
         let start = Instant::now();
-        let batch = self.model.rollout_with_cost(
-            x,
-            &self.samples,
-            self.config.rollouts,
-            self.k,
-            self.config.threads,
-            Some(cost),
-        )?;
+        let (n, k, threads) = (self.config.rollouts, self.k, self.config.threads);
+        self.model.rollout_into(x, &self.samples, n, k, threads, Some(cost), batch)?;
         self.stats.rollout_time = start.elapsed().as_secs_f64();
         (self.stats.engine_steps, self.stats.engine_time) = batch.engine_totals();
-        Ok(batch)
+        Ok(())
     }
 
     /// Weights the samples by `costs` and moves the policy: μ_k += α clip(Σ_l w_l ε_k^l, ±g_max) (14, 54),
@@ -505,8 +508,12 @@ impl Mppi {
         }
         let start = Instant::now();
         self.sample(t);
-        let batch = self.rollout(x, cost)?;
-        self.update(&batch.costs)?;
+        let mut batch = std::mem::take(&mut self.batch);
+        let result = self
+            .rollout_into(x, cost, &mut batch)
+            .and_then(|()| self.update(&batch.costs));
+        self.batch = batch;
+        result?;
         self.stats.iteration_time = start.elapsed().as_secs_f64();
         Ok(&self.stats)
     }

@@ -90,7 +90,7 @@ impl Default for RolloutConfig {
 }
 
 /// Results of N rollouts of K steps, row-major in (N, K[+1], ·).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct RolloutBatch {
     pub n: usize,
     pub k: usize,
@@ -117,6 +117,35 @@ pub struct RolloutBatch {
 }
 
 impl RolloutBatch {
+    /// Sizes the batch for `n` rollouts of `k` steps, keeping its buffers' memory: a planner that
+    /// reuses one batch allocates (and the OS maps and zeroes) nothing per iteration. The states,
+    /// τ_ext, wrenches and contacts are left as they were (every rollout writes all of its own);
+    /// the per-rollout flags and totals start from zero.
+    fn prepare(&mut self, n: usize, k: usize, nx: usize, nq: usize) -> Result<()> {
+        fn fit<T: Clone>(v: &mut Vec<T>, len: usize, fill: T) -> Result<()> {
+            if len > v.len() {
+                v.try_reserve_exact(len - v.len())
+                    .map_err(|_| SabreError::Simulation(format!("cannot allocate {len} values for the rollout outputs")))?;
+            }
+            v.resize(len, fill);
+            Ok(())
+        }
+        (self.n, self.k, self.nx, self.nq) = (n, k, nx, nq);
+        fit(&mut self.states, n * (k + 1) * nx, 0.0)?;
+        fit(&mut self.tau_ext, n * k * nq, 0.0)?;
+        fit(&mut self.wrench, n * k * 6, 0.0)?;
+        fit(&mut self.contact, n * k, false)?;
+        for (v, fill) in [(&mut self.costs, 0.0), (&mut self.engine_time, 0.0)] {
+            fit(v, n, fill)?;
+            v.fill(fill);
+        }
+        fit(&mut self.failed, n, false)?;
+        self.failed.fill(false);
+        fit(&mut self.engine_steps, n, 0)?;
+        self.engine_steps.fill(0);
+        Ok(())
+    }
+
     /// Steps through Rapier's pipeline and the time spent in them, summed over the batch. The time
     /// adds up every worker's: divide by the thread count for its share of the wall time.
     pub fn engine_totals(&self) -> (u64, f64) {
@@ -131,6 +160,10 @@ pub struct RolloutModel {
     template: RolloutWorld,
     /// Worlds handed to workers; each is restored from `template` before every rollout.
     worlds: Mutex<Vec<RolloutWorld>>,
+    /// A world per worker of the pool running a batch (by rayon's thread index): a worker keeps the
+    /// world it used last, whose memory is still in its core's caches, instead of one another core
+    /// left on the shared stack.
+    by_worker: Vec<Mutex<Option<RolloutWorld>>>,
     /// Per joint (robot, then object) the speed beyond which a rollout has diverged.
     speed_bounds: Vec<f64>,
 }
@@ -248,6 +281,7 @@ impl RolloutModel {
             config,
             template,
             worlds: Mutex::new(Vec::new()),
+            by_worker: (0..MAX_THREADS).map(|_| Mutex::new(None)).collect(),
         })
     }
 
@@ -297,6 +331,26 @@ impl RolloutModel {
 
     fn checkin(&self, world: RolloutWorld) {
         self.worlds.lock().unwrap_or_else(|e| e.into_inner()).push(world);
+    }
+
+    /// The calling worker's own world (see `by_worker`), else one from the shared stack.
+    fn checkout_for_worker(&self) -> RolloutWorld {
+        let slot = rayon::current_thread_index().and_then(|i| self.by_worker.get(i));
+        let own = slot.and_then(|m| m.lock().unwrap_or_else(|e| e.into_inner()).take());
+        own.unwrap_or_else(|| self.checkout())
+    }
+
+    fn checkin_for_worker(&self, world: RolloutWorld) {
+        match rayon::current_thread_index().and_then(|i| self.by_worker.get(i)) {
+            Some(m) => {
+                let mut slot = m.lock().unwrap_or_else(|e| e.into_inner());
+                match slot.as_ref() {
+                    None => *slot = Some(world),
+                    Some(_) => self.checkin(world),
+                }
+            }
+            None => self.checkin(world),
+        }
     }
 
     /// Simulates one input sequence `u` (K × nu) from `x0`; returns the step at which the physics
@@ -358,6 +412,23 @@ impl RolloutModel {
         threads: Option<usize>,
         cost: Option<&dyn StepEvaluator>,
     ) -> Result<RolloutBatch> {
+        let mut batch = RolloutBatch::default();
+        self.rollout_into(x0, u, n, k, threads, cost, &mut batch)?;
+        Ok(batch)
+    }
+
+    /// [`Self::rollout_with_cost`] into `batch`, whose memory is reused (see [`RolloutBatch::prepare`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn rollout_into(
+        &self,
+        x0: &[f64],
+        u: &[f64],
+        n: usize,
+        k: usize,
+        threads: Option<usize>,
+        cost: Option<&dyn StepEvaluator>,
+        batch: &mut RolloutBatch,
+    ) -> Result<()> {
         let nx = self.scene.nx();
         let nq = self.scene.nq();
         self.scene.check_state(x0)?;
@@ -388,33 +459,13 @@ impl RolloutModel {
                     format!("a batch of {n} rollouts × {k} steps is too large (limit {MAX_BATCH_ELEMENTS} values per output)"),
                 )
             })?;
-        let zeros = |len: usize| -> Result<Vec<f64>> {
-            let mut v = Vec::new();
-            v.try_reserve_exact(len)
-                .map_err(|_| SabreError::Simulation(format!("cannot allocate {len} values for the rollout outputs")))?;
-            v.resize(len, 0.0);
-            Ok(v)
-        };
         debug_assert!(elements >= n * k);
-        let mut batch = RolloutBatch {
-            n,
-            k,
-            nx,
-            nq,
-            states: zeros(n * (k + 1) * nx)?,
-            tau_ext: zeros(n * k * nq)?,
-            wrench: zeros(n * k * 6)?,
-            contact: vec![false; n * k],
-            failed: vec![false; n],
-            costs: zeros(n)?,
-            engine_steps: vec![0; n],
-            engine_time: vec![0.0; n],
-        };
+        batch.prepare(n, k, nx, nq)?;
         if n == 0 || k == 0 {
             for i in 0..n {
                 batch.states[i * nx..(i + 1) * nx].copy_from_slice(x0);
             }
-            return Ok(batch);
+            return Ok(());
         }
         if let Some(cost) = cost {
             cost.validate(&self.scene)?;
@@ -427,7 +478,7 @@ impl RolloutModel {
                     contact: &mut [bool],
                     (failed, total): (&mut bool, &mut f64),
                     (engine_steps, engine_time): (&mut u64, &mut f64)| {
-            let mut world = self.checkout();
+            let mut world = self.checkout_for_worker();
             let clock = world.engine_clock();
             let u_i = &u[i * k * nq..(i + 1) * k * nq];
             let slices = RolloutSlices {
@@ -446,7 +497,7 @@ impl RolloutModel {
                     let after = world.engine_clock();
                     *engine_steps = after.steps - clock.steps;
                     *engine_time = after.seconds - clock.seconds;
-                    self.checkin(world);
+                    self.checkin_for_worker(world);
                     result
                 }
                 Err(_) => Some(0),
@@ -470,11 +521,14 @@ impl RolloutModel {
                 .zip(batch.failed.par_iter_mut().zip(batch.costs.par_iter_mut()))
                 .zip(batch.engine_steps.par_iter_mut().zip(batch.engine_time.par_iter_mut()))
                 .enumerate()
+                // One rollout per job: rollouts in contact cost several times those in free space,
+                // and rayon's default halving leaves a worker idle behind a chunk of expensive ones.
+                .with_max_len(1)
                 .for_each(|(i, (((((s, t), w), c), f), e))| work(i, s, t, w, c, f, e));
         };
         let pool = pool(threads)?;
         crate::interrupt::run_watched(&cancel, || pool.install(run))?;
-        Ok(batch)
+        Ok(())
     }
 }
 
@@ -608,6 +662,45 @@ pub(crate) mod tests {
         assert_failed_at(&failing, &clean, 1, 0);
         for i in [0, 2, 3] {
             assert!(same_rollout(&failing, &clean, i), "rollout {i} changed");
+        }
+    }
+
+    #[test]
+    fn a_reused_batch_holds_what_a_fresh_one_would_after_failures_and_other_sizes() {
+        let probe = Probe { panic_on: f64::NAN };
+        let model = RolloutModel::new(probe_and_drawer(), RolloutConfig::default()).expect("model");
+        let x0 = state([0.3, 0.0], [0.0, 0.0], 0.0, 0.0);
+        let u = inputs();
+        let clean = batch(&u, &probe);
+        let mut poisoned = u.clone();
+        poisoned[(2 * K + 3) * 2] = NON_FINITE_COMMAND;
+        let mut reused = RolloutBatch::default();
+        // A failing batch, a smaller one, then the full clean one into the same buffers.
+        model
+            .rollout_into(&x0, &poisoned, N, K, Some(2), Some(&probe), &mut reused)
+            .expect("failing");
+        assert!(reused.failed[2]);
+        let half = &u[..2 * K * 2];
+        model
+            .rollout_into(&x0, half, 2, K, Some(1), Some(&probe), &mut reused)
+            .expect("smaller");
+        assert_eq!(
+            (reused.n, reused.states.len(), reused.failed.len()),
+            (2, 2 * (K + 1) * reused.nx, 2)
+        );
+        for i in 0..2 {
+            assert!(same_rollout(&reused, &clean, i), "rollout {i} of the smaller batch");
+        }
+        model
+            .rollout_into(&x0, &u, N, K, Some(2), Some(&probe), &mut reused)
+            .expect("clean");
+        assert_eq!(
+            (reused.failed.as_slice(), reused.engine_steps.as_slice()),
+            (clean.failed.as_slice(), clean.engine_steps.as_slice())
+        );
+        assert_eq!(reused.states.len(), clean.states.len());
+        for i in 0..N {
+            assert!(same_rollout(&reused, &clean, i), "rollout {i} of the reused batch");
         }
     }
 }
