@@ -2,7 +2,7 @@
 //! and the core's long loops poll it on the calling thread every [`POLL_PERIOD`].
 
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::OnceLock;
+use std::sync::{Condvar, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 use crate::error::{Result, SabreError};
@@ -35,29 +35,32 @@ pub fn interrupted_now() -> bool {
     WATCHER.get().is_some_and(|w| w.watches_current_thread() && w.interrupted())
 }
 
-/// Runs `work` on a helper thread while the watched calling thread polls the watcher; on an
+/// Runs `work` on `pool`; a watched calling thread polls the watcher meanwhile and on an
 /// interrupt sets `cancel` (which `work` must poll), waits for `work` to return and reports it.
-/// On an unwatched thread `work` simply runs here.
-pub fn run_watched<F: FnOnce() + Send>(cancel: &Cancel, work: F) -> Result<()> {
+/// The calling thread waits on a condition variable, not on a helper thread of its own: spawning
+/// one per call cost more than a small batch's rollouts.
+pub fn run_watched_on<F: FnOnce() + Send>(pool: &rayon::ThreadPool, cancel: &Cancel, work: F) -> Result<()> {
     if !watched() {
-        work();
+        pool.install(work);
         return Ok(());
     }
-    let (done, finished) = std::sync::mpsc::channel::<()>();
-    let interrupted = std::thread::scope(|s| {
-        s.spawn(move || {
+    let finished = (Mutex::new(false), Condvar::new());
+    let mut interrupted = false;
+    pool.in_place_scope(|scope| {
+        scope.spawn(|_| {
             work();
-            let _ = done.send(());
+            let (done, signal) = &finished;
+            *done.lock().unwrap_or_else(|e| e.into_inner()) = true;
+            signal.notify_one();
         });
-        loop {
-            match finished.recv_timeout(POLL_PERIOD) {
-                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
-                    if interrupted_now() {
-                        cancel.set();
-                        return true;
-                    }
-                }
-                _ => return false,
+        let (done, signal) = &finished;
+        let mut is_done = done.lock().unwrap_or_else(|e| e.into_inner());
+        while !*is_done {
+            let (guard, _) = signal.wait_timeout(is_done, POLL_PERIOD).unwrap_or_else(|e| e.into_inner());
+            is_done = guard;
+            if !*is_done && !interrupted && interrupted_now() {
+                cancel.set();
+                interrupted = true;
             }
         }
     });

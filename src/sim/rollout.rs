@@ -527,7 +527,7 @@ impl RolloutModel {
                 .for_each(|(i, (((((s, t), w), c), f), e))| work(i, s, t, w, c, f, e));
         };
         let pool = pool(threads)?;
-        crate::interrupt::run_watched(&cancel, || pool.install(run))?;
+        crate::interrupt::run_watched_on(&pool, &cancel, run)?;
         Ok(())
     }
 }
