@@ -522,7 +522,7 @@ impl RolloutModel {
                 .zip(batch.engine_steps.par_iter_mut().zip(batch.engine_time.par_iter_mut()))
                 .enumerate()
                 // One rollout per job: rollouts in contact cost several times those in free space,
-                // and rayon's default halving leaves a worker idle behind a chunk of expensive ones.
+                // and rayon's default halving can leave a worker idle behind a chunk of expensive ones.
                 .with_max_len(1)
                 .for_each(|(i, (((((s, t), w), c), f), e))| work(i, s, t, w, c, f, e));
         };

@@ -405,26 +405,32 @@ def _urdf_box_corners(urdf, link, collision, frame_joint):
     return np.hstack([centre + half * signs, np.ones((8, 1))])
 
 
+def _at_insert_depth(scene, task, dz):
+    """A state at rest with the grasp frame dz (m) along the handle frame's z from the insert
+    target (the shelf closed, the base in front of it), and the depth in the handle frame of the
+    hook tip's nearest corner (a box on the hook finger, read from the URDF)."""
+    tip = _urdf_box_corners(ASSETS / "robots" / "royalpanda.urdf", "hook_finger", "tip", "grasp_joint")
+    x = scene.default_state()
+    x[0] = 0.939 - 0.75
+    handle = scene.object_fk(np.zeros(1), "handle_frame")
+    target = handle @ task.grasp_offset(scene, "insert")
+    target[:3, 3] += dz * handle[:3, 2]
+    placed = _place_grasp(scene, x, target)
+    corners = np.linalg.solve(handle, scene.fk(placed[: scene.nq], "grasp") @ tip.T).T
+    return placed, float(corners[:, 2].min())
+
+
 def test_inserting_ends_only_once_the_hook_tip_is_behind_the_bar(scene):
     """The hook phase slides the finger sideways; its tip (a box on the hook finger) must already be
     behind the bar (a 1 cm box at the handle frame's origin). Checked against the URDF's boxes: at
     every depth the insert test accepts, the tip's nearest corner clears the bar's back face; a
     finger 12 mm short, which the across-the-bar distance alone lets through, has its tip level with
     the bar and keeps inserting."""
-    tip = _urdf_box_corners(ASSETS / "robots" / "royalpanda.urdf", "hook_finger", "tip", "grasp_joint")
     bar_back = 0.005  # half the bar's 1 cm depth (assets/objects/shelf.urdf, collision "bar")
     task = sabre.tasks.OpenObject()
-    x = scene.default_state()
-    x[0] = 0.939 - 0.75
-    handle = scene.object_fk(np.zeros(1), "handle_frame")
-    target = handle @ task.grasp_offset(scene, "insert")
 
     def at_depth(dz):
-        shifted = target.copy()
-        shifted[:3, 3] += dz * handle[:3, 2]
-        placed = _place_grasp(scene, x, shifted)
-        corners = np.linalg.solve(handle, scene.fk(placed[: scene.nq], "grasp") @ tip.T).T
-        return placed, float(corners[:, 2].min())
+        return _at_insert_depth(scene, task, dz)
 
     for dz in (-0.9 * task.hook.insert_depth_tolerance, 0.0, 0.9 * task.hook.insert_depth_tolerance):
         placed, nearest = at_depth(dz)
@@ -448,24 +454,12 @@ def test_a_finger_stopped_a_few_millimetres_short_of_the_insert_depth_hooks(scen
     (URDF boxes); the same finger still moving toward the target (grasp frame at 2 cm/s, from
     joint rates through a least-squares inverse of the Jacobian) keeps inserting, and one stopped
     12 mm short, tip level with the bar, keeps inserting too."""
-    tip = _urdf_box_corners(ASSETS / "robots" / "royalpanda.urdf", "hook_finger", "tip", "grasp_joint")
     bar_back = 0.005  # half the bar's 1 cm depth (assets/objects/shelf.urdf, collision "bar")
     task = sabre.tasks.OpenObject()
     blocked = task.hook.blocked_depth
     assert blocked > task.hook.insert_depth_tolerance
-    x = scene.default_state()
-    x[0] = 0.939 - 0.75
     handle = scene.object_fk(np.zeros(1), "handle_frame")
-    target = handle @ task.grasp_offset(scene, "insert")
-
-    def at_depth(dz):
-        shifted = target.copy()
-        shifted[:3, 3] += dz * handle[:3, 2]
-        placed = _place_grasp(scene, x, shifted)
-        corners = np.linalg.solve(handle, scene.fk(placed[: scene.nq], "grasp") @ tip.T).T
-        return placed, float(corners[:, 2].min())
-
-    stopped, nearest = at_depth(-0.95 * blocked)
+    stopped, nearest = _at_insert_depth(scene, task, -0.95 * blocked)
     assert task.depth_error(scene, stopped, "insert") == pytest.approx(-0.95 * blocked, abs=1e-4)
     assert nearest > bar_back
     assert task.next_phase(scene, stopped, 0.0, "insert") == "hook"
@@ -476,7 +470,7 @@ def test_a_finger_stopped_a_few_millimetres_short_of_the_insert_depth_hooks(scen
     hand_velocity = scene.jacobian(moving[: scene.nq], "grasp")[:3] @ moving[scene.nq : 2 * scene.nq]
     assert np.linalg.norm(hand_velocity) == pytest.approx(0.02)
     assert task.next_phase(scene, moving, 0.0, "insert") == "insert"
-    far, _ = at_depth(-0.012)
+    far, _ = _at_insert_depth(scene, task, -0.012)
     assert task.next_phase(scene, far, 0.0, "insert") == "insert"
     never = sabre.tasks.OpenObject(hook=sabre.tasks.HookConfig(blocked_depth=None))
     assert never.next_phase(scene, stopped, 0.0, "insert") == "insert"
