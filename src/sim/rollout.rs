@@ -199,6 +199,9 @@ fn pool(threads: usize) -> Result<Arc<rayon::ThreadPool>> {
     Ok(p)
 }
 
+/// A single rollout of at most this many steps runs on the calling thread (see `rollout_into`).
+const INLINE_STEPS: usize = 512;
+
 /// Upper bound on the values in one output array of a batch (2^28 doubles = 2 GiB).
 pub const MAX_BATCH_ELEMENTS: usize = 1 << 28;
 
@@ -511,6 +514,23 @@ impl RolloutModel {
                 contact[step..].fill(false);
             }
         };
+        if n == 1 && k <= INLINE_STEPS {
+            // One short rollout (a task's probe, every planning iteration) costs less than handing
+            // it to the pool and back, and ends too soon to need watching for Ctrl-C.
+            let b = &mut *batch;
+            let (failed, costs) = (&mut b.failed[0], &mut b.costs[0]);
+            let (steps, time) = (&mut b.engine_steps[0], &mut b.engine_time[0]);
+            work(
+                0,
+                &mut b.states,
+                &mut b.tau_ext,
+                &mut b.wrench,
+                &mut b.contact,
+                (failed, costs),
+                (steps, time),
+            );
+            return Ok(());
+        }
         let run = || {
             batch
                 .states
@@ -663,6 +683,30 @@ pub(crate) mod tests {
         for i in [0, 2, 3] {
             assert!(same_rollout(&failing, &clean, i), "rollout {i} changed");
         }
+    }
+
+    #[test]
+    fn a_single_rollout_run_on_the_calling_thread_matches_its_row_of_a_batch_and_keeps_a_panic_inside() {
+        let probe = Probe { panic_on: 0.0625 };
+        let model = RolloutModel::new(probe_and_drawer(), RolloutConfig::default()).expect("model");
+        let x0 = state([0.3, 0.0], [0.0, 0.0], 0.0, 0.0);
+        let u = inputs();
+        let clean = batch(&u, &Probe { panic_on: f64::NAN });
+        let row = &u[2 * K * 2..3 * K * 2];
+        let single = model
+            .rollout_with_cost(&x0, row, 1, K, Some(2), Some(&probe))
+            .expect("single");
+        let nx = single.nx;
+        assert_eq!(single.states, clean.states[2 * (K + 1) * nx..3 * (K + 1) * nx]);
+        assert_eq!(single.tau_ext, clean.tau_ext[2 * K * single.nq..3 * K * single.nq]);
+        assert_eq!((single.costs[0], single.failed[0]), (clean.costs[2], false));
+        let mut poisoned = row.to_vec();
+        poisoned[5 * 2] = 0.0625;
+        let failing = model
+            .rollout_with_cost(&x0, &poisoned, 1, K, Some(2), Some(&probe))
+            .expect("failing");
+        assert!(failing.failed[0] && failing.costs[0] == f64::INFINITY);
+        assert!(failing.states[nx..].iter().all(|v| v.is_nan()));
     }
 
     #[test]
