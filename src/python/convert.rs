@@ -3,7 +3,7 @@
 
 use std::sync::{Mutex, MutexGuard};
 
-use nalgebra::{Isometry3, Matrix3, Matrix4, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion};
 use numpy::{PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
@@ -76,8 +76,12 @@ pub(crate) fn isometry(name: &str, m: &[f64]) -> crate::Result<Isometry3<f64>> {
     if (rot.transpose() * rot - Matrix3::identity()).norm() > 1e-6 || (rot.determinant() - 1.0).abs() > 1e-6 {
         return Err(SabreError::invalid(name, "rotation block is not a rotation matrix"));
     }
+    // The block is a rotation to 1e-6: read it directly (Shepperd's method) and normalise, instead of
+    // nalgebra's iterative projection onto the rotations, which cost more than the servo guide
+    // whose targets it read.
+    let quaternion = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(rot));
     Ok(Isometry3::from_parts(
         Translation3::new(m[3], m[7], m[11]),
-        UnitQuaternion::from_matrix(&rot),
+        UnitQuaternion::new_normalize(quaternion.into_inner()),
     ))
 }
