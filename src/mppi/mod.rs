@@ -377,9 +377,10 @@ impl Mppi {
     }
 
     fn project(&self, u: &mut [f64]) {
-        for (i, v) in u.iter_mut().enumerate() {
-            let d = i % self.nu;
-            *v = v.clamp(self.lower[d], self.upper[d]);
+        for step in u.chunks_exact_mut(self.nu) {
+            for ((v, &lo), &hi) in step.iter_mut().zip(&self.lower).zip(&self.upper) {
+                *v = v.clamp(lo, hi);
+            }
         }
     }
 
