@@ -18,6 +18,7 @@ mod robot;
 mod safety;
 mod scene;
 mod sim;
+mod sim_driver;
 
 use pyo3::prelude::*;
 use pyo3::types::PyModule;
@@ -43,6 +44,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<control::PyInnerLoop>()?;
     m.add_class::<control::PyRateLimiter>()?;
     m.add_class::<bridge::PyCommandGate>()?;
+    m.add_class::<sim_driver::PySimDriver>()?;
+    m.add_class::<sim_driver::PyFrankaReflexes>()?;
+    m.add_function(wrap_pyfunction!(sim_driver::rcl_function_names, m)?)?;
     m.add_class::<bridge::PyJointMerge>()?;
     m.add_class::<bridge_tick::PyBridgeTick>()?;
     m.add_class::<bridge_tick::PyWrenchFrames>()?;

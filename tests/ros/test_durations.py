@@ -33,3 +33,14 @@ def test_empty_negative_nan_and_overlong_durations():
     assert len(record) == 1 and record.percentile_ms(100) == 0.0
     record.record(10 * LONGEST)
     assert record.max_ms() == pytest.approx(LONGEST * 1e3, rel=2e-3)
+
+
+def test_recording_many_at_once_skips_nan_and_matches_numpy():
+    rng = np.random.default_rng(1)
+    samples = rng.lognormal(mean=np.log(2e-4), sigma=0.5, size=5_000)
+    record = Durations()
+    record.record_all(np.r_[samples[:2_500], np.nan, samples[2_500:]])
+    record.record_all(np.zeros(0))
+    assert len(record) == len(samples)
+    expected = np.percentile(samples, 99, method="inverted_cdf") * 1e3
+    assert record.percentile_ms(99) == pytest.approx(expected, rel=2e-3)

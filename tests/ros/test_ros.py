@@ -369,13 +369,15 @@ def test_a_moved_and_turned_shelf_is_opened_through_the_pose_input_within_the_li
     assert np.all(np.array(s["arm_speed_max"]) <= np.array(limits["arm_velocity"]) + 1e-9)
 
 
-def test_the_sim_robot_matches_answers_by_stamp_and_stops_on_its_command_timeout(bridge):
+@pytest.mark.parametrize("direct", [True, False], ids=["commands-taken-by-the-core", "commands-by-callback"])
+def test_the_sim_robot_matches_answers_by_stamp_and_stops_on_its_command_timeout(bridge, direct):
     """The probe answers every tenth joint state with a zero arm command carrying that state's stamp
     (and three with stamps no state had), then a small ramp it stops sending: the sim robot counts
     the answers over the states published while answers came, the made-up ones apart, and stops
-    the arm at most command_timeout plus one tick after the last command, and it comes to rest."""
+    the arm at most command_timeout plus one tick after the last command, and it comes to rest;
+    with the commands taken by the core at each tick and with an executor callback per command."""
     domain, probe, processes = bridge
-    sim = start_node("sim-robot", domain.id, ["--object", "shelf"], {"command_timeout": 0.05})
+    sim = start_node("sim-robot", domain.id, ["--object", "shelf"], {"command_timeout": 0.05, "direct_middleware": direct})
     processes.append(sim)
     answered: list[float] = []
     received = [0]

@@ -33,6 +33,11 @@ class Durations:
         if seconds == seconds:  # not NaN
             self._pending.append(seconds)
 
+    def record_all(self, seconds: np.ndarray) -> None:
+        """Records each of ``seconds`` (NaN skipped)."""
+        values = np.asarray(seconds, dtype=np.float64)
+        self._pending.extend(values[~np.isnan(values)].tolist())
+
     def _flush(self) -> None:
         pending, self._pending = self._pending, []
         if not pending:

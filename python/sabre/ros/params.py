@@ -183,6 +183,9 @@ SIM_ROBOT_PARAMETERS: dict[str, Any] = {
     # "cycle": the command in effect at each plant tick (delivery jitter too, as the arm sees it; needs
     # a plant loop that is never late itself)
     "reflex_check": "command",
+    # the arm's commands and joint states taken and published by the core from the plant loop (no
+    # executor callback per command); False: an executor callback per command
+    "direct_middleware": True,
     "command_timeout": 0.05,  # s: older commands → the robot is stopped (the robot side's timeout)
     "max_catchup": 0.1,
     "status_rate": 2.0,

@@ -1,5 +1,5 @@
-"""The Franka arm's checks of a joint-velocity command stream, emulated for the simulated robot (plain
-NumPy): every control cycle the command in effect must keep the joint velocity, acceleration and
+"""The Franka arm's checks of a joint-velocity command stream, emulated for the simulated robot (in
+the core): every control cycle the command in effect must keep the joint velocity, acceleration and
 jerk limits, the latter two as difference quotients over the cycle; a violation aborts the motion
 (libfranka's discontinuity reflexes), and the arm brakes and ignores commands until recovered."""
 
@@ -9,6 +9,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .. import _core
 from .params import FRANKA_ACCELERATION, FRANKA_JERK, FRANKA_VELOCITY
 
 __all__ = ["FrankaReflexes", "LIMIT_TOLERANCE"]
@@ -30,13 +31,9 @@ class FrankaReflexes:
         jerk: Sequence[float] = FRANKA_JERK,
     ) -> None:
         self.dt = float(dt)
-        self.v_max = np.asarray(velocity, dtype=np.float64) * (1 + LIMIT_TOLERANCE)
-        self.a_max = np.asarray(acceleration, dtype=np.float64) * (1 + LIMIT_TOLERANCE)
-        self.j_max = np.asarray(jerk, dtype=np.float64) * (1 + LIMIT_TOLERANCE)
-        self._limits = np.concatenate((self.v_max, self.a_max, self.j_max))
-        self.aborted: str | None = None
-        self.aborts = 0
-        self.recover()
+        self.core = _core.FrankaReflexes(
+            self.dt, [float(v) for v in velocity], [float(a) for a in acceleration], [float(j) for j in jerk]
+        )
 
     @classmethod
     def for_arm(cls, dt: float, velocity: Sequence[float] | np.ndarray) -> FrankaReflexes:
@@ -49,37 +46,22 @@ class FrankaReflexes:
         n = len(velocity)
         return cls(dt, list(velocity), [min(FRANKA_ACCELERATION)] * n, [min(FRANKA_JERK)] * n)
 
+    @property
+    def aborted(self) -> str | None:
+        return self.core.aborted
+
+    @property
+    def aborts(self) -> int:
+        return self.core.aborts
+
     def recover(self) -> None:
         """Clears an abort; the next check starts from rest."""
-        self.aborted = None
-        self._v = np.zeros(len(self.v_max))
-        self._a = np.zeros(len(self.v_max))
+        self.core.recover()
 
     def follow(self, v: np.ndarray) -> None:
         """Takes ``v`` as the command in effect without checking it (the robot's own stop)."""
-        a = (v - self._v) / self.dt
-        self._v, self._a = v.copy(), a
+        self.core.follow(np.asarray(v, dtype=np.float64))
 
     def check(self, v: np.ndarray) -> str | None:
         """The reflex ``v`` (the command in effect this cycle) trips, if any (then aborted)."""
-        if self.aborted is not None:
-            return None
-        a = (v - self._v) / self.dt
-        jerk = (a - self._a) / self.dt
-        self._v, self._a = v.copy(), a
-        if (np.abs(np.concatenate((v, a, jerk))) <= self._limits).all():
-            return None  # the common case, in one comparison
-        for name, reflex, value, limit in (
-            ("velocity", "velocity_limits_violation", v, self.v_max),
-            ("acceleration", "velocity_discontinuity", a, self.a_max),
-            ("jerk", "acceleration_discontinuity", jerk, self.j_max),
-        ):
-            over = np.flatnonzero(np.abs(value) > limit)
-            if over.size:
-                i = int(over[0])
-                self.aborted = (
-                    f"joint_motion_generator_{reflex}: joint {i + 1} commanded {name} {value[i]:.4g} beyond {limit[i]:.4g}"
-                )
-                self.aborts += 1
-                return self.aborted
-        return None
+        return self.core.check(np.asarray(v, dtype=np.float64))

@@ -1,5 +1,6 @@
 """What the simulated robot publishes, as a Franka arm's and a mobile base's drivers do: the arm's joint
-states with the gripper's (held) joints at the plant's rate, the base's odometry with its twist in the
+states with the gripper's (held) joints at the plant's rate (serialized, noisy and published by the
+core's `SimDriver`, see :meth:`DriverOutputs.driver`), the base's odometry with its twist in the
 base frame (a robot with a base), the wrist wrench best effort in the sensor frame, measurement noise on all three, the robot
 description latched, and (as a perception node would) the object's pose; besides, for evaluation
 only, the object's true joint state and a clock."""
@@ -11,7 +12,6 @@ from typing import Any
 
 import numpy as np
 
-from .. import _core
 from ..scene import Scene
 from .conversions import quaternion_of
 from .qos import profile
@@ -66,12 +66,9 @@ class DriverOutputs:
         held = [float(p["finger_width"])] * len(fingers)
         if not fingers:
             fingers, held = list(scene.held_joints), [float(v) for v in scene.held_joints.values()]
-        self._js_names = [scene.joint_names[i] for i in arm_index] + fingers
-        width = len(arm_index) + len(fingers)
-        self._position = np.zeros(width)
-        self._velocity = np.zeros(width)
-        self._no_effort = np.zeros(0)
-        self._position[len(arm_index) :] = held
+        self.joint_state_names = [scene.joint_names[i] for i in arm_index] + fingers
+        self.held_positions = held
+        self.position_noise, self.velocity_noise = float(p["position_noise"]), float(p["velocity_noise"])
         self._odom = Odometry()
         self._odom.header.frame_id = str(p["world_frame"])
         self._odom.child_frame_id = str(p["base_frame"])
@@ -81,8 +78,7 @@ class DriverOutputs:
         self._truth = JointState(name=list(scene.object_joint_names))
         self._clock = Clock()
         seed = int(p["noise_seed"])
-        na = len(arm_index)
-        self.arm_noise = Noise(seed, 2 * na, np.r_[np.full(na, p["position_noise"]), np.full(na, p["velocity_noise"])])
+        self.noise_seed = seed
         self.base_noise = Noise(seed + 1, 6, np.r_[np.full(3, p["position_noise"]), np.full(3, p["velocity_noise"])])
         f = float(p["force_noise"])
         self.wrench_noise = Noise(seed + 2, 6, np.r_[np.full(3, f), np.full(3, 0.1 * f)])
@@ -98,16 +94,6 @@ class DriverOutputs:
         o = msg.pose.orientation
         o.x, o.y, o.z, o.w = quaternion_of(roll, pitch, yaw)
         self.pose_pub.publish(msg)
-
-    def publish_joint_states(self, q: np.ndarray, dq: np.ndarray, stamp_ns: int) -> None:
-        """The arm's and the gripper's joint state, serialized in the core and published as bytes
-        (no message object per state at 1 kHz)."""
-        noise = self.arm_noise.next()
-        na = len(self.arm_index)
-        np.add(q[self.arm_index], noise[:na], out=self._position[:na])
-        np.add(dq[self.arm_index], noise[na:], out=self._velocity[:na])
-        raw = _core.encode_joint_state(stamp_ns, "", self._js_names, self._position, self._velocity, self._no_effort)
-        self.js_pub.publish(raw)
 
     def publish_odometry(self, q: np.ndarray, dq: np.ndarray, stamp: Any) -> None:
         """The base's pose and its twist in the base frame (as nav_msgs/Odometry defines it)."""

@@ -2,7 +2,11 @@
 behind what a Franka arm's and a mobile base's drivers offer (:mod:`sabre.ros.sim_drivers`): arm
 joint velocities in, their stream checked by the arm's discontinuity reflexes
 (:mod:`sabre.ros.reflexes`; a violation aborts the motion and publishes the error), a base twist
-in, a command timeout on the robot side, and run-time faults (stuck door, obstacles)."""
+in, a command timeout on the robot side, and run-time faults (stuck door, obstacles).
+
+The 1 kHz streams (the arm's commands in, its joint states out) run through the core's
+`SimDriver`, which takes and publishes them through rcl from the plant loop (:mod:`sabre.ros.direct`)
+without an executor callback or a message object per tick (``direct_middleware``)."""
 
 from __future__ import annotations
 
@@ -21,7 +25,7 @@ from ..inner_loop import LowLevelController
 from ..scene import Scene
 from ..sim import Plant
 from . import PeriodicThread, gil_priority, realtime_middleware, realtime_thread, require_ros, spin_node
-from .conversions import base_to_world
+from .direct import handle_address, rcl_functions
 from .durations import Durations
 from .params import SIM_ROBOT_PARAMETERS, declare
 from .qos import profile
@@ -62,6 +66,7 @@ class SimRobotNode:
         self._build_plant(p)
         self._init_bookkeeping(p)
         self.out = DriverOutputs(self.node, p, self.scene, self.arm_index, self._robot_urdf(p))
+        self._build_driver(p)
         if p["publish_object_pose"]:
             self.out.publish_object_pose(self.object_pose, str(p["world_frame"]))
         self._create_inputs(p)
@@ -114,40 +119,41 @@ class SimRobotNode:
 
         return urdf_text("royalpanda")
 
+    def _build_driver(self, p: dict[str, Any]) -> None:
+        """The core's side of the 1 kHz streams (see :class:`sabre._core.SimDriver`)."""
+        reflexes = FrankaReflexes.for_arm(self.period, self.scene.dq_limit[self.arm_index]) if p["reflexes"] else None
+        out = self.out
+        self._driver = _core.SimDriver(
+            self.scene.nq,
+            [int(i) for i in self.arm_index],
+            self.scene.base_indices,
+            self.command_timeout,
+            self.period,
+            out.joint_state_names,
+            out.held_positions,
+            out.position_noise,
+            out.velocity_noise,
+            out.noise_seed,
+            p["reflex_check"] == "command",
+            RECENT_STATES,
+            None if reflexes is None else reflexes.core,
+        )
+        self._direct_node: Any = None
+
     def _init_bookkeeping(self, p: dict[str, Any]) -> None:
         self.command_timeout = float(p["command_timeout"])
-        na = len(self.arm_index)
-        self._arm_cmd = np.zeros(na)
-        self._arm_recv = -math.inf
-        self._base_cmd = np.zeros(3)
-        self._base_recv = -math.inf
+        self._stamped = bool(p["cmd_vel_stamped"])
         self._hold_request: bool | None = None
-        self._stopped = {"arm": True, "base": True}
-        self._u = np.zeros(self.scene.nq)  # the reference of one tick, filled in place
         self._running = True
-        self.reflexes = FrankaReflexes.for_arm(self.period, self.scene.dq_limit[self.arm_index]) if p["reflexes"] else None
         if p["reflex_check"] not in ("command", "cycle"):
             raise SabreError(f"reflex_check must be 'command' or 'cycle', got {p['reflex_check']!r}")
-        self._per_cycle = p["reflex_check"] == "cycle"
-        self._last_arm_msg: np.ndarray | None = None
-        self._last_arm_step: np.ndarray | None = None
         self.stats: dict[str, Any] = {
             "ticks": 0,
             "loops": 0,
             "late_ticks": 0,
             "skipped_ticks": 0,
             "overrun_loops": 0,
-            "states_published": 0,
-            "arm_commands": 0,
-            "base_commands": 0,
-            "rejected_commands": 0,
-            "echoes": 0,
-            "late_echoes": 0,
-            "unmatched_echoes": 0,
-            "first_answered": None,
-            "last_answered": None,
             "latency": Durations(),
-            "stops": [],
             "loop_work": Durations(),
             "success_time": None,
             "contact_force_sum": 0.0,
@@ -155,15 +161,10 @@ class SimRobotNode:
             "hold_started": None,
             "hold_ended": None,
             "reflex_errors": [],
-            "arm_step_max": np.zeros(na),  # |Δv| between consecutive arm commands, per joint
-            "arm_step_change_max": np.zeros(na),  # |Δ²v|
-            "arm_speed_max": np.zeros(na),
         }
         scene = self.scene
         self._hold_at = float(p["hold_at_opening"]) * float(scene.o_upper[0] - scene.o_lower[0]) + float(scene.o_lower[0])
         self._hold_done = False
-        # the recent states' stamps (nanoseconds) → (index, time): an answer names the state it answers
-        self._published: dict[int, tuple[int, float]] = {}
         from builtin_interfaces.msg import Time
 
         self._time_msg = Time
@@ -172,18 +173,14 @@ class SimRobotNode:
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import Twist, TwistStamped
         from sensor_msgs.msg import JointState
-        from std_msgs.msg import Bool, Float64MultiArray, String
+        from std_msgs.msg import Bool, String
         from visualization_msgs.msg import MarkerArray
 
         node, reliable = self.node, profile("reliable")
         self.status_pub = node.create_publisher(DiagnosticArray, p["sim_status_topic"], reliable)
         self.error_pub = node.create_publisher(String, p["error_topic"], reliable)
         self.obstacle_pub = node.create_publisher(MarkerArray, p["obstacle_topic"], reliable)
-        # a deep queue: every arm command is checked and recorded, also when this process falls behind
-        # the commands arrive serialized and are read in the core (no message object per command)
-        arm_qos = profile("reliable:1000")
-        node.create_subscription(Float64MultiArray, p["arm_command_topic"], self._on_arm, arm_qos, raw=True)
-        self._stamped = bool(p["cmd_vel_stamped"])
+        self._arm_commands_in(p)
         if len(self.base_index):
             kind = TwistStamped if self._stamped else Twist
             node.create_subscription(kind, p["cmd_vel_topic"], self._on_twist, reliable, raw=True)
@@ -191,6 +188,31 @@ class SimRobotNode:
             node.create_subscription(JointState, p["command_echo_topic"], self._on_echo, profile("sensor"))
         node.create_subscription(Bool, p["hold_topic"], self._on_hold, reliable)
         node.create_subscription(MarkerArray, p["set_obstacles_topic"], self.obstacle_pub.publish, reliable)
+
+    def _arm_commands_in(self, p: dict[str, Any]) -> None:
+        """The arm's commands taken by the core at each plant tick and the joint states published
+        by it (``direct_middleware``), else an executor callback per command."""
+        from std_msgs.msg import Float64MultiArray
+
+        # a deep queue: every arm command is checked and recorded, also when this process falls behind
+        arm_qos = profile("reliable:1000")
+        if p["direct_middleware"]:
+            try:
+                functions = rcl_functions()
+            except SabreError as exc:
+                self.node.get_logger().warning(f"the arm commands go through the executor: {exc}")
+            else:
+                import rclpy
+
+                # on a node of its own, which no executor waits on: only the core takes from it
+                self._direct_node = rclpy.create_node(f"{self.node.get_name()}_direct")
+                arm_sub = self._direct_node.create_subscription(
+                    Float64MultiArray, p["arm_command_topic"], lambda _: None, arm_qos, raw=True
+                )
+                js_pub = self.out.js_pub
+                self._driver.connect(functions, (arm_sub, handle_address(arm_sub)), (js_pub, handle_address(js_pub)))
+                return
+        self.node.create_subscription(Float64MultiArray, p["arm_command_topic"], self._on_arm, arm_qos, raw=True)
 
     def start(self) -> None:
         self._start_wall = time.monotonic()
@@ -200,107 +222,24 @@ class SimRobotNode:
 
     # Commands --------------------------------------------------------------------------------
     def _on_arm(self, raw: bytes) -> None:
-        try:
-            v, data_offset = _core.decode_float64_array(raw)
-        except SabreError:
-            v, data_offset = np.zeros(0), 0
-        if v.shape != self._arm_cmd.shape or not np.all(np.isfinite(v)):
-            self.stats["rejected_commands"] += 1
-            self.node.get_logger().error(
-                f"arm command rejected: need {len(self._arm_cmd)} finite values", throttle_duration_sec=1.0
-            )
-            return
-        s = self.stats
-        self._match(data_offset)
-        if self._last_arm_msg is not None:
-            step = v - self._last_arm_msg
-            np.maximum(s["arm_step_max"], np.abs(step), out=s["arm_step_max"])
-            if self._last_arm_step is not None:
-                np.maximum(s["arm_step_change_max"], np.abs(step - self._last_arm_step), out=s["arm_step_change_max"])
-            self._last_arm_step = step
-        np.maximum(s["arm_speed_max"], np.abs(v), out=s["arm_speed_max"])
-        self._last_arm_msg = v
-        if self.reflexes is not None and not self._per_cycle and self.reflexes.aborted is None:
-            if time.monotonic() - self._arm_recv > self.command_timeout and not v.any():
-                # a stream that starts again from rest after the arm stopped (a new controller); a
-                # stream that goes on where it was is checked against its own previous command, even
-                # when this process received it late
-                self.reflexes.recover()
-            error = self.reflexes.check(v)
-            if error is not None:
-                self._on_reflex(error)
-        self._arm_cmd = v
-        self._arm_recv = time.monotonic()
-        s["arm_commands"] += 1
+        self._driver.receive_arm(raw, time.monotonic(), time.time())
 
     def _on_twist(self, raw: bytes) -> None:
-        try:
-            linear, angular, _ = _core.decode_twist(raw, self._stamped)
-        except SabreError:
-            self.stats["rejected_commands"] += 1
-            return
-        v = np.array([linear[0], linear[1], angular[2]])
-        if not np.all(np.isfinite(v)):
-            self.stats["rejected_commands"] += 1
-            return
-        self._base_cmd = v
-        self._base_recv = time.monotonic()
-        self.stats["base_commands"] += 1
+        self._driver.receive_base(raw, self._stamped, time.monotonic())
 
     def _on_echo(self, msg: Any) -> None:
-        self._match(msg.header.stamp.nanosec)
-
-    def _match(self, nanosec: int) -> None:
-        """Books the answer to the state whose stamp has these nanoseconds: its round trip, and
-        the window of states answered."""
-        now = time.time()
-        published = self._published.get(nanosec)
-        s = self.stats
-        if published is None:  # a command the controller sent on its own (watchdog, shutdown ramp)
-            s["unmatched_echoes"] += 1
-            return
-        index, sent = published
-        latency = now - sent
-        s["first_answered"] = index if s["first_answered"] is None else min(s["first_answered"], index)
-        s["last_answered"] = index if s["last_answered"] is None else max(s["last_answered"], index)
-        s["echoes"] += 1
-        s["latency"].record(latency)
-        if latency > self.period:
-            s["late_echoes"] += 1
+        self._driver.match_answer(msg.header.stamp.nanosec, time.time())
 
     def _on_hold(self, msg: Any) -> None:
         self._hold_request = bool(msg.data)
 
-    def _reference(self, tick_time: float, yaw: float) -> np.ndarray:
-        """The joint velocity reference (nq,) at a tick's scheduled time: each part zero once its
-        command is older than the timeout (or none came), the arm's zero after a reflex."""
-        u = self._u
-        u.fill(0.0)
-        arm_fresh = tick_time - self._arm_recv <= self.command_timeout
-        base_fresh = tick_time - self._base_recv <= self.command_timeout
-        reflexes = self.reflexes
-        if arm_fresh:
-            arm = self._arm_cmd
-            if reflexes is not None and self._per_cycle and reflexes.aborted is None and reflexes.check(arm) is not None:
-                self._on_reflex(reflexes.aborted or "")
-            if reflexes is None or reflexes.aborted is None:
-                u[self.arm_index] = arm
-        elif reflexes is not None and self._per_cycle:
-            reflexes.follow(np.zeros(len(self.arm_index)))
-        if base_fresh and len(self.base_index):
-            u[self.base_index] = base_to_world(self._base_cmd, yaw)
-        self._note_stops(tick_time, arm_fresh, base_fresh)
-        return u
-
-    def _note_stops(self, tick_time: float, arm_fresh: bool, base_fresh: bool) -> None:
-        """Books a stop when a stream goes stale: how long after its last command."""
-        stopped = self._stopped
-        for part, fresh, recv in (("arm", arm_fresh, self._arm_recv), ("base", base_fresh, self._base_recv)):
-            if not fresh and not stopped[part]:
-                stopped[part] = True
-                self.stats["stops"].append(tick_time - recv if math.isfinite(recv) else 0.0)
-            elif fresh:
-                stopped[part] = False
+    def _events(self) -> None:
+        """Logs refused commands and publishes the reflexes tripped since the last tick."""
+        rejected, reflexes = self._driver.take_events()
+        if rejected:
+            self.node.get_logger().error(f"command rejected: {rejected[-1]}", throttle_duration_sec=1.0)
+        for error in reflexes:
+            self._on_reflex(error)
 
     def _on_reflex(self, error: str) -> None:
         from std_msgs.msg import String
@@ -363,13 +302,16 @@ class SimRobotNode:
 
     def _step(self, tick_time: float) -> None:
         self._apply_faults()
-        u = self._reference(tick_time, float(self.plant.state[self.base_index[2]]) if len(self.base_index) else 0.0)
+        yaw = float(self.plant.state[self.base_index[2]]) if len(self.base_index) else 0.0
+        u, events = self._driver.tick(tick_time, yaw, time.monotonic(), time.time())
+        if events:
+            self._events()
         if self._track is not None:
             self._track(self.plant._core, u, 1)
         elif self.low is not None:
             self.low.track(self.plant, u, 1)
         else:
-            self.plant.step(u.copy())  # u is reused by the next tick
+            self.plant.step(u)
         self.stats["ticks"] += 1
         if self.plant.contact:
             self.stats["contact_force_sum"] += math.hypot(*self.plant.wrench[:3])
@@ -398,17 +340,13 @@ class SimRobotNode:
         nq, no = self.scene.nq, self.scene.no
         q, dq = x[:nq], x[nq : 2 * nq]
         ns = time.time_ns()
-        nanosec = ns % 1_000_000_000
-        published = self._published
-        published[nanosec] = (self.stats["states_published"], ns * 1e-9)  # before an answer can come
-        if len(published) > RECENT_STATES:
-            del published[next(iter(published))]
-        self.stats["states_published"] += 1
-        self.out.publish_joint_states(q, dq, ns)
+        raw = self._driver.publish_state(q, dq, ns)
+        if raw is not None:
+            self.out.js_pub.publish(raw)
         every = self._schedule
         if k % every["odometry"] and k % every["wrench"] and k % every["ground_truth"] and k % every["clock"]:
             return
-        stamp = self._time_msg(sec=ns // 1_000_000_000, nanosec=nanosec)
+        stamp = self._time_msg(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
         if k % every["odometry"] == 0 and self.out.odom_pub is not None:
             self.out.publish_odometry(q, dq, stamp)
         if k % every["wrench"] == 0:
@@ -421,10 +359,15 @@ class SimRobotNode:
     # Reports ---------------------------------------------------------------------------------
     def summary(self) -> dict[str, Any]:
         s = self.stats
+        driver = self._driver
+        counts = driver.counts()
+        s["latency"].record_all(driver.take_latencies())
+        step_max, step_change_max, speed_max, command = driver.arm_record()
         state = self.scene.split_state(np.asarray(self.plant.state))
         lat = s["latency"]
         wall = time.monotonic() - self._start_wall
-        window = 0 if s["first_answered"] is None else s["last_answered"] - s["first_answered"] + 1
+        first, last = counts["first_answered"], counts["last_answered"]
+        window = 0 if first is None or last is None else last - first + 1
         return {
             "node": "sim_robot",
             "object": self.scene.object_name,
@@ -432,10 +375,18 @@ class SimRobotNode:
             "sim_time": self.plant.time,
             "wall_time": wall,
             "cpu_share": (time.process_time() - self._start_cpu) / wall if wall > 0 else 0.0,
-            **{k: s[k] for k in ("ticks", "late_ticks", "skipped_ticks", "overrun_loops", "loops", "states_published")},
+            **{k: s[k] for k in ("ticks", "late_ticks", "skipped_ticks", "overrun_loops", "loops")},
             **{
-                k: s[k]
-                for k in ("arm_commands", "base_commands", "rejected_commands", "echoes", "late_echoes", "unmatched_echoes")
+                k: counts[k]
+                for k in (
+                    "states_published",
+                    "arm_commands",
+                    "base_commands",
+                    "rejected_commands",
+                    "echoes",
+                    "late_echoes",
+                    "unmatched_echoes",
+                )
             },
             "loop_work_p50_ms": s["loop_work"].percentile_ms(50),
             "loop_work_p99_ms": s["loop_work"].percentile_ms(99),
@@ -444,16 +395,17 @@ class SimRobotNode:
             "latency_max_ms": lat.max_ms(),
             "latency_percentiles_ms": {q: lat.percentile_ms(q) for q in (50, 90, 95, 98, 99, 99.5, 99.9)},
             "answered_window": window,
-            "delivered_fraction": s["echoes"] / window if window else 0.0,
-            "stop_delays_ms": [d * 1e3 for d in s["stops"]],
+            "delivered_fraction": counts["echoes"] / window if window else 0.0,
+            "stop_delays_ms": [d * 1e3 for d in driver.stops()],
             "command_timeout_ms": self.command_timeout * 1e3,
             "period_ms": self.period * 1e3,
-            "reflex_aborts": 0 if self.reflexes is None else self.reflexes.aborts,
+            "reflex_aborts": counts["reflex_aborts"],
+            "reflex_aborted": counts["reflex_aborted"],
             "reflex_errors": s["reflex_errors"],
-            "arm_accel_max": (s["arm_step_max"] / self.period).tolist(),
-            "arm_jerk_max": (s["arm_step_change_max"] / self.period**2).tolist(),
-            "arm_speed_max": s["arm_speed_max"].tolist(),
-            "last_arm_command": self._arm_cmd.tolist(),
+            "arm_accel_max": (step_max / self.period).tolist(),
+            "arm_jerk_max": (step_change_max / self.period**2).tolist(),
+            "arm_speed_max": speed_max.tolist(),
+            "last_arm_command": command.tolist(),
             "opening": float(state.o[0]),
             "success": s["success_time"] is not None,
             "time_to_open": s["success_time"],
@@ -490,12 +442,12 @@ class SimRobotNode:
             "arm_speed_max",
             "last_arm_command",
         )
-        aborted = self.reflexes is not None and self.reflexes.aborted is not None
+        aborted = s["reflex_aborted"]
         status = DiagnosticStatus(
             name="sabre/sim_robot",
             hardware_id="sim",
             level=DiagnosticStatus.ERROR if aborted else DiagnosticStatus.OK,
-            message=(self.reflexes.aborted or "") if aborted and self.reflexes is not None else "running",
+            message=aborted or "running",
             values=[KeyValue(key=k, value=json.dumps(s[k])) for k in keys],
         )
         msg = DiagnosticArray(status=[status])
@@ -507,7 +459,12 @@ class SimRobotNode:
         self._status.stop()
         if self._thread.is_alive():
             self._thread.join()
-        return self.summary()
+        summary = self.summary()
+        self._driver.disconnect()  # before the endpoints it calls into are destroyed
+        if self._direct_node is not None:
+            self._direct_node.destroy_node()
+            self._direct_node = None
+        return summary
 
 
 def _pose_of(t: np.ndarray) -> np.ndarray:
