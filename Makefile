@@ -73,12 +73,13 @@ test: test-rust test-python
 
 # The ROS 2 bridge's tests under Jazzy (`make test` runs them under Kilted, the `ros` extra): a venv of its own,
 # since the two distributions' wheels install the same module names.
+# `meshes` brings the example robots the fixed-base test drives.
 JAZZY_VENV := .venv-jazzy
 test-ros-jazzy: $(BASE_STAMP)
 	test -x $(JAZZY_VENV)/bin/python || $(PYTHON) -m venv $(JAZZY_VENV)
 	$(JAZZY_VENV)/bin/python -m pip install --quiet "pip>=25.1" pytest
 	$(JAZZY_VENV)/bin/python -m pip install --quiet --group build
-	VIRTUAL_ENV=$(CURDIR)/$(JAZZY_VENV) $(JAZZY_VENV)/bin/maturin develop --release --quiet --extras ros-jazzy
+	VIRTUAL_ENV=$(CURDIR)/$(JAZZY_VENV) $(JAZZY_VENV)/bin/maturin develop --release --quiet --extras ros-jazzy,meshes
 	$(JAZZY_VENV)/bin/python -m pytest -q tests/ros
 
 # `make -k lint` reports every tool's findings instead of stopping at the first.
