@@ -82,7 +82,15 @@ def grasp_offset(scene: Scene, handle: str, xyz: Sequence[float], pitch: float) 
     (rad) below the handle's normal.
 
     The tilt is about whichever handle axis (x or y) is horizontal with the object closed, in the
-    sense that makes the grasp frame's z point downward."""
+    sense that makes the grasp frame's z point downward. Made once per scene and arguments (the
+    planner asks for it several times per iteration); the array is read-only."""
+    key = ("grasp offset", handle, tuple(float(v) for v in xyz), float(pitch))
+    # made on the scene itself (not the weak proxy per_scene hands over: the handle frame is cached
+    # per scene too); the value, an array, keeps no reference to it
+    return per_scene(scene, key, lambda _: _grasp_offset(scene, handle, xyz, pitch))
+
+
+def _grasp_offset(scene: Scene, handle: str, xyz: Sequence[float], pitch: float) -> np.ndarray:
     closed = handle_pose(scene, handle, scene.o_lower)
     axis = 0 if abs(closed[2, 0]) < abs(closed[2, 1]) else 1
     c, s = np.cos(pitch), np.sin(pitch)
@@ -96,6 +104,7 @@ def grasp_offset(scene: Scene, handle: str, xyz: Sequence[float], pitch: float) 
     out = np.eye(4)
     out[:3, :3] = rot
     out[:3, 3] = xyz
+    out.setflags(write=False)
     return out
 
 

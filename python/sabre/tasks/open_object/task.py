@@ -156,6 +156,19 @@ class OpenObject(Task):
         """
         if self.open.object_overshoot is not None:
             return self.target_opening(scene) + float(self.open.object_overshoot)
+        # every input besides the scene, for the value kept per scene (asked for every iteration)
+        key = (
+            "object setpoint",
+            self.handle,
+            self.opening,
+            self.open.speeds[:1],
+            self.safety.power,
+            self.open.object_weight,
+            self.horizon,
+        )
+        return per_scene(scene, key, lambda _: self._object_setpoint(scene))  # a float: keeps no scene
+
+    def _object_setpoint(self, scene: Scene) -> float:
         speed = self.open.speeds[0] if self.open.speeds else 0.1
         rate = speed / max(self.handle_travel(scene, float(scene.o_lower[0])), 1e-6)
         resisting = float(scene.object_friction[0] + scene.object_damping[0] * rate)
