@@ -447,6 +447,14 @@ def test_inserting_ends_only_once_the_hook_tip_is_behind_the_bar(scene):
     )
 
 
+def test_only_inserting_leaves_the_object_cost_out(scene):
+    """While inserting, the object cost would reward dragging the closed door by the finger's tip
+    beside the bar; every other phase carries it (a door resting on the hand is seen to open)."""
+    task = sabre.tasks.OpenObject()
+    carries = {phase: any(isinstance(t, costs.ObjectState) for t in task.cost(scene, phase).terms) for phase in task.phases}
+    assert carries == {"approach": True, "insert": False, "hook": True, "open": True, "release": True}
+
+
 def test_a_finger_stopped_a_few_millimetres_short_of_the_insert_depth_hooks(scene):
     """A hand held a few millimetres short of the insert target's depth by something in front of it
     (the planner cannot push it further) ends inserting once it has stopped, within

@@ -204,11 +204,17 @@ class OpenObject(Task):
         if phase == "release":
             return pull_object + costs.Contact(self.contact_weight) + every_phase
         if phase in ("approach", "insert", "hook"):
-            # The object cost also before the hook holds: a door that can open by itself (a dishwasher
-            # past its balance point, resting on the hand after a slip) should be let go, not held.
+            # The object cost also before the hook holds (approaching, hooking): a door that can open
+            # by itself (a dishwasher past its balance point, resting on the hand after a slip)
+            # should be let go, not held.
             reach = costs.Cost([costs.TargetPose(target, tool, frame, self.approach.weight, self.approach.weight)])
             if phase == "approach":
                 reach = reach + costs.Contact(self.contact_weight) + self.posture_term(scene)
+            if phase == "insert":
+                # Not while inserting: the finger's tip is beside the bar and short of it, and the
+                # object cost rewards samples that swing the tip sideways into the bar to drag the
+                # door by it, which jams the finger against the bar's side face.
+                return reach + every_phase
             return reach + pull_object + every_phase
         hold = costs.TargetPose(
             target,
