@@ -1,6 +1,6 @@
 """What the simulated robot publishes, as a Franka arm's and a mobile base's drivers do: the arm's joint
 states with the gripper's (held) joints at the plant's rate (serialized, noisy and published by the
-core's `SimDriver`, see :meth:`DriverOutputs.driver`), the base's odometry with its twist in the
+core's `SimDriver`, see :mod:`sabre.ros.sim_robot`), the base's odometry with its twist in the
 base frame (a robot with a base), the wrist wrench best effort in the sensor frame, measurement noise on all three, the robot
 description latched, and (as a perception node would) the object's pose; besides, for evaluation
 only, the object's true joint state and a clock."""
