@@ -425,6 +425,8 @@ def test_the_sim_robot_matches_answers_by_stamp_and_stops_on_its_command_timeout
     assert stops[-1] <= 50.0 + 1.0 + 1e-6
     probe.wait_for(lambda: (sim_status(probe) or {}).get("robot_speed", 1.0) < 0.02, "the robot to come to rest")
     assert sim_status(probe)["reflex_aborts"] == 0
+    sim.stop()
+    assert sim.summary()["direct_middleware"] == direct  # the path named, not a fallback
 
 
 def test_a_fixed_base_arm_is_driven_by_the_roles_of_its_own_description(bridge):

@@ -139,6 +139,7 @@ class SimRobotNode:
             None if reflexes is None else reflexes.core,
         )
         self._direct_node: Any = None
+        self.direct = False  # whether the core takes the arm commands and publishes the joint states
 
     def _init_bookkeeping(self, p: dict[str, Any]) -> None:
         self.command_timeout = float(p["command_timeout"])
@@ -211,6 +212,7 @@ class SimRobotNode:
                 )
                 js_pub = self.out.js_pub
                 self._driver.connect(functions, (arm_sub, handle_address(arm_sub)), (js_pub, handle_address(js_pub)))
+                self.direct = True
                 return
         self.node.create_subscription(Float64MultiArray, p["arm_command_topic"], self._on_arm, arm_qos, raw=True)
 
@@ -401,6 +403,7 @@ class SimRobotNode:
             "period_ms": self.period * 1e3,
             "reflex_aborts": counts["reflex_aborts"],
             "reflex_aborted": counts["reflex_aborted"],
+            "direct_middleware": self.direct,
             "reflex_errors": s["reflex_errors"],
             "arm_accel_max": (step_max / self.period).tolist(),
             "arm_jerk_max": (step_change_max / self.period**2).tolist(),
