@@ -110,10 +110,92 @@ pub enum Term {
         radius: f64,
         bottom: f64,
         top: f64,
-        points: Vec<(usize, Point3<f64>)>,
+        points: ClearancePoints,
         weight: f64,
         weight_slope: f64,
     },
+}
+
+/// The sample points of a [`Term::BaseClearance`] (object link, point in its frame), in clusters
+/// of neighbours on one link, each with a bounding sphere: a step skips the clusters that cannot
+/// reach the footprint's band or cylinder, which on most steps is all of them.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ClearancePoints {
+    clusters: Vec<PointCluster>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+struct PointCluster {
+    link: usize,
+    centre: Point3<f64>,
+    radius: f64,
+    points: Vec<Point3<f64>>,
+}
+
+/// Points per cluster: consecutive points of [`moving_object_points`]'s grid lie close together.
+const CLUSTER_POINTS: usize = 16;
+
+/// How far inside a bound a cluster must be to be skipped, so that rounding between the
+/// cluster's centre and its points never drops a point that counts.
+const CLUSTER_SLACK: f64 = 1e-9;
+
+impl ClearancePoints {
+    /// Clusters `points` (object link, point in its frame) in their order.
+    pub fn new(points: &[(usize, Point3<f64>)]) -> Self {
+        let mut clusters = Vec::new();
+        let mut start = 0;
+        while start < points.len() {
+            let link = points[start].0;
+            let mut end = start + 1;
+            while end < points.len() && points[end].0 == link && end - start < CLUSTER_POINTS {
+                end += 1;
+            }
+            let members: Vec<Point3<f64>> = points[start..end].iter().map(|(_, p)| *p).collect();
+            let centre = Point3::from(members.iter().map(|p| p.coords).sum::<Vector3<f64>>() / members.len() as f64);
+            let radius = members.iter().map(|p| (p - centre).norm()).fold(0.0, f64::max);
+            clusters.push(PointCluster {
+                link,
+                centre,
+                radius,
+                points: members,
+            });
+            start = end;
+        }
+        Self { clusters }
+    }
+
+    /// The object link of each cluster.
+    fn links(&self) -> impl Iterator<Item = usize> + '_ {
+        self.clusters.iter().map(|c| c.link)
+    }
+
+    /// max over the points inside the height band [bottom, top] above `base` of radius − their
+    /// horizontal distance from `base`; −∞ without such a point. A cluster whose sphere lies
+    /// outside the band or the cylinder is skipped: none of its points can be in the band or
+    /// give more than 0 there, and the term only charges a positive maximum.
+    fn deepest(&self, object: &[Isometry3<f64>], base: &Vector3<f64>, radius: f64, bottom: f64, top: f64) -> f64 {
+        let mut deepest = f64::NEG_INFINITY;
+        for cluster in &self.clusters {
+            let pose = &object[cluster.link];
+            let c = pose * cluster.centre;
+            let reach = cluster.radius + CLUSTER_SLACK;
+            let height = c.z - base.z;
+            if height + reach < bottom || height - reach > top {
+                continue;
+            }
+            if ((c.x - base.x).powi(2) + (c.y - base.y).powi(2)).sqrt() - reach > radius {
+                continue;
+            }
+            for local in &cluster.points {
+                let p = pose * local;
+                let height = p.z - base.z;
+                if height >= bottom && height <= top {
+                    deepest = deepest.max(radius - ((p.x - base.x).powi(2) + (p.y - base.y).powi(2)).sqrt());
+                }
+            }
+        }
+        deepest
+    }
 }
 
 /// Points spread over the collision primitives of the object's moving links (in their link frames),
@@ -235,7 +317,7 @@ pub fn base_clearance(
         radius: radius + margin,
         bottom: bottom - margin,
         top: top + margin,
-        points: moving_object_points(scene, spacing),
+        points: ClearancePoints::new(&moving_object_points(scene, spacing)),
         weight,
         weight_slope,
     })
@@ -346,7 +428,7 @@ impl Cost {
                     weight,
                     weight_slope,
                 } => {
-                    if *base_link >= scene.robot.links.len() || points.iter().any(|(l, _)| *l >= scene.object.links.len()) {
+                    if *base_link >= scene.robot.links.len() || points.links().any(|l| l >= scene.object.links.len()) {
                         return bad("base clearance cost", "link index out of range".into());
                     }
                     finite("base clearance", &[*radius, *bottom, *top, *weight, *weight_slope])?;
@@ -507,14 +589,7 @@ impl Cost {
                     weight_slope,
                 } => {
                     let base = view.robot.poses[*base_link].translation.vector;
-                    let mut deepest = f64::NEG_INFINITY;
-                    for (link, local) in points {
-                        let p = view.object.poses[*link] * local;
-                        let height = p.z - base.z;
-                        if height >= *bottom && height <= *top {
-                            deepest = deepest.max(radius - ((p.x - base.x).powi(2) + (p.y - base.y).powi(2)).sqrt());
-                        }
-                    }
+                    let deepest = points.deepest(&view.object.poses, &base, *radius, *bottom, *top);
                     hinge_square(deepest, *weight, *weight_slope)
                 }
             };

@@ -594,7 +594,7 @@ fn base_clearance(top: f64) -> Term {
         bottom: -0.1,
         top,
         // The front's centre, and a point 0.15 m closer to the robot and 0.3 m higher.
-        points: vec![(front, Point3::new(0.0, 0.0, 0.0)), (front, Point3::new(-0.15, 0.0, 0.3))],
+        points: ClearancePoints::new(&[(front, Point3::new(0.0, 0.0, 0.0)), (front, Point3::new(-0.15, 0.0, 0.3))]),
         weight: 8.0,
         weight_slope: 50.0,
     }
@@ -702,4 +702,59 @@ fn pure_translation_log_is_the_translation() {
     let t = Isometry3::translation(0.3, -0.1, 2.0);
     let xi = se3_log(&t);
     assert!((xi - Vector6::new(0.3, -0.1, 2.0, 0.0, 0.0, 0.0)).norm() < 1e-12);
+}
+
+#[test]
+fn clustered_clearance_points_give_every_point_s_deepest_penetration() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    // Two links' grids of points (as moving_object_points lays them out), then random link poses
+    // and bases: the clusters' answer against the plain maximum over every point.
+    let mut points = Vec::new();
+    for link in [1usize, 2] {
+        for i in 0..7 {
+            for j in 0..3 {
+                for k in 0..9 {
+                    points.push((link, Point3::new(0.1 * i as f64, 0.02 * j as f64, 0.1 * k as f64 - 0.4)));
+                }
+            }
+        }
+    }
+    let clusters = ClearancePoints::new(&points);
+    let (radius, bottom, top) = (0.35, -0.1, 0.5);
+    let mut charged = 0;
+    for _ in 0..2000 {
+        let mut pose = || {
+            Isometry3::new(
+                Vector3::new(
+                    rng.random_range(-0.6..0.6),
+                    rng.random_range(-0.6..0.6),
+                    rng.random_range(-0.3..0.6),
+                ),
+                Vector3::new(
+                    rng.random_range(-3.0..3.0),
+                    rng.random_range(-3.0..3.0),
+                    rng.random_range(-3.0..3.0),
+                ),
+            )
+        };
+        let object = [Isometry3::identity(), pose(), pose()];
+        let base = Vector3::new(rng.random_range(-0.8..0.8), rng.random_range(-0.8..0.8), 0.0);
+        let mut expected = f64::NEG_INFINITY;
+        for (link, local) in &points {
+            let p = object[*link] * local;
+            let height = p.z - base.z;
+            if height >= bottom && height <= top {
+                expected = expected.max(radius - ((p.x - base.x).powi(2) + (p.y - base.y).powi(2)).sqrt());
+            }
+        }
+        let got = clusters.deepest(&object, &base, radius, bottom, top);
+        if expected > 0.0 {
+            charged += 1;
+            assert_eq!(got, expected, "a penetrating point's depth");
+        } else {
+            assert!(got <= 0.0, "{got} where no point penetrates ({expected})");
+        }
+    }
+    assert!(charged > 100 && charged < 1900, "both cases drawn: {charged} of 2000 charged");
 }

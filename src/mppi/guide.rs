@@ -133,6 +133,7 @@ pub fn servo_guide(
     let mut q = q0.to_vec();
     let mut frames = Frames::default();
     let mut jacobian = vec![0.0; 6 * nq];
+    let mut columns = vec![Vector6::zeros(); nq];
     let mut solver = HeldSolver {
         lower,
         upper,
@@ -150,11 +151,13 @@ pub fn servo_guide(
         scene
             .robot
             .frames_jacobian_into(&frames, link, &pose.translation.vector.into(), &mut jacobian);
-        let column = |c: usize| Vector6::from_column_slice(&jacobian[6 * c..6 * c + 6]);
+        for (c, column) in columns.iter_mut().enumerate() {
+            *column = Vector6::from_column_slice(&jacobian[6 * c..6 * c + 6]);
+        }
         let mut rate = displacement(&targets[k], &targets[k + 1]) / dt + config.gain * displacement(&pose, &targets[k]);
         cap_rate(&mut rate, config.max_linear, config.max_angular);
 
-        solver.solve(&column, &rate, &unit, &q, &mut v);
+        solver.solve(&columns, &rate, &unit, &q, &mut v);
         if config.limit_weighting {
             let mut weighted = false;
             for c in 0..nq {
@@ -162,7 +165,7 @@ pub fn servo_guide(
                 weighted |= weights[c] > 1.0;
             }
             if weighted {
-                solver.solve(&column, &rate, &weights, &q, &mut v);
+                solver.solve(&columns, &rate, &weights, &q, &mut v);
             }
         }
         let over = v.iter().zip(&speed).map(|(vi, s)| vi.abs() / s).fold(0.0, f64::max);
@@ -191,7 +194,7 @@ impl HeldSolver {
     /// v = W⁻¹Jᵀ(JW⁻¹Jᵀ + λI)⁻¹ rate (W = diag(weights)), with the joints that would cross their
     /// margin within the step held there and the others re-solved for the rest of the rate (clamp
     /// and re-solve), so that, for example, the base takes over from an arm joint at its limit.
-    fn solve(&mut self, column: &dyn Fn(usize) -> Vector6<f64>, rate: &Vector6<f64>, weights: &[f64], q: &[f64], v: &mut [f64]) {
+    fn solve(&mut self, columns: &[Vector6<f64>], rate: &Vector6<f64>, weights: &[f64], q: &[f64], v: &mut [f64]) {
         let nq = q.len();
         self.free.fill(true);
         self.held.fill(0.0);
@@ -199,10 +202,10 @@ impl HeldSolver {
         for _ in 0..=nq {
             let mut gram = Matrix6::identity() * self.damping;
             let mut remaining = *rate;
-            for (c, ((&free, &held), &weight)) in self.free.iter().zip(&self.held).zip(weights).enumerate() {
-                let col = column(c);
+            for (col, ((&free, &held), &weight)) in columns.iter().zip(self.free.iter().zip(&self.held).zip(weights)) {
                 if free {
-                    gram += col * col.transpose() / weight;
+                    // The Gram matrix is symmetric: its lower triangle is all the factorisation reads.
+                    gram.syger(1.0 / weight, col, col, 1.0);
                 } else {
                     remaining -= col * held;
                 }
@@ -217,7 +220,7 @@ impl HeldSolver {
                     v[c] = self.held[c];
                     continue;
                 }
-                v[c] = column(c).dot(&y) / weights[c];
+                v[c] = columns[c].dot(&y) / weights[c];
                 let next = q[c] + self.dt * v[c];
                 if next > self.upper[c] && v[c] > 0.0 {
                     self.held[c] = (self.upper[c] - q[c]).max(0.0) / self.dt;

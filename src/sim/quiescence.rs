@@ -94,7 +94,8 @@ impl Quiescence {
     /// least its gravity torque, or gravity pressing it onto a limit), and no robot contact body can
     /// reach any object link within a step of `dt` (bounding spheres, with `margin` and each body's
     /// travel at the joint velocities `qd`). `frames` are the robot's at the step's start;
-    /// `jacobian` is scratch space.
+    /// `jacobian` is scratch space; `first` is the body to test first, and is left at the one
+    /// that failed the test (the caller keeps it from step to step).
     #[allow(clippy::too_many_arguments)]
     pub fn holds(
         &self,
@@ -106,6 +107,7 @@ impl Quiescence {
         dt: f64,
         margin: f64,
         jacobian: &mut Vec<f64>,
+        first: &mut usize,
     ) -> bool {
         if !od.iter().all(|v| v.abs() < 1e-9) {
             return false;
@@ -127,15 +129,23 @@ impl Quiescence {
         }
         let object_poses = scene.object.link_poses(&scene.object_pose, o);
         jacobian.resize(6 * scene.nq(), 0.0);
-        for &(link, center, radius) in &self.robot_spheres {
+        // Starting from the body that kept the last step from being skipped: it usually does so
+        // again, and the answer does not depend on the order.
+        let n = self.robot_spheres.len();
+        for k in 0..n {
+            let index = (k + *first) % n;
+            let (link, center, radius) = self.robot_spheres[index];
             let c = frames.poses[link] * center;
-            let nearest = self
-                .object_shapes
-                .iter()
-                .map(|(olink, origin, shape)| distance_to_shape(&(object_poses[*olink] * origin), shape, &c))
-                .fold(f64::INFINITY, f64::min);
-            if nearest < radius + margin {
-                return false;
+            // A body in reach of some primitive decides at the first such primitive (in contact,
+            // nearly always), before the nearest distance is known.
+            let mut nearest = f64::INFINITY;
+            for (olink, origin, shape) in &self.object_shapes {
+                let distance = distance_to_shape(&(object_poses[*olink] * origin), shape, &c);
+                if distance < radius + margin {
+                    *first = index;
+                    return false;
+                }
+                nearest = nearest.min(distance);
             }
             // Travel bound of this body over the step: its link's linear speed at the centre (only
             // needed when the static clearance does not already decide).
@@ -145,6 +155,7 @@ impl Quiescence {
                 v += Vector3::new(jacobian[6 * col], jacobian[6 * col + 1], jacobian[6 * col + 2]) * rate;
             }
             if nearest < radius + v.norm() * dt + margin {
+                *first = index;
                 return false;
             }
         }

@@ -161,6 +161,7 @@ impl SimWorld {
             self.params.dt,
             margin,
             &mut self.jacobian,
+            &mut 0,
         );
         self.scratch = x;
         quiet

@@ -167,7 +167,15 @@ struct Touch {
 /// A world of the reduced contact path: the robot's servo state and the object's coordinates.
 #[derive(Clone)]
 pub struct ReducedWorld {
+    /// Shared by a world and its copies; read through a borrow in the step, never cloned there
+    /// (two workers counting references on one cache line slow each other's steps).
     layout: Arc<ReducedLayout>,
+    state: WorldState,
+}
+
+/// Everything of a [`ReducedWorld`] a step changes, apart from the layout it reads.
+#[derive(Clone)]
+struct WorldState {
     scene: Arc<Scene>,
     servo: ServoState,
     o: Vec<f64>,
@@ -176,6 +184,10 @@ pub struct ReducedWorld {
     /// Contacts of the last step and the impulses they carried (N·s, on the robot, world frame).
     touches: Vec<Touch>,
     impulses: Vec<Vector3<f64>>,
+    /// The contact body the quiescence test tries first (the one that failed it last).
+    quiescence_first: usize,
+    /// The last step's force and moment (about the link's origin) on each touched robot link.
+    link_wrenches: Vec<(usize, Vector3<f64>, Vector3<f64>)>,
     /// The last step's impulse of each contact by its key: the next step's warm start.
     warm_start: Vec<(ContactKey, Vector3<f64>)>,
     /// Robot link poses (`robot.frames`) and the servo's mass-matrix buffers.
@@ -238,40 +250,44 @@ impl ReducedWorld {
         };
         let mut world = Self {
             layout: Arc::new(layout),
-            servo: ServoState::new(nq),
-            o: vec![0.0; no],
-            od: vec![0.0; no],
-            last: Interaction {
-                contact: false,
-                tau_ext: vec![0.0; nq],
-                wrench: [0.0; 6],
+            state: WorldState {
+                servo: ServoState::new(nq),
+                o: vec![0.0; no],
+                od: vec![0.0; no],
+                last: Interaction {
+                    contact: false,
+                    tau_ext: vec![0.0; nq],
+                    wrench: [0.0; 6],
+                },
+                touches: Vec::new(),
+                impulses: Vec::new(),
+                link_wrenches: Vec::new(),
+                quiescence_first: 0,
+                warm_start: Vec::new(),
+                robot: DynamicsWorkspace::default(),
+                mass_matrix: DMatrix::zeros(nq, nq),
+                gravity_torque: DVector::zeros(nq),
+                object: DynamicsWorkspace::default(),
+                object_mass: DMatrix::zeros(no, no),
+                object_gravity: DVector::zeros(no),
+                inverse_mass: DMatrix::zeros(no, no),
+                detector: Detector::default(),
+                solver: Solver::default(),
+                jacobian: vec![0.0; 6 * nq],
+                object_jacobian: vec![0.0; 6 * no],
+                linear_jacobian: vec![0.0; 3 * no],
+                o_before: Vec::with_capacity(no),
+                free_velocity: Vec::with_capacity(no),
+                engine: EngineClock::default(),
+                scene: scene.clone(),
             },
-            touches: Vec::new(),
-            impulses: Vec::new(),
-            warm_start: Vec::new(),
-            robot: DynamicsWorkspace::default(),
-            mass_matrix: DMatrix::zeros(nq, nq),
-            gravity_torque: DVector::zeros(nq),
-            object: DynamicsWorkspace::default(),
-            object_mass: DMatrix::zeros(no, no),
-            object_gravity: DVector::zeros(no),
-            inverse_mass: DMatrix::zeros(no, no),
-            detector: Detector::default(),
-            solver: Solver::default(),
-            jacobian: vec![0.0; 6 * nq],
-            object_jacobian: vec![0.0; 6 * no],
-            linear_jacobian: vec![0.0; 3 * no],
-            o_before: Vec::with_capacity(no),
-            free_velocity: Vec::with_capacity(no),
-            engine: EngineClock::default(),
-            scene: scene.clone(),
         };
         world.set_state(&scene.default_state());
         Ok(world)
     }
 
     pub fn scene(&self) -> &Scene {
-        &self.scene
+        &self.state.scene
     }
 
     pub fn dt(&self) -> f64 {
@@ -285,6 +301,60 @@ impl ReducedWorld {
 
     /// Takes the state of `snapshot`; nothing of what this world simulated before remains.
     pub fn restore_from(&mut self, snapshot: &ReducedWorld) {
+        self.state.restore_from(&snapshot.state);
+    }
+
+    /// Places robot and object at state x = [q, q̇, o, ȯ] (x must be validated by the caller),
+    /// with a fresh servo and no contact history.
+    pub fn set_state(&mut self, x: &[f64]) {
+        self.state.set_state(&self.layout, x);
+    }
+
+    /// Writes the current state into `x` (length nx): the object's velocity is the one the solve
+    /// left it (see [`Self::step_once`], which reports its displacement rate instead).
+    pub fn read_state(&self, x: &mut [f64]) {
+        self.state.read_state(&self.layout, x);
+    }
+
+    /// One step under the velocity command `u` (projected onto the velocity limits); writes the
+    /// state after the step into `x` (nx), the object's velocity being the rate at which it moved
+    /// over the step (as in the Rapier path).
+    pub fn step_once(&mut self, u: &[f64], x: &mut [f64]) {
+        self.state.step_once(&self.layout, u, x);
+    }
+
+    /// Advances one step under the current command and measures its interaction.
+    pub fn step(&mut self) {
+        self.state.step(&self.layout);
+    }
+
+    /// Interaction measured in the last step.
+    pub fn interaction(&self) -> &Interaction {
+        &self.state.last
+    }
+
+    /// Every robot–object contact point that carried force in the last step, with the force on
+    /// the robot (allocates; for diagnosis).
+    pub fn contacts(&self) -> Vec<ContactReport> {
+        self.state.contacts(&self.layout)
+    }
+
+    /// Steps that went through the contact solve and the time spent in them (detection, solve
+    /// and integration), since the world was built.
+    pub fn engine_clock(&self) -> EngineClock {
+        self.state.engine
+    }
+
+    /// `evaluator`'s value of the last step, which led to state `x` under command `u` (frames from
+    /// the world's caches, as in the Rapier path).
+    pub fn evaluate_step(&mut self, evaluator: &dyn StepEvaluator, x: &[f64], u: &[f64]) -> f64 {
+        self.state.evaluate_step(&self.layout, evaluator, x, u)
+    }
+}
+
+impl WorldState {
+    /// [`ReducedWorld::restore_from`].
+    fn restore_from(&mut self, snapshot: &WorldState) {
         self.servo.clone_from(&snapshot.servo);
         self.o.clone_from(&snapshot.o);
         self.od.clone_from(&snapshot.od);
@@ -295,10 +365,9 @@ impl ReducedWorld {
         self.detector.restore_from(&snapshot.detector);
     }
 
-    /// Places robot and object at state x = [q, q̇, o, ȯ] (x must be validated by the caller),
-    /// with a fresh servo and no contact history.
-    pub fn set_state(&mut self, x: &[f64]) {
-        let (nq, no) = (self.layout.nq, self.layout.no);
+    /// [`ReducedWorld::set_state`].
+    fn set_state(&mut self, layout: &ReducedLayout, x: &[f64]) {
+        let (nq, no) = (layout.nq, layout.no);
         self.servo.reset(&x[..nq], &x[nq..2 * nq]);
         self.o.copy_from_slice(&x[2 * nq..2 * nq + no]);
         self.od.copy_from_slice(&x[2 * nq + no..2 * (nq + no)]);
@@ -315,34 +384,29 @@ impl ReducedWorld {
         self.detector.reset();
     }
 
-    /// Writes the current state into `x` (length nx): the object's velocity is the one the solve
-    /// left it (see [`Self::step_once`], which reports its displacement rate instead).
-    pub fn read_state(&self, x: &mut [f64]) {
-        let (nq, no) = (self.layout.nq, self.layout.no);
+    /// [`ReducedWorld::read_state`].
+    fn read_state(&self, layout: &ReducedLayout, x: &mut [f64]) {
+        let (nq, no) = (layout.nq, layout.no);
         x[..nq].copy_from_slice(&self.servo.q);
         x[nq..2 * nq].copy_from_slice(&self.servo.qd);
         x[2 * nq..2 * nq + no].copy_from_slice(&self.o);
         x[2 * nq + no..2 * (nq + no)].copy_from_slice(&self.od);
     }
 
-    /// One step under the velocity command `u` (projected onto the velocity limits); writes the
-    /// state after the step into `x` (nx), the object's velocity being the rate at which it moved
-    /// over the step (as in the Rapier path).
-    pub fn step_once(&mut self, u: &[f64], x: &mut [f64]) {
-        let layout = self.layout.clone();
+    /// [`ReducedWorld::step_once`].
+    fn step_once(&mut self, layout: &ReducedLayout, u: &[f64], x: &mut [f64]) {
         self.servo.set_command(u, &layout.servo_limits);
         self.o_before.clone_from(&self.o);
-        self.step();
-        self.read_state(x);
+        self.step(layout);
+        self.read_state(layout, x);
         let (nq, no) = (layout.nq, layout.no);
         for (i, b) in self.o_before.iter().enumerate() {
             x[2 * nq + no + i] = (self.o[i] - b) / layout.config.dt;
         }
     }
 
-    /// Advances one step under the current command and measures its interaction.
-    pub fn step(&mut self) {
-        let layout = self.layout.clone();
+    /// [`ReducedWorld::step`].
+    fn step(&mut self, layout: &ReducedLayout) {
         let dt = layout.config.dt;
         self.servo.advance(
             &layout.config.gains,
@@ -368,6 +432,7 @@ impl ReducedWorld {
                 dt,
                 PREDICTION + QUIESCENCE_MARGIN,
                 &mut self.jacobian,
+                &mut self.quiescence_first,
             )
         {
             // Nothing can touch the object and it is held at rest: the step cannot move it.
@@ -376,11 +441,11 @@ impl ReducedWorld {
             return;
         }
         let started = Instant::now();
-        self.solve_contacts(&layout);
+        self.solve_contacts(layout);
         self.engine.steps += 1;
         self.engine.seconds += started.elapsed().as_secs_f64();
         self.servo.commit();
-        self.measure_interaction(&layout);
+        self.measure_interaction(layout);
     }
 
     /// Detection, the solve and the object's integration over one step.
@@ -523,19 +588,24 @@ impl ReducedWorld {
         let frames = &mut self.robot.frames;
         self.scene.robot.update_frames(&Isometry3::identity(), &self.servo.q, frames);
         let inv_dt = 1.0 / layout.config.dt;
+        // The contacts on one link act on the joints as one wrench about the link's origin: one
+        // Jacobian per touched link instead of one per contact point.
+        self.link_wrenches.clear();
         for (touch, impulse) in self.touches.iter().zip(&self.impulses) {
             if *impulse == Vector3::zeros() {
                 continue;
             }
             self.last.contact = true;
             let force = impulse * inv_dt;
-            let point = frames.poses[touch.robot_link] * touch.local_point;
-            self.scene
-                .robot
-                .frames_jacobian_into(frames, touch.robot_link, &point, &mut self.jacobian);
-            for (c, t) in self.last.tau_ext.iter_mut().enumerate() {
-                let col = &self.jacobian[6 * c..6 * c + 3];
-                *t += col[0] * force.x + col[1] * force.y + col[2] * force.z;
+            let pose = frames.poses[touch.robot_link];
+            let point = pose * touch.local_point;
+            let moment = (point.coords - pose.translation.vector).cross(&force);
+            match self.link_wrenches.iter_mut().find(|(link, _, _)| *link == touch.robot_link) {
+                Some((_, f, m)) => {
+                    *f += force;
+                    *m += moment;
+                }
+                None => self.link_wrenches.push((touch.robot_link, force, moment)),
             }
             if layout.sensor_links[touch.robot_link] {
                 let sensor = frames.poses[layout.sensor_link].translation.vector;
@@ -550,19 +620,23 @@ impl ReducedWorld {
                 }
             }
         }
+        for (link, force, moment) in &self.link_wrenches {
+            let origin = Point3::from(frames.poses[*link].translation.vector);
+            self.scene
+                .robot
+                .frames_jacobian_into(frames, *link, &origin, &mut self.jacobian);
+            for (c, t) in self.last.tau_ext.iter_mut().enumerate() {
+                let col = &self.jacobian[6 * c..6 * c + 6];
+                *t += col[0] * force.x + col[1] * force.y + col[2] * force.z + col[3] * moment.x + col[4] * moment.y + col[5] * moment.z;
+            }
+        }
     }
 
-    /// Interaction measured in the last step.
-    pub fn interaction(&self) -> &Interaction {
-        &self.last
-    }
-
-    /// Every robot–object contact point that carried force in the last step, with the force on
-    /// the robot (allocates; for diagnosis).
-    pub fn contacts(&self) -> Vec<ContactReport> {
+    /// [`ReducedWorld::contacts`].
+    fn contacts(&self, layout: &ReducedLayout) -> Vec<ContactReport> {
         let frames_q = &self.servo.q;
         let poses = self.scene.robot.link_poses(&Isometry3::identity(), frames_q);
-        let inv_dt = 1.0 / self.layout.config.dt;
+        let inv_dt = 1.0 / layout.config.dt;
         self.touches
             .iter()
             .zip(&self.impulses)
@@ -580,16 +654,9 @@ impl ReducedWorld {
             .collect()
     }
 
-    /// Steps that went through the contact solve and the time spent in them (detection, solve
-    /// and integration), since the world was built.
-    pub fn engine_clock(&self) -> EngineClock {
-        self.engine
-    }
-
-    /// `evaluator`'s value of the last step, which led to state `x` under command `u` (frames from
-    /// the world's caches, as in the Rapier path).
-    pub fn evaluate_step(&mut self, evaluator: &dyn StepEvaluator, x: &[f64], u: &[f64]) -> f64 {
-        let (nq, no) = (self.layout.nq, self.layout.no);
+    /// [`ReducedWorld::evaluate_step`].
+    fn evaluate_step(&mut self, layout: &ReducedLayout, evaluator: &dyn StepEvaluator, x: &[f64], u: &[f64]) -> f64 {
+        let (nq, no) = (layout.nq, layout.no);
         self.scene
             .robot
             .update_frames(&Isometry3::identity(), &x[..nq], &mut self.robot.frames);

@@ -135,12 +135,8 @@ impl Solver {
     }
 
     /// Adds a row acting on `proxy` at `point` along `dir` (linear part; none for joint rows) and on
-    /// the object with J_o = `object_j`.
-    fn push_row(&mut self, proxy: Option<(usize, &Point3<f64>, &Vector3<f64>)>, object_j: impl Iterator<Item = f64>) -> usize {
-        let mut j = [0.0; MAX_OBJECT_DOFS];
-        for (slot, v) in j.iter_mut().zip(object_j) {
-            *slot = v;
-        }
+    /// the object with J_o = `j`.
+    fn push_row(&mut self, proxy: Option<(usize, &Point3<f64>, &Vector3<f64>)>, j: ObjectVector) -> usize {
         let no = self.no;
         let mut wj = [0.0; MAX_OBJECT_DOFS];
         for (slot, row) in wj.iter_mut().zip(&self.inverse_mass).take(no) {
@@ -198,12 +194,15 @@ impl Solver {
         warm: Option<Vector3<f64>>,
     ) {
         let no = self.no;
-        let project = |dir: Vector3<f64>| {
-            (0..no).map(move |c| {
-                -(object_jacobian[3 * c] * dir.x + object_jacobian[3 * c + 1] * dir.y + object_jacobian[3 * c + 2] * dir.z)
-            })
+        let project = |dir: &Vector3<f64>| {
+            let mut j = [0.0; MAX_OBJECT_DOFS];
+            for (c, slot) in j.iter_mut().enumerate().take(no) {
+                let column = &object_jacobian[3 * c..3 * c + 3];
+                *slot = -(column[0] * dir.x + column[1] * dir.y + column[2] * dir.z);
+            }
+            j
         };
-        let first = self.push_row(Some((proxy, point, normal)), project(*normal));
+        let first = self.push_row(Some((proxy, point, normal)), project(normal));
         // A gap may close within the step (speculative contact); an overlap is pushed apart at
         // the contact's stiffness, no faster than the corrective velocity bound.
         let rhs_wo_bias = dist.max(0.0) / params.dt;
@@ -211,7 +210,7 @@ impl Solver {
         row.rhs_wo_bias = rhs_wo_bias;
         row.rhs = rhs_wo_bias + (params.erp_inv_dt * dist).clamp(-params.max_corrective_velocity, 0.0);
         for t in tangents(normal) {
-            self.push_row(Some((proxy, point, &t)), project(t));
+            self.push_row(Some((proxy, point, &t)), project(&t));
         }
         self.contacts.push(ContactRows { first, friction });
         if let Some(impulse) = warm {
@@ -229,8 +228,9 @@ impl Solver {
     /// within the step and pushes it back stiffly once beyond.
     pub fn add_limit(&mut self, params: &SolverParams, dof: usize, lower: bool, distance: f64) {
         let sign = if lower { 1.0 } else { -1.0 };
-        let no = self.no;
-        let row = self.push_row(None, (0..no).map(|c| if c == dof { sign } else { 0.0 }));
+        let mut j = [0.0; MAX_OBJECT_DOFS];
+        j[dof] = sign;
+        let row = self.push_row(None, j);
         let rhs_wo_bias = distance.max(0.0) / params.dt;
         self.rows[row].rhs_wo_bias = rhs_wo_bias;
         self.rows[row].rhs = rhs_wo_bias + params.limit_erp_inv_dt * distance.min(0.0);
@@ -244,8 +244,9 @@ impl Solver {
 
     /// Dry friction on coordinate `dof`: its velocity is held at zero by at most `max_impulse`.
     pub fn add_dry_friction(&mut self, dof: usize, max_impulse: f64) {
-        let no = self.no;
-        let row = self.push_row(None, (0..no).map(|c| if c == dof { 1.0 } else { 0.0 }));
+        let mut j = [0.0; MAX_OBJECT_DOFS];
+        j[dof] = 1.0;
+        let row = self.push_row(None, j);
         self.bounded.push(BoundedRow {
             row,
             lower: -max_impulse,
@@ -254,6 +255,7 @@ impl Solver {
         });
     }
 
+    #[inline(always)]
     fn velocity(&self, row: &Row) -> f64 {
         // Most objects have one joint: skip the loop over the padding then.
         let mut v = if self.no == 1 {
@@ -268,6 +270,7 @@ impl Solver {
         v
     }
 
+    #[inline(always)]
     fn apply(&mut self, row: usize, delta: f64) {
         let r = &self.rows[row];
         if r.proxy != NO_PROXY {
