@@ -627,7 +627,12 @@ impl WorldState {
                 .frames_jacobian_into(frames, *link, &origin, &mut self.jacobian);
             for (c, t) in self.last.tau_ext.iter_mut().enumerate() {
                 let col = &self.jacobian[6 * c..6 * c + 6];
-                *t += col[0] * force.x + col[1] * force.y + col[2] * force.z + col[3] * moment.x + col[4] * moment.y + col[5] * moment.z;
+                *t += col[0] * force.x
+                    + col[1] * force.y
+                    + col[2] * force.z
+                    + col[3] * moment.x
+                    + col[4] * moment.y
+                    + col[5] * moment.z;
             }
         }
     }
