@@ -3,9 +3,9 @@
     perf record -e cpu-clock -F 999 -g -o /tmp/contact.perf -- .venv/bin/python benches/profile_contact.py --iterations 300
     .venv/bin/python benches/perf_breakdown.py /tmp/contact.perf
 
-Repeats `Controller.update` from the hooked shelf state in the open phase (N = 40, K = 67,
-2 threads), the iteration that benches/compare_planning.py times against `mujoco.rollout`;
---contact-model rapier profiles the reference path.
+Repeats `Controller.update` from the hooked shelf state in the open phase (N = 40 unless
+--rollouts says otherwise, K = 67, 2 threads), the iteration that benches/compare_planning.py
+times against `mujoco.rollout`; --contact-model rapier profiles the reference path.
 """
 
 from __future__ import annotations
@@ -23,9 +23,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--iterations", type=int, default=300)
     parser.add_argument("--object", default="shelf", choices=sabre.OBJECTS)
     parser.add_argument("--contact-model", default="reduced", choices=sabre.CONTACT_MODELS)
+    parser.add_argument("--rollouts", type=int, default=40, help="samples per iteration (N)")
     args = parser.parse_args(argv)
     scene = sabre.Scene.load(obj=args.object)
-    config = sabre.ControllerConfig(seed=0, threads=2, contact_model=args.contact_model)
+    config = sabre.ControllerConfig(seed=0, threads=2, rollouts=args.rollouts, contact_model=args.contact_model)
     controller = sabre.Controller(scene, sabre.tasks.OpenObject(), config)
     controller.set_phase("open")
     x = hooked_state(scene)

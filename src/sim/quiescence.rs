@@ -132,8 +132,8 @@ impl Quiescence {
         // Starting from the body that kept the last step from being skipped: it usually does so
         // again, and the answer does not depend on the order.
         let n = self.robot_spheres.len();
-        for k in 0..n {
-            let index = (k + *first) % n;
+        let start = (*first).min(n.saturating_sub(1));
+        for index in (start..n).chain(0..start) {
             let (link, center, radius) = self.robot_spheres[index];
             let c = frames.poses[link] * center;
             // A body in reach of some primitive decides at the first such primitive (in contact,
