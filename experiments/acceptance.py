@@ -11,6 +11,7 @@ one success needs), mean wrench, real-time factor, planning time, and the seeds 
     .venv/bin/python experiments/acceptance.py --seeds 10
     .venv/bin/python experiments/acceptance.py --objects shelf drawer --seeds 3 --variant N IO
     .venv/bin/python experiments/acceptance.py --robot panda_pedestal --seeds 5 --variant N IO
+    .venv/bin/python experiments/acceptance.py --rollouts 160 --seeds 10 --variant N IO
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--duration", type=float, default=60.0, help="longest episode, s of simulated time")
     parser.add_argument("--replan-rate", type=float, default=50.0, help="re-planning rate, Hz of simulated time")
+    parser.add_argument("--rollouts", type=int, default=None, help="samples per iteration (default: the controller's)")
     parser.add_argument("--workers", type=int, default=None, help="local worker processes (default: cores)")
     parser.add_argument("--out", default="results", help="output folder (runs cached in <out>/acceptance/runs/)")
     args = parser.parse_args(argv)
@@ -43,6 +45,7 @@ def main(argv: list[str] | None = None) -> None:
         duration=args.duration,
         replan_rate=args.replan_rate,
         robot=args.robot,
+        rollouts=args.rollouts,
     )
     records = run_specs(runs, Path(args.out) / "acceptance", workers=args.workers)
     print(

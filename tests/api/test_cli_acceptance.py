@@ -33,6 +33,27 @@ def test_unknown_objects_or_variants_are_rejected():
         acceptance_specs(range(1), variants=["X"])
 
 
+def test_the_samples_per_iteration_reach_the_controller_and_a_run_of_their_own(monkeypatch):
+    from sabre.experiments import scenarios
+
+    (default,) = acceptance_specs([0], objects=["drawer"], variants=["N"], duration=0.03)
+    (more,) = acceptance_specs([0], objects=["drawer"], variants=["N"], duration=0.03, rollouts=16)
+    assert "rollouts" not in default.options and more.options["rollouts"] == 16 and more.key != default.key
+    built = []
+
+    class Recording(scenarios.Controller):
+        def __init__(self, scene, task, config):
+            built.append(config.rollouts)
+            super().__init__(scene, task, config)
+
+    monkeypatch.setattr(scenarios, "Controller", Recording)
+    runner.run_one(more)
+    runner.run_one(default)
+    assert built == [16, sabre.ControllerConfig().rollouts]
+    with pytest.raises(sabre.InvalidValueError, match="rollouts"):
+        acceptance_specs(range(1), rollouts=0)
+
+
 def test_script_runs_caches_and_tabulates_and_a_second_call_reuses_the_runs(tmp_path, capsys, monkeypatch):
     script = runpy.run_path(str(SCRIPT))
     argv = [

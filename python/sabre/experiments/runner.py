@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from .._validate import as_count
 from ..errors import InvalidValueError, require_extra
 from ..scene import OBJECTS
 
@@ -148,12 +149,14 @@ def acceptance_specs(
     replan_rate: float = 50.0,
     plant: str | None = None,
     robot: str = "royalpanda",
+    rollouts: int | None = None,
 ) -> list[RunSpec]:
     """The acceptance runs: every object opened from the robot's start by every variant at every seed,
     for up to ``duration`` s of simulated time, re-planning at ``replan_rate`` Hz (on the plant ``plant``
     names, "module:factory"; None: the Rapier plant). ``robot``: the RoyalPanda (the paper's start) or
     an example robot (:data:`sabre.robot_examples.EXAMPLE_ROBOTS`), which opens its own objects
-    (``objects`` defaults to them)."""
+    (``objects`` defaults to them). ``rollouts``: samples per iteration (None: the controller's
+    default)."""
     from ..planner import VARIANTS
     from ..robot_examples import EXAMPLE_OBJECTS
 
@@ -167,6 +170,8 @@ def acceptance_specs(
         raise InvalidValueError(f"acceptance: unknown objects or variants {unknown}; objects {known}, variants {VARIANTS}")
     # the RoyalPanda's runs keep the configuration (and so the cache entries) they always had
     mounted = {} if robot == "royalpanda" else {"robot": robot}
+    if rollouts is not None:
+        mounted["rollouts"] = as_count("rollouts", rollouts)
     runs = [
         _spec("acceptance", seed, obj=o, variant=v, duration=float(duration), replan_rate=float(replan_rate), **mounted)
         for o in objects
@@ -287,7 +292,14 @@ def _acceptance_run(c: dict, seed: int, plant: Callable | None = None) -> dict:
     from . import scenarios
 
     run = scenarios.object_manipulation(
-        c["variant"], c["obj"], seed, c["duration"], replan_rate=c["replan_rate"], plant=plant, robot=c.get("robot", "royalpanda")
+        c["variant"],
+        c["obj"],
+        seed,
+        c["duration"],
+        replan_rate=c["replan_rate"],
+        plant=plant,
+        robot=c.get("robot", "royalpanda"),
+        rollouts=c.get("rollouts"),
     )
     ep = run.episode
     phases = [ep.phases[i] for i in ep.phase]

@@ -467,12 +467,15 @@ def object_manipulation(
     replan_rate: float = 50.0,
     plant: PlantFactory | None = None,
     robot: str = "royalpanda",
+    rollouts: int | None = None,
 ) -> ManipulationResult:
     """OpenObject from :func:`~sabre.closed_loop.paper_start_state`; violations per ZBF class. ``robot``:
     a built-in robot (:data:`sabre.ROBOTS`) or an example robot
-    (:data:`sabre.robot_examples.EXAMPLE_ROBOTS`, with its objects where it opens them)."""
+    (:data:`sabre.robot_examples.EXAMPLE_ROBOTS`, with its objects where it opens them); ``rollouts``:
+    the samples per iteration (None: the controller's default)."""
     scene = manipulation_scene(robot, obj)
-    ctrl = Controller(scene, tasks.OpenObject(), ControllerConfig(variant=variant, seed=seed))
+    sampled = {} if rollouts is None else {"rollouts": rollouts}
+    ctrl = Controller(scene, tasks.OpenObject(), ControllerConfig(variant=variant, seed=seed, **sampled))
     ep = run_episode(
         scene,
         ctrl,
