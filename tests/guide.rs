@@ -4,7 +4,7 @@
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use sabre::model::Scene;
-use sabre::mppi::{servo_guide, ServoGuideConfig};
+use sabre::mppi::{servo_guide, servo_guides, ServoGuideConfig};
 use sabre::SabreError;
 
 const DT: f64 = 0.015;
@@ -221,4 +221,52 @@ fn limit_weighting_keeps_a_joint_further_from_its_limit_and_still_reaches() {
         dp < 5e-3 && da < 2e-2,
         "the other joints should reach the target: {dp} m, {da} rad"
     );
+}
+
+#[test]
+fn guides_in_parallel_are_each_guide_alone_on_any_thread_count() {
+    let scene = scene();
+    let q0 = scene.home_configuration();
+    let start = scene.fk(&q0, "grasp").unwrap();
+    let sequences: Vec<Vec<Isometry3<f64>>> = (0..3)
+        .map(|m| {
+            let offset = Translation3::new(0.05 * m as f64, -0.04, 0.02 * m as f64);
+            (0..=K)
+                .map(|k| {
+                    Isometry3::from_parts(offset, UnitQuaternion::identity())
+                        * start
+                        * Isometry3::translation(0.0, 0.0, 0.001 * k as f64)
+                })
+                .collect()
+        })
+        .collect();
+    let configs: Vec<ServoGuideConfig> = (0..3)
+        .map(|m| ServoGuideConfig {
+            max_linear: 0.1 + 0.1 * m as f64,
+            ..Default::default()
+        })
+        .collect();
+    let alone: Vec<f64> = sequences
+        .iter()
+        .zip(&configs)
+        .flat_map(|(t, c)| servo_guide(&scene, &q0, t, DT, "grasp", c).unwrap())
+        .collect();
+    for threads in [1, 2, 3] {
+        let together = servo_guides(&scene, &q0, &sequences, DT, "grasp", &configs, Some(threads)).unwrap();
+        assert_eq!(together, alone, "{threads} threads");
+    }
+    let uneven = vec![sequences[0].clone(), sequences[1][..K].to_vec()];
+    assert!(matches!(
+        servo_guides(&scene, &q0, &uneven, DT, "grasp", &configs[..2], None),
+        Err(SabreError::InvalidValue { .. })
+    ));
+    assert!(matches!(
+        servo_guides(&scene, &q0, &sequences, DT, "grasp", &configs[..2], None),
+        Err(SabreError::InvalidValue { .. })
+    ));
+    assert!(matches!(
+        servo_guides(&scene, &q0, &sequences, DT, "grasp", &configs, Some(0)),
+        Err(SabreError::InvalidValue { .. })
+    ));
+    assert!(servo_guides(&scene, &q0, &[], DT, "grasp", &[], None).unwrap().is_empty());
 }

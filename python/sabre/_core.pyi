@@ -50,6 +50,7 @@ __all__ = [
     "likelihood_weights",
     "mesh_triangles",
     "servo_guide",
+    "servo_guides",
     "decode_joint_state",
     "encode_joint_state",
     "decode_float64_array",
@@ -531,6 +532,15 @@ def servo_guide(
     dt: float,
     frame: str,
     config: ServoGuideConfig,
+) -> npt.NDArray[np.float64]: ...
+def servo_guides(
+    scene: Scene,
+    q0: npt.NDArray[np.float64],
+    targets: npt.NDArray[np.float64],
+    dt: float,
+    frame: str,
+    configs: list[ServoGuideConfig],
+    threads: int | None = None,
 ) -> npt.NDArray[np.float64]: ...
 
 @final

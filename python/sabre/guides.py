@@ -9,14 +9,17 @@ horizon.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from . import _core
-from ._validate import as_float_array, core_config
+from ._validate import as_count, as_float_array, core_config
 from .errors import InvalidValueError
 from .scene import Scene
+from .sim import MAX_THREADS
 
-__all__ = ["servo_guide", "rotation_log"]
+__all__ = ["servo_guide", "servo_guides", "rotation_log"]
 
 # The core's defaults, the one source of the servo guide's defaults.
 _GUIDE = _core.ServoGuideConfig()
@@ -71,9 +74,70 @@ def servo_guide(
     targets = np.ascontiguousarray(targets, dtype=np.float64)
     if targets.ndim != 3 or targets.shape[1:] != (4, 4) or len(targets) < 2:
         raise InvalidValueError(f"targets: expected shape (K+1, 4, 4) with K >= 1, got {targets.shape}")
+    config = _config(scene, gain, max_linear, max_angular, velocity_limit, damping, joint_margin, limit_weighting)
+    frame = frame if frame is not None else scene.require_tool_frame("servo_guide")
+    return _core.servo_guide(scene._core, q0, targets, float(dt), frame, config)
+
+
+def servo_guides(
+    scene: Scene,
+    q0: np.ndarray,
+    targets: np.ndarray,
+    dt: float,
+    frame: str | None = None,
+    gain: float | Sequence[float] = _GUIDE.gain,
+    max_linear: float | Sequence[float] = _GUIDE.max_linear,
+    max_angular: float | Sequence[float] = _GUIDE.max_angular,
+    velocity_limit: np.ndarray | None = None,
+    damping: float = _GUIDE.damping,
+    joint_margin: float = _GUIDE.joint_margin,
+    limit_weighting: bool = _GUIDE.limit_weighting,
+    threads: int | None = None,
+) -> np.ndarray:
+    """(M, K, nu) joint velocities: :func:`servo_guide` from q0 (nq,) along each of the M target
+    sequences ``targets`` (M, K+1, 4, 4), guide m with ``gain``, ``max_linear`` and ``max_angular``
+    (each one value for all or M values, one per guide). The guides run in parallel in Rust on the
+    rollouts' worker threads: ``threads`` of them, by default as many as the last rollouts ran on
+    (a planner's own, when a task calls this from :meth:`Task.guides`; every core before any
+    rollout). Each is the guide :func:`servo_guide` gives for its sequence alone."""
+    q0 = as_float_array("q0", q0, (scene.nq,))
+    targets = np.ascontiguousarray(targets, dtype=np.float64)
+    if targets.ndim != 4 or targets.shape[2:] != (4, 4) or targets.shape[1] < 2:
+        raise InvalidValueError(f"targets: expected shape (M, K+1, 4, 4) with K >= 1, got {targets.shape}")
+    count = len(targets)
+
+    def per_guide(name: str, value: float | Sequence[float]) -> list[float]:
+        values = np.asarray(value, dtype=np.float64)
+        if values.ndim == 0:
+            values = np.full(count, float(values))
+        if values.shape != (count,):
+            raise InvalidValueError(f"{name}: expected one value or {count} (one per guide), got shape {values.shape}")
+        return values.tolist()
+
+    gains, linear, angular = per_guide("gain", gain), per_guide("max_linear", max_linear), per_guide("max_angular", max_angular)
+    configs = [
+        _config(scene, g, lin, ang, velocity_limit, damping, joint_margin, limit_weighting)
+        for g, lin, ang in zip(gains, linear, angular, strict=True)
+    ]
+    threads = None if threads is None else as_count("threads", threads, maximum=MAX_THREADS)
+    frame = frame if frame is not None else scene.require_tool_frame("servo_guides")
+    return _core.servo_guides(scene._core, q0, targets, float(dt), frame, configs, threads)
+
+
+def _config(
+    scene: Scene,
+    gain: float,
+    max_linear: float,
+    max_angular: float,
+    velocity_limit: np.ndarray | None,
+    damping: float,
+    joint_margin: float,
+    limit_weighting: bool,
+) -> _core.ServoGuideConfig:
+    """The core's config of one servo guide (its checks in Rust)."""
     if velocity_limit is not None:
         velocity_limit = as_float_array("velocity_limit", velocity_limit, (scene.nq,))
-    config = core_config(
+    return core_config(
         _core.ServoGuideConfig,
         gain=float(gain),
         max_linear=float(max_linear),
@@ -83,5 +147,3 @@ def servo_guide(
         joint_margin=float(joint_margin),
         limit_weighting=bool(limit_weighting),
     )
-    frame = frame if frame is not None else scene.require_tool_frame("servo_guide")
-    return _core.servo_guide(scene._core, q0, targets, float(dt), frame, config)

@@ -2,6 +2,7 @@
 //! integrated on the kinematics over the horizon.
 
 use nalgebra::{Isometry3, Matrix6, Vector6};
+use rayon::prelude::*;
 
 use crate::error::{ensure_finite, Result, SabreError};
 use crate::model::kinematics::Frames;
@@ -176,6 +177,52 @@ pub fn servo_guide(
         for (qi, vi) in q.iter_mut().zip(&v) {
             *qi += dt * vi;
         }
+    }
+    Ok(out)
+}
+
+/// [`servo_guide`] along several target sequences from the same `q0`, each with its own config,
+/// in parallel on the rollouts' worker pool of `threads` threads (None: the pool the last rollouts
+/// ran on, see [`crate::sim::worker_pool`]): M × K × nu
+/// joint velocities (row-major), guide m servoing along `targets[m]`. Every sequence has the same
+/// length K + 1. One guide runs on the calling thread.
+pub fn servo_guides(
+    scene: &Scene,
+    q0: &[f64],
+    targets: &[Vec<Isometry3<f64>>],
+    dt: f64,
+    frame: &str,
+    configs: &[ServoGuideConfig],
+    threads: Option<usize>,
+) -> Result<Vec<f64>> {
+    if targets.len() != configs.len() {
+        return Err(SabreError::invalid(
+            "configs",
+            format!(
+                "one per target sequence: {} sequences, {} configs",
+                targets.len(),
+                configs.len()
+            ),
+        ));
+    }
+    if let Some(first) = targets.first() {
+        if let Some(other) = targets.iter().find(|t| t.len() != first.len()) {
+            return Err(SabreError::invalid(
+                "targets",
+                format!("every sequence has the same length: {} and {}", first.len(), other.len()),
+            ));
+        }
+    }
+    let one = |(t, c): (&Vec<Isometry3<f64>>, &ServoGuideConfig)| servo_guide(scene, q0, t, dt, frame, c);
+    let guides: Vec<Result<Vec<f64>>> = if targets.len() <= 1 {
+        targets.iter().zip(configs).map(one).collect()
+    } else {
+        let pool = crate::sim::worker_pool(threads)?;
+        pool.install(|| targets.par_iter().zip(configs).map(one).collect())
+    };
+    let mut out = Vec::new();
+    for guide in guides {
+        out.extend(guide?);
     }
     Ok(out)
 }

@@ -15,7 +15,7 @@ use rand_distr::{Distribution, StandardNormal};
 use crate::cost::Cost;
 use crate::error::{ensure_finite, Result, SabreError};
 use crate::sim::{RolloutBatch, RolloutModel, MAX_BATCH_ELEMENTS};
-pub use guide::{servo_guide, ServoGuideConfig};
+pub use guide::{servo_guide, servo_guides, ServoGuideConfig};
 pub use smoothing::SavitzkyGolay;
 pub use weights::{effective_sample_size, weights, LikelihoodMapping};
 

@@ -2,7 +2,7 @@
 
 use std::sync::{Arc, Mutex};
 
-use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn};
+use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -179,6 +179,41 @@ pub fn servo_guide<'py>(
         Ok((out, poses.len().saturating_sub(1)))
     })?;
     array(py, out, &[steps, nq])
+}
+
+/// Joint velocities (M, K, nu) of one servo guide per target sequence of `targets` (M, K+1, 4, 4),
+/// guide m with the gains of `configs[m]`, all from q0 (nq,), in parallel on the rollouts' worker
+/// pool of `threads` threads (None: the one the last rollouts ran on): `sabre.guides.servo_guides`.
+#[pyfunction]
+#[pyo3(signature = (scene, q0, targets, dt, frame, configs, threads=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn servo_guides<'py>(
+    py: Python<'py>,
+    scene: &PyScene,
+    q0: PyReadonlyArrayDyn<'py, f64>,
+    targets: PyReadonlyArrayDyn<'py, f64>,
+    dt: f64,
+    frame: &str,
+    configs: Vec<PyRef<'py, PyServoGuideConfig>>,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    let nq = scene.inner.nq();
+    let q0 = run(|| view("q0", &q0, &[nq as isize]))?;
+    let sequences = run(|| {
+        let poses = view("targets", &targets, &[-1, -1, 4, 4])?;
+        let per_sequence = 16 * targets.shape()[1];
+        poses
+            .chunks(per_sequence.max(1))
+            .map(|sequence| sequence.chunks(16).map(|m| isometry("targets", m)).collect())
+            .collect::<crate::Result<Vec<Vec<_>>>>()
+    })?;
+    let configs = run(|| configs.iter().map(|c| c.to_core(nq)).collect::<crate::Result<Vec<_>>>())?;
+    let (m, steps) = (sequences.len(), targets.shape()[1].saturating_sub(1));
+    let inner = &scene.inner;
+    let out = run_detached(py, || {
+        crate::mppi::servo_guides(inner, q0, &sequences, dt, frame, &configs, threads)
+    })?;
+    array(py, out, &[m, steps, nq])
 }
 
 #[pyclass(name = "Planner", module = "sabre._core")]

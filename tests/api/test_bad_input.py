@@ -348,6 +348,9 @@ FRAME_CALLS = {
     "servo_guide unknown": lambda s: sabre.guides.servo_guide(
         s, np.zeros(s.nq), np.stack([np.eye(4)] * 3), 0.015, frame="gripper"
     ),
+    "servo_guides unknown": lambda s: sabre.guides.servo_guides(
+        s, np.zeros(s.nq), np.stack([np.stack([np.eye(4)] * 3)] * 2), 0.015, frame="gripper"
+    ),
 }
 
 

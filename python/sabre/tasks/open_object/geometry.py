@@ -108,11 +108,25 @@ def _grasp_offset(scene: Scene, handle: str, xyz: Sequence[float], pitch: float)
     return out
 
 
+def _handle_and_tool(scene: Scene, handle: str, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The handle's pose and the grasp frame's pose (4, 4, read-only) at state x. The last state's
+    are kept per scene: a planning iteration's phase test measures the same state several ways."""
+    last = per_scene(scene, ("poses at the last state", handle), lambda _: {})
+    key = np.asarray(x, dtype=np.float64).tobytes()
+    if key not in last:
+        q, _, o, _ = scene.split_state(x)
+        poses = (handle_pose(scene, handle, o), scene.fk(q, tool_frame(scene)))
+        for pose in poses:
+            pose.setflags(write=False)
+        last.clear()
+        last[key] = poses
+    return last[key]
+
+
 def approach_error(scene: Scene, handle: str, x: np.ndarray, offset: np.ndarray) -> GraspError:
     """Distance (m) and angle (rad) of the grasp frame from the target ``offset`` at state x."""
-    q, _, o, _ = scene.split_state(x)
-    target = handle_pose(scene, handle, o) @ offset
-    pose = scene.fk(q, tool_frame(scene))
+    handle_at, pose = _handle_and_tool(scene, handle, x)
+    target = handle_at @ offset
     dp = float(np.linalg.norm(pose[:3, 3] - target[:3, 3]))
     cos = (np.trace(target[:3, :3].T @ pose[:3, :3]) - 1.0) / 2.0
     return GraspError(distance=dp, angle=float(np.arccos(np.clip(cos, -1.0, 1.0))))
@@ -120,10 +134,9 @@ def approach_error(scene: Scene, handle: str, x: np.ndarray, offset: np.ndarray)
 
 def _grasp_from_target(scene: Scene, handle: str, x: np.ndarray, offset: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The handle's pose (4, 4) and the grasp frame's offset (3,) from the target ``offset``, in world axes."""
-    q, _, o, _ = scene.split_state(x)
-    pose = handle_pose(scene, handle, o)
+    pose, tool = _handle_and_tool(scene, handle, x)
     target = pose @ offset
-    return pose, scene.fk(q, tool_frame(scene))[:3, 3] - target[:3, 3]
+    return pose, tool[:3, 3] - target[:3, 3]
 
 
 def pocket_error(scene: Scene, handle: str, x: np.ndarray, offset: np.ndarray) -> PocketError:
@@ -144,17 +157,23 @@ def depth_error(scene: Scene, handle: str, x: np.ndarray, offset: np.ndarray) ->
 
 def lateral_error(scene: Scene, handle: str, x: np.ndarray, sideways: float) -> float:
     """Sideways position (m) of the grasp frame along the handle frame's y axis, from ``sideways``."""
-    q, _, o, _ = scene.split_state(x)
-    grasp = np.linalg.solve(handle_pose(scene, handle, o), scene.fk(q, tool_frame(scene)))
+    handle_at, tool = _handle_and_tool(scene, handle, x)
+    grasp = np.linalg.solve(handle_at, tool)
     return float(grasp[1, 3] - sideways)
 
 
 def handle_travel(scene: Scene, handle: str, o: float) -> float:
-    """Distance (m) the handle moves per unit of opening (rad or m) at opening o."""
-    h = 1e-4 * (scene.o_upper[0] - scene.o_lower[0])
-    lo, hi = np.clip([o - h, o + h], scene.o_lower[0], scene.o_upper[0])
-    moved = handle_pose(scene, handle, [hi])[:3, 3] - handle_pose(scene, handle, [lo])[:3, 3]
-    return float(np.linalg.norm(moved) / max(hi - lo, 1e-12))
+    """Distance (m) the handle moves per unit of opening (rad or m) at opening o (the last opening's
+    kept per scene: the phase test and the guides ask at the same one)."""
+    o = float(o)
+    last = per_scene(scene, ("travel at the last opening", handle), lambda _: {})
+    if o not in last:
+        h = 1e-4 * (scene.o_upper[0] - scene.o_lower[0])
+        lo, hi = np.clip([o - h, o + h], scene.o_lower[0], scene.o_upper[0])
+        moved = handle_pose(scene, handle, [hi])[:3, 3] - handle_pose(scene, handle, [lo])[:3, 3]
+        last.clear()
+        last[o] = float(np.linalg.norm(moved) / max(hi - lo, 1e-12))
+    return last[o]
 
 
 def handle_speed(scene: Scene, handle: str, x: np.ndarray) -> float:

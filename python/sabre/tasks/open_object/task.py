@@ -10,7 +10,7 @@ import numpy as np
 from ... import costs
 from ..._validate import as_finite, as_non_negative, as_positive
 from ...errors import InvalidValueError
-from ...guides import servo_guide
+from ...guides import servo_guide, servo_guides
 from ...scene import Scene
 from ...sim import RolloutModel
 from .._per_scene import per_scene
@@ -460,13 +460,11 @@ class OpenObject(Task):
         own = float(o_dot[0]) * travel
         if own > max(speeds):
             speeds.insert(0, own)  # follow the object at its own pace
-        out = []
-        for speed in speeds:
-            rate = speed / max(travel, 1e-6)
-            openings = np.minimum(o[0] + rate * dt * np.arange(steps + 1), max(end, o[0]))
-            targets = self.handle_poses(scene, openings[:, None]) @ offset
-            out.append(servo_guide(scene, q, targets, dt, gain=self.guide.gain, max_linear=2.0 * speed + 0.05, max_angular=2.0))
-        return np.stack(out)
+        rates = np.asarray(speeds) / max(travel, 1e-6)
+        openings = np.minimum(o[0] + rates[:, None] * dt * np.arange(steps + 1), max(end, o[0]))
+        targets = (self.handle_poses(scene, openings.reshape(-1, 1)) @ offset).reshape(len(speeds), steps + 1, 4, 4)
+        max_linear = [2.0 * speed + 0.05 for speed in speeds]
+        return servo_guides(scene, q, targets, dt, gain=self.guide.gain, max_linear=max_linear, max_angular=2.0)
 
     def gain_inertia_floor(self, phase: str) -> float | None:
         return self.open.gain_inertia_floor if phase == "open" else None
