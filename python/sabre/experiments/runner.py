@@ -169,7 +169,7 @@ def acceptance_specs(
     if unknown:
         raise InvalidValueError(f"acceptance: unknown objects or variants {unknown}; objects {known}, variants {VARIANTS}")
     # the RoyalPanda's runs keep the configuration (and so the cache entries) they always had
-    mounted = {} if robot == "royalpanda" else {"robot": robot}
+    mounted: dict[str, object] = {} if robot == "royalpanda" else {"robot": robot}
     if rollouts is not None:
         mounted["rollouts"] = as_count("rollouts", rollouts)
     runs = [

@@ -474,8 +474,11 @@ def object_manipulation(
     (:data:`sabre.robot_examples.EXAMPLE_ROBOTS`, with its objects where it opens them); ``rollouts``:
     the samples per iteration (None: the controller's default)."""
     scene = manipulation_scene(robot, obj)
-    sampled = {} if rollouts is None else {"rollouts": rollouts}
-    ctrl = Controller(scene, tasks.OpenObject(), ControllerConfig(variant=variant, seed=seed, **sampled))
+    if rollouts is None:
+        config = ControllerConfig(variant=variant, seed=seed)
+    else:
+        config = ControllerConfig(variant=variant, seed=seed, rollouts=rollouts)
+    ctrl = Controller(scene, tasks.OpenObject(), config)
     ep = run_episode(
         scene,
         ctrl,

@@ -111,7 +111,7 @@ def _grasp_offset(scene: Scene, handle: str, xyz: Sequence[float], pitch: float)
 def _handle_and_tool(scene: Scene, handle: str, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The handle's pose and the grasp frame's pose (4, 4, read-only) at state x. The last state's
     are kept per scene: a planning iteration's phase test measures the same state several ways."""
-    last = per_scene(scene, ("poses at the last state", handle), lambda _: {})
+    last: dict[bytes, tuple[np.ndarray, np.ndarray]] = per_scene(scene, ("poses at the last state", handle), lambda _: {})
     key = np.asarray(x, dtype=np.float64).tobytes()
     if key not in last:
         q, _, o, _ = scene.split_state(x)
@@ -166,7 +166,7 @@ def handle_travel(scene: Scene, handle: str, o: float) -> float:
     """Distance (m) the handle moves per unit of opening (rad or m) at opening o (the last opening's
     kept per scene: the phase test and the guides ask at the same one)."""
     o = float(o)
-    last = per_scene(scene, ("travel at the last opening", handle), lambda _: {})
+    last: dict[float, float] = per_scene(scene, ("travel at the last opening", handle), lambda _: {})
     if o not in last:
         h = 1e-4 * (scene.o_upper[0] - scene.o_lower[0])
         lo, hi = np.clip([o - h, o + h], scene.o_lower[0], scene.o_upper[0])
