@@ -224,7 +224,7 @@ fn limit_weighting_keeps_a_joint_further_from_its_limit_and_still_reaches() {
 }
 
 #[test]
-fn guides_in_parallel_are_each_guide_alone_on_any_thread_count() {
+fn guides_in_a_batch_are_each_guide_alone() {
     let scene = scene();
     let q0 = scene.home_configuration();
     let start = scene.fk(&q0, "grasp").unwrap();
@@ -251,22 +251,16 @@ fn guides_in_parallel_are_each_guide_alone_on_any_thread_count() {
         .zip(&configs)
         .flat_map(|(t, c)| servo_guide(&scene, &q0, t, DT, "grasp", c).unwrap())
         .collect();
-    for threads in [1, 2, 3] {
-        let together = servo_guides(&scene, &q0, &sequences, DT, "grasp", &configs, Some(threads)).unwrap();
-        assert_eq!(together, alone, "{threads} threads");
-    }
+    let together = servo_guides(&scene, &q0, &sequences, DT, "grasp", &configs).unwrap();
+    assert_eq!(together, alone);
     let uneven = vec![sequences[0].clone(), sequences[1][..K].to_vec()];
     assert!(matches!(
-        servo_guides(&scene, &q0, &uneven, DT, "grasp", &configs[..2], None),
+        servo_guides(&scene, &q0, &uneven, DT, "grasp", &configs[..2]),
         Err(SabreError::InvalidValue { .. })
     ));
     assert!(matches!(
-        servo_guides(&scene, &q0, &sequences, DT, "grasp", &configs[..2], None),
+        servo_guides(&scene, &q0, &sequences, DT, "grasp", &configs[..2]),
         Err(SabreError::InvalidValue { .. })
     ));
-    assert!(matches!(
-        servo_guides(&scene, &q0, &sequences, DT, "grasp", &configs, Some(0)),
-        Err(SabreError::InvalidValue { .. })
-    ));
-    assert!(servo_guides(&scene, &q0, &[], DT, "grasp", &[], None).unwrap().is_empty());
+    assert!(servo_guides(&scene, &q0, &[], DT, "grasp", &[]).unwrap().is_empty());
 }

@@ -540,7 +540,6 @@ def servo_guides(
     dt: float,
     frame: str,
     configs: list[ServoGuideConfig],
-    threads: int | None = None,
 ) -> npt.NDArray[np.float64]: ...
 
 @final

@@ -14,10 +14,9 @@ from collections.abc import Sequence
 import numpy as np
 
 from . import _core
-from ._validate import as_count, as_float_array, core_config
+from ._validate import as_float_array, core_config
 from .errors import InvalidValueError
 from .scene import Scene
-from .sim import MAX_THREADS
 
 __all__ = ["servo_guide", "servo_guides", "rotation_log"]
 
@@ -92,14 +91,11 @@ def servo_guides(
     damping: float = _GUIDE.damping,
     joint_margin: float = _GUIDE.joint_margin,
     limit_weighting: bool = _GUIDE.limit_weighting,
-    threads: int | None = None,
 ) -> np.ndarray:
     """(M, K, nu) joint velocities: :func:`servo_guide` from q0 (nq,) along each of the M target
     sequences ``targets`` (M, K+1, 4, 4), guide m with ``gain``, ``max_linear`` and ``max_angular``
-    (each one value for all or M values, one per guide). The guides run in parallel in Rust on the
-    rollouts' worker threads: ``threads`` of them, by default as many as the last rollouts ran on
-    (a planner's own, when a task calls this from :meth:`Task.guides`; every core before any
-    rollout). Each is the guide :func:`servo_guide` gives for its sequence alone."""
+    (each one value for all or M values, one per guide), in one call into Rust. Each is the guide
+    :func:`servo_guide` gives for its sequence alone."""
     q0 = as_float_array("q0", q0, (scene.nq,))
     targets = np.ascontiguousarray(targets, dtype=np.float64)
     if targets.ndim != 4 or targets.shape[2:] != (4, 4) or targets.shape[1] < 2:
@@ -119,9 +115,8 @@ def servo_guides(
         _config(scene, g, lin, ang, velocity_limit, damping, joint_margin, limit_weighting)
         for g, lin, ang in zip(gains, linear, angular, strict=True)
     ]
-    threads = None if threads is None else as_count("threads", threads, maximum=MAX_THREADS)
     frame = frame if frame is not None else scene.require_tool_frame("servo_guides")
-    return _core.servo_guides(scene._core, q0, targets, float(dt), frame, configs, threads)
+    return _core.servo_guides(scene._core, q0, targets, float(dt), frame, configs)
 
 
 def _config(

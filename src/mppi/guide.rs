@@ -2,7 +2,6 @@
 //! integrated on the kinematics over the horizon.
 
 use nalgebra::{Isometry3, Matrix6, Vector6};
-use rayon::prelude::*;
 
 use crate::error::{ensure_finite, Result, SabreError};
 use crate::model::kinematics::Frames;
@@ -181,11 +180,10 @@ pub fn servo_guide(
     Ok(out)
 }
 
-/// [`servo_guide`] along several target sequences from the same `q0`, each with its own config,
-/// in parallel on the rollouts' worker pool of `threads` threads (None: the pool the last rollouts
-/// ran on, see [`crate::sim::worker_pool`]): M × K × nu
-/// joint velocities (row-major), guide m servoing along `targets[m]`. Every sequence has the same
-/// length K + 1. One guide runs on the calling thread.
+/// [`servo_guide`] along several target sequences from the same `q0`, each with its own config:
+/// M × K × nu joint velocities (row-major), guide m servoing along `targets[m]`. Every sequence has
+/// the same length K + 1. The guides run one after the other: a guide takes tens of microseconds,
+/// about what waking a worker thread and waiting for it takes.
 pub fn servo_guides(
     scene: &Scene,
     q0: &[f64],
@@ -193,7 +191,6 @@ pub fn servo_guides(
     dt: f64,
     frame: &str,
     configs: &[ServoGuideConfig],
-    threads: Option<usize>,
 ) -> Result<Vec<f64>> {
     if targets.len() != configs.len() {
         return Err(SabreError::invalid(
@@ -213,16 +210,9 @@ pub fn servo_guides(
             ));
         }
     }
-    let one = |(t, c): (&Vec<Isometry3<f64>>, &ServoGuideConfig)| servo_guide(scene, q0, t, dt, frame, c);
-    let guides: Vec<Result<Vec<f64>>> = if targets.len() <= 1 {
-        targets.iter().zip(configs).map(one).collect()
-    } else {
-        let pool = crate::sim::worker_pool(threads)?;
-        pool.install(|| targets.par_iter().zip(configs).map(one).collect())
-    };
     let mut out = Vec::new();
-    for guide in guides {
-        out.extend(guide?);
+    for (sequence, config) in targets.iter().zip(configs) {
+        out.extend(servo_guide(scene, q0, sequence, dt, frame, config)?);
     }
     Ok(out)
 }

@@ -182,11 +182,8 @@ pub fn servo_guide<'py>(
 }
 
 /// Joint velocities (M, K, nu) of one servo guide per target sequence of `targets` (M, K+1, 4, 4),
-/// guide m with the gains of `configs[m]`, all from q0 (nq,), in parallel on the rollouts' worker
-/// pool of `threads` threads (None: the one the last rollouts ran on): `sabre.guides.servo_guides`.
+/// guide m with the gains of `configs[m]`, all from q0 (nq,): `sabre.guides.servo_guides`.
 #[pyfunction]
-#[pyo3(signature = (scene, q0, targets, dt, frame, configs, threads=None))]
-#[allow(clippy::too_many_arguments)]
 pub fn servo_guides<'py>(
     py: Python<'py>,
     scene: &PyScene,
@@ -195,7 +192,6 @@ pub fn servo_guides<'py>(
     dt: f64,
     frame: &str,
     configs: Vec<PyRef<'py, PyServoGuideConfig>>,
-    threads: Option<usize>,
 ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
     let nq = scene.inner.nq();
     let q0 = run(|| view("q0", &q0, &[nq as isize]))?;
@@ -209,10 +205,7 @@ pub fn servo_guides<'py>(
     })?;
     let configs = run(|| configs.iter().map(|c| c.to_core(nq)).collect::<crate::Result<Vec<_>>>())?;
     let (m, steps) = (sequences.len(), targets.shape()[1].saturating_sub(1));
-    let inner = &scene.inner;
-    let out = run_detached(py, || {
-        crate::mppi::servo_guides(inner, q0, &sequences, dt, frame, &configs, threads)
-    })?;
+    let out = run(|| crate::mppi::servo_guides(&scene.inner, q0, &sequences, dt, frame, &configs))?;
     array(py, out, &[m, steps, nq])
 }
 

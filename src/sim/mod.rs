@@ -22,7 +22,7 @@ pub use interaction::{ContactReport, Interaction};
 pub use plant::{Plant, PlantConfig, DEFAULT_TAU_EXT_CUTOFF};
 pub use rapier::SimWorld;
 pub use reduced::{ReducedConfig, ReducedWorld};
-pub use rollout::{default_threads, worker_pool, ContactModel, RolloutBatch, RolloutConfig, RolloutModel, MAX_BATCH_ELEMENTS};
+pub use rollout::{default_threads, ContactModel, RolloutBatch, RolloutConfig, RolloutModel, MAX_BATCH_ELEMENTS};
 pub use rollout_world::RolloutWorld;
 
 /// A joint moving faster than this multiple of its velocity limit (or, for the object's joints,

@@ -172,35 +172,13 @@ pub struct RolloutModel {
 /// counts keeps the most recent ones and lets the others' threads exit.
 pub const MAX_CACHED_POOLS: usize = 2;
 
-/// The worker pool of `threads` threads the rollouts run on, for other data-parallel work of a
-/// planning iteration (the servo guides); None: the pool the last rollouts ran on (so a planner's
-/// guides take the planner's threads), or one of [`default_threads`] before any. `threads` must be
-/// within [1, [`MAX_THREADS`]].
-pub fn worker_pool(threads: Option<usize>) -> Result<Arc<rayon::ThreadPool>> {
-    if let Some(threads) = threads {
-        if !(1..=MAX_THREADS).contains(&threads) {
-            return Err(SabreError::invalid(
-                "threads",
-                format!("must be between 1 and {MAX_THREADS}, got {threads}"),
-            ));
-        }
-    }
-    pool(threads)
-}
-
 /// Thread pools by size, most recently used last: rayon pools are costly to create and a rollout
-/// is short, so they are reused; at most [`MAX_CACHED_POOLS`] are kept. None: the most recently
-/// used pool (one of [`default_threads`] when there is none).
-fn pool(threads: Option<usize>) -> Result<Arc<rayon::ThreadPool>> {
+/// is short, so they are reused; at most [`MAX_CACHED_POOLS`] are kept.
+fn pool(threads: usize) -> Result<Arc<rayon::ThreadPool>> {
     type Pools = Vec<(usize, Arc<rayon::ThreadPool>)>;
     static POOLS: OnceLock<Mutex<Pools>> = OnceLock::new();
     let pools = POOLS.get_or_init(|| Mutex::new(Vec::new()));
     let mut pools = pools.lock().unwrap_or_else(|e| e.into_inner());
-    let threads = match (threads, pools.last()) {
-        (Some(threads), _) => threads,
-        (None, Some((_, last))) => return Ok(last.clone()),
-        (None, None) => default_threads(),
-    };
     if let Some(i) = pools.iter().position(|(n, _)| *n == threads) {
         let entry = pools.remove(i);
         let p = entry.1.clone();
@@ -568,7 +546,7 @@ impl RolloutModel {
                 .with_max_len(1)
                 .for_each(|(i, (((((s, t), w), c), f), e))| work(i, s, t, w, c, f, e));
         };
-        let pool = pool(Some(threads))?;
+        let pool = pool(threads)?;
         crate::interrupt::run_watched_on(&pool, &cancel, run)?;
         Ok(())
     }

@@ -1,5 +1,5 @@
 """Servo guides in a batch: each guide of `sabre.guides.servo_guides` is the one `servo_guide` gives
-for its target sequence alone, on any number of threads, and bad batches are refused."""
+for its target sequence alone, and bad batches are refused."""
 
 from __future__ import annotations
 
@@ -27,15 +27,15 @@ def _sequences(scene, q0, count, steps):
     return out
 
 
-def test_each_guide_is_the_guide_of_its_sequence_alone_on_any_thread_count(scene):
+def test_each_guide_is_the_guide_of_its_sequence_alone(scene):
     q0 = scene.default_state()[: scene.nq]
     targets = _sequences(scene, q0, 3, 40)
     linear = [0.05, 0.2, 0.4]
     alone = np.stack([servo_guide(scene, q0, t, 0.015, gain=3.0, max_linear=v, max_angular=1.0) for t, v in zip(targets, linear)])
-    for threads in (None, 1, 2):
-        together = servo_guides(scene, q0, targets, 0.015, gain=3.0, max_linear=linear, max_angular=1.0, threads=threads)
-        assert together.shape == (3, 40, scene.nu)
-        np.testing.assert_array_equal(together, alone)
+    together = servo_guides(scene, q0, targets, 0.015, gain=3.0, max_linear=linear, max_angular=1.0)
+    assert together.shape == (3, 40, scene.nu)
+    np.testing.assert_array_equal(together, alone)
+    assert servo_guides(scene, q0, targets[:0], 0.015).shape == (0, 40, scene.nu)
     # the slowest cap binds: its guide moves the frame less far than the fastest's
     assert np.abs(alone[0]).sum() < np.abs(alone[2]).sum()
 
@@ -47,8 +47,6 @@ def test_each_guide_is_the_guide_of_its_sequence_alone_on_any_thread_count(scene
         ("a sequence of one pose", lambda s, q, t: servo_guides(s, q, t[:, :1], 0.015)),
         ("max_linear per guide, too few", lambda s, q, t: servo_guides(s, q, t, 0.015, max_linear=[0.1, 0.2])),
         ("gain per guide, a matrix", lambda s, q, t: servo_guides(s, q, t, 0.015, gain=np.ones((3, 1)))),
-        ("no threads", lambda s, q, t: servo_guides(s, q, t, 0.015, threads=0)),
-        ("threads as a bool", lambda s, q, t: servo_guides(s, q, t, 0.015, threads=True)),
         ("a negative cap", lambda s, q, t: servo_guides(s, q, t, 0.015, max_angular=[1.0, -1.0, 1.0])),
     ],
 )
