@@ -5,25 +5,25 @@
 //! pipeline ([`crate::sim::SimWorld`]) stays the reference this path is validated against.
 
 mod geometry;
+mod proxies;
 mod solver;
 
 use std::sync::Arc;
 use std::time::Instant;
 
-use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Point3, Vector3};
+use nalgebra::{DMatrix, DVector, Isometry3, Point3, Vector3};
 
 use self::geometry::{Collider, ContactKey, Detector};
+use self::proxies::{proxy_bodies, ProxyBody};
 use self::solver::{softness, Proxy, Solver, SolverParams};
 use super::engine_clock::EngineClock;
 use super::evaluator::{StepEvaluator, StepView};
 use super::interaction::{ContactReport, Interaction};
-use super::proxy::{body_groups, effective_mass};
 use super::quiescence::Quiescence;
 use super::servo::{validate_step, ServoGains, ServoLimits, ServoState};
 use super::wrist_sensor::wrist_sensor;
 use crate::error::Result;
 use crate::model::dynamics::{joint_space_terms, DynamicsWorkspace};
-use crate::model::kinematics::KinematicTree;
 use crate::model::scene::Scene;
 use crate::model::GRAVITY;
 
@@ -57,82 +57,6 @@ const RELAXATION_ITERATIONS: usize = 1;
 const LIMIT_REACH: f64 = 0.05;
 /// Extra clearance (m) of the quiescence test beyond the prediction distance.
 const QUIESCENCE_MARGIN: f64 = 0.02;
-
-/// A proxy: the rigid body of robot links joined by fixed joints that carries contact geometry,
-/// with the robot's effective mass at its centre of mass.
-#[derive(Debug, Clone)]
-struct ProxyBody {
-    /// The link whose frame the body lives in (the first link of its fixed group).
-    link: usize,
-    /// Centre of mass in that frame.
-    com: Point3<f64>,
-    inv_mass: f64,
-    /// Inverse inertia about the centre of mass, in that frame.
-    inv_inertia: Matrix3<f64>,
-}
-
-/// Mass, centre of mass and inertia (about that centre, in the frame of `body`) of the links of
-/// `tree` that fixed joints join into `body`.
-fn group_mass(tree: &KinematicTree, group: &[usize], offset: &[Isometry3<f64>], body: usize) -> (f64, Point3<f64>, Matrix3<f64>) {
-    let parts: Vec<(f64, Point3<f64>, Matrix3<f64>)> = tree
-        .links
-        .iter()
-        .enumerate()
-        .filter(|&(link, _)| group[link] == body)
-        .filter_map(|(link, l)| {
-            let inertial = l.inertial.as_ref()?;
-            let r = offset[link].rotation.to_rotation_matrix();
-            Some((
-                inertial.mass,
-                offset[link] * Point3::from(inertial.com),
-                r.matrix() * inertial.inertia * r.matrix().transpose(),
-            ))
-        })
-        .collect();
-    let mass: f64 = parts.iter().map(|p| p.0).sum();
-    if mass <= 0.0 {
-        // Massless links still need an invertible inertia.
-        return (1e-3, Point3::origin(), Matrix3::identity() * 1e-6);
-    }
-    let com = Point3::from(parts.iter().map(|(m, c, _)| c.coords * *m).sum::<Vector3<f64>>() / mass);
-    let inertia = parts
-        .iter()
-        .map(|(m, c, i)| {
-            let d = c - com;
-            i + (Matrix3::identity() * d.norm_squared() - d * d.transpose()) * *m
-        })
-        .sum();
-    (mass, com, inertia)
-}
-
-/// The proxies of the links `include` accepts, and for each of those links' primitives (in
-/// [`Collider::of_tree`] order) the proxy it belongs to.
-fn proxy_bodies(scene: &Scene, colliders: &[Collider]) -> (Vec<ProxyBody>, Vec<usize>) {
-    let tree = &scene.robot;
-    let (group, offset) = body_groups(tree);
-    let q0 = &scene.default_state()[..scene.nq()];
-    let mut bodies: Vec<ProxyBody> = Vec::new();
-    let owner = colliders
-        .iter()
-        .map(|c| {
-            let body = group[c.link];
-            if let Some(i) = bodies.iter().position(|b| b.link == body) {
-                return i;
-            }
-            let (mass, com, inertia) = group_mass(tree, &group, &offset, body);
-            let effective = effective_mass(tree, q0, body, &com);
-            let scale = effective / mass;
-            bodies.push(ProxyBody {
-                link: body,
-                com,
-                inv_mass: 1.0 / effective,
-                inv_inertia: (inertia * scale).try_inverse().unwrap_or_else(Matrix3::zeros),
-            });
-            bodies.len() - 1
-        })
-        .collect();
-    (bodies, owner)
-}
 
 /// Static facts about a reduced world, shared by every copy of it.
 #[derive(Debug)]
@@ -685,55 +609,4 @@ impl WorldState {
 }
 
 #[cfg(test)]
-mod tests {
-    use std::sync::Arc;
-
-    use super::ReducedWorld;
-    use crate::model::scene::Scene;
-    use crate::sim::test_scene::{probe_and_drawer, reduced_config, servo_config, state, world_at, DT};
-
-    fn reduced_at(scene: &Arc<Scene>, x: &[f64]) -> ReducedWorld {
-        let mut world = ReducedWorld::new(scene.clone(), &reduced_config()).expect("reduced world");
-        world.set_state(x);
-        world
-    }
-
-    /// Against the Rapier path on the same pushes: the drawer ends where Rapier's pipeline puts it
-    /// (within 1 mm after 0.3 s of pushing) and the robot feels the same force.
-    #[test]
-    fn the_drawer_moves_as_in_rapiers_pipeline() {
-        let scene = probe_and_drawer();
-        let x0 = state([0.62, 0.3], [0.3, 0.0], 0.0, 0.0);
-        let mut reduced = reduced_at(&scene, &x0);
-        let mut rapier = world_at(&scene, &servo_config(0.0, false), &x0);
-        let (mut a, mut b) = (x0.clone(), x0.clone());
-        let (mut impulse_a, mut impulse_b) = (0.0, 0.0);
-        for _ in 0..20 {
-            reduced.step_once(&[0.3, 0.2], &mut a);
-            rapier.step_once(&[0.3, 0.2], &mut b);
-            impulse_a += reduced.interaction().tau_ext[0] * DT;
-            impulse_b += rapier.interaction().tau_ext[0] * DT;
-        }
-        assert!(b[4] > 0.05, "Rapier's drawer opened: {}", b[4]);
-        assert!((a[4] - b[4]).abs() < 1e-3, "drawer {} vs {}", a[4], b[4]);
-        assert!(
-            (impulse_a - impulse_b).abs() < 0.05 * impulse_b.abs(),
-            "{impulse_a} vs {impulse_b}"
-        );
-    }
-
-    #[test]
-    fn nothing_touches_a_robot_far_from_the_object() {
-        let scene = probe_and_drawer();
-        let x0 = state([-0.5, 0.0], [0.0, 0.0], 0.2, 0.0);
-        let mut world = reduced_at(&scene, &x0);
-        let mut x = x0.clone();
-        for _ in 0..10 {
-            world.step_once(&[0.1, 0.5], &mut x);
-            assert!(!world.interaction().contact && world.contacts().is_empty());
-            assert_eq!(world.interaction().tau_ext, vec![0.0; 2]);
-        }
-        // Held by its dry friction, the drawer stays put.
-        assert_eq!(x[4], 0.2);
-    }
-}
+mod tests;
