@@ -348,19 +348,6 @@ impl KinematicTree {
 
     /// `frame` (a joint's frame in the world) followed by the joint's motion at `value`: the pose
     /// of the joint's child. The axis is a unit vector (the URDF loader normalises it).
-    /// The pose of link `parent`: `last` (the link placed just before, with its pose) when it is
-    /// that link, as along a chain, else from `poses`. Reading a pose back from memory right after
-    /// writing it stalls the load on most CPUs (the store cannot be forwarded to it), which made
-    /// that read the costliest instruction of the walk down a chain.
-    #[inline(always)]
-    fn parent_pose(poses: &[Isometry3<f64>], last: &(usize, Isometry3<f64>), parent: usize) -> Isometry3<f64> {
-        if last.0 == parent {
-            last.1
-        } else {
-            poses[parent]
-        }
-    }
-
     fn moved(frame: &Isometry3<f64>, joint: &Joint, value: f64) -> Isometry3<f64> {
         match joint.kind {
             JointKind::Fixed => *frame,
@@ -381,15 +368,10 @@ impl KinematicTree {
         out.clear();
         out.resize(self.links.len(), Isometry3::identity());
         out[self.root] = *root_pose;
-        let mut last = (self.root, *root_pose);
         for &j in &self.topological_joints {
             let joint = &self.joints[j];
             let value = joint.q_index.map_or(0.0, |i| q[i]);
-            last = (
-                joint.child,
-                Self::moved(&(Self::parent_pose(out, &last, joint.parent) * joint.origin), joint, value),
-            );
-            out[joint.child] = last.1;
+            out[joint.child] = Self::moved(&(out[joint.parent] * joint.origin), joint, value);
         }
     }
 
@@ -431,21 +413,13 @@ impl KinematicTree {
         frames.axes.resize(self.joints.len(), Vector3::zeros());
         frames.origins.resize(self.joints.len(), Point3::origin());
         frames.poses[self.root] = *root_pose;
-        let (mut last_link, mut last_pose) = (self.root, *root_pose);
         for &j in &self.topological_joints {
             let joint = &self.joints[j];
-            let parent = if last_link == joint.parent {
-                last_pose
-            } else {
-                frames.poses[joint.parent]
-            };
-            let frame = parent * joint.origin;
+            let frame = frames.poses[joint.parent] * joint.origin;
             frames.axes[j] = frame.rotation * joint.axis;
             frames.origins[j] = Point3::from(frame.translation.vector);
             let value = joint.q_index.map_or(0.0, |i| q[i]);
-            last_pose = Self::moved(&frame, joint, value);
-            last_link = joint.child;
-            frames.poses[joint.child] = last_pose;
+            frames.poses[joint.child] = Self::moved(&frame, joint, value);
         }
         frames.q.clear();
         frames.q.extend_from_slice(q);

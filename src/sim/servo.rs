@@ -59,7 +59,7 @@ impl ServoLimits {
 }
 
 /// The servo's state: configuration, velocity, accumulated lag, the command of the next step and
-/// the inverse mass matrix of the contact term.
+/// the factorised mass matrix of the contact term.
 #[derive(Clone, Debug)]
 pub struct ServoState {
     pub q: Vec<f64>,
