@@ -8,10 +8,11 @@ benches/compare_planning.py). For every N and thread count a controller (variant
 ``Controller.update`` while `mujoco.rollout` runs the same N × K batch on the equivalent scene on
 2 threads (per-step states, no cost), alternately in one process; medians are printed. Columns:
 the whole iteration (wall time of ``update``), its parallel rollouts (with the cost), the rest of
-the core's iteration (sampling and the update), the task's Python side (phase switch, noise scale,
-guides and the controller's bookkeeping: the iteration's wall time less the core's), the ratio of
-the iteration to MuJoCo's batch (< 1: sabre's whole iteration is faster than MuJoCo's rollouts
-alone), and the speed-up of 2 threads over 1.
+the core's iteration (sampling and the update), the task's guides (the call that makes them, on
+the calling thread before the rollouts), the rest of the task's and the controller's side (phase
+switch, noise scale and bookkeeping: the iteration's wall time less the core's and the guides'),
+the ratio of the iteration to MuJoCo's batch (< 1: sabre's whole iteration is faster than
+MuJoCo's rollouts alone), and the speed-up of 2 threads over 1.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ def time_iterations(scene: sabre.Scene, x: np.ndarray, rollouts: int, threads: i
     config = sabre.ControllerConfig(seed=0, rollouts=rollouts, threads=threads)
     controller = sabre.Controller(scene, sabre.tasks.OpenObject(), config)
     controller.set_phase("open")
-    rows: dict[str, list[float]] = {"iteration": [], "rollouts": [], "core_rest": [], "python": [], "mujoco": []}
+    rows: dict[str, list[float]] = {"iteration": [], "rollouts": [], "core_rest": [], "guides": [], "python": [], "mujoco": []}
     t = 0.0
     for round_ in range(repeats + 3):
         t += 0.01
@@ -57,7 +58,8 @@ def time_iterations(scene: sabre.Scene, x: np.ndarray, rollouts: int, threads: i
         rows["iteration"].append(wall)
         rows["rollouts"].append(stats.rollout_time)
         rows["core_rest"].append(core - stats.rollout_time)
-        rows["python"].append(wall - core)
+        rows["guides"].append(stats.guide_time)
+        rows["python"].append(wall - core - stats.guide_time)
     return {name: statistics.median(values[3:]) for name, values in rows.items()}
 
 
@@ -72,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
         f"median of {args.repeats} alternating rounds; MuJoCo on {MUJOCO_THREADS} threads"
     )
     print(
-        f"{'object':<8} {'N':>4} {'threads':>7} {'iteration':>10} {'rollouts':>9} {'core rest':>10} {'Python':>7} "
+        f"{'object':<8} {'N':>4} {'threads':>7} {'iteration':>10} {'rollouts':>9} {'core rest':>10} {'guides':>7} {'Python':>7} "
         f"{'MuJoCo':>7} {'ratio':>6} {'2 vs 1':>7}   (ms)"
     )
     for obj in args.objects:
@@ -104,7 +106,8 @@ def main(argv: list[str] | None = None) -> int:
                 one = m["iteration"] if one is None else one
                 print(
                     f"{obj:<8} {n:>4} {threads:>7} {1e3 * m['iteration']:>10.2f} {1e3 * m['rollouts']:>9.2f} "
-                    f"{1e3 * m['core_rest']:>10.2f} {1e3 * m['python']:>7.2f} {1e3 * m['mujoco']:>7.2f} "
+                    f"{1e3 * m['core_rest']:>10.2f} {1e3 * m['guides']:>7.2f} {1e3 * m['python']:>7.2f} "
+                    f"{1e3 * m['mujoco']:>7.2f} "
                     f"{m['iteration'] / m['mujoco']:>5.2f}x {speedup:>7}",
                     flush=True,
                 )

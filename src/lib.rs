@@ -11,6 +11,7 @@ pub mod model;
 pub mod mppi;
 pub mod safety;
 pub mod sim;
+pub mod task;
 
 #[cfg(feature = "python")]
 mod python;

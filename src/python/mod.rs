@@ -19,6 +19,7 @@ mod safety;
 mod scene;
 mod sim;
 mod sim_driver;
+mod task;
 
 use pyo3::prelude::*;
 use pyo3::types::PyModule;
@@ -61,6 +62,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<safety::PyEnergyTankConfig>()?;
     m.add_class::<safety::PyEnergyTank>()?;
     m.add_class::<safety::PyTankRefillConfig>()?;
+    m.add_class::<task::PyOpenObjectConfig>()?;
+    m.add_class::<task::PyHandleGeometry>()?;
+    m.add_class::<task::PyOpenObjectRules>()?;
     m.add_function(wrap_pyfunction!(default_threads, m)?)?;
     m.add_function(wrap_pyfunction!(scene::builtin_urdf, m)?)?;
     m.add_function(wrap_pyfunction!(mppi::likelihood_weights, m)?)?;

@@ -1,8 +1,10 @@
-"""What the tasks derive from a scene (handle frames, the probe model) is made once per scene and dropped with the scene."""
+"""What the tasks derive from a scene (handle frames, the core's task logic) is made once per scene and dropped with the
+scene; a changed setting makes it again."""
 
 from __future__ import annotations
 
 import gc
+import pickle
 import weakref
 
 import sabre
@@ -40,3 +42,17 @@ def test_a_scene_is_freed_after_an_open_object_task_used_it() -> None:
     del scene
     gc.collect()
     assert alive() is None
+
+
+def test_a_changed_setting_takes_effect_and_a_used_task_pickles() -> None:
+    scene = sabre.Scene.load(obj="drawer")
+    task = sabre.tasks.OpenObject()
+    x = scene.default_state()
+    scene.split_state(x).o[0] = 0.8 * task.target_opening(scene)
+    assert not task.success(scene, x)  # 0.8 of the target, short of the default 0.9
+    task.open = sabre.tasks.OpenConfig(success_fraction=0.75)
+    assert task.success(scene, x)
+    copy = pickle.loads(pickle.dumps(task))
+    assert copy.open == task.open and copy.success(scene, x)
+    copy.opening = float(scene.o_upper[0])  # a copy's settings are its own: 0.6 of the range is short of 0.75 of it
+    assert not copy.success(scene, x) and task.success(scene, x)

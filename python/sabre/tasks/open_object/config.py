@@ -7,11 +7,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ... import costs
-from ..._validate import as_finite, as_float_array, as_non_negative, as_positive
+from ... import _core, costs
+from ..._validate import as_finite, as_float_array, as_non_negative, as_positive, core_config
 from ...errors import InvalidValueError
 
-__all__ = ["ApproachConfig", "HookConfig", "OpenConfig", "ReleaseConfig", "NoiseConfig", "GuideConfig"]
+__all__ = ["ApproachConfig", "HookConfig", "OpenConfig", "ReleaseConfig", "NoiseConfig", "GuideConfig", "rules_config"]
+
+# The core's defaults, the one source of every default below that its per-iteration logic reads.
+_RULES = _core.OpenObjectConfig()
 
 
 def xyz(name: str, value: Sequence[float]) -> tuple[float, float, float]:
@@ -47,12 +50,12 @@ class ApproachConfig:
         InvalidValueError: a negative weight or tolerance, a non-finite offset or pitch.
     """
 
-    pregrasp_offset: tuple[float, float, float] = (0.0, -0.022, -0.07)
-    insert_offset: tuple[float, float, float] = (0.0, -0.022, 0.0)
-    pitch: float = 0.3
+    pregrasp_offset: tuple[float, float, float] = xyz("pregrasp_offset", _RULES.pregrasp_offset)
+    insert_offset: tuple[float, float, float] = xyz("insert_offset", _RULES.insert_offset)
+    pitch: float = _RULES.pitch
     weight: float = costs.TargetPose.linear_weight
-    switch_position: float = 0.015
-    switch_angle: float = 0.15
+    switch_position: float = _RULES.switch_position
+    switch_angle: float = _RULES.switch_angle
     posture: tuple[float, ...] | None = None
     posture_weight: float = 0.0
 
@@ -94,16 +97,16 @@ class HookConfig:
         InvalidValueError: a negative or non-finite tolerance, speed or distance.
     """
 
-    offset: tuple[float, float, float] = (0.0, 0.003, 0.0)
-    tolerance: float = 0.006
-    insert_depth_tolerance: float | None = 0.005
-    blocked_depth: float | None = 0.008
-    blocked_speed: float = 0.005
-    backout: float | None = 0.010
-    along_tolerance: float = 0.03
-    drag_speed: float = 0.02
-    drag_distance: float = 0.03
-    stall_depth: float | None = 0.04
+    offset: tuple[float, float, float] = xyz("hook_offset", _RULES.hook_offset)
+    tolerance: float = _RULES.hook_tolerance
+    insert_depth_tolerance: float | None = _RULES.insert_depth_tolerance
+    blocked_depth: float | None = _RULES.blocked_depth
+    blocked_speed: float = _RULES.blocked_speed
+    backout: float | None = _RULES.backout
+    along_tolerance: float = _RULES.along_tolerance
+    drag_speed: float = _RULES.drag_speed
+    drag_distance: float = _RULES.drag_distance
+    stall_depth: float | None = _RULES.stall_depth
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "offset", xyz("hook.offset", self.offset))
@@ -139,15 +142,15 @@ class OpenConfig:
             success fraction outside (0, 1].
     """
 
-    offset: tuple[float, float, float] = (0.0, 0.003, -0.016)
+    offset: tuple[float, float, float] = xyz("open_offset", _RULES.open_offset)
     pose_weights: tuple[float, float, float, float, float, float] = (100.0, 10000.0, 1000.0, 1000.0, 1000.0, 1000.0)
     lead: float = 0.0
     object_weight: float = costs.ObjectState.weight
     object_overshoot: float | None = None
-    speeds: tuple[float, ...] = (0.1, 0.05)
-    slip_distance: float = 0.05
-    slip_lateral: float = 0.01
-    success_fraction: float = 0.9
+    speeds: tuple[float, ...] = tuple(_RULES.open_speeds)
+    slip_distance: float = _RULES.slip_distance
+    slip_lateral: float = _RULES.slip_lateral
+    success_fraction: float = _RULES.success_fraction
     gain_inertia_floor: float | None = None
 
     def __post_init__(self) -> None:
@@ -184,11 +187,11 @@ class ReleaseConfig:
         InvalidValueError: a negative speed, distance or rate, a non-positive probe.
     """
 
-    speed: float = 0.4
-    distance: float = 0.3
-    rate: float = 0.05
-    probe: float = 0.15
-    runaway_speed: float = 0.15
+    speed: float = _RULES.release_speed
+    distance: float = _RULES.release_distance
+    rate: float = _RULES.release_rate
+    probe: float = _RULES.probe
+    runaway_speed: float = _RULES.runaway_speed
 
     def __post_init__(self) -> None:
         for name in ("speed", "distance", "rate", "runaway_speed"):
@@ -206,9 +209,9 @@ class NoiseConfig:
         InvalidValueError: a non-positive distance, a negative floor or open scale.
     """
 
-    distance: float = 0.5
-    floor: float = 1e-3
-    open: float = 0.01
+    distance: float = _RULES.noise_distance
+    floor: float = _RULES.noise_floor
+    open: float = _RULES.noise_open
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "distance", as_positive("noise.distance", self.distance))
@@ -229,10 +232,50 @@ class GuideConfig:
         InvalidValueError: a negative speed or gain.
     """
 
-    speed: float = 0.3
-    fine_speed: float = 0.05
-    gain: float = 2.0
+    speed: float = _RULES.guide_speed
+    fine_speed: float = _RULES.fine_speed
+    gain: float = _RULES.guide_gain
 
     def __post_init__(self) -> None:
         for name in ("speed", "fine_speed", "gain"):
             object.__setattr__(self, name, as_non_negative(f"guide.{name}", getattr(self, name)))
+
+
+def rules_config(
+    approach: ApproachConfig, hook: HookConfig, open: OpenConfig, release: ReleaseConfig, noise: NoiseConfig, guide: GuideConfig
+) -> _core.OpenObjectConfig:
+    """The core's settings of the task's per-iteration logic from its setting groups."""
+    return core_config(
+        _core.OpenObjectConfig,
+        pregrasp_offset=list(approach.pregrasp_offset),
+        insert_offset=list(approach.insert_offset),
+        hook_offset=list(hook.offset),
+        open_offset=list(open.offset),
+        pitch=approach.pitch,
+        switch_position=approach.switch_position,
+        switch_angle=approach.switch_angle,
+        hook_tolerance=hook.tolerance,
+        along_tolerance=hook.along_tolerance,
+        insert_depth_tolerance=hook.insert_depth_tolerance,
+        blocked_depth=hook.blocked_depth,
+        blocked_speed=hook.blocked_speed,
+        backout=hook.backout,
+        drag_speed=hook.drag_speed,
+        drag_distance=hook.drag_distance,
+        stall_depth=hook.stall_depth,
+        open_speeds=list(open.speeds),
+        slip_distance=open.slip_distance,
+        slip_lateral=open.slip_lateral,
+        success_fraction=open.success_fraction,
+        release_speed=release.speed,
+        release_distance=release.distance,
+        release_rate=release.rate,
+        probe=release.probe,
+        runaway_speed=release.runaway_speed,
+        noise_distance=noise.distance,
+        noise_floor=noise.floor,
+        noise_open=noise.open,
+        guide_speed=guide.speed,
+        fine_speed=guide.fine_speed,
+        guide_gain=guide.gain,
+    )

@@ -2,36 +2,24 @@
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from ... import costs
+from ... import _core, costs
 from ..._validate import as_finite, as_non_negative, as_positive
 from ...errors import InvalidValueError
-from ...guides import servo_guide, servo_guides
 from ...scene import Scene
-from ...sim import RolloutModel
 from .._per_scene import per_scene
 from ..base import SafetyWeights, Task
 from . import geometry
-from .config import ApproachConfig, GuideConfig, HookConfig, NoiseConfig, OpenConfig, ReleaseConfig
+from .config import ApproachConfig, GuideConfig, HookConfig, NoiseConfig, OpenConfig, ReleaseConfig, rules_config
 from .geometry import GraspError, PocketError
 
 __all__ = ["OpenObject"]
-
-
-def _probe_model(scene: Scene) -> RolloutModel:
-    """The rollout model that watches the object alone: a fixed-base robot cannot be moved out of the
-    way, so its links are taken out of the contact instead."""
-    if scene.base_indices is None:
-        return RolloutModel(Scene(scene._core.without_robot_contact()))
-    return RolloutModel(scene)
-
-
-#: The phase that follows each reaching phase once its target is reached.
-_REACHED = {"approach": "insert", "insert": "hook", "hook": "open"}
 
 
 @dataclass
@@ -105,6 +93,36 @@ class OpenObject(Task):
         self.horizon = as_positive("horizon", self.horizon)
         if self.opening is not None:
             self.opening = as_finite("opening", self.opening)
+
+    # The core's logic of the last scene asked about, dropped whenever a setting changes; never
+    # pickled (a task crosses to a planner process without it and makes it there again).
+    def __setattr__(self, name: str, value: Any) -> None:
+        object.__setattr__(self, name, value)
+        self.__dict__.pop("_rules_for", None)
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state.pop("_rules_for", None)
+        return state
+
+    def _rules(self, scene: Scene) -> _core.OpenObjectRules:
+        """The core's per-iteration logic of this task on ``scene`` (phase switch, probe, noise, guides)."""
+        kept = self.__dict__.get("_rules_for")
+        if kept is not None and kept[0]() is scene:
+            return kept[1]
+        groups = (self.approach, self.hook, self.open, self.release, self.noise, self.guide)
+        key = ("open-object rules", self.handle, self.opening, self.horizon, self.safety.power, groups)
+        rules = per_scene(scene, key, lambda _: self._make_rules(scene))
+        self.__dict__["_rules_for"] = (weakref.ref(scene), rules)
+        return rules
+
+    def _make_rules(self, scene: Scene) -> _core.OpenObjectRules:
+        return _core.OpenObjectRules(
+            geometry.core_geometry(scene, self.handle),
+            rules_config(self.approach, self.hook, self.open, self.release, self.noise, self.guide),
+            self.target_opening(scene),
+            self.object_setpoint(scene),
+        )
 
     def check(self, scene: Scene) -> None:
         """The object must have one movable joint, which moves the handle, and the opening must lie
@@ -272,18 +290,7 @@ class OpenObject(Task):
         ``open.slip_distance`` of the pocket leaves the way it came in (across the bar to the insert
         offset's sideways position, then back to the pre-grasp offset's depth), riding on the handle;
         then the hand backs off ``release.distance`` along :meth:`release_direction`."""
-        return geometry.release_path(
-            scene,
-            self.handle,
-            x,
-            steps,
-            dt,
-            entry_side=float(self.approach.insert_offset[1]),
-            entry_depth=float(self.approach.pregrasp_offset[2]),
-            hooked_within=self.open.slip_distance,
-            speed=self.release.speed,
-            distance=self.release.distance,
-        )
+        return self._rules(scene).release_path(_state(x), int(steps), float(dt))
 
     def release_direction(self, scene: Scene, x: np.ndarray) -> np.ndarray:
         """(3,) unit direction in which the hand backs off when releasing: away from the door and,
@@ -294,27 +301,13 @@ class OpenObject(Task):
         """The object's opening (rad or m) at state x."""
         return float(scene.split_state(x).o[0])
 
-    # -- what the object and the finger are doing -------------------------------------------------
+    # -- what the object and the finger are doing (each computed in the core) -----------------------
     def self_opening(self, scene: Scene, x: np.ndarray) -> bool:
         """Whether the object, left alone at rest, opens further by itself (a dishwasher door past
         its balance point): the rollout model run for ``release.probe`` s from x with the robot and
         the object at rest and the robot out of its way (a holonomic base moved 5 m away from the
         object; a fixed-base robot's links taken out of the contact), checked against ``release.rate``."""
-        if self.success(scene, x) or self.opening_of(scene, x) >= scene.o_upper[0] - 1e-3:
-            return False
-        model = per_scene(scene, "probe model", _probe_model)
-        free = np.array(x, dtype=np.float64)
-        q, q_dot, _, o_dot = scene.split_state(free)
-        if scene.base_indices is not None:
-            xy = list(scene.base_indices[:2])
-            away = q[xy] - scene.object_pose[:2, 3]
-            norm = float(np.linalg.norm(away))
-            q[xy] = scene.object_pose[:2, 3] + 5.0 * (away / norm if norm > 1e-9 else np.array([-1.0, 0.0]))
-        q_dot[:] = 0.0
-        o_dot[:] = 0.0  # from rest: a drawer still coasting from a pull does not open by itself
-        steps = max(1, int(round(self.release.probe / model.dt)))
-        end = model.rollout(free, np.zeros((1, steps, scene.nu))).states[0, -1]
-        return float(scene.split_state(end).o_dot[0]) > self.release.rate
+        return bool(self._rules(scene).self_opening(_state(x)))
 
     def pulling(self, scene: Scene, x: np.ndarray) -> bool:
         """Whether the finger already pulls the object open before the hook test passed: the
@@ -322,13 +315,7 @@ class OpenObject(Task):
         phase's slip bounds (the bar sits in the pocket, just not where the hook target put it),
         and the handle is at least ``hook.drag_distance`` (m) from closed. An object that opens by
         itself is caught by ``self_opening`` first."""
-        if self.hook.drag_speed <= 0.0:
-            return False
-        if self.handle_from_closed(scene, x) < self.hook.drag_distance:
-            return False
-        if self.handle_speed(scene, x) <= self.hook.drag_speed:
-            return False
-        return not self._slipped(scene, x)
+        return bool(self._rules(scene).pulling(_state(x)))
 
     def backed_out(self, scene: Scene, x: np.ndarray) -> bool:
         """Whether the finger, hooking, has backed out in front of the bar and stalled: the grasp frame
@@ -339,141 +326,58 @@ class OpenObject(Task):
         pocket (``pulling``), and on a closed door that is how the drag starts; a door that was opened
         and does not move now (held, or stuck) only takes the tank's energy for the catch, and a
         finger too far out for its tip to hold the bar starts over however little it dragged."""
-        if self.hook.backout is None:
-            return False
-        short = -self.depth_error(scene, x, "hook")
-        if short <= self.hook.backout:
-            return False
-        lost = self.hook.stall_depth is not None and short > self.hook.stall_depth
-        if not lost and self.handle_from_closed(scene, x) < self.hook.drag_distance:
-            return False
-        return self.handle_speed(scene, x) <= self.hook.drag_speed
+        return bool(self._rules(scene).backed_out(_state(x)))
 
     def running_ahead(self, scene: Scene, x: np.ndarray) -> bool:
         """Whether the object opens by itself faster than ``release.runaway_speed`` (m/s at the handle), as
         a dishwasher door does past its balance point. The hand then rides along (its finger sits
         in the door's path) instead of starting over from the approach."""
-        return self.handle_speed(scene, x) > self.release.runaway_speed
-
-    def _slipped(self, scene: Scene, x: np.ndarray) -> bool:
-        """Whether the bar has left the finger's pocket: the grasp frame beyond ``open.slip_distance``
-        of its open-phase target or beyond ``open.slip_lateral`` sideways of it."""
-        dp = self.approach_error(scene, x, "open").distance
-        return dp > self.open.slip_distance or abs(self.lateral_error(scene, x)) > self.open.slip_lateral
+        return bool(self._rules(scene).running_ahead(_state(x)))
 
     # -- phase switching ----------------------------------------------------------------------------
     def next_phase(self, scene: Scene, x: np.ndarray, t: float, phase: str) -> str:
-        if phase == "release":
-            return "release" if self.self_opening(scene, x) else "approach"
-        if phase == "open":
-            return self._while_opening(scene, x)
-        if phase not in _REACHED:
-            return phase
-        if self.opening_of(scene, x) > 0.0 and self.self_opening(scene, x):
-            return "release"
-        if self._reached(scene, x, phase):
-            return _REACHED[phase]
-        if phase in ("insert", "hook") and self.pulling(scene, x):
-            return "open"
-        if phase == "hook" and self.backed_out(scene, x):
-            return "approach"
-        return phase
+        """The phase after ``phase`` at state x:
 
-    def _reached(self, scene: Scene, x: np.ndarray, phase: str) -> bool:
-        """Whether the grasp frame is close enough to the target of the reaching `phase` to move on."""
-        error = self.approach_error(scene, x, phase)
-        if error.angle >= self.approach.switch_angle:
-            return False
-        if phase == "approach":
-            return error.distance < 2.0 * self.approach.switch_position
-        pocket = self.pocket_error(scene, x, phase)
-        if pocket.along >= self.hook.along_tolerance:
-            return False
-        if phase == "hook":
-            return pocket.across < self.hook.tolerance
-        if pocket.across >= self.approach.switch_position:
-            return False
-        depth = self.hook.insert_depth_tolerance
-        depth_error = self.depth_error(scene, x, phase)
-        return depth is None or abs(depth_error) < depth or self._blocked(scene, x, depth_error)
-
-    def _blocked(self, scene: Scene, x: np.ndarray, depth_error: float) -> bool:
-        """Whether an inserting finger has stopped short of the target's depth, within
-        ``hook.blocked_depth`` of it: the hand rests against something (the door, the frame) and
-        the planner cannot push it the last millimetres, while its tip already clears the bar."""
-        blocked = self.hook.blocked_depth
-        if blocked is None or not -blocked < depth_error < 0.0:
-            return False
-        q, dq, _, _ = scene.split_state(x)
-        speed = float(np.linalg.norm(scene.jacobian(q, geometry.tool_frame(scene))[:3] @ dq))
-        return speed < self.hook.blocked_speed
-
-    def _while_opening(self, scene: Scene, x: np.ndarray) -> str:
-        """The phase after one of opening: releasing a door that opens by itself (holding it only
-        makes the arm follow it down into its joint limits), starting over when the bar has left
-        the pocket and the object is not running ahead of the hand, else opening on."""
-        if self.success(scene, x):
-            return "open"
-        if self.self_opening(scene, x):
-            return "release"
-        if self._slipped(scene, x) and not self.running_ahead(scene, x):
-            return "approach"
-        return "open"
+        - approach, insert, hook: release an object that is open and opens by itself; move on
+          (approach → insert → hook → open) once the grasp frame is at the phase's target (within
+          ``approach.switch_angle``; approach within twice ``approach.switch_position``; insert and
+          hook within ``hook.along_tolerance`` along the bar, insert within
+          ``approach.switch_position`` across it and ``hook.insert_depth_tolerance`` of its depth
+          or blocked short of it (``hook.blocked_depth``, slower than ``hook.blocked_speed``), hook
+          within ``hook.tolerance`` across it); insert and hook go to open when :meth:`pulling`, a
+          hook starts over (approach) when :meth:`backed_out`;
+        - open: stays once successful; releases a door that opens by itself (holding it only makes
+          the arm follow it down into its joint limits); starts over when the bar has left the
+          pocket (beyond ``open.slip_distance`` of the open target or ``open.slip_lateral``
+          sideways of it) and the object is not :meth:`running_ahead` of the hand;
+        - release: stays while the object opens by itself, then starts over.
+        """
+        return str(self._rules(scene).next_phase(_state(x), phase))
 
     # -- sampling: guides and noise -----------------------------------------------------------------
     def guides(self, scene: Scene, x: np.ndarray, phase: str, steps: int, dt: float) -> np.ndarray | None:
-        if phase == "release":
-            return self._release_guide(scene, x, steps, dt)
-        if phase == "open":
-            return self._opening_guides(scene, x, steps, dt)
-        return self._reaching_guide(scene, x, phase, steps, dt)
+        """Servos (M, steps, nu) for the sampler (:func:`sabre.guides.servo_guide`), or None:
 
-    def _release_guide(self, scene: Scene, x: np.ndarray, steps: int, dt: float) -> np.ndarray | None:
-        """A servo along :meth:`release_path` (1, steps, nu), or None with ``release.speed`` 0."""
-        if self.release.speed <= 0.0:
-            return None
-        targets = self.release_path(scene, x, steps, dt)
-        q = scene.split_state(x).q
-        guide = servo_guide(scene, q, targets, dt, gain=self.guide.gain, max_linear=2.0 * self.release.speed, max_angular=1.0)
-        return guide[None]
-
-    def _reaching_guide(self, scene: Scene, x: np.ndarray, phase: str, steps: int, dt: float) -> np.ndarray | None:
-        """A servo toward the target of the reaching `phase` (1, steps, nu), or None with ``guide.speed`` 0."""
-        if self.guide.speed <= 0.0:
-            return None
-        q, _, o, _ = scene.split_state(x)
-        target = self.handle_pose(scene, o) @ self.grasp_offset(scene, phase)
-        speed = self.guide.speed if phase == "approach" else self.guide.fine_speed
-        targets = np.broadcast_to(target, (steps + 1, 4, 4))
-        return servo_guide(scene, q, targets, dt, gain=self.guide.gain, max_linear=speed, max_angular=4.0 * speed)[None]
-
-    def _opening_guides(self, scene: Scene, x: np.ndarray, steps: int, dt: float) -> np.ndarray | None:
-        """Servos (M, steps, nu) that follow the handle along its path at ``open.speeds`` (and at
-        the object's own pace when it opens faster), or None without speeds."""
-        if not self.open.speeds:
-            return None
-        q, _, o, o_dot = scene.split_state(x)
-        offset = self.grasp_offset(scene, "open")
-        travel = self.handle_travel(scene, float(o[0]))
-        end = min(self.object_setpoint(scene), scene.o_upper[0])
-        speeds = list(self.open.speeds)
-        own = float(o_dot[0]) * travel
-        if own > max(speeds):
-            speeds.insert(0, own)  # follow the object at its own pace
-        rates = np.asarray(speeds) / max(travel, 1e-6)
-        openings = np.minimum(o[0] + rates[:, None] * dt * np.arange(steps + 1), max(end, o[0]))
-        targets = (self.handle_poses(scene, openings.reshape(-1, 1)) @ offset).reshape(len(speeds), steps + 1, 4, 4)
-        max_linear = [2.0 * speed + 0.05 for speed in speeds]
-        return servo_guides(scene, q, targets, dt, gain=self.guide.gain, max_linear=max_linear, max_angular=2.0)
+        - approach, insert, hook: toward the phase's target at ``guide.speed`` (approach) or
+          ``guide.fine_speed`` (None with ``guide.speed`` 0);
+        - open: along the handle's path at each of ``open.speeds`` (and at the object's own pace
+          when it opens faster) up to :meth:`object_setpoint` (None without speeds);
+        - release: along :meth:`release_path` (None with ``release.speed`` 0).
+        """
+        return self._rules(scene).guides(_state(x), phase, int(steps), float(dt))
 
     def gain_inertia_floor(self, phase: str) -> float | None:
         return self.open.gain_inertia_floor if phase == "open" else None
 
     def noise_scale(self, scene: Scene, x: np.ndarray, phase: str) -> float:
-        if phase in ("open", "release"):
-            return self.noise.open
-        d = self.approach_error(scene, x, phase).distance
-        return float(np.clip((d / self.noise.distance) ** 2, self.noise.floor, 1.0))
+        """``noise.open`` while opening and releasing; while reaching (d / ``noise.distance``)²
+        clipped to [``noise.floor``, 1], d the grasp frame's distance (m) to the phase's target."""
+        return float(self._rules(scene).noise_scale(_state(x), phase))
 
     def success(self, scene: Scene, x: np.ndarray) -> bool:
-        return self.opening_of(scene, x) >= self.open.success_fraction * self.target_opening(scene)
+        return bool(self._rules(scene).success(_state(x)))
+
+
+def _state(x: np.ndarray) -> np.ndarray:
+    """x as the core reads it (its shape and values are checked there)."""
+    return np.ascontiguousarray(x, dtype=np.float64)

@@ -1,0 +1,8 @@
+//! The shipped tasks' per-iteration logic in the core: the open-object task's handle geometry, phase
+//! switch, noise schedule and guides (the task itself, its phases and costs, is Python's `sabre.tasks`).
+
+pub mod handle;
+pub mod open_object;
+
+pub use handle::{HandAtHandle, HandleGeometry, ReleaseMove};
+pub use open_object::{OpenObjectConfig, OpenObjectRules, OpenPhase};
