@@ -422,10 +422,8 @@ class Controller:
         return np.array(result.states[0, steps]), t + steps * dt
 
     def _predict_dissipation(self, x: np.ndarray) -> np.ndarray:
-        """−τ_extᵀu (W) at each step of the current plan's rollout from x (K,), for the tank's refill."""
-        nominal = self.nominal
-        result = self.model.rollout(x, nominal[None], threads=1)
-        return -np.einsum("kj,kj->k", result.tau_ext[0], nominal)
+        """−τ_extᵀu (W) at each step of the current plan's rollout from x (K,), for the tank's refill (in the core)."""
+        return self._planner.predicted_dissipation(x)
 
     @property
     def predicted_dissipation(self) -> np.ndarray | None:

@@ -291,6 +291,18 @@ impl Mppi {
     pub fn nominal_t0(&self) -> f64 {
         self.nominal_t0
     }
+    /// The port dissipation −τ_extᵀu (W) at each of the K steps of the nominal's rollout from `x`,
+    /// on the calling thread: what the plan predicts for the tank's refill.
+    pub fn predicted_dissipation(&self, x: &[f64]) -> Result<Vec<f64>> {
+        let nu = self.nu;
+        let batch = self.model.rollout(x, &self.nominal, 1, self.k, Some(1))?;
+        Ok(batch
+            .tau_ext
+            .chunks(nu)
+            .zip(self.nominal.chunks(nu))
+            .map(|(tau, u)| -tau.iter().zip(u).map(|(t, v)| t * v).sum::<f64>())
+            .collect())
+    }
     /// Samples of the last iteration (N × K × nu) and their weights.
     pub fn samples(&self) -> &[f64] {
         &self.samples

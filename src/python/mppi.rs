@@ -344,6 +344,19 @@ impl PyPlanner {
         array(py, planner.nominal().to_vec(), &[k, nu])
     }
 
+    /// −τ_extᵀu (W) at each step of the nominal's rollout from x (K,), for the tank's refill.
+    fn predicted_dissipation<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArrayDyn<'py, f64>,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let inner = &self.inner;
+        let x = run(|| view("x", &x, &[-1]))?;
+        let dissipation = run_detached(py, || lock(inner).predicted_dissipation(x))?;
+        let k = dissipation.len();
+        array(py, dissipation, &[k])
+    }
+
     #[getter]
     fn nominal_t0(&self) -> f64 {
         lock(&self.inner).nominal_t0()

@@ -101,3 +101,15 @@ def test_io_controllers_refill_by_default_and_n_only_keeps_the_books():
     assert io.predicted_dissipation is not None and io.predicted_dissipation.shape == (io.config.horizon_steps,)
     n.update(x, 0.0)
     assert n.predicted_dissipation is None
+
+
+def test_the_predicted_dissipation_is_the_plans_port_power_on_the_rollout_model(pull):
+    scene, U, dt, x0, _ = pull
+    io = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(variant="IO", rollouts=8, dt=dt))
+    io.set_phase("open")
+    io.update(x0, 0.0)
+    # the same plan rolled out through the batch interface and the port power −τ_extᵀu summed here
+    rollout = io.model.rollout(x0, io.nominal[None], threads=1)
+    expected = -np.einsum("kj,kj->k", rollout.tau_ext[0], io.nominal)
+    assert np.any(np.abs(expected) > 1e-3)  # hooked on the handle: the plan does work on the door
+    np.testing.assert_allclose(io.predicted_dissipation, expected, rtol=1e-12, atol=1e-12)  # the sums' order differs
