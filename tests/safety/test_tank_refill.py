@@ -104,7 +104,7 @@ def test_io_controllers_refill_by_default_and_n_only_keeps_the_books():
 
 
 def test_the_predicted_dissipation_is_the_plans_port_power_on_the_rollout_model(pull):
-    scene, U, dt, x0, _ = pull
+    scene, _, dt, x0, _ = pull
     io = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(variant="IO", rollouts=8, dt=dt))
     io.set_phase("open")
     io.update(x0, 0.0)
