@@ -114,6 +114,9 @@ pub struct Mppi {
     previous_weights: Vec<f64>,
     previous_t0: f64,
     have_previous: bool,
+    /// The last update moved the batch to `previous` (a swap); it is the current batch until the
+    /// next `sample`.
+    batch_in_previous: bool,
     /// Task-proposed sequences for the next batch only (M × K × nu).
     guides: Vec<f64>,
     weights: Vec<f64>,
@@ -254,6 +257,7 @@ impl Mppi {
             previous_weights: vec![0.0; n],
             previous_t0: 0.0,
             have_previous: false,
+            batch_in_previous: false,
             guides: Vec::new(),
             weights: vec![0.0; n],
             smoother,
@@ -303,10 +307,7 @@ impl Mppi {
             .map(|(tau, u)| -tau.iter().zip(u).map(|(t, v)| t * v).sum::<f64>())
             .collect())
     }
-    /// Samples of the last iteration (N × K × nu) and their weights.
-    pub fn samples(&self) -> &[f64] {
-        &self.samples
-    }
+    /// The normalised weights of the last iteration's samples (N).
     pub fn weights(&self) -> &[f64] {
         &self.weights
     }
@@ -315,6 +316,7 @@ impl Mppi {
     pub fn reset(&mut self, seed: u64, t0: f64) {
         self.nominal.fill(0.0);
         self.nominal_t0 = t0;
+        self.recall_batch();
         self.have_previous = false;
         self.guides.clear();
         self.rng = ChaCha8Rng::seed_from_u64(seed);
@@ -398,6 +400,7 @@ impl Mppi {
 
     /// Builds the batch for time `t`: nominal, zero, the best previous samples shifted, fresh samples.
     pub fn sample(&mut self, t: f64) -> &[f64] {
+        self.batch_in_previous = false;
         self.shift_to(t);
         let (n, k, nu) = (self.config.rollouts, self.k, self.nu);
         let row = k * nu;
@@ -451,12 +454,22 @@ impl Mppi {
     }
 
     fn rollout_into(&mut self, x: &[f64], cost: &Cost, batch: &mut RolloutBatch) -> Result<()> {
+        self.recall_batch();
         let start = Instant::now();
         let (n, k, threads) = (self.config.rollouts, self.k, self.config.threads);
         self.model.rollout_into(x, &self.samples, n, k, threads, Some(cost), batch)?;
         self.stats.rollout_time = start.elapsed().as_secs_f64();
         (self.stats.engine_steps, self.stats.engine_time) = batch.engine_totals();
         Ok(())
+    }
+
+    /// Moves the current batch back into `samples` if the last update swapped it out (a second
+    /// update or rollout of the same batch).
+    fn recall_batch(&mut self) {
+        if self.batch_in_previous {
+            std::mem::swap(&mut self.previous, &mut self.samples);
+            self.batch_in_previous = false;
+        }
     }
 
     /// Weights the samples by `costs` and moves the policy: μ_k += α clip(Σ_l w_l ε_k^l, ±g_max) (14, 54),
@@ -466,6 +479,7 @@ impl Mppi {
         if costs.len() != n {
             return Err(SabreError::shape("costs", format!("({n},)"), format!("({},)", costs.len())));
         }
+        self.recall_batch();
         let mut w = std::mem::take(&mut self.weights);
         weights(costs, LikelihoodMapping::Invariant { h: self.config.h }, &mut w);
         let row = k * nu;
@@ -505,7 +519,10 @@ impl Mppi {
         self.stats.nominal_cost = costs[0];
         self.stats.effective_sample_size = effective_sample_size(&w);
         self.stats.failed_rollouts = n - finite.len();
-        self.previous.copy_from_slice(&self.samples);
+        // The batch becomes the previous one by a swap, not a copy (an N × K × nu array every
+        // iteration): the next `sample` writes every row of the batch anew.
+        std::mem::swap(&mut self.previous, &mut self.samples);
+        self.batch_in_previous = true;
         self.previous_weights.copy_from_slice(&w);
         self.previous_t0 = self.nominal_t0;
         self.have_previous = true;
@@ -567,6 +584,28 @@ mod tests {
         let w = 1.0 / (1.0 + 2.0 * (-2.0f64).exp());
         for (m, g) in mppi.nominal().iter().zip(&guide) {
             let expected = 0.5 * (w * g).clamp(-0.1, 0.1);
+            assert!((m - expected).abs() < 1e-15, "{m} vs {expected}");
+        }
+    }
+
+    #[test]
+    fn a_second_update_weighs_the_same_batch_again() {
+        let mut mppi = sampler(3);
+        mppi.config.step_size = 0.5;
+        mppi.config.gradient_clip = 0.1;
+        mppi.config.h = 2.0;
+        let k = mppi.horizon_steps();
+        let guide: Vec<f64> = (0..2 * k).map(|e| [0.05, 0.5, -0.05, -0.5][e % 4]).collect();
+        mppi.set_guides(&guide).unwrap();
+        mppi.sample(0.0);
+        mppi.update(&[1.0, 1.0, 0.0]).unwrap();
+        let first = mppi.nominal().to_vec();
+        mppi.update(&[1.0, 1.0, 0.0]).unwrap();
+        // The batch is still (0, 0, guide) with weights (w₀, w₀, w) summing to 1: the step is
+        // clip(w g − μ₁) with μ₁ the first update's mean.
+        let w = 1.0 / (1.0 + 2.0 * (-2.0f64).exp());
+        for ((m, m1), g) in mppi.nominal().iter().zip(&first).zip(&guide) {
+            let expected = m1 + 0.5 * (w * g - m1).clamp(-0.1, 0.1);
             assert!((m - expected).abs() < 1e-15, "{m} vs {expected}");
         }
     }
