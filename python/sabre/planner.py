@@ -9,6 +9,7 @@ plant is :func:`sabre.run_episode`.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -16,7 +17,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import _core
-from ._validate import as_array, as_count, as_finite, as_float_array, as_non_negative, as_positive, core_config
+from ._validate import (
+    as_array,
+    as_count,
+    as_finite,
+    as_float_array,
+    as_non_negative,
+    as_positive,
+    as_state_vector,
+    core_config,
+)
 from .costs import Batch, CompiledCost
 from .errors import InvalidValueError, ShapeError
 from .inner_loop import PlanSnapshot
@@ -338,9 +348,9 @@ class Controller:
             ShapeError: x is not (nx,), or the task's guides are not (M, K, nu).
             InvalidValueError: non-finite x or t, an unknown phase or a bad noise scale from the task.
         """
-        x = as_float_array("x", x, (self.scene.nx,))
+        x = as_state_vector("x", x, self.scene.nx)
         t = float(t)
-        if not np.isfinite(t):
+        if not math.isfinite(t):
             raise InvalidValueError("t must be finite")
         phase = self.task.next_phase(self.scene, x, t, self.phase)
         if phase not in self.task.phases:
@@ -348,7 +358,7 @@ class Controller:
         self.set_phase(phase, t)
         self.task.on_step(self.scene, x, t, self)
         scale = float(self.task.noise_scale(self.scene, x, self.phase))
-        if not (np.isfinite(scale) and scale > 0.0):
+        if not (math.isfinite(scale) and scale > 0.0):
             raise InvalidValueError(f"task.noise_scale returned {scale}; it must be positive and finite")
         self._planner.noise_scale = scale
         start = time.perf_counter()

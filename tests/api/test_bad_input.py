@@ -41,7 +41,8 @@ def objs():
     model = sabre.RolloutModel(scene)
     plant = sabre.Plant(scene)
     controller = sabre.LowLevelController(scene)
-    return SimpleNamespace(scene=scene, model=model, plant=plant, controller=controller)
+    planner = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(rollouts=4, horizon=0.06))
+    return SimpleNamespace(scene=scene, model=model, plant=plant, controller=controller, planner=planner)
 
 
 def check(excinfo, cls, *also):
@@ -81,6 +82,12 @@ TARGETS = {
         False,
     ),
     "Plant.reset(x0)": (lambda o, v: o.plant.reset(v), lambda o: o.scene.nx, lambda o: o.scene.default_state(), True),
+    "Controller.update(x)": (
+        lambda o, v: o.planner.update(v, 0.0),
+        lambda o: o.scene.nx,
+        lambda o: o.scene.default_state(),
+        False,
+    ),
     "Plant.step(tau)": (lambda o, v: o.plant.step(v), lambda o: o.scene.nq, lambda o: np.zeros(o.scene.nq), False),
     "LowLevelController.track(u_ref)": (
         lambda o, v: o.controller.track(o.plant, v, 1),
