@@ -568,8 +568,9 @@ mod tests {
         Mppi::new(model, config).expect("sampler")
     }
 
-    #[test]
-    fn update_moves_the_nominal_by_the_clipped_weighted_step() {
+    /// A sampler of three (α = 0.5, g_max = 0.1, h = 2) whose batch is the nominal (zero), the zero
+    /// sequence and a guide, updated once with costs (1, 1, 0); and the guide.
+    fn updated_once_with_a_guide() -> (Mppi, Vec<f64>) {
         let mut mppi = sampler(3);
         mppi.config.step_size = 0.5;
         mppi.config.gradient_clip = 0.1;
@@ -577,9 +578,14 @@ mod tests {
         let k = mppi.horizon_steps();
         let guide: Vec<f64> = (0..2 * k).map(|e| [0.05, 0.5, -0.05, -0.5][e % 4]).collect();
         mppi.set_guides(&guide).unwrap();
-        // The batch: the nominal (zero), the zero sequence, the guide.
         mppi.sample(0.0);
         mppi.update(&[1.0, 1.0, 0.0]).unwrap();
+        (mppi, guide)
+    }
+
+    #[test]
+    fn update_moves_the_nominal_by_the_clipped_weighted_step() {
+        let (mppi, guide) = updated_once_with_a_guide();
         // (55): costs (1, 1, 0) weigh (e⁻², e⁻², 1) / (1 + 2e⁻²); only the guide differs from μ = 0.
         let w = 1.0 / (1.0 + 2.0 * (-2.0f64).exp());
         for (m, g) in mppi.nominal().iter().zip(&guide) {
@@ -590,15 +596,7 @@ mod tests {
 
     #[test]
     fn a_second_update_weighs_the_same_batch_again() {
-        let mut mppi = sampler(3);
-        mppi.config.step_size = 0.5;
-        mppi.config.gradient_clip = 0.1;
-        mppi.config.h = 2.0;
-        let k = mppi.horizon_steps();
-        let guide: Vec<f64> = (0..2 * k).map(|e| [0.05, 0.5, -0.05, -0.5][e % 4]).collect();
-        mppi.set_guides(&guide).unwrap();
-        mppi.sample(0.0);
-        mppi.update(&[1.0, 1.0, 0.0]).unwrap();
+        let (mut mppi, guide) = updated_once_with_a_guide();
         let first = mppi.nominal().to_vec();
         mppi.update(&[1.0, 1.0, 0.0]).unwrap();
         // The batch is still (0, 0, guide) with weights (w₀, w₀, w) summing to 1: the step is
