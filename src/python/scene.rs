@@ -281,13 +281,6 @@ impl PyScene {
     fn visuals(&self) -> (Vec<VisualRow>, Vec<VisualRow>) {
         (visual_rows(&self.inner.robot), visual_rows(&self.inner.object))
     }
-    /// The same scene with no robot link touching the object in the rollout model (to watch the
-    /// object move by itself).
-    fn without_robot_contact(&self) -> Self {
-        let mut scene = (*self.inner).clone();
-        scene.rollout_contact_links.clear();
-        Self::wrap(scene)
-    }
     fn rollout_contact_links(&self) -> Vec<String> {
         self.inner
             .rollout_contact_links

@@ -326,15 +326,12 @@ impl OpenObjectRules {
         free[nq..2 * nq].fill(0.0);
         free[2 * nq + no..].fill(0.0); // from rest: a drawer still coasting from a pull does not open by itself
         let steps = ((self.config.probe / self.probe.dt()).round_ties_even() as usize).max(1);
-        let rate = self.probe.with_world(&free, |world| {
-            let zero = vec![0.0; scene.nu()];
-            let mut state = free.clone();
-            for _ in 0..steps {
-                world.step_once(&zero, &mut state);
-            }
-            Ok(state[2 * nq + no])
-        })?;
-        Ok(rate > self.config.release_rate) // a diverged probe (NaN) does not open by itself
+        // One short rollout runs on the calling thread; a probe whose physics diverged does not
+        // open by itself.
+        let zero = vec![0.0; steps * nq];
+        let watched = self.probe.rollout(&free, &zero, 1, steps, Some(1))?;
+        let nx = scene.nx();
+        Ok(!watched.failed[0] && watched.states[steps * nx + 2 * nq + no] > self.config.release_rate)
     }
 
     /// The bar has left the finger's pocket.
