@@ -69,9 +69,10 @@ pub fn joint_space_terms(
     tree.update_frames(root_pose, q, &mut ws.frames);
     let frames = &ws.frames;
     ws.composites.clear();
+    // A link that no movable joint moves (a cabinet's carcass) adds nothing to M or g.
     ws.composites
         .extend(tree.links.iter().enumerate().map(|(link, l)| match &l.inertial {
-            Some(inertial) => {
+            Some(inertial) if !tree.ancestor_active_joints(link).is_empty() => {
                 let pose = frames.poses[link];
                 let c = (pose * Point3::from(inertial.com)).coords;
                 let r = pose.rotation.to_rotation_matrix();
@@ -82,12 +83,15 @@ pub fn joint_space_terms(
                     inertia: inertia_com + (Matrix3::identity() * c.norm_squared() - c * c.transpose()) * inertial.mass,
                 }
             }
-            None => Composite::ZERO,
+            _ => Composite::ZERO,
         }));
     // Children come after their parents in topological order: summed from the leaves up, each
     // link's entry becomes the inertia of the subtree it carries.
     for &j in tree.topological_joints.iter().rev() {
         let (parent, child) = (tree.joints[j].parent, tree.joints[j].child);
+        if tree.ancestor_active_joints(parent).is_empty() {
+            continue;
+        }
         let below = ws.composites[child];
         let above = &mut ws.composites[parent];
         above.mass += below.mass;

@@ -121,12 +121,12 @@ pub struct Frames {
 }
 
 impl Frames {
-    /// World axis of joint `j` at the frames' configuration.
+    /// World axis of movable joint `j` at the frames' configuration.
     pub fn axis(&self, j: usize) -> Vector3<f64> {
         self.axes[j]
     }
 
-    /// World origin of joint `j`'s frame at the frames' configuration.
+    /// World origin of movable joint `j`'s frame at the frames' configuration.
     pub fn origin(&self, j: usize) -> Point3<f64> {
         self.origins[j]
     }
@@ -416,10 +416,14 @@ impl KinematicTree {
         for &j in &self.topological_joints {
             let joint = &self.joints[j];
             let frame = frames.poses[joint.parent] * joint.origin;
-            frames.axes[j] = frame.rotation * joint.axis;
-            frames.origins[j] = Point3::from(frame.translation.vector);
-            let value = joint.q_index.map_or(0.0, |i| q[i]);
-            frames.poses[joint.child] = Self::moved(&frame, joint, value);
+            // Only movable joints have an axis anyone asks for (Jacobians, dynamics).
+            if let Some(i) = joint.q_index {
+                frames.axes[j] = frame.rotation * joint.axis;
+                frames.origins[j] = Point3::from(frame.translation.vector);
+                frames.poses[joint.child] = Self::moved(&frame, joint, q[i]);
+            } else {
+                frames.poses[joint.child] = frame;
+            }
         }
         frames.q.clear();
         frames.q.extend_from_slice(q);

@@ -328,12 +328,12 @@ impl Detector {
             let mut kept = false;
             for (oi, oc) in object.iter().enumerate() {
                 let manifold = &mut manifolds[oi];
-                let (pose_o, ref aabb_o) = self.object_poses[oi];
+                let (pose_o, aabb_o) = &self.object_poses[oi];
                 // The boxes of the long, thin boards of a carcass pass the box screen near a
                 // corner; the exact distance from the robot primitive's sphere centre to a box is
                 // tight.
                 if !aabb.within(aabb_o, prediction)
-                    || matches!(oc.primitive, Shape::Box { .. }) && distance_to_shape(&pose_o, &oc.primitive, &center) > reach
+                    || matches!(oc.primitive, Shape::Box { .. }) && distance_to_shape(pose_o, &oc.primitive, &center) > reach
                 {
                     manifold.clear();
                     continue;
