@@ -312,6 +312,38 @@ fn jacobian_matches_finite_differences_of_fk() {
     }
 }
 
+/// The twist of a frame's origin and the joint torques of a wrench on it, formed without the
+/// Jacobian, against the finite-difference Jacobian: J q̇ and Jᵀ (f, m).
+#[test]
+fn twist_and_wrench_torques_are_the_finite_difference_jacobian_products() {
+    let s = scene();
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let mut frames = sabre::model::kinematics::Frames::default();
+    for _ in 0..4 {
+        let q = random_q(&s, &mut rng);
+        let qd: Vec<f64> = (0..q.len()).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let (force, moment) = (v3(3.0, -1.0, 2.0), v3(-0.5, 0.2, 0.7));
+        s.robot.update_frames(&Isometry3::identity(), &q, &mut frames);
+        for frame in ["grasp", "panda_link4", "base_link", "world"] {
+            let link = s.robot.link_id(frame).unwrap();
+            let origin = Point3::from(frames.poses[link].translation.vector);
+            let fd = fd_jacobian(&s, &q, frame);
+            let twist = &fd * DVector::from_column_slice(&qd);
+            let (v, w) = s.robot.frames_point_velocity(&frames, link, &origin, &qd);
+            assert_vec_close(frame, &v, &v3(twist[0], twist[1], twist[2]), 1e-6);
+            assert_vec_close(frame, &w, &v3(twist[3], twist[4], twist[5]), 1e-6);
+            let wrench = DVector::from_column_slice(&[force.x, force.y, force.z, moment.x, moment.y, moment.z]);
+            let want = fd.transpose() * wrench;
+            let mut tau = vec![1.0; q.len()];
+            s.robot
+                .frames_add_wrench_torques(&frames, link, &origin, &force, &moment, &mut tau);
+            for (c, (got, want)) in tau.iter().zip(want.iter()).enumerate() {
+                assert!((got - 1.0 - want).abs() < 1e-6, "{frame}, joint {c}: {} vs {want}", got - 1.0);
+            }
+        }
+    }
+}
+
 #[test]
 fn jacobian_of_base_joints_is_world_aligned() {
     // base_x and base_y are world-aligned prismatic joints; base_yaw is a rotation about world z.

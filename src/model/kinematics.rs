@@ -158,6 +158,9 @@ pub struct KinematicTree {
     link_index: HashMap<String, usize>,
     /// For each link, the movable joints between the root and that link (root first).
     ancestor_active_joints: Vec<Vec<usize>>,
+    /// The same joints by their column (q index), with that column: the order in which a
+    /// Jacobian-vector product over all columns adds them up.
+    ancestor_columns: Vec<Vec<(usize, usize)>>,
 }
 
 impl KinematicTree {
@@ -225,6 +228,14 @@ impl KinematicTree {
             }
             ancestor_active_joints[joint.child] = chain;
         }
+        let ancestor_columns = ancestor_active_joints
+            .iter()
+            .map(|chain| {
+                let mut columns: Vec<(usize, usize)> = chain.iter().map(|&j| (j, joints[j].q_index.expect("movable"))).collect();
+                columns.sort_by_key(|&(_, column)| column);
+                columns
+            })
+            .collect();
 
         Ok(Self {
             name,
@@ -235,6 +246,7 @@ impl KinematicTree {
             root,
             link_index,
             ancestor_active_joints,
+            ancestor_columns,
         })
     }
 
@@ -444,6 +456,52 @@ impl KinematicTree {
                 point,
                 &mut out[6 * col..6 * col + 6],
             );
+        }
+    }
+
+    /// The twist J(q) q̇ of `point` on `link` from up-to-date [`Frames`]: (linear velocity of the
+    /// point, angular velocity of the link), without forming the 6 × nq Jacobian.
+    pub fn frames_point_velocity(
+        &self,
+        frames: &Frames,
+        link: usize,
+        point: &Point3<f64>,
+        qd: &[f64],
+    ) -> (Vector3<f64>, Vector3<f64>) {
+        let mut twist = [0.0; 6];
+        let mut column = [0.0; 6];
+        for &(j, c) in &self.ancestor_columns[link] {
+            fill_column(self.joints[j].kind, &frames.axes[j], &frames.origins[j], point, &mut column);
+            for (t, v) in twist.iter_mut().zip(&column) {
+                *t += v * qd[c];
+            }
+        }
+        (
+            Vector3::new(twist[0], twist[1], twist[2]),
+            Vector3::new(twist[3], twist[4], twist[5]),
+        )
+    }
+
+    /// Adds the joint torques J(q)ᵀ (force, moment) of a wrench acting at `point` on `link` to `tau`
+    /// (nq), from up-to-date [`Frames`], without forming the Jacobian.
+    pub fn frames_add_wrench_torques(
+        &self,
+        frames: &Frames,
+        link: usize,
+        point: &Point3<f64>,
+        force: &Vector3<f64>,
+        moment: &Vector3<f64>,
+        tau: &mut [f64],
+    ) {
+        let mut col = [0.0; 6];
+        for &(j, c) in &self.ancestor_columns[link] {
+            fill_column(self.joints[j].kind, &frames.axes[j], &frames.origins[j], point, &mut col);
+            tau[c] += col[0] * force.x
+                + col[1] * force.y
+                + col[2] * force.z
+                + col[3] * moment.x
+                + col[4] * moment.y
+                + col[5] * moment.z;
         }
     }
 

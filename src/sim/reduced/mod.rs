@@ -15,14 +15,14 @@ use nalgebra::{DMatrix, DVector, Isometry3, Point3, Vector3};
 
 use self::geometry::{Collider, ContactKey, Detector};
 use self::proxies::{proxy_bodies, ProxyBody};
-use self::solver::{softness, Proxy, Solver, SolverParams};
+use self::solver::{softness, Proxy, Solver, SolverParams, MAX_OBJECT_DOFS};
 use super::engine_clock::EngineClock;
 use super::evaluator::{StepEvaluator, StepView};
 use super::interaction::{ContactReport, Interaction};
 use super::quiescence::Quiescence;
 use super::servo::{validate_step, ServoGains, ServoLimits, ServoState};
 use super::wrist_sensor::wrist_sensor;
-use crate::error::Result;
+use crate::error::{Result, SabreError};
 use crate::model::dynamics::{joint_space_terms, DynamicsWorkspace};
 use crate::model::scene::Scene;
 use crate::model::GRAVITY;
@@ -124,7 +124,10 @@ struct WorldState {
     object_gravity: DVector<f64>,
     inverse_mass: DMatrix<f64>,
     detector: Detector,
-    solver: Solver,
+    /// The contact solve, sized for one object joint (no padding in its rows) or for up to
+    /// [`MAX_OBJECT_DOFS`]; a world uses the one that fits its object.
+    solver_one: Solver<1>,
+    solver_many: Solver<MAX_OBJECT_DOFS>,
     jacobian: Vec<f64>,
     object_jacobian: Vec<f64>,
     linear_jacobian: Vec<f64>,
@@ -139,6 +142,12 @@ impl ReducedWorld {
     pub fn new(scene: Arc<Scene>, config: &ReducedConfig) -> Result<Self> {
         validate_step(config.dt, Some(config.gains.bandwidth))?;
         let (nq, no) = (scene.nq(), scene.no());
+        if no > MAX_OBJECT_DOFS {
+            return Err(SabreError::invalid(
+                "contact_model",
+                format!("the reduced contact path takes objects of at most {MAX_OBJECT_DOFS} movable joints, this one has {no}; use 'rapier'"),
+            ));
+        }
         let mut contact_links = vec![false; scene.robot.links.len()];
         scene.rollout_contact_links.iter().for_each(|&l| contact_links[l] = true);
         let robot_colliders = Collider::of_tree(&scene.robot, &|l| contact_links[l]);
@@ -196,7 +205,8 @@ impl ReducedWorld {
                 object_gravity: DVector::zeros(no),
                 inverse_mass: DMatrix::zeros(no, no),
                 detector: Detector::default(),
-                solver: Solver::default(),
+                solver_one: Solver::default(),
+                solver_many: Solver::default(),
                 jacobian: vec![0.0; 6 * nq],
                 object_jacobian: vec![0.0; 6 * no],
                 linear_jacobian: vec![0.0; 3 * no],
@@ -374,6 +384,19 @@ impl WorldState {
 
     /// Detection, the solve and the object's integration over one step.
     fn solve_contacts(&mut self, layout: &ReducedLayout) {
+        // The solver moves out of the state for the step (its buffers with it) and back.
+        if layout.no == 1 {
+            let mut solver = std::mem::take(&mut self.solver_one);
+            self.solve_contacts_with(layout, &mut solver);
+            self.solver_one = solver;
+        } else {
+            let mut solver = std::mem::take(&mut self.solver_many);
+            self.solve_contacts_with(layout, &mut solver);
+            self.solver_many = solver;
+        }
+    }
+
+    fn solve_contacts_with<const N: usize>(&mut self, layout: &ReducedLayout, solver: &mut Solver<N>) {
         let (no, dt) = (layout.no, layout.config.dt);
         let scene = &self.scene;
         joint_space_terms(
@@ -405,25 +428,19 @@ impl WorldState {
             free.push(v);
         }
         // nalgebra's DMatrix is column-major; the solver takes it row-major (it is symmetric).
-        self.solver.begin(free, self.inverse_mass.as_slice());
+        solver.begin(free, self.inverse_mass.as_slice());
         let frames = &self.robot.frames;
         for body in &layout.proxies {
             let pose = frames.poses[body.link];
             let com = pose * body.com;
-            scene.robot.frames_jacobian_into(frames, body.link, &com, &mut self.jacobian);
-            let mut twist = [0.0; 6];
-            for (c, &v) in self.servo.qd.iter().enumerate() {
-                for (r, t) in twist.iter_mut().enumerate() {
-                    *t += self.jacobian[6 * c + r] * v;
-                }
-            }
+            let (v, w) = scene.robot.frames_point_velocity(frames, body.link, &com, &self.servo.qd);
             let r = pose.rotation.to_rotation_matrix();
-            self.solver.proxies.push(Proxy {
+            solver.proxies.push(Proxy {
                 inv_mass: body.inv_mass,
                 inv_inertia: r.matrix() * body.inv_inertia * r.matrix().transpose(),
                 com,
-                v: Vector3::new(twist[0], twist[1], twist[2]),
-                w: Vector3::new(twist[3], twist[4], twist[5]),
+                v,
+                w,
             });
         }
         self.detector.detect(
@@ -451,7 +468,7 @@ impl WorldState {
                 .iter()
                 .find(|(key, _)| *key == contact.key)
                 .map(|(_, impulse)| *impulse);
-            self.solver.add_contact(
+            solver.add_contact(
                 &layout.params,
                 layout.collider_proxy[contact.robot],
                 &contact.point,
@@ -475,21 +492,21 @@ impl WorldState {
             let reach = self.free_velocity[i].abs() * dt + LIMIT_REACH;
             for (is_lower, distance) in [(true, self.o[i] - lower), (false, upper - self.o[i])] {
                 if distance < reach {
-                    self.solver.add_limit(&layout.params, i, is_lower, distance);
+                    solver.add_limit(&layout.params, i, is_lower, distance);
                 }
             }
             if layout.object_friction[i] > 0.0 {
-                self.solver.add_dry_friction(i, layout.object_friction[i] * dt);
+                solver.add_dry_friction(i, layout.object_friction[i] * dt);
             }
         }
-        self.solver.solve(&layout.params);
-        for (o, od) in self.o.iter_mut().zip(self.solver.object_velocity()) {
+        solver.solve(&layout.params);
+        for (o, od) in self.o.iter_mut().zip(solver.object_velocity()) {
             *o += dt * od;
         }
-        self.solver.relax(&layout.params);
-        self.od.copy_from_slice(self.solver.object_velocity());
+        solver.relax(&layout.params);
+        self.od.copy_from_slice(solver.object_velocity());
         self.impulses.clear();
-        self.impulses.extend(self.solver.contact_impulses());
+        self.impulses.extend(solver.contact_impulses());
         self.warm_start.clear();
         self.warm_start.extend(
             self.detector
@@ -548,16 +565,7 @@ impl WorldState {
             let origin = Point3::from(frames.poses[*link].translation.vector);
             self.scene
                 .robot
-                .frames_jacobian_into(frames, *link, &origin, &mut self.jacobian);
-            for (c, t) in self.last.tau_ext.iter_mut().enumerate() {
-                let col = &self.jacobian[6 * c..6 * c + 6];
-                *t += col[0] * force.x
-                    + col[1] * force.y
-                    + col[2] * force.z
-                    + col[3] * moment.x
-                    + col[4] * moment.y
-                    + col[5] * moment.z;
-            }
+                .frames_add_wrench_torques(frames, *link, &origin, force, moment, &mut self.last.tau_ext);
         }
     }
 

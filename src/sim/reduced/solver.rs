@@ -5,12 +5,13 @@
 use nalgebra::{Matrix3, Point3, Vector3};
 
 /// The most movable joints an object may have on the reduced path: a row's object part is a
-/// fixed array of this length, so that the solver's inner loop has no indirection.
+/// fixed array, so that the solver's inner loop has no indirection. A solver is built for one
+/// joint (most objects: rows without padding) or for up to this many.
 pub const MAX_OBJECT_DOFS: usize = 8;
 
-type ObjectVector = [f64; MAX_OBJECT_DOFS];
+type ObjectVector<const N: usize> = [f64; N];
 
-fn dot(a: &ObjectVector, b: &ObjectVector) -> f64 {
+fn dot<const N: usize>(a: &ObjectVector<N>, b: &ObjectVector<N>) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
@@ -58,7 +59,7 @@ const NO_PROXY: usize = usize::MAX;
 /// One scalar constraint row: J v + rhs ≥ 0 (or within bounds), J acting on at most one proxy and
 /// on the object's coordinates.
 #[derive(Debug, Clone, Copy)]
-struct Row {
+struct Row<const N: usize> {
     proxy: usize,
     /// Linear and angular parts of J on the proxy, and the same through its inverse mass.
     lin: Vector3<f64>,
@@ -66,8 +67,8 @@ struct Row {
     m_lin: Vector3<f64>,
     m_ang: Vector3<f64>,
     /// Object part of J (on ȯ) and W Jᵀ, zero beyond the object's coordinates.
-    object_j: ObjectVector,
-    object_wj: ObjectVector,
+    object_j: ObjectVector<N>,
+    object_wj: ObjectVector<N>,
     inv_k: f64,
     rhs: f64,
     rhs_wo_bias: f64,
@@ -91,16 +92,17 @@ struct BoundedRow {
     biased: bool,
 }
 
-/// The solve's bodies, rows and impulses; buffers are reused from step to step.
-#[derive(Debug, Clone, Default)]
-pub(super) struct Solver {
+/// The solve's bodies, rows and impulses for an object of at most N joints; buffers are reused
+/// from step to step.
+#[derive(Debug, Clone)]
+pub(super) struct Solver<const N: usize> {
     no: usize,
     pub proxies: Vec<Proxy>,
     /// The object's generalized velocity (zero beyond its coordinates).
-    od: ObjectVector,
+    od: ObjectVector<N>,
     /// (M + dt D)⁻¹ of the object, row-major in its first `no` × `no` entries.
-    inverse_mass: [ObjectVector; MAX_OBJECT_DOFS],
-    rows: Vec<Row>,
+    inverse_mass: [ObjectVector<N>; N],
+    rows: Vec<Row<N>>,
     contacts: Vec<ContactRows>,
     bounded: Vec<BoundedRow>,
 }
@@ -112,19 +114,30 @@ fn tangents(n: &Vector3<f64>) -> [Vector3<f64>; 2] {
     [t1, n.cross(&t1)]
 }
 
-impl Solver {
+impl<const N: usize> Default for Solver<N> {
+    fn default() -> Self {
+        Self {
+            no: 0,
+            proxies: Vec::new(),
+            od: [0.0; N],
+            inverse_mass: [[0.0; N]; N],
+            rows: Vec::new(),
+            contacts: Vec::new(),
+            bounded: Vec::new(),
+        }
+    }
+}
+
+impl<const N: usize> Solver<N> {
     /// Starts a solve over the object's `no` coordinates moving at `od` with inverse (augmented)
     /// mass `inverse_mass` (no × no, row-major); proxies are set through [`Self::proxies`].
     pub fn begin(&mut self, od: &[f64], inverse_mass: &[f64]) {
         let no = od.len();
-        assert!(
-            no <= MAX_OBJECT_DOFS,
-            "the reduced path takes at most {MAX_OBJECT_DOFS} object joints"
-        );
+        assert!(no <= N, "this solver takes at most {N} object joints");
         self.no = no;
-        self.od = [0.0; MAX_OBJECT_DOFS];
+        self.od = [0.0; N];
         self.od[..no].copy_from_slice(od);
-        self.inverse_mass = [[0.0; MAX_OBJECT_DOFS]; MAX_OBJECT_DOFS];
+        self.inverse_mass = [[0.0; N]; N];
         for (a, row) in self.inverse_mass.iter_mut().take(no).enumerate() {
             row[..no].copy_from_slice(&inverse_mass[a * no..(a + 1) * no]);
         }
@@ -136,9 +149,9 @@ impl Solver {
 
     /// Adds a row acting on `proxy` at `point` along `dir` (linear part; none for joint rows) and on
     /// the object with J_o = `j`.
-    fn push_row(&mut self, proxy: Option<(usize, &Point3<f64>, &Vector3<f64>)>, j: ObjectVector) -> usize {
+    fn push_row(&mut self, proxy: Option<(usize, &Point3<f64>, &Vector3<f64>)>, j: ObjectVector<N>) -> usize {
         let no = self.no;
-        let mut wj = [0.0; MAX_OBJECT_DOFS];
+        let mut wj = [0.0; N];
         for (slot, row) in wj.iter_mut().zip(&self.inverse_mass).take(no) {
             *slot = row[..no].iter().zip(&j[..no]).map(|(a, b)| a * b).sum();
         }
@@ -195,7 +208,7 @@ impl Solver {
     ) {
         let no = self.no;
         let project = |dir: &Vector3<f64>| {
-            let mut j = [0.0; MAX_OBJECT_DOFS];
+            let mut j = [0.0; N];
             for (c, slot) in j.iter_mut().enumerate().take(no) {
                 let column = &object_jacobian[3 * c..3 * c + 3];
                 *slot = -(column[0] * dir.x + column[1] * dir.y + column[2] * dir.z);
@@ -228,7 +241,7 @@ impl Solver {
     /// within the step and pushes it back stiffly once beyond.
     pub fn add_limit(&mut self, params: &SolverParams, dof: usize, lower: bool, distance: f64) {
         let sign = if lower { 1.0 } else { -1.0 };
-        let mut j = [0.0; MAX_OBJECT_DOFS];
+        let mut j = [0.0; N];
         j[dof] = sign;
         let row = self.push_row(None, j);
         let rhs_wo_bias = distance.max(0.0) / params.dt;
@@ -244,7 +257,7 @@ impl Solver {
 
     /// Dry friction on coordinate `dof`: its velocity is held at zero by at most `max_impulse`.
     pub fn add_dry_friction(&mut self, dof: usize, max_impulse: f64) {
-        let mut j = [0.0; MAX_OBJECT_DOFS];
+        let mut j = [0.0; N];
         j[dof] = 1.0;
         let row = self.push_row(None, j);
         self.bounded.push(BoundedRow {
@@ -256,7 +269,7 @@ impl Solver {
     }
 
     #[inline(always)]
-    fn velocity(&self, row: &Row) -> f64 {
+    fn velocity(&self, row: &Row<N>) -> f64 {
         // Most objects have one joint: skip the loop over the padding then.
         let mut v = if self.no == 1 {
             row.object_j[0] * self.od[0]
@@ -419,7 +432,7 @@ mod tests {
         let (m, big_m, v) = (2.0, 3.0, 0.5);
         let mut p = params(30);
         p.cfm_factor = 1.0;
-        let mut solver = Solver::default();
+        let mut solver = Solver::<1>::default();
         solver.begin(&[0.0], &[1.0 / big_m]);
         solver.proxies.push(ball(m, Vector3::new(-v, 0.0, 0.0)));
         // The slider's point moves with ȯ along x: J_o = x̂. The object pushes the robot along +x.
@@ -438,7 +451,7 @@ mod tests {
     #[test]
     fn sliding_friction_sits_on_the_cone_and_opposes_the_motion() {
         let p = params(20);
-        let mut solver = Solver::default();
+        let mut solver = Solver::<1>::default();
         solver.begin(&[0.0], &[1.0]);
         solver.proxies.push(ball(1.0, Vector3::new(2.0, 0.0, -0.3)));
         solver.add_contact(&p, 0, &Point3::origin(), &Vector3::z(), 0.0, &[0.0, 0.0, 0.0], 0.2, None);
@@ -454,11 +467,44 @@ mod tests {
         assert!(solver.proxies[0].v.x > 0.0, "still sliding: {}", solver.proxies[0].v.x);
     }
 
+    /// The solver sized for one joint and the one sized for the most joints solve a one-joint
+    /// object alike, to the bit: the padding of the larger one only ever adds zeros.
+    #[test]
+    fn the_one_joint_solver_and_the_padded_one_agree_exactly() {
+        fn run<const N: usize>() -> (Vec<f64>, Vector3<f64>, Vector3<f64>) {
+            let p = params(3);
+            let mut solver = Solver::<N>::default();
+            solver.begin(&[0.4], &[0.7]);
+            solver.proxies.push(ball(1.5, Vector3::new(-0.3, 0.2, -0.6)));
+            let normal = Vector3::new(0.3, -0.2, 1.0).normalize();
+            let jacobian = [0.2, -0.5, 0.1];
+            solver.add_contact(
+                &p,
+                0,
+                &Point3::new(0.01, 0.02, 0.0),
+                &normal,
+                -0.002,
+                &jacobian,
+                0.4,
+                Some(Vector3::new(0.1, 0.0, 0.3)),
+            );
+            solver.add_limit(&p, 0, false, 0.003);
+            solver.add_dry_friction(0, 0.05);
+            solver.solve(&p);
+            solver.relax(&p);
+            let impulse: Vector3<f64> = solver.contact_impulses().sum();
+            (solver.object_velocity().to_vec(), solver.proxies[0].v, impulse)
+        }
+        let (one, padded) = (run::<1>(), run::<MAX_OBJECT_DOFS>());
+        assert_eq!(one, padded);
+        assert!(one.2.norm() > 0.0, "the contact carries an impulse: {:?}", one.2);
+    }
+
     #[test]
     fn a_gap_closes_no_faster_than_it_can_within_the_step() {
         // 3 mm apart at 1 m/s closing: the row lets the proxy close 3 mm in 15 ms (0.2 m/s), not more.
         let p = params(10);
-        let mut solver = Solver::default();
+        let mut solver = Solver::<1>::default();
         solver.begin(&[0.0], &[1.0]);
         solver.proxies.push(ball(1.0, Vector3::new(0.0, 0.0, -1.0)));
         solver.add_contact(&p, 0, &Point3::origin(), &Vector3::z(), 0.003, &[0.0; 3], 0.0, None);
@@ -470,7 +516,7 @@ mod tests {
     fn dry_friction_holds_a_coordinate_until_the_push_exceeds_it() {
         let p = params(10);
         for (push, held) in [(0.5, true), (2.0, false)] {
-            let mut solver = Solver::default();
+            let mut solver = Solver::<1>::default();
             // Inverse mass 1: a velocity of `push` is an impulse of `push` to cancel.
             solver.begin(&[push], &[1.0]);
             solver.add_dry_friction(0, 1.0);
@@ -486,7 +532,7 @@ mod tests {
     #[test]
     fn a_limit_stops_the_coordinate_at_the_limit_and_pushes_back_from_beyond() {
         let p = params(5);
-        let mut solver = Solver::default();
+        let mut solver = Solver::<1>::default();
         // 1 mm inside the lower limit moving toward it at 1 m/s: it may move 1 mm, no more.
         solver.begin(&[-1.0], &[0.5]);
         solver.add_limit(&p, 0, true, 0.001);
