@@ -62,9 +62,14 @@ pub fn joint_space_terms(
     gravity_torque: &mut DVector<f64>,
 ) {
     let n = tree.nq();
-    mass_matrix.resize_mut(n, n, 0.0);
+    // nalgebra's resize moves the data into a new allocation even at the same size.
+    if mass_matrix.shape() != (n, n) {
+        mass_matrix.resize_mut(n, n, 0.0);
+    }
     mass_matrix.fill(0.0);
-    gravity_torque.resize_vertically_mut(n, 0.0);
+    if gravity_torque.len() != n {
+        gravity_torque.resize_vertically_mut(n, 0.0);
+    }
     gravity_torque.fill(0.0);
     tree.update_frames(root_pose, q, &mut ws.frames);
     let frames = &ws.frames;

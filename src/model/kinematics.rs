@@ -420,7 +420,7 @@ impl KinematicTree {
         if frames.root.as_ref() == Some(root_pose) && frames.q == q && frames.poses.len() == self.links.len() {
             return;
         }
-        frames.poses.clear();
+        // Every link but the root is some joint's child: the loop below writes every pose.
         frames.poses.resize(self.links.len(), Isometry3::identity());
         frames.axes.resize(self.joints.len(), Vector3::zeros());
         frames.origins.resize(self.joints.len(), Point3::origin());

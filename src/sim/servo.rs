@@ -148,9 +148,13 @@ impl ServoState {
                 gravity_torque,
             );
             self.mass_factor.clear();
-            if let Some(factor) = mass_matrix.clone().cholesky() {
+            // The factorisation works in the mass matrix's own buffer, which goes back for the
+            // next refresh (its contents are rebuilt there).
+            let matrix = std::mem::replace(mass_matrix, DMatrix::zeros(0, 0));
+            if let Some(factor) = matrix.cholesky() {
                 let l = factor.l_dirty();
                 self.mass_factor.extend((0..nq * nq).map(|k| l[(k / nq, k % nq)]));
+                *mass_matrix = factor.unpack_dirty();
             }
             self.mass_factor_q.clone_from(&self.q);
         }
