@@ -312,10 +312,10 @@ fn jacobian_matches_finite_differences_of_fk() {
     }
 }
 
-/// The twist of a frame's origin and the joint torques of a wrench on it, formed without the
-/// Jacobian, against the finite-difference Jacobian: J q̇ and Jᵀ (f, m).
+/// The twist of a frame's origin, its linear Jacobian and the joint torques of a wrench on it,
+/// formed without the full Jacobian, against the finite-difference Jacobian: J q̇, J_v and Jᵀ (f, m).
 #[test]
-fn twist_and_wrench_torques_are_the_finite_difference_jacobian_products() {
+fn twist_linear_jacobian_and_wrench_torques_are_the_finite_difference_jacobian_products() {
     let s = scene();
     let mut rng = ChaCha8Rng::seed_from_u64(5);
     let mut frames = sabre::model::kinematics::Frames::default();
@@ -332,6 +332,12 @@ fn twist_and_wrench_torques_are_the_finite_difference_jacobian_products() {
             let (v, w) = s.robot.frames_point_velocity(&frames, link, &origin, &qd);
             assert_vec_close(frame, &v, &v3(twist[0], twist[1], twist[2]), 1e-6);
             assert_vec_close(frame, &w, &v3(twist[3], twist[4], twist[5]), 1e-6);
+            let mut linear = vec![f64::NAN; 3 * q.len()];
+            s.robot.frames_linear_jacobian_into(&frames, link, &origin, &mut linear);
+            for c in 0..q.len() {
+                let want = v3(fd[(0, c)], fd[(1, c)], fd[(2, c)]);
+                assert_vec_close(frame, &v3(linear[3 * c], linear[3 * c + 1], linear[3 * c + 2]), &want, 1e-6);
+            }
             let wrench = DVector::from_column_slice(&[force.x, force.y, force.z, moment.x, moment.y, moment.z]);
             let want = fd.transpose() * wrench;
             let mut tau = vec![1.0; q.len()];

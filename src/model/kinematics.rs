@@ -459,6 +459,18 @@ impl KinematicTree {
         }
     }
 
+    /// The linear rows of [`Self::frames_jacobian_into`]: the velocity of `point` on `link` per
+    /// unit rate of each joint, as a 3 × nq matrix (column-major).
+    pub fn frames_linear_jacobian_into(&self, frames: &Frames, link: usize, point: &Point3<f64>, out: &mut [f64]) {
+        debug_assert_eq!(out.len(), 3 * self.nq());
+        out.fill(0.0);
+        let mut column = [0.0; 6];
+        for &(j, c) in &self.ancestor_columns[link] {
+            fill_column(self.joints[j].kind, &frames.axes[j], &frames.origins[j], point, &mut column);
+            out[3 * c..3 * c + 3].copy_from_slice(&column[..3]);
+        }
+    }
+
     /// The twist J(q) q̇ of `point` on `link` from up-to-date [`Frames`]: (linear velocity of the
     /// point, angular velocity of the link), without forming the 6 × nq Jacobian.
     pub fn frames_point_velocity(

@@ -129,7 +129,6 @@ struct WorldState {
     solver_one: Solver<1>,
     solver_many: Solver<MAX_OBJECT_DOFS>,
     jacobian: Vec<f64>,
-    object_jacobian: Vec<f64>,
     linear_jacobian: Vec<f64>,
     /// The object's coordinates at the step's start, and its velocity before the contacts act.
     o_before: Vec<f64>,
@@ -208,7 +207,6 @@ impl ReducedWorld {
                 solver_one: Solver::default(),
                 solver_many: Solver::default(),
                 jacobian: vec![0.0; 6 * nq],
-                object_jacobian: vec![0.0; 6 * no],
                 linear_jacobian: vec![0.0; 3 * no],
                 o_before: Vec::with_capacity(no),
                 free_velocity: Vec::with_capacity(no),
@@ -454,12 +452,12 @@ impl WorldState {
         for contact in &self.detector.contacts {
             let object_link = layout.object_colliders[contact.object].link;
             if layout.object_colliders[contact.object].moves {
-                scene
-                    .object
-                    .frames_jacobian_into(&self.object.frames, object_link, &contact.point, &mut self.object_jacobian);
-                for c in 0..no {
-                    self.linear_jacobian[3 * c..3 * c + 3].copy_from_slice(&self.object_jacobian[6 * c..6 * c + 3]);
-                }
+                scene.object.frames_linear_jacobian_into(
+                    &self.object.frames,
+                    object_link,
+                    &contact.point,
+                    &mut self.linear_jacobian,
+                );
             } else {
                 self.linear_jacobian.fill(0.0);
             }
