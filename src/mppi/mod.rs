@@ -428,15 +428,23 @@ impl Mppi {
         let std_scale = self.noise_scale.sqrt();
         let knots = (k - 1) / interval + 2;
         let mut knot_noise = vec![0.0; knots * nu];
+        let scaled_std: Vec<f64> = self.std.iter().map(|s| std_scale * s).collect();
         for i in filled..n {
             for e in knot_noise.iter_mut() {
                 *e = StandardNormal.sample(&mut self.rng);
             }
-            for s in 0..k {
+            let sample = &mut self.samples[i * row..(i + 1) * row];
+            for (s, (out, nominal)) in sample.chunks_exact_mut(nu).zip(self.nominal.chunks_exact(nu)).enumerate() {
                 let (j, a) = (s / interval, (s % interval) as f64 / interval as f64);
+                let (here, next) = (&knot_noise[j * nu..(j + 1) * nu], &knot_noise[(j + 1) * nu..(j + 2) * nu]);
                 for d in 0..nu {
-                    let e = (1.0 - a) * knot_noise[j * nu + d] + a * knot_noise[(j + 1) * nu + d];
-                    self.samples[i * row + s * nu + d] = self.nominal[s * nu + d] + std_scale * self.std[d] * e;
+                    // On a knot (a = 0, every step of white noise) the interpolation is the knot.
+                    let e = if a == 0.0 {
+                        here[d]
+                    } else {
+                        (1.0 - a) * here[d] + a * next[d]
+                    };
+                    out[d] = nominal[d] + scaled_std[d] * e;
                 }
             }
         }
