@@ -50,3 +50,39 @@ fn nothing_touches_a_robot_far_from_the_object() {
     // Held by its dry friction, the drawer stays put.
     assert_eq!(x[4], 0.2);
 }
+
+/// An object with more movable joints than the reduced solve takes is refused when the world is
+/// built, naming the limit and the path that takes it.
+#[test]
+fn an_object_with_too_many_joints_is_refused_by_name() {
+    let joints = super::MAX_OBJECT_DOFS + 1;
+    let mut urdf = String::from(r#"<robot name="chain"><link name="l0"/>"#);
+    for i in 1..=joints {
+        urdf += &format!(
+            r#"<link name="l{i}"><inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+            <joint name="j{i}" type="revolute"><parent link="l{}"/><child link="l{i}"/><axis xyz="0 0 1"/>
+            <limit lower="-1" upper="1" effort="10" velocity="1"/></joint>"#,
+            i - 1
+        );
+    }
+    urdf += "</robot>";
+    let scene = Arc::new(
+        Scene::from_urdf_strings(
+            crate::sim::test_scene::ROBOT,
+            &urdf,
+            Some(&crate::sim::test_scene::OBJECT_POSE),
+        )
+        .expect("test scene"),
+    );
+    match ReducedWorld::new(scene, &reduced_config()) {
+        Err(crate::SabreError::InvalidValue { what, detail }) => {
+            assert_eq!(what, "contact_model");
+            assert!(
+                detail.contains(&joints.to_string()) && detail.contains("'rapier'"),
+                "{detail}"
+            );
+        }
+        Err(other) => panic!("another error: {other}"),
+        Ok(_) => panic!("a world of {joints} object joints was built"),
+    }
+}
