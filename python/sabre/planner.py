@@ -235,10 +235,12 @@ class Controller:
         self.keep_samples = False
         self.last_samples: tuple[np.ndarray, np.ndarray] | None = None
         c = self.config
+        # The task's check first: what it says about a scene (files swapped, a joint to pick) is
+        # more to the point than the rollout model's limits.
+        task.check(scene)
         self.model = RolloutModel(
             scene, c.dt, servo_bandwidth=c.servo_bandwidth, contact_friction=c.contact_friction, contact_model=c.contact_model
         )
-        task.check(scene)
         self.phase = task.initial_phase()
         self._compiled: dict[str, CompiledCost] = {}
         for phase in task.phases:  # a phase the scene cannot serve fails here, not mid-episode
