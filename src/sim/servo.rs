@@ -117,6 +117,8 @@ impl ServoState {
     /// One step of semi-implicit Euler of q̈ = Λ (u − q̇) + Λ_I ∫(u − q̇) + M⁻¹ τ_ext: updates q̇ and
     /// the lag and computes the configuration at the end of the step, which [`Self::commit`] makes
     /// current. In between, `q` is still the step's start, where the contact bodies are placed.
+    /// `dynamics`, `mass_matrix` and `gravity_torque` are the caller's scratch buffers: what they
+    /// hold on return is unspecified.
     #[allow(clippy::too_many_arguments)]
     pub fn advance(
         &mut self,

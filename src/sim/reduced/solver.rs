@@ -270,12 +270,7 @@ impl<const N: usize> Solver<N> {
 
     #[inline(always)]
     fn velocity(&self, row: &Row<N>) -> f64 {
-        // Most objects have one joint: skip the loop over the padding then.
-        let mut v = if self.no == 1 {
-            row.object_j[0] * self.od[0]
-        } else {
-            dot(&row.object_j, &self.od)
-        };
+        let mut v = dot(&row.object_j, &self.od);
         if row.proxy != NO_PROXY {
             let body = &self.proxies[row.proxy];
             v += row.lin.dot(&body.v) + row.ang.dot(&body.w);
@@ -291,12 +286,8 @@ impl<const N: usize> Solver<N> {
             body.v += r.m_lin * delta;
             body.w += r.m_ang * delta;
         }
-        if self.no == 1 {
-            self.od[0] += r.object_wj[0] * delta;
-        } else {
-            for (od, wj) in self.od.iter_mut().zip(&r.object_wj) {
-                *od += wj * delta;
-            }
+        for (od, wj) in self.od.iter_mut().zip(&r.object_wj) {
+            *od += wj * delta;
         }
     }
 
