@@ -168,7 +168,8 @@ class IterationStats:
         iteration: iterations since the last reset, this one included.
         iteration_time: wall time of the whole iteration (s): sampling, rollouts, cost, update, the
             task's guides and, with the outer filter, the sequential FILTER-QP.
-        rollout_time: wall time of the parallel rollouts and their cost (s).
+        rollout_time: wall time of the parallel rollouts and their cost (s); with every cost term in
+            the core, each worker also draws the samples it rolls out, and their time is here.
         engine_steps: rollout steps, summed over the rollouts, that went through the contact step
             (contact detection and solve, or Rapier's pipeline with ``contact_model="rapier"``); the
             others were skipped as quiescent, see :class:`sabre.RolloutModel`.

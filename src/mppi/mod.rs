@@ -1,6 +1,7 @@
 //! The MPPI-style sampler (paper Sec. III-A and V): Gaussian policy, cost-scale-invariant weights, clipped
 //! gradient step, nominal and zero sequences always sampled, best samples reused, receding horizon, smoothing.
 
+mod batch;
 pub mod guide;
 pub mod smoothing;
 pub mod weights;
@@ -8,13 +9,11 @@ pub mod weights;
 use std::sync::Arc;
 use std::time::Instant;
 
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, StandardNormal};
-
 use crate::cost::Cost;
 use crate::error::{ensure_finite, Result, SabreError};
 use crate::sim::{RolloutBatch, RolloutModel, MAX_BATCH_ELEMENTS};
+pub use batch::interpolate;
+use batch::{shift, stream_key, RowPlan};
 pub use guide::{servo_guide, servo_guides, ServoGuideConfig};
 pub use smoothing::SavitzkyGolay;
 pub use weights::{effective_sample_size, weights, LikelihoodMapping};
@@ -78,7 +77,8 @@ pub struct IterationStats {
     pub iteration: u64,
     /// Wall time of sampling, rollouts and update (s).
     pub iteration_time: f64,
-    /// Wall time of the rollouts with their cost (s).
+    /// Wall time of the rollouts with their cost (s); in [`Mppi::iterate`] each worker also builds
+    /// the rows it rolls out, and their time is here.
     pub rollout_time: f64,
     /// Steps of the batch that went through Rapier's pipeline (the rest were skipped as quiescent).
     pub engine_steps: u64,
@@ -121,41 +121,17 @@ pub struct Mppi {
     guides: Vec<f64>,
     weights: Vec<f64>,
     smoother: Option<SavitzkyGolay>,
-    rng: ChaCha8Rng,
+    /// The random streams' key (from the seed) and the number of batches drawn since it was set:
+    /// row i of batch b draws from stream b at the i-th offset.
+    key: [u8; 32],
+    batches: u64,
+    /// The next batch's kept rows of `previous`, best first, and its fresh samples' deviations.
+    kept: Vec<usize>,
+    scaled_std: Vec<f64>,
     stats: IterationStats,
     scratch: Vec<f64>,
     /// The rollouts of [`Self::iterate`], reused from one iteration to the next.
     batch: RolloutBatch,
-}
-
-/// Value of a K × nu sequence at fractional index `s`, linearly interpolated, clamped at both ends.
-pub fn interpolate(seq: &[f64], nu: usize, s: f64, out: &mut [f64]) {
-    let k = seq.len() / nu;
-    if k == 0 {
-        out.fill(0.0);
-        return;
-    }
-    let s = s.clamp(0.0, (k - 1) as f64);
-    let i = s.floor() as usize;
-    let j = (i + 1).min(k - 1);
-    let a = s - i as f64;
-    for d in 0..nu {
-        out[d] = (1.0 - a) * seq[i * nu + d] + a * seq[j * nu + d];
-    }
-}
-
-/// Shifts a K × nu sequence forward by `steps` (fractional), padding with its last value.
-fn shift(seq: &mut [f64], nu: usize, steps: f64, scratch: &mut Vec<f64>) {
-    if steps <= 0.0 {
-        return;
-    }
-    let k = seq.len() / nu;
-    scratch.clear();
-    scratch.resize(seq.len(), 0.0);
-    for i in 0..k {
-        interpolate(seq, nu, i as f64 + steps, &mut scratch[i * nu..(i + 1) * nu]);
-    }
-    seq.copy_from_slice(scratch);
 }
 
 /// The longest horizon in steps: the Savitzky–Golay smoother holds a K × K matrix.
@@ -261,7 +237,10 @@ impl Mppi {
             guides: Vec::new(),
             weights: vec![0.0; n],
             smoother,
-            rng: ChaCha8Rng::seed_from_u64(config.seed),
+            key: stream_key(config.seed),
+            batches: 0,
+            kept: Vec::new(),
+            scaled_std: Vec::new(),
             stats: IterationStats::default(),
             scratch: Vec::new(),
             batch: RolloutBatch::default(),
@@ -319,7 +298,8 @@ impl Mppi {
         self.recall_batch();
         self.have_previous = false;
         self.guides.clear();
-        self.rng = ChaCha8Rng::seed_from_u64(seed);
+        self.key = stream_key(seed);
+        self.batches = 0;
         self.config.seed = seed;
         self.noise_scale = 1.0;
         self.stats = IterationStats::default();
@@ -398,76 +378,103 @@ impl Mppi {
         }
     }
 
-    /// Builds the batch for time `t`: nominal, zero, the best previous samples shifted, fresh samples.
-    pub fn sample(&mut self, t: f64) -> &[f64] {
+    /// Moves the nominal to `t` and chooses what the next batch's rows hold: the nominal, zero,
+    /// the guides, the best previous samples shifted to `t`, fresh samples (see [`RowPlan`]).
+    fn plan_batch(&mut self, t: f64) {
+        // Every row of the batch is written anew: whatever `samples` holds is scratch.
         self.batch_in_previous = false;
         self.shift_to(t);
-        let (n, k, nu) = (self.config.rollouts, self.k, self.nu);
-        let row = k * nu;
-        self.samples[..row].copy_from_slice(&self.nominal);
-        self.samples[row..2 * row].fill(0.0);
-        let mut filled = 2;
-        let guided = self.guides.len() / row;
-        self.samples[filled * row..(filled + guided) * row].copy_from_slice(&self.guides);
-        filled += guided;
-        self.guides.clear();
+        let n = self.config.rollouts;
+        let filled = 2 + self.guides.len() / (self.k * self.nu);
+        self.kept.clear();
         if self.have_previous {
             let keep = ((self.config.keep_fraction * n as f64).floor() as usize).min(n - filled);
-            let mut order: Vec<usize> = (0..n).filter(|&i| self.previous_weights[i] > 0.0).collect();
+            let weights = &self.previous_weights;
+            self.kept.extend((0..n).filter(|&i| weights[i] > 0.0));
             // Highest weight first; ties by index keep the choice deterministic.
-            order.sort_by(|&a, &b| self.previous_weights[b].total_cmp(&self.previous_weights[a]).then(a.cmp(&b)));
-            let steps = (t - self.previous_t0) / self.dt;
-            for &i in order.iter().take(keep) {
-                let mut seq = self.previous[i * row..(i + 1) * row].to_vec();
-                shift(&mut seq, nu, steps, &mut self.scratch);
-                self.samples[filled * row..(filled + 1) * row].copy_from_slice(&seq);
-                filled += 1;
-            }
+            self.kept.sort_by(|&a, &b| weights[b].total_cmp(&weights[a]).then(a.cmp(&b)));
+            self.kept.truncate(keep);
         }
-        let interval = self.config.noise_interval.max(1);
         let std_scale = self.noise_scale.sqrt();
-        let knots = (k - 1) / interval + 2;
-        let mut knot_noise = vec![0.0; knots * nu];
-        let scaled_std: Vec<f64> = self.std.iter().map(|s| std_scale * s).collect();
-        for i in filled..n {
-            for e in knot_noise.iter_mut() {
-                *e = StandardNormal.sample(&mut self.rng);
-            }
-            let sample = &mut self.samples[i * row..(i + 1) * row];
-            for (s, (out, nominal)) in sample.chunks_exact_mut(nu).zip(self.nominal.chunks_exact(nu)).enumerate() {
-                let (j, a) = (s / interval, (s % interval) as f64 / interval as f64);
-                let (here, next) = (&knot_noise[j * nu..(j + 1) * nu], &knot_noise[(j + 1) * nu..(j + 2) * nu]);
-                for d in 0..nu {
-                    // On a knot (a = 0, every step of white noise) the interpolation is the knot.
-                    let e = if a == 0.0 {
-                        here[d]
-                    } else {
-                        (1.0 - a) * here[d] + a * next[d]
-                    };
-                    out[d] = nominal[d] + scaled_std[d] * e;
-                }
-            }
+        self.scaled_std.clear();
+        self.scaled_std.extend(self.std.iter().map(|s| std_scale * s));
+        self.batches += 1;
+    }
+
+    /// The rows of the batch chosen by the last [`Self::plan_batch`].
+    fn row_plan(&self) -> RowPlan<'_> {
+        RowPlan {
+            nu: self.nu,
+            nominal: &self.nominal,
+            guides: &self.guides,
+            previous: &self.previous,
+            kept: &self.kept,
+            kept_shift: (self.nominal_t0 - self.previous_t0) / self.dt,
+            std: &self.scaled_std,
+            interval: self.config.noise_interval.max(1),
+            lower: &self.lower,
+            upper: &self.upper,
+            key: self.key,
+            batch: self.batches,
         }
+    }
+
+    /// Builds every row of the planned batch here; the guides are used.
+    fn fill_batch(&mut self) {
         let mut samples = std::mem::take(&mut self.samples);
-        self.project(&mut samples);
+        let plan = self.row_plan();
+        for (i, row) in samples.chunks_exact_mut(self.k * self.nu).enumerate() {
+            plan.fill(i, row);
+        }
         self.samples = samples;
+        self.guides.clear();
+    }
+
+    /// Builds the batch for time `t`: nominal, zero, the guides, the best previous samples
+    /// shifted, fresh samples. The same batch as [`Self::iterate`] rolls out at `t`.
+    pub fn sample(&mut self, t: f64) -> &[f64] {
+        self.plan_batch(t);
+        self.fill_batch();
         &self.samples
     }
 
     /// Rolls the current batch out from `x` with `cost`; records its timing in [`Self::stats`].
     pub fn rollout(&mut self, x: &[f64], cost: &Cost) -> Result<RolloutBatch> {
+        self.recall_batch();
         let mut batch = RolloutBatch::default();
-        self.rollout_into(x, cost, &mut batch)?;
+        let start = Instant::now();
+        let (n, k, threads) = (self.config.rollouts, self.k, self.config.threads);
+        self.model
+            .rollout_into(x, &self.samples, n, k, threads, Some(cost), &mut batch)?;
+        self.record_rollouts(start, &batch);
         Ok(batch)
     }
 
-    fn rollout_into(&mut self, x: &[f64], cost: &Cost, batch: &mut RolloutBatch) -> Result<()> {
-        self.recall_batch();
-        let start = Instant::now();
-        let (n, k, threads) = (self.config.rollouts, self.k, self.config.threads);
-        self.model.rollout_into(x, &self.samples, n, k, threads, Some(cost), batch)?;
+    fn record_rollouts(&mut self, start: Instant, batch: &RolloutBatch) {
         self.stats.rollout_time = start.elapsed().as_secs_f64();
         (self.stats.engine_steps, self.stats.engine_time) = batch.engine_totals();
+    }
+
+    /// Plans the batch for `t` and rolls it out from `x` with `cost`, each row built by the worker
+    /// that rolls it out.
+    fn sample_and_rollout(&mut self, x: &[f64], t: f64, cost: &Cost, batch: &mut RolloutBatch) -> Result<()> {
+        self.plan_batch(t);
+        let start = Instant::now();
+        let (n, k, threads) = (self.config.rollouts, self.k, self.config.threads);
+        let mut samples = std::mem::take(&mut self.samples);
+        let plan = self.row_plan();
+        let fill = |i: usize, row: &mut [f64]| plan.fill(i, row);
+        let result = self
+            .model
+            .rollout_filled_into(x, &mut samples, &fill, n, k, threads, Some(cost), batch);
+        self.samples = samples;
+        if result.is_err() {
+            // Rows that no worker reached are built here, so that the batch is whole.
+            self.fill_batch();
+            return result;
+        }
+        self.guides.clear();
+        self.record_rollouts(start, batch);
         Ok(())
     }
 
@@ -545,10 +552,9 @@ impl Mppi {
             return Err(SabreError::invalid("t", "must be finite"));
         }
         let start = Instant::now();
-        self.sample(t);
         let mut batch = std::mem::take(&mut self.batch);
         let result = self
-            .rollout_into(x, cost, &mut batch)
+            .sample_and_rollout(x, t, cost, &mut batch)
             .and_then(|()| self.update(&batch.costs));
         self.batch = batch;
         result?;

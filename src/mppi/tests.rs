@@ -85,3 +85,102 @@ fn shifting_by_whole_and_fractional_steps() {
     shift(&mut seq, 1, 0.5, &mut scratch);
     assert_eq!(seq, vec![1.5, 2.5, 3.0, 3.0]);
 }
+
+/// Two iterations of a sampler of `rollouts` on `threads` from the probe scene's rest state (the
+/// second batch keeps samples of the first): the policy and the last batch.
+fn two_iterations(rollouts: usize, threads: usize, noise_interval: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut mppi = sampler(rollouts);
+    mppi.config.threads = Some(threads);
+    mppi.config.noise_interval = noise_interval;
+    let cost = Cost::new(vec![Term::Posture {
+        target: vec![0.5, 0.0],
+        weights: vec![1.0, 1.0],
+    }]);
+    let x0 = state([0.0, 0.0], [0.0, 0.0], 0.0, 0.0);
+    for t in [0.0, 0.013] {
+        mppi.iterate(&x0, t, &cost).unwrap();
+    }
+    (mppi.nominal().to_vec(), mppi.previous.clone())
+}
+
+#[test]
+fn the_batch_rolled_out_by_iterate_is_the_one_sample_builds_on_any_thread_count() {
+    for interval in [1, 3] {
+        let (policy, batch) = two_iterations(12, 1, interval);
+        assert_eq!(
+            two_iterations(12, 2, interval),
+            (policy.clone(), batch.clone()),
+            "interval {interval}"
+        );
+        let mut mppi = sampler(12);
+        mppi.config.noise_interval = interval;
+        let cost = Cost::new(vec![Term::Posture {
+            target: vec![0.5, 0.0],
+            weights: vec![1.0, 1.0],
+        }]);
+        let x0 = state([0.0, 0.0], [0.0, 0.0], 0.0, 0.0);
+        for t in [0.0, 0.013] {
+            mppi.sample(t);
+            let rolled = mppi.rollout(&x0, &cost).unwrap();
+            mppi.update(&rolled.costs).unwrap();
+        }
+        assert_eq!(mppi.nominal(), &policy[..], "interval {interval}");
+        assert_eq!(mppi.previous, batch, "interval {interval}");
+    }
+}
+
+/// The fresh rows' noise (sample − nominal) / σ of a sampler of `rollouts` around a zero
+/// nominal, far inside the input bounds: one K × nu row each, for `batches` batches.
+fn fresh_noise(rollouts: usize, noise_interval: usize, batches: usize) -> Vec<Vec<f64>> {
+    let mut mppi = sampler(rollouts);
+    mppi.config.noise_interval = noise_interval;
+    mppi.config.keep_fraction = 0.0;
+    mppi.std = vec![1e-3; 2];
+    let row = mppi.horizon_steps() * 2;
+    let mut rows = Vec::new();
+    for b in 0..batches {
+        let samples = mppi.sample(b as f64 * 0.01).to_vec();
+        rows.extend(
+            samples[2 * row..]
+                .chunks(row)
+                .map(|r| r.iter().map(|v| v / 1e-3).collect::<Vec<f64>>()),
+        );
+    }
+    rows
+}
+
+#[test]
+fn fresh_rows_are_independent_standard_normal_noise_across_rows_and_batches() {
+    let rows = fresh_noise(202, 1, 2);
+    let values: Vec<f64> = rows.iter().flatten().copied().collect();
+    let count = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / count;
+    let variance = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / count;
+    // 6400 standard normal values: the mean's deviation is 0.0125, the variance's 0.018.
+    assert!(mean.abs() < 0.05, "mean {mean}");
+    assert!((variance - 1.0).abs() < 0.08, "variance {variance}");
+    // Row i of one batch against row i of the next and against row i + 1 of the same batch:
+    // correlations of 16 values, averaged over 200 pairs each, about 0 within 0.02.
+    let correlation = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>() / a.len() as f64;
+    let fresh = rows.len() / 2;
+    let across_batches: f64 = (0..fresh).map(|i| correlation(&rows[i], &rows[fresh + i])).sum::<f64>() / fresh as f64;
+    let across_rows: f64 = (0..fresh - 1).map(|i| correlation(&rows[i], &rows[i + 1])).sum::<f64>() / (fresh - 1) as f64;
+    assert!(across_batches.abs() < 0.1, "across batches {across_batches}");
+    assert!(across_rows.abs() < 0.1, "across rows {across_rows}");
+    assert!(rows[0] != rows[fresh] && rows[0] != rows[1]);
+}
+
+#[test]
+fn noise_between_knots_is_their_linear_interpolation() {
+    for row in fresh_noise(5, 3, 1) {
+        let steps: Vec<&[f64]> = row.chunks(2).collect();
+        for s in [1, 2, 4, 5] {
+            let (knot, a) = (s / 3 * 3, (s % 3) as f64 / 3.0);
+            let (here, next) = (steps[knot], steps[knot + 3]);
+            for ((&value, &h), &n) in steps[s].iter().zip(here).zip(next) {
+                let expected = (1.0 - a) * h + a * n;
+                assert!((value - expected).abs() < 1e-9, "step {s}: {value} vs {expected}");
+            }
+        }
+    }
+}

@@ -238,11 +238,11 @@ def test_realtime_tick_refills_the_tank_only_while_the_measured_power_matches_th
     assert refilled[10.0] < 0.01
 
 
-def test_predict_puts_the_planning_state_near_where_the_plant_is_when_the_plan_takes_over(scene):
-    """Moving in free space, the plant follows the plan for 30–90 ms; the rollout model's
-    prediction from the state at the start lands within a quarter of the distance the robot
-    covered (planning from the measured state would be off by all of it)."""
-    controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=0))
+def _moved_and_prediction_error(scene, seed: int) -> list[tuple[float, float]]:
+    """After 20 re-plannings of the approach (seed ``seed``), for plan delays of 30, 50 and 90 ms:
+    how far the plant moves following the plan, and how far the rollout model's prediction from
+    the state at the start lands from where it ends."""
+    controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=seed))
     plant = sabre.Plant(scene)
     low = sabre.LowLevelController(scene, dt=plant.dt)
     plant.reset(sabre.paper_start_state(scene))
@@ -253,6 +253,7 @@ def test_predict_puts_the_planning_state_near_where_the_plant_is_when_the_plan_t
     x, t = plant.state, plant.time
     controller.update(x, t)
     nq = scene.nq
+    outcomes = []
     for delay, steps in ((0.03, 2), (0.05, 3), (0.09, 6)):
         predicted, at = controller.predict(x, t, delay)
         assert at == pytest.approx(t + steps * controller.config.dt)
@@ -262,12 +263,24 @@ def test_predict_puts_the_planning_state_near_where_the_plant_is_when_the_plan_t
             follower, controller.nominal, controller.nominal_t0 - t, controller.config.dt, int(round((at - t) / follower.dt))
         )
         moved = np.abs(follower.state[:nq] - x[:nq]).max()
-        assert moved > 0.02
-        assert np.abs(predicted[:nq] - follower.state[:nq]).max() < 0.25 * moved
+        outcomes.append((moved, np.abs(predicted[:nq] - follower.state[:nq]).max()))
     same, at = controller.predict(x, t, 0.004)  # under half a planning step: the state itself
     assert at == t and np.array_equal(same, x)
     with pytest.raises(InvalidValueError, match="delay"):
         controller.predict(x, t, -0.01)
+    return outcomes
+
+
+def test_predict_puts_the_planning_state_near_where_the_plant_is_when_the_plan_takes_over(scene):
+    """Moving in free space, the plant follows the plan for 30–90 ms; the rollout model's
+    prediction from the state at the start lands within a third of the distance the robot covered,
+    typically within a fifth (planning from the measured state would be off by all of it)."""
+    outcomes = [o for seed in (0, 1, 2) for o in _moved_and_prediction_error(scene, seed)]
+    moved = np.array([m for m, _ in outcomes])
+    share = np.array([e / m for m, e in outcomes])
+    assert np.all(moved > 0.01), moved  # the robot is moving: 0.3 m/s or rad/s and more
+    assert np.all(share < 0.33), share
+    assert np.median(share) < 0.2, share
 
 
 def test_run_episode_without_plan_delay_is_unchanged_and_refuses_a_delay_past_the_period(scene):

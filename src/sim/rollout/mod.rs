@@ -1,8 +1,9 @@
 //! The reduced-order rollout model and its data-parallel batch rollouts (rayon, one world per worker).
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, Mutex};
 
+use rayon::iter::Either;
 use rayon::prelude::*;
 
 use super::evaluator::StepEvaluator;
@@ -13,6 +14,10 @@ use super::servo::ServoGains;
 use crate::error::{ensure_finite, Result, SabreError};
 use crate::interrupt::Cancel;
 use crate::model::scene::Scene;
+use pool::pool;
+pub use pool::{default_threads, MAX_CACHED_POOLS, MAX_THREADS};
+
+mod pool;
 
 /// How the rollout model resolves the contacts between the robot's contact bodies and the object.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -168,49 +173,16 @@ pub struct RolloutModel {
     speed_bounds: Vec<f64>,
 }
 
-/// How many worker pools (of different sizes) stay alive: a process that asks for many thread
-/// counts keeps the most recent ones and lets the others' threads exit.
-pub const MAX_CACHED_POOLS: usize = 2;
-
-/// Thread pools by size, most recently used last: rayon pools are costly to create and a rollout
-/// is short, so they are reused; at most [`MAX_CACHED_POOLS`] are kept.
-fn pool(threads: usize) -> Result<Arc<rayon::ThreadPool>> {
-    type Pools = Vec<(usize, Arc<rayon::ThreadPool>)>;
-    static POOLS: OnceLock<Mutex<Pools>> = OnceLock::new();
-    let pools = POOLS.get_or_init(|| Mutex::new(Vec::new()));
-    let mut pools = pools.lock().unwrap_or_else(|e| e.into_inner());
-    if let Some(i) = pools.iter().position(|(n, _)| *n == threads) {
-        let entry = pools.remove(i);
-        let p = entry.1.clone();
-        pools.push(entry);
-        return Ok(p);
-    }
-    let p = Arc::new(
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .thread_name(|i| format!("sabre-rollout-{i}"))
-            .build()
-            .map_err(|e| SabreError::Simulation(format!("cannot start {threads} worker threads: {e}")))?,
-    );
-    pools.push((threads, p.clone()));
-    if pools.len() > MAX_CACHED_POOLS {
-        pools.remove(0);
-    }
-    Ok(p)
-}
-
 /// A single rollout of at most this many steps runs on the calling thread (see `rollout_into`).
 const INLINE_STEPS: usize = 512;
 
 /// Upper bound on the values in one output array of a batch (2^28 doubles = 2 GiB).
 pub const MAX_BATCH_ELEMENTS: usize = 1 << 28;
 
-/// Upper bound on worker threads per pool.
-pub const MAX_THREADS: usize = 256;
-
-/// Default worker count: every core the process may use.
-pub fn default_threads() -> usize {
-    std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+/// A batch's inputs: given, or written row by row by the worker that rolls the row out.
+enum Inputs<'a> {
+    Given(&'a [f64]),
+    Filled(&'a mut [f64], &'a (dyn Fn(usize, &mut [f64]) + Sync)),
 }
 
 struct RolloutSlices<'a> {
@@ -432,9 +404,33 @@ impl RolloutModel {
         cost: Option<&dyn StepEvaluator>,
         batch: &mut RolloutBatch,
     ) -> Result<()> {
-        let nx = self.scene.nx();
+        self.check_inputs(u, n, k)?;
+        ensure_finite("U", u)?;
+        self.rollout_rows(x0, Inputs::Given(u), n, k, threads, cost, batch)
+    }
+
+    /// [`Self::rollout_into`] of inputs that `fill(i, row)` writes into row i of `u` (K × nu) on
+    /// the worker that rolls that row out, just before. `fill` must write finite values within the
+    /// joint velocity limits: the rows are not checked. Rows are filled only if rolled out: after
+    /// an error, some may not be.
+    #[allow(clippy::too_many_arguments)]
+    pub fn rollout_filled_into(
+        &self,
+        x0: &[f64],
+        u: &mut [f64],
+        fill: &(dyn Fn(usize, &mut [f64]) + Sync),
+        n: usize,
+        k: usize,
+        threads: Option<usize>,
+        cost: Option<&dyn StepEvaluator>,
+        batch: &mut RolloutBatch,
+    ) -> Result<()> {
+        self.check_inputs(u, n, k)?;
+        self.rollout_rows(x0, Inputs::Filled(u, fill), n, k, threads, cost, batch)
+    }
+
+    fn check_inputs(&self, u: &[f64], n: usize, k: usize) -> Result<()> {
         let nq = self.scene.nq();
-        self.scene.check_state(x0)?;
         if u.len() != n * k * nq {
             return Err(SabreError::shape(
                 "U",
@@ -442,7 +438,23 @@ impl RolloutModel {
                 format!("{} elements", u.len()),
             ));
         }
-        ensure_finite("U", u)?;
+        Ok(())
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn rollout_rows(
+        &self,
+        x0: &[f64],
+        inputs: Inputs,
+        n: usize,
+        k: usize,
+        threads: Option<usize>,
+        cost: Option<&dyn StepEvaluator>,
+        batch: &mut RolloutBatch,
+    ) -> Result<()> {
+        let nx = self.scene.nx();
+        let nq = self.scene.nq();
+        self.scene.check_state(x0)?;
         let threads = threads.unwrap_or_else(default_threads);
         if !(1..=MAX_THREADS).contains(&threads) {
             return Err(SabreError::invalid(
@@ -474,7 +486,7 @@ impl RolloutModel {
             cost.validate(&self.scene)?;
         }
         let cancel = Cancel::default();
-        let work = |i: usize,
+        let work = |u_i: &[f64],
                     states: &mut [f64],
                     tau: &mut [f64],
                     wrench: &mut [f64],
@@ -483,7 +495,6 @@ impl RolloutModel {
                     (engine_steps, engine_time): (&mut u64, &mut f64)| {
             let mut world = self.checkout_for_worker();
             let clock = world.engine_clock();
-            let u_i = &u[i * k * nq..(i + 1) * k * nq];
             let slices = RolloutSlices {
                 states: &mut *states,
                 tau_ext: &mut *tau,
@@ -520,8 +531,15 @@ impl RolloutModel {
             let b = &mut *batch;
             let (failed, costs) = (&mut b.failed[0], &mut b.costs[0]);
             let (steps, time) = (&mut b.engine_steps[0], &mut b.engine_time[0]);
+            let u = match inputs {
+                Inputs::Given(u) => u,
+                Inputs::Filled(u, fill) => {
+                    fill(0, u);
+                    &*u
+                }
+            };
             work(
-                0,
+                u,
                 &mut b.states,
                 &mut b.tau_ext,
                 &mut b.wrench,
@@ -531,20 +549,24 @@ impl RolloutModel {
             );
             return Ok(());
         }
+        let rows = match inputs {
+            Inputs::Given(u) => Either::Left(u.par_chunks(k * nq)),
+            Inputs::Filled(u, fill) => Either::Right(u.par_chunks_mut(k * nq).enumerate().map(move |(i, row)| {
+                fill(i, row);
+                &*row
+            })),
+        };
         let run = || {
-            batch
-                .states
-                .par_chunks_mut((k + 1) * nx)
+            rows.zip(batch.states.par_chunks_mut((k + 1) * nx))
                 .zip(batch.tau_ext.par_chunks_mut(k * nq))
                 .zip(batch.wrench.par_chunks_mut(k * 6))
                 .zip(batch.contact.par_chunks_mut(k))
                 .zip(batch.failed.par_iter_mut().zip(batch.costs.par_iter_mut()))
                 .zip(batch.engine_steps.par_iter_mut().zip(batch.engine_time.par_iter_mut()))
-                .enumerate()
                 // One rollout per job: rollouts in contact cost several times those in free space,
                 // and rayon's default halving can leave a worker idle behind a chunk of expensive ones.
                 .with_max_len(1)
-                .for_each(|(i, (((((s, t), w), c), f), e))| work(i, s, t, w, c, f, e));
+                .for_each(|((((((u_i, s), t), w), c), f), e)| work(u_i, s, t, w, c, f, e));
         };
         let pool = pool(threads)?;
         crate::interrupt::run_watched_on(&pool, &cancel, run)?;
@@ -553,198 +575,4 @@ impl RolloutModel {
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
-    use super::*;
-    use crate::model::scene::Scene;
-    use crate::sim::evaluator::{StepEvaluator, StepView};
-    use crate::sim::test_scene::{probe_and_drawer, state};
-
-    /// A command value that makes the physics of its step report non-finite numbers (test builds only).
-    pub(crate) const NON_FINITE_COMMAND: f64 = 0.123_456_789;
-
-    pub(super) fn inject_failure(u: &[f64], x: &mut [f64]) {
-        if u[0] == NON_FINITE_COMMAND {
-            x[0] = f64::NAN;
-        }
-    }
-
-    #[test]
-    fn contact_models_are_found_by_their_names_and_an_unknown_name_lists_the_choices() {
-        assert_eq!(ContactModel::from_name("reduced").unwrap(), ContactModel::Reduced);
-        assert_eq!(ContactModel::from_name("rapier").unwrap(), ContactModel::Rapier);
-        assert_eq!(ContactModel::ALL[0], RolloutConfig::default().contact_model);
-        match ContactModel::from_name("mujoco") {
-            Err(SabreError::InvalidValue { what, detail }) => {
-                assert_eq!(what, "contact_model");
-                assert!(
-                    detail.contains("'reduced'") && detail.contains("'rapier'") && detail.contains("'mujoco'"),
-                    "{detail}"
-                );
-            }
-            other => panic!("expected an invalid value, got {other:?}"),
-        }
-    }
-
-    /// Scores a step by its state and command; panics on a command of `panic_on` in joint 0.
-    struct Probe {
-        panic_on: f64,
-    }
-
-    impl StepEvaluator for Probe {
-        fn validate(&self, _: &Scene) -> Result<()> {
-            Ok(())
-        }
-        fn needs_object_frames(&self) -> bool {
-            false
-        }
-        fn evaluate(&self, _: &Scene, view: &StepView) -> f64 {
-            assert!(view.u[0] != self.panic_on, "evaluator fault");
-            view.x[0] * view.x[0] + view.u[1].abs()
-        }
-    }
-
-    const N: usize = 4;
-    const K: usize = 8;
-
-    fn inputs() -> Vec<f64> {
-        (0..N * K * 2).map(|e| 0.3 * ((e as f64) * 0.7).sin()).collect()
-    }
-
-    fn batch(u: &[f64], evaluator: &Probe) -> RolloutBatch {
-        let model = RolloutModel::new(probe_and_drawer(), RolloutConfig::default()).expect("model");
-        let x0 = state([0.3, 0.0], [0.0, 0.0], 0.0, 0.0);
-        model
-            .rollout_with_cost(&x0, u, N, K, Some(2), Some(evaluator))
-            .expect("batch")
-    }
-
-    /// Rollout `i` of two batches is the same, bit for bit.
-    fn same_rollout(a: &RolloutBatch, b: &RolloutBatch, i: usize) -> bool {
-        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-        let (nx, nq) = (a.nx, a.nq);
-        bits(&a.states[i * (K + 1) * nx..(i + 1) * (K + 1) * nx]) == bits(&b.states[i * (K + 1) * nx..(i + 1) * (K + 1) * nx])
-            && bits(&a.tau_ext[i * K * nq..(i + 1) * K * nq]) == bits(&b.tau_ext[i * K * nq..(i + 1) * K * nq])
-            && bits(&a.wrench[i * K * 6..(i + 1) * K * 6]) == bits(&b.wrench[i * K * 6..(i + 1) * K * 6])
-            && a.contact[i * K..(i + 1) * K] == b.contact[i * K..(i + 1) * K]
-            && a.costs[i].to_bits() == b.costs[i].to_bits()
-    }
-
-    /// Asserts rollout `i` is marked failed at `step`: +∞ cost, outputs NaN from that step, no contact.
-    fn assert_failed_at(batch: &RolloutBatch, clean: &RolloutBatch, i: usize, step: usize) {
-        let (nx, nq) = (batch.nx, batch.nq);
-        assert!(batch.failed[i]);
-        assert_eq!(batch.costs[i], f64::INFINITY);
-        let states = &batch.states[i * (K + 1) * nx..(i + 1) * (K + 1) * nx];
-        assert_eq!(
-            states[..(step + 1) * nx],
-            clean.states[i * (K + 1) * nx..i * (K + 1) * nx + (step + 1) * nx]
-        );
-        assert!(states[(step + 1) * nx..].iter().all(|v| v.is_nan()));
-        assert!(batch.tau_ext[i * K * nq..(i + 1) * K * nq][step * nq..]
-            .iter()
-            .all(|v| v.is_nan()));
-        assert!(batch.wrench[i * K * 6..(i + 1) * K * 6][step * 6..]
-            .iter()
-            .all(|v| v.is_nan()));
-        assert!(batch.contact[i * K..(i + 1) * K][step..].iter().all(|c| !c));
-    }
-
-    #[test]
-    fn non_finite_physics_fails_that_rollout_alone() {
-        let probe = Probe { panic_on: f64::NAN };
-        let u = inputs();
-        let clean = batch(&u, &probe);
-        assert!(clean.failed.iter().all(|f| !f) && clean.costs.iter().all(|c| c.is_finite()));
-        let mut poisoned = u.clone();
-        poisoned[(2 * K + 3) * 2] = NON_FINITE_COMMAND;
-        let failing = batch(&poisoned, &probe);
-        assert_eq!(failing.failed, vec![false, false, true, false]);
-        assert_failed_at(&failing, &clean, 2, 3);
-        for i in [0, 1, 3] {
-            assert!(same_rollout(&failing, &clean, i), "rollout {i} changed");
-        }
-        let mut w = Vec::new();
-        crate::mppi::weights(&failing.costs, crate::mppi::LikelihoodMapping::Invariant { h: 10.0 }, &mut w);
-        assert_eq!(w[2], 0.0);
-        assert!(w.iter().enumerate().all(|(i, &v)| i == 2 || v > 0.0));
-        assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
-    }
-
-    #[test]
-    fn panic_inside_a_rollout_fails_it_from_the_first_step() {
-        let u = inputs();
-        let clean = batch(&u, &Probe { panic_on: f64::NAN });
-        let mut poisoned = u.clone();
-        let fault = 0.0625;
-        poisoned[(K + 5) * 2] = fault;
-        let failing = batch(&poisoned, &Probe { panic_on: fault });
-        assert_eq!(failing.failed, vec![false, true, false, false]);
-        assert_failed_at(&failing, &clean, 1, 0);
-        for i in [0, 2, 3] {
-            assert!(same_rollout(&failing, &clean, i), "rollout {i} changed");
-        }
-    }
-
-    #[test]
-    fn a_single_rollout_run_on_the_calling_thread_matches_its_row_of_a_batch_and_keeps_a_panic_inside() {
-        let probe = Probe { panic_on: 0.0625 };
-        let model = RolloutModel::new(probe_and_drawer(), RolloutConfig::default()).expect("model");
-        let x0 = state([0.3, 0.0], [0.0, 0.0], 0.0, 0.0);
-        let u = inputs();
-        let clean = batch(&u, &Probe { panic_on: f64::NAN });
-        let row = &u[2 * K * 2..3 * K * 2];
-        let single = model
-            .rollout_with_cost(&x0, row, 1, K, Some(2), Some(&probe))
-            .expect("single");
-        let nx = single.nx;
-        assert_eq!(single.states, clean.states[2 * (K + 1) * nx..3 * (K + 1) * nx]);
-        assert_eq!(single.tau_ext, clean.tau_ext[2 * K * single.nq..3 * K * single.nq]);
-        assert_eq!((single.costs[0], single.failed[0]), (clean.costs[2], false));
-        let mut poisoned = row.to_vec();
-        poisoned[5 * 2] = 0.0625;
-        let failing = model
-            .rollout_with_cost(&x0, &poisoned, 1, K, Some(2), Some(&probe))
-            .expect("failing");
-        assert!(failing.failed[0] && failing.costs[0] == f64::INFINITY);
-        assert!(failing.states[nx..].iter().all(|v| v.is_nan()));
-    }
-
-    #[test]
-    fn a_reused_batch_holds_what_a_fresh_one_would_after_failures_and_other_sizes() {
-        let probe = Probe { panic_on: f64::NAN };
-        let model = RolloutModel::new(probe_and_drawer(), RolloutConfig::default()).expect("model");
-        let x0 = state([0.3, 0.0], [0.0, 0.0], 0.0, 0.0);
-        let u = inputs();
-        let clean = batch(&u, &probe);
-        let mut poisoned = u.clone();
-        poisoned[(2 * K + 3) * 2] = NON_FINITE_COMMAND;
-        let mut reused = RolloutBatch::default();
-        // A failing batch, a smaller one, then the full clean one into the same buffers.
-        model
-            .rollout_into(&x0, &poisoned, N, K, Some(2), Some(&probe), &mut reused)
-            .expect("failing");
-        assert!(reused.failed[2]);
-        let half = &u[..2 * K * 2];
-        model
-            .rollout_into(&x0, half, 2, K, Some(1), Some(&probe), &mut reused)
-            .expect("smaller");
-        assert_eq!(
-            (reused.n, reused.states.len(), reused.failed.len()),
-            (2, 2 * (K + 1) * reused.nx, 2)
-        );
-        for i in 0..2 {
-            assert!(same_rollout(&reused, &clean, i), "rollout {i} of the smaller batch");
-        }
-        model
-            .rollout_into(&x0, &u, N, K, Some(2), Some(&probe), &mut reused)
-            .expect("clean");
-        assert_eq!(
-            (reused.failed.as_slice(), reused.engine_steps.as_slice()),
-            (clean.failed.as_slice(), clean.engine_steps.as_slice())
-        );
-        assert_eq!(reused.states.len(), clean.states.len());
-        for i in 0..N {
-            assert!(same_rollout(&reused, &clean, i), "rollout {i} of the reused batch");
-        }
-    }
-}
+pub(crate) mod tests;
