@@ -1,11 +1,13 @@
 //! Contact detection of the reduced path: the robot's contact primitives against the object's, a
-//! bounding-sphere and box-distance screen, then parry's contact manifold for the pairs that pass.
+//! bounding-sphere and box-distance screen, then the contact manifold of the pairs that pass (two
+//! boxes by sabre's box–box generator, other pairs by parry's).
 
 use nalgebra::{Isometry3, Point3, Vector3};
 use rapier3d_f64::parry::query::{ContactManifold, DefaultQueryDispatcher, PersistentQueryDispatcher};
-use rapier3d_f64::parry::shape::{Cuboid, PolygonalFeature, SharedShape, SupportMap};
+use rapier3d_f64::parry::shape::{Cuboid, SharedShape, SupportMap};
 use rapier3d_f64::prelude::Pose;
 
+use super::box_box::{box_box_manifold, clip_support_faces};
 use crate::model::collision_shape::shared_shape;
 use crate::model::kinematics::{Frames, KinematicTree, Shape};
 use crate::sim::quiescence::distance_to_shape;
@@ -147,22 +149,7 @@ fn keep_axis(
     if kept < separation_along(cuboid1, cuboid2, pos12, chosen) - AXIS_PERSISTENCE {
         return;
     }
-    let local_n2 = pos12.rotation.inverse() * -previous;
-    let feature1 = cuboid1.support_feature(previous);
-    let feature2 = cuboid2.support_feature(local_n2);
-    manifold.clear();
-    PolygonalFeature::contacts(
-        pos12,
-        &pos12.inverse(),
-        previous,
-        local_n2,
-        &feature1,
-        &feature2,
-        manifold,
-        false,
-    );
-    manifold.local_n1 = previous;
-    manifold.local_n2 = local_n2;
+    clip_support_faces(cuboid1, cuboid2, pos12, previous, manifold);
 }
 
 /// The most contact points kept of one manifold.
@@ -341,8 +328,13 @@ impl Detector {
                 let pose_r = *pose_r.get_or_insert_with(|| link * rc.local);
                 let pos12 = to_pose(&(pose_r.inverse() * pose_o));
                 let previous = (!manifold.points.is_empty()).then_some(manifold.local_n1);
+                if let (Some(cuboid1), Some(cuboid2)) = (rc.shape.as_cuboid(), oc.shape.as_cuboid()) {
+                    box_box_manifold(cuboid1, cuboid2, &pos12, prediction, manifold);
+                    if let Some(previous) = previous {
+                        keep_axis(cuboid1, cuboid2, &pos12, previous, manifold);
+                    }
                 // Every primitive is convex, and parry has a generator for each convex pair.
-                if DefaultQueryDispatcher
+                } else if DefaultQueryDispatcher
                     .contact_manifold_convex_convex(
                         &pos12,
                         rc.shape.as_ref(),
@@ -356,9 +348,6 @@ impl Detector {
                 {
                     manifold.clear();
                     continue;
-                }
-                if let (Some(previous), Some(cuboid1), Some(cuboid2)) = (previous, rc.shape.as_cuboid(), oc.shape.as_cuboid()) {
-                    keep_axis(cuboid1, cuboid2, &pos12, previous, manifold);
                 }
                 let manifold = &*manifold;
                 kept |= !manifold.points.is_empty();

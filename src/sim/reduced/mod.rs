@@ -4,6 +4,7 @@
 //! solve in sabre per step; no physics pipeline, broad phase, islands or multibody. Rapier's
 //! pipeline ([`crate::sim::SimWorld`]) stays the reference this path is validated against.
 
+mod box_box;
 mod geometry;
 mod proxies;
 mod solver;
