@@ -38,6 +38,7 @@ __all__ = [
     "Cost",
     "MppiConfig",
     "ServoGuideConfig",
+    "ServoGuidePlan",
     "Planner",
     "SafetyConfig",
     "SafetyFilter",
@@ -54,6 +55,7 @@ __all__ = [
     "mesh_triangles",
     "servo_guide",
     "servo_guides",
+    "servo_guide_plan",
     "decode_joint_state",
     "encode_joint_state",
     "decode_float64_array",
@@ -248,6 +250,13 @@ class ServoGuideConfig:
     joint_margin: float
     limit_weighting: bool
     def __new__(cls) -> ServoGuideConfig: ...
+
+@final
+class ServoGuidePlan:
+    def __len__(self) -> int: ...
+    @property
+    def shape(self) -> tuple[int, int, int]: ...
+    def evaluate(self) -> npt.NDArray[np.float64]: ...
 
 @final
 class SafetyConfig:
@@ -543,6 +552,14 @@ def servo_guides(
     frame: str,
     configs: list[ServoGuideConfig],
 ) -> npt.NDArray[np.float64]: ...
+def servo_guide_plan(
+    scene: Scene,
+    q0: npt.NDArray[np.float64],
+    targets: npt.NDArray[np.float64],
+    dt: float,
+    frame: str,
+    configs: list[ServoGuideConfig],
+) -> ServoGuidePlan: ...
 
 @final
 class OpenObjectConfig:
@@ -614,6 +631,7 @@ class OpenObjectRules:
     def next_phase(self, x: npt.NDArray[np.float64], phase: str) -> str: ...
     def noise_scale(self, x: npt.NDArray[np.float64], phase: str) -> float: ...
     def guides(self, x: npt.NDArray[np.float64], phase: str, steps: int, dt: float) -> npt.NDArray[np.float64] | None: ...
+    def guide_plan(self, x: npt.NDArray[np.float64], phase: str, steps: int, dt: float) -> ServoGuidePlan: ...
     def offset(self, phase: str) -> npt.NDArray[np.float64]: ...
     def success(self, x: npt.NDArray[np.float64]) -> bool: ...
     def self_opening(self, x: npt.NDArray[np.float64]) -> bool: ...
@@ -656,6 +674,7 @@ class Planner:
     @property
     def nominal_t0(self) -> float: ...
     def set_guides(self, guides: npt.NDArray[np.float64]) -> None: ...
+    def set_guide_plan(self, plan: ServoGuidePlan) -> None: ...
     def set_nominal(self, nominal: npt.NDArray[np.float64], t0: float) -> None: ...
     @property
     def weights(self) -> list[float]: ...

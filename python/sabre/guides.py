@@ -18,7 +18,10 @@ from ._validate import as_float_array, core_config
 from .errors import InvalidValueError
 from .scene import Scene
 
-__all__ = ["servo_guide", "servo_guides", "rotation_log"]
+__all__ = ["ServoGuidePlan", "servo_guide", "servo_guides", "servo_guide_plan", "rotation_log"]
+
+#: Servo guides checked and ready to integrate (:func:`servo_guide_plan`).
+ServoGuidePlan = _core.ServoGuidePlan
 
 # The core's defaults, the one source of the servo guide's defaults.
 _GUIDE = _core.ServoGuideConfig()
@@ -96,6 +99,31 @@ def servo_guides(
     sequences ``targets`` (M, K+1, 4, 4), guide m with ``gain``, ``max_linear`` and ``max_angular``
     (each one value for all or M values, one per guide), in one call into Rust. Each is the guide
     :func:`servo_guide` gives for its sequence alone."""
+    plan = servo_guide_plan(
+        scene, q0, targets, dt, frame, gain, max_linear, max_angular, velocity_limit, damping, joint_margin, limit_weighting
+    )
+    return plan.evaluate()
+
+
+def servo_guide_plan(
+    scene: Scene,
+    q0: np.ndarray,
+    targets: np.ndarray,
+    dt: float,
+    frame: str | None = None,
+    gain: float | Sequence[float] = _GUIDE.gain,
+    max_linear: float | Sequence[float] = _GUIDE.max_linear,
+    max_angular: float | Sequence[float] = _GUIDE.max_angular,
+    velocity_limit: np.ndarray | None = None,
+    damping: float = _GUIDE.damping,
+    joint_margin: float = _GUIDE.joint_margin,
+    limit_weighting: bool = _GUIDE.limit_weighting,
+) -> ServoGuidePlan:
+    """The guides of :func:`servo_guides`, checked now and integrated where they are used: a task's
+    :meth:`~sabre.tasks.Task.guide_plan` returns one, and the controller's rollout workers each
+    integrate the guide of the row they roll out, in parallel with the other rollouts.
+    ``plan.evaluate()`` gives the (M, K, nu) array :func:`servo_guides` does, ``plan.shape`` its
+    shape."""
     q0 = as_float_array("q0", q0, (scene.nq,))
     targets = np.ascontiguousarray(targets, dtype=np.float64)
     if targets.ndim != 4 or targets.shape[2:] != (4, 4) or targets.shape[1] < 2:
@@ -116,7 +144,7 @@ def servo_guides(
         for g, lin, ang in zip(gains, linear, angular, strict=True)
     ]
     frame = frame if frame is not None else scene.require_tool_frame("servo_guides")
-    return _core.servo_guides(scene._core, q0, targets, float(dt), frame, configs)
+    return _core.servo_guide_plan(scene._core, q0, targets, float(dt), frame, configs)
 
 
 def _config(

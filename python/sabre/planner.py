@@ -182,7 +182,9 @@ class IterationStats:
         failed_rollouts: rollouts whose physics diverged (weighted zero).
         phase: the task phase the iteration planned for.
         noise_scale: factor on Σ the task asked for (:meth:`sabre.tasks.Task.noise_scale`).
-        guide_time: wall time of the task's guides (s), included in ``iteration_time``.
+        guide_time: wall time of the task's guides (s), included in ``iteration_time``; of a guide
+            plan (:meth:`sabre.tasks.Task.guide_plan`) only its making: the rollout workers
+            integrate its guides, within ``rollout_time``.
         sequential_time: wall time of the sequential FILTER-QP (s, Algorithm 1), included in
             ``iteration_time``; None without the outer filter (variants N, I).
         sequential_fallbacks: steps of the sequential filter that fell back to the safe stop; None
@@ -365,8 +367,16 @@ class Controller:
             raise InvalidValueError(f"task.noise_scale returned {scale}; it must be positive and finite")
         self._planner.noise_scale = scale
         start = time.perf_counter()
-        guides = self.task.guides(self.scene, x, self.phase, self.config.horizon_steps, self.config.dt)
-        if guides is not None and len(guides):
+        steps, dt = self.config.horizon_steps, self.config.dt
+        plan = self.task.guide_plan(self.scene, x, self.phase, steps, dt)
+        guides = self.task.guides(self.scene, x, self.phase, steps, dt) if plan is None else None
+        if plan is not None:
+            if not isinstance(plan, _core.ServoGuidePlan):
+                raise InvalidValueError(
+                    f"task.guide_plan: expected a sabre.guides.ServoGuidePlan or None, got {type(plan).__name__}"
+                )
+            self._planner.set_guide_plan(plan)
+        elif guides is not None and len(guides):
             guides = np.asarray(guides, dtype=np.float64)
             if guides.ndim != 3 or guides.shape[1:] != (self.config.horizon_steps, self.scene.nu):
                 raise ShapeError(f"task.guides: expected (M, {self.config.horizon_steps}, {self.scene.nu}), got {guides.shape}")

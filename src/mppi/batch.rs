@@ -7,6 +7,8 @@ use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
+use super::ServoGuidePlan;
+
 /// log2 of the words of a row's random stream. A row draws a few words per value it holds, and a
 /// batch holds at most 2^28 values (the rollouts' batch limit), so rows never overlap: 2^24 rows
 /// of 2^40 words fit ChaCha's 2^68 words of one stream.
@@ -59,8 +61,10 @@ pub(super) fn stream_key(seed: u64) -> [u8; 32] {
 pub(super) struct RowPlan<'a> {
     pub nu: usize,
     pub nominal: &'a [f64],
-    /// M × K × nu sequences proposed by the task, rows 2 to M + 1.
+    /// M × K × nu sequences proposed by the task, rows 2 to M + 1, then the first P guides of a
+    /// plan, integrated here.
     pub guides: &'a [f64],
+    pub planned: Option<(&'a ServoGuidePlan, usize)>,
     /// The previous batch and its rows kept, best first, for the rows after the guides.
     pub previous: &'a [f64],
     pub kept: &'a [usize],
@@ -81,18 +85,21 @@ impl RowPlan<'_> {
     /// Writes row `i` of the batch into `out`, projected onto the input bounds.
     pub fn fill(&self, i: usize, out: &mut [f64]) {
         let row = out.len();
-        let guided = self.guides.len() / row.max(1);
-        if i == 0 {
-            out.copy_from_slice(self.nominal);
-        } else if i == 1 {
-            out.fill(0.0);
-        } else if i < 2 + guided {
-            let g = i - 2;
-            out.copy_from_slice(&self.guides[g * row..(g + 1) * row]);
-        } else if let Some(&kept) = self.kept.get(i - 2 - guided) {
-            shifted_into(&self.previous[kept * row..(kept + 1) * row], self.nu, self.kept_shift, out);
-        } else {
-            self.draw(i, out);
+        let given = 2 + self.guides.len() / row.max(1);
+        let planned = given + self.planned.map_or(0, |(_, count)| count);
+        match i {
+            0 => out.copy_from_slice(self.nominal),
+            1 => out.fill(0.0),
+            i if i < given => out.copy_from_slice(&self.guides[(i - 2) * row..(i - 1) * row]),
+            i if i < planned => {
+                if let Some((plan, _)) = self.planned {
+                    plan.write(i - given, out);
+                }
+            }
+            i => match self.kept.get(i - planned) {
+                Some(&kept) => shifted_into(&self.previous[kept * row..(kept + 1) * row], self.nu, self.kept_shift, out),
+                None => self.draw(i, out),
+            },
         }
         for step in out.chunks_exact_mut(self.nu) {
             for ((v, &lo), &hi) in step.iter_mut().zip(self.lower).zip(self.upper) {

@@ -1,6 +1,8 @@
 //! Guide sequences for the sampler: a resolved-rate servo of a robot frame along target poses,
 //! integrated on the kinematics over the horizon.
 
+use std::sync::Arc;
+
 use nalgebra::{Isometry3, Matrix6, Vector6};
 
 use crate::error::{ensure_finite, Result, SabreError};
@@ -77,113 +79,158 @@ pub fn servo_guide(
     frame: &str,
     config: &ServoGuideConfig,
 ) -> Result<Vec<f64>> {
-    let nq = scene.nq();
-    crate::error::ensure_len("q0", q0, nq)?;
-    ensure_finite("q0", q0)?;
-    if targets.len() < 2 {
-        return Err(SabreError::invalid(
-            "targets",
-            format!("the servo guide needs at least 2 poses (K + 1), got {}", targets.len()),
-        ));
-    }
-    let finite_pose = |t: &Isometry3<f64>| {
-        t.translation
-            .vector
-            .iter()
-            .chain(t.rotation.coords.iter())
-            .all(|v| v.is_finite())
-    };
-    if !targets.iter().all(finite_pose) {
-        return Err(SabreError::invalid("targets", "must be finite"));
-    }
-    for (name, value) in [
-        ("dt", dt),
-        ("max_linear", config.max_linear),
-        ("max_angular", config.max_angular),
-        ("damping", config.damping),
-    ] {
-        if !(value.is_finite() && value > 0.0) {
-            return Err(SabreError::invalid(name, format!("must be positive and finite, got {value}")));
-        }
-    }
-    if !(config.gain.is_finite() && config.gain >= 0.0 && config.joint_margin.is_finite()) {
-        return Err(SabreError::invalid(
-            "gain, joint_margin",
-            "gain must be non-negative and finite, joint_margin finite",
-        ));
-    }
-    let link = scene.robot.require_link(frame)?;
-    let limits = scene.robot_limits();
-    let mut speed: Vec<f64> = limits.iter().map(|l| l.velocity).collect();
-    if let Some(tighter) = &config.velocity_limit {
-        crate::error::ensure_len("velocity_limit", tighter, nq)?;
-        ensure_finite("velocity_limit", tighter)?;
-        for (s, &t) in speed.iter_mut().zip(tighter) {
-            if t <= 0.0 {
-                return Err(SabreError::invalid("velocity_limit", "must be positive"));
-            }
-            *s = s.min(t);
-        }
-    }
-    let lower: Vec<f64> = limits.iter().map(|l| l.lower + config.joint_margin).collect();
-    let upper: Vec<f64> = limits.iter().map(|l| l.upper - config.joint_margin).collect();
-
-    let steps = targets.len() - 1;
-    let mut out = vec![0.0; steps * nq];
-    let mut q = q0.to_vec();
-    let mut frames = Frames::default();
-    let mut jacobian = vec![0.0; 6 * nq];
-    let mut columns = vec![Vector6::zeros(); nq];
-    let mut solver = HeldSolver {
-        lower,
-        upper,
-        dt,
-        damping: config.damping,
-        free: vec![true; nq],
-        held: vec![0.0; nq],
-    };
-    let unit = vec![1.0; nq];
-    let mut weights = vec![1.0; nq];
-    let mut v = vec![0.0; nq];
-    for k in 0..steps {
-        scene.robot.update_frames(&Isometry3::identity(), &q, &mut frames);
-        let pose = frames.poses[link];
-        scene
-            .robot
-            .frames_jacobian_into(&frames, link, &pose.translation.vector.into(), &mut jacobian);
-        for (c, column) in columns.iter_mut().enumerate() {
-            *column = Vector6::from_column_slice(&jacobian[6 * c..6 * c + 6]);
-        }
-        let mut rate = displacement(&targets[k], &targets[k + 1]) / dt + config.gain * displacement(&pose, &targets[k]);
-        cap_rate(&mut rate, config.max_linear, config.max_angular);
-
-        solver.solve(&columns, &rate, &unit, &q, &mut v);
-        if config.limit_weighting {
-            let mut weighted = false;
-            for c in 0..nq {
-                weights[c] = limit_weight(q[c], limits[c].lower, limits[c].upper, v[c]);
-                weighted |= weights[c] > 1.0;
-            }
-            if weighted {
-                solver.solve(&columns, &rate, &weights, &q, &mut v);
-            }
-        }
-        let over = v.iter().zip(&speed).map(|(vi, s)| vi.abs() / s).fold(0.0, f64::max);
-        if over > 1.0 {
-            v.iter_mut().for_each(|vi| *vi /= over);
-        }
-        out[k * nq..(k + 1) * nq].copy_from_slice(&v);
-        for (qi, vi) in q.iter_mut().zip(&v) {
-            *qi += dt * vi;
-        }
-    }
+    let guide = ServoGuide::new(scene, q0, targets.to_vec(), dt, frame, config)?;
+    let mut out = vec![0.0; guide.steps() * scene.nq()];
+    guide.write(scene, &mut out);
     Ok(out)
+}
+
+/// One servo guide, checked and ready to integrate (see [`servo_guide`]).
+#[derive(Debug, Clone)]
+struct ServoGuide {
+    q0: Vec<f64>,
+    targets: Vec<Isometry3<f64>>,
+    dt: f64,
+    link: usize,
+    config: ServoGuideConfig,
+    /// Per joint: the speed limit and the margin-tightened position limits.
+    speed: Vec<f64>,
+    lower: Vec<f64>,
+    upper: Vec<f64>,
+}
+
+impl ServoGuide {
+    fn new(
+        scene: &Scene,
+        q0: &[f64],
+        targets: Vec<Isometry3<f64>>,
+        dt: f64,
+        frame: &str,
+        config: &ServoGuideConfig,
+    ) -> Result<Self> {
+        let nq = scene.nq();
+        crate::error::ensure_len("q0", q0, nq)?;
+        ensure_finite("q0", q0)?;
+        if targets.len() < 2 {
+            return Err(SabreError::invalid(
+                "targets",
+                format!("the servo guide needs at least 2 poses (K + 1), got {}", targets.len()),
+            ));
+        }
+        let finite_pose = |t: &Isometry3<f64>| {
+            t.translation
+                .vector
+                .iter()
+                .chain(t.rotation.coords.iter())
+                .all(|v| v.is_finite())
+        };
+        if !targets.iter().all(finite_pose) {
+            return Err(SabreError::invalid("targets", "must be finite"));
+        }
+        for (name, value) in [
+            ("dt", dt),
+            ("max_linear", config.max_linear),
+            ("max_angular", config.max_angular),
+            ("damping", config.damping),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(SabreError::invalid(name, format!("must be positive and finite, got {value}")));
+            }
+        }
+        if !(config.gain.is_finite() && config.gain >= 0.0 && config.joint_margin.is_finite()) {
+            return Err(SabreError::invalid(
+                "gain, joint_margin",
+                "gain must be non-negative and finite, joint_margin finite",
+            ));
+        }
+        let link = scene.robot.require_link(frame)?;
+        let limits = scene.robot_limits();
+        let mut speed: Vec<f64> = limits.iter().map(|l| l.velocity).collect();
+        if let Some(tighter) = &config.velocity_limit {
+            crate::error::ensure_len("velocity_limit", tighter, nq)?;
+            ensure_finite("velocity_limit", tighter)?;
+            for (s, &t) in speed.iter_mut().zip(tighter) {
+                if t <= 0.0 {
+                    return Err(SabreError::invalid("velocity_limit", "must be positive"));
+                }
+                *s = s.min(t);
+            }
+        }
+        Ok(Self {
+            q0: q0.to_vec(),
+            targets,
+            dt,
+            link,
+            config: config.clone(),
+            speed,
+            lower: limits.iter().map(|l| l.lower + config.joint_margin).collect(),
+            upper: limits.iter().map(|l| l.upper - config.joint_margin).collect(),
+        })
+    }
+
+    fn steps(&self) -> usize {
+        self.targets.len() - 1
+    }
+
+    /// Integrates the guide on `scene` (the one it was checked on) into `out` (K × nq).
+    fn write(&self, scene: &Scene, out: &mut [f64]) {
+        let nq = self.q0.len();
+        let (config, dt) = (&self.config, self.dt);
+        let limits = scene.robot_limits();
+        let mut q = self.q0.clone();
+        let mut frames = Frames::default();
+        let mut jacobian = vec![0.0; 6 * nq];
+        let mut columns = vec![Vector6::zeros(); nq];
+        let mut solver = HeldSolver {
+            lower: self.lower.clone(),
+            upper: self.upper.clone(),
+            dt,
+            damping: config.damping,
+            free: vec![true; nq],
+            held: vec![0.0; nq],
+        };
+        let unit = vec![1.0; nq];
+        let mut weights = vec![1.0; nq];
+        let mut v = vec![0.0; nq];
+        let targets = &self.targets;
+        for k in 0..self.steps() {
+            scene.robot.update_frames(&Isometry3::identity(), &q, &mut frames);
+            let pose = frames.poses[self.link];
+            scene
+                .robot
+                .frames_jacobian_into(&frames, self.link, &pose.translation.vector.into(), &mut jacobian);
+            for (c, column) in columns.iter_mut().enumerate() {
+                *column = Vector6::from_column_slice(&jacobian[6 * c..6 * c + 6]);
+            }
+            let mut rate = displacement(&targets[k], &targets[k + 1]) / dt + config.gain * displacement(&pose, &targets[k]);
+            cap_rate(&mut rate, config.max_linear, config.max_angular);
+
+            solver.solve(&columns, &rate, &unit, &q, &mut v);
+            if config.limit_weighting {
+                let mut weighted = false;
+                for c in 0..nq {
+                    weights[c] = limit_weight(q[c], limits[c].lower, limits[c].upper, v[c]);
+                    weighted |= weights[c] > 1.0;
+                }
+                if weighted {
+                    solver.solve(&columns, &rate, &weights, &q, &mut v);
+                }
+            }
+            let over = v.iter().zip(&self.speed).map(|(vi, s)| vi.abs() / s).fold(0.0, f64::max);
+            if over > 1.0 {
+                v.iter_mut().for_each(|vi| *vi /= over);
+            }
+            out[k * nq..(k + 1) * nq].copy_from_slice(&v);
+            for (qi, vi) in q.iter_mut().zip(&v) {
+                *qi += dt * vi;
+            }
+        }
+    }
 }
 
 /// [`servo_guide`] along several target sequences from the same `q0`, each with its own config:
 /// M × K × nu joint velocities (row-major), guide m servoing along `targets[m]`. Every sequence has
-/// the same length K + 1. The guides run one after the other: a guide takes tens of microseconds,
-/// about what waking a worker thread and waiting for it takes.
+/// the same length K + 1.
 pub fn servo_guides(
     scene: &Scene,
     q0: &[f64],
@@ -192,6 +239,24 @@ pub fn servo_guides(
     frame: &str,
     configs: &[ServoGuideConfig],
 ) -> Result<Vec<f64>> {
+    let guides = checked_guides(scene, q0, targets, dt, frame, configs)?;
+    let row = guides.first().map_or(0, ServoGuide::steps) * scene.nq();
+    let mut out = vec![0.0; guides.len() * row];
+    for (guide, chunk) in guides.iter().zip(out.chunks_exact_mut(row.max(1))) {
+        guide.write(scene, chunk);
+    }
+    Ok(out)
+}
+
+/// The guides of [`servo_guides`], checked.
+fn checked_guides(
+    scene: &Scene,
+    q0: &[f64],
+    targets: &[Vec<Isometry3<f64>>],
+    dt: f64,
+    frame: &str,
+    configs: &[ServoGuideConfig],
+) -> Result<Vec<ServoGuide>> {
     if targets.len() != configs.len() {
         return Err(SabreError::invalid(
             "configs",
@@ -210,11 +275,80 @@ pub fn servo_guides(
             ));
         }
     }
-    let mut out = Vec::new();
-    for (sequence, config) in targets.iter().zip(configs) {
-        out.extend(servo_guide(scene, q0, sequence, dt, frame, config)?);
+    targets
+        .iter()
+        .zip(configs)
+        .map(|(sequence, config)| ServoGuide::new(scene, q0, sequence.clone(), dt, frame, config))
+        .collect()
+}
+
+/// The servo guides of [`servo_guides`], checked when the plan is made and integrated one by one
+/// where they are used: a planner's rollout workers each build the guide of the row they roll out,
+/// in parallel with the others' rollouts, instead of the caller building them all first.
+#[derive(Debug, Clone)]
+pub struct ServoGuidePlan {
+    scene: Arc<Scene>,
+    guides: Vec<ServoGuide>,
+    steps: usize,
+}
+
+impl ServoGuidePlan {
+    /// One guide per target sequence (every sequence K + 1 poses long), guide m with `configs[m]`.
+    pub fn new(
+        scene: Arc<Scene>,
+        q0: &[f64],
+        targets: &[Vec<Isometry3<f64>>],
+        dt: f64,
+        frame: &str,
+        configs: &[ServoGuideConfig],
+    ) -> Result<Self> {
+        let guides = checked_guides(&scene, q0, targets, dt, frame, configs)?;
+        let steps = guides.first().map_or(0, ServoGuide::steps);
+        Ok(Self { scene, guides, steps })
     }
-    Ok(out)
+
+    /// A plan of no guides.
+    pub fn empty(scene: Arc<Scene>) -> Self {
+        Self {
+            scene,
+            guides: Vec::new(),
+            steps: 0,
+        }
+    }
+
+    /// The number of guides M.
+    pub fn len(&self) -> usize {
+        self.guides.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.guides.is_empty()
+    }
+
+    /// Steps K of every guide.
+    pub fn steps(&self) -> usize {
+        self.steps
+    }
+
+    /// Joint velocities per step: the robot's nq.
+    pub fn width(&self) -> usize {
+        self.scene.nq()
+    }
+
+    /// Integrates guide `m` into `out` (K × nq).
+    pub fn write(&self, m: usize, out: &mut [f64]) {
+        self.guides[m].write(&self.scene, out);
+    }
+
+    /// Every guide, M × K × nq (row-major).
+    pub fn evaluate(&self) -> Vec<f64> {
+        let row = self.steps * self.width();
+        let mut out = vec![0.0; self.len() * row];
+        for (m, chunk) in out.chunks_exact_mut(row.max(1)).enumerate().take(self.len()) {
+            self.write(m, chunk);
+        }
+        out
+    }
 }
 
 /// The joint-rate solve of [`servo_guide`] with its joint margins and scratch.

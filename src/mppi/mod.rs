@@ -14,7 +14,7 @@ use crate::error::{ensure_finite, Result, SabreError};
 use crate::sim::{RolloutBatch, RolloutModel, MAX_BATCH_ELEMENTS};
 pub use batch::interpolate;
 use batch::{shift, stream_key, RowPlan};
-pub use guide::{servo_guide, servo_guides, ServoGuideConfig};
+pub use guide::{servo_guide, servo_guides, ServoGuideConfig, ServoGuidePlan};
 pub use smoothing::SavitzkyGolay;
 pub use weights::{effective_sample_size, weights, LikelihoodMapping};
 
@@ -117,8 +117,10 @@ pub struct Mppi {
     /// The last update moved the batch to `previous` (a swap); it is the current batch until the
     /// next `sample`.
     batch_in_previous: bool,
-    /// Task-proposed sequences for the next batch only (M × K × nu).
+    /// Task-proposed sequences for the next batch only (M × K × nu), and guides planned for it
+    /// that the rollouts' workers integrate (after those).
     guides: Vec<f64>,
+    guide_plan: Option<Arc<ServoGuidePlan>>,
     weights: Vec<f64>,
     smoother: Option<SavitzkyGolay>,
     /// The random streams' key (from the seed) and the number of batches drawn since it was set:
@@ -235,6 +237,7 @@ impl Mppi {
             have_previous: false,
             batch_in_previous: false,
             guides: Vec::new(),
+            guide_plan: None,
             weights: vec![0.0; n],
             smoother,
             key: stream_key(config.seed),
@@ -297,7 +300,7 @@ impl Mppi {
         self.nominal_t0 = t0;
         self.recall_batch();
         self.have_previous = false;
-        self.guides.clear();
+        self.clear_guides();
         self.key = stream_key(seed);
         self.batches = 0;
         self.config.seed = seed;
@@ -343,6 +346,26 @@ impl Mppi {
         Ok(())
     }
 
+    /// Puts the guides of `plan` into the next batch after those of [`Self::set_guides`], as many
+    /// as the batch has slots for; each is integrated by the worker that rolls its row out, in
+    /// parallel with the other rollouts. Used once, like [`Self::set_guides`].
+    pub fn set_guide_plan(&mut self, plan: Arc<ServoGuidePlan>) -> Result<()> {
+        if !plan.is_empty() && (plan.steps() != self.k || plan.width() != self.nu) {
+            return Err(SabreError::shape(
+                "guide plan",
+                format!("(M, {}, {})", self.k, self.nu),
+                format!("({}, {}, {})", plan.len(), plan.steps(), plan.width()),
+            ));
+        }
+        self.guide_plan = Some(plan);
+        Ok(())
+    }
+
+    fn clear_guides(&mut self) {
+        self.guides.clear();
+        self.guide_plan = None;
+    }
+
     /// Replaces the policy mean (e.g. with a filtered sequence), K × nu starting at time `t0`.
     pub fn set_nominal(&mut self, nominal: &[f64], t0: f64) -> Result<()> {
         if nominal.len() != self.nominal.len() {
@@ -385,7 +408,7 @@ impl Mppi {
         self.batch_in_previous = false;
         self.shift_to(t);
         let n = self.config.rollouts;
-        let filled = 2 + self.guides.len() / (self.k * self.nu);
+        let filled = 2 + self.guides.len() / (self.k * self.nu) + self.planned_guides();
         self.kept.clear();
         if self.have_previous {
             let keep = ((self.config.keep_fraction * n as f64).floor() as usize).min(n - filled);
@@ -401,12 +424,19 @@ impl Mppi {
         self.batches += 1;
     }
 
+    /// How many of the planned guides the next batch takes: those the given ones leave room for.
+    fn planned_guides(&self) -> usize {
+        let room = self.config.rollouts - 2 - self.guides.len() / (self.k * self.nu);
+        self.guide_plan.as_ref().map_or(0, |plan| plan.len().min(room))
+    }
+
     /// The rows of the batch chosen by the last [`Self::plan_batch`].
     fn row_plan(&self) -> RowPlan<'_> {
         RowPlan {
             nu: self.nu,
             nominal: &self.nominal,
             guides: &self.guides,
+            planned: self.guide_plan.as_deref().map(|plan| (plan, self.planned_guides())),
             previous: &self.previous,
             kept: &self.kept,
             kept_shift: (self.nominal_t0 - self.previous_t0) / self.dt,
@@ -427,7 +457,7 @@ impl Mppi {
             plan.fill(i, row);
         }
         self.samples = samples;
-        self.guides.clear();
+        self.clear_guides();
     }
 
     /// Builds the batch for time `t`: nominal, zero, the guides, the best previous samples
@@ -473,7 +503,7 @@ impl Mppi {
             self.fill_batch();
             return result;
         }
-        self.guides.clear();
+        self.clear_guides();
         self.record_rollouts(start, batch);
         Ok(())
     }

@@ -55,6 +55,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<cost::PyCost>()?;
     m.add_class::<mppi::PyMppiConfig>()?;
     m.add_class::<mppi::PyServoGuideConfig>()?;
+    m.add_class::<mppi::PyServoGuidePlan>()?;
     m.add_class::<mppi::PyPlanner>()?;
     m.add_class::<safety::PySafetyConfig>()?;
     m.add_class::<safety::PySafetyFilter>()?;
@@ -70,6 +71,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mppi::likelihood_weights, m)?)?;
     m.add_function(wrap_pyfunction!(mppi::servo_guide, m)?)?;
     m.add_function(wrap_pyfunction!(mppi::servo_guides, m)?)?;
+    m.add_function(wrap_pyfunction!(mppi::servo_guide_plan, m)?)?;
     m.add_function(wrap_pyfunction!(robot::mesh_triangles, m)?)?;
     m.add_function(wrap_pyfunction!(messages::decode_joint_state, m)?)?;
     m.add_function(wrap_pyfunction!(messages::encode_joint_state, m)?)?;

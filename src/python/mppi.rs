@@ -1,4 +1,4 @@
-//! `_core.Planner` and its `MppiConfig`, the likelihood mappings, and the servo guide with its settings.
+//! `_core.Planner` and its `MppiConfig`, the likelihood mappings, and the servo guides with their settings and plans.
 
 use std::sync::{Arc, Mutex};
 
@@ -13,7 +13,7 @@ use super::scene::PyScene;
 use super::sim::PyRolloutModel;
 use crate::cost::Cost;
 use crate::error::SabreError;
-use crate::mppi::{IterationStats, LikelihoodMapping, Mppi, MppiConfig, ServoGuideConfig};
+use crate::mppi::{IterationStats, LikelihoodMapping, Mppi, MppiConfig, ServoGuideConfig, ServoGuidePlan};
 
 /// Sampler settings (Table I); `MppiConfig()` holds the core's defaults. `sigma=None` is the
 /// Table I covariance for the scene's inputs ([`MppiConfig::paper_defaults`]).
@@ -193,6 +193,21 @@ pub fn servo_guides<'py>(
     frame: &str,
     configs: Vec<PyRef<'py, PyServoGuideConfig>>,
 ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    let plan = servo_guide_plan(scene, q0, targets, dt, frame, configs)?;
+    plan.evaluate(py)
+}
+
+/// The guides of `servo_guides`, checked now and integrated where they are used:
+/// `sabre.guides.servo_guide_plan`.
+#[pyfunction]
+pub fn servo_guide_plan<'py>(
+    scene: &PyScene,
+    q0: PyReadonlyArrayDyn<'py, f64>,
+    targets: PyReadonlyArrayDyn<'py, f64>,
+    dt: f64,
+    frame: &str,
+    configs: Vec<PyRef<'py, PyServoGuideConfig>>,
+) -> PyResult<PyServoGuidePlan> {
     let nq = scene.inner.nq();
     let q0 = run(|| view("q0", &q0, &[nq as isize]))?;
     let sequences = run(|| {
@@ -204,9 +219,52 @@ pub fn servo_guides<'py>(
             .collect::<crate::Result<Vec<Vec<_>>>>()
     })?;
     let configs = run(|| configs.iter().map(|c| c.to_core(nq)).collect::<crate::Result<Vec<_>>>())?;
-    let (m, steps) = (sequences.len(), targets.shape()[1].saturating_sub(1));
-    let out = run(|| crate::mppi::servo_guides(&scene.inner, q0, &sequences, dt, frame, &configs))?;
-    array(py, out, &[m, steps, nq])
+    let plan = run(|| ServoGuidePlan::new(scene.inner.clone(), q0, &sequences, dt, frame, &configs))?;
+    Ok(PyServoGuidePlan::new(plan, targets.shape()[1].saturating_sub(1)))
+}
+
+/// Servo guides checked and ready to integrate: a planner given one (`Planner.set_guide_plan`)
+/// has each rollout worker integrate the guide of the row it rolls out.
+#[pyclass(name = "ServoGuidePlan", module = "sabre._core", frozen)]
+pub struct PyServoGuidePlan {
+    pub(crate) inner: Arc<ServoGuidePlan>,
+    /// K, also of a plan of no guides.
+    steps: usize,
+}
+
+impl PyServoGuidePlan {
+    pub(crate) fn new(plan: ServoGuidePlan, steps: usize) -> Self {
+        Self {
+            inner: Arc::new(plan),
+            steps,
+        }
+    }
+}
+
+#[pymethods]
+impl PyServoGuidePlan {
+    fn __len__(&self) -> usize {
+        self.inner.len()
+    }
+
+    /// (M, K, nu) of the guides.
+    #[getter]
+    fn shape(&self) -> (usize, usize, usize) {
+        (self.inner.len(), self.steps, self.inner.width())
+    }
+
+    /// Every guide, (M, K, nu), integrated here (without the GIL).
+    fn evaluate<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let plan = self.inner.clone();
+        let out = run_detached(py, move || Ok(plan.evaluate()))?;
+        let (m, k, nu) = self.shape();
+        array(py, out, &[m, k, nu])
+    }
+
+    fn __repr__(&self) -> String {
+        let (m, k, nu) = self.shape();
+        format!("ServoGuidePlan({m} guides of {k} steps × {nu})")
+    }
 }
 
 #[pyclass(name = "Planner", module = "sabre._core")]
@@ -368,6 +426,12 @@ impl PyPlanner {
         let (k, nu) = (planner.horizon_steps() as isize, planner.model().scene().nu() as isize);
         let guides = run(|| view("guides", &guides, &[-1, k, nu]))?;
         run(|| planner.set_guides(guides))
+    }
+
+    /// Guides placed in the next batch after those of `set_guides`, as many as it has slots for,
+    /// each integrated by the worker that rolls it out.
+    fn set_guide_plan(&self, plan: &PyServoGuidePlan) -> PyResult<()> {
+        run(|| lock(&self.inner).set_guide_plan(plan.inner.clone()))
     }
 
     fn set_nominal(&self, nominal: PyReadonlyArrayDyn<'_, f64>, t0: f64) -> PyResult<()> {

@@ -6,6 +6,7 @@ use pyo3::prelude::*;
 
 use super::convert::{array, isometry, pose_array, poses_array, view};
 use super::error::{run, run_detached};
+use super::mppi::PyServoGuidePlan;
 use super::scene::PyScene;
 use crate::task::{HandleGeometry, OpenObjectConfig, OpenObjectRules, OpenPhase, ReleaseMove};
 
@@ -267,6 +268,14 @@ impl PyOpenObjectRules {
         let x = self.state(&x)?;
         let (guides, count) = run_detached(py, || self.inner.guides(x, phase, steps, dt))?;
         self.guides_array(py, guides, count, steps)
+    }
+
+    /// The guides of `guides` as a plan, integrated where they are used.
+    fn guide_plan(&self, x: PyReadonlyArrayDyn<'_, f64>, phase: &str, steps: usize, dt: f64) -> PyResult<PyServoGuidePlan> {
+        let phase = run(|| OpenPhase::from_name(phase))?;
+        let x = self.state(&x)?;
+        let plan = run(|| self.inner.guide_plan(x, phase, steps, dt))?;
+        Ok(PyServoGuidePlan::new(plan, steps))
     }
 
     /// (4, 4) grasp target of `phase` in the handle frame.

@@ -11,7 +11,7 @@ use nalgebra::Isometry3;
 use super::handle::{HandAtHandle, HandleGeometry, ReleaseMove};
 use crate::error::{ensure_finite, Result, SabreError};
 use crate::model::scene::Scene;
-use crate::mppi::{servo_guide, servo_guides, ServoGuideConfig};
+use crate::mppi::{ServoGuideConfig, ServoGuidePlan};
 use crate::sim::{RolloutConfig, RolloutModel};
 
 /// The phases of opening with a hook finger, in order.
@@ -505,6 +505,13 @@ impl OpenObjectRules {
     /// its path at `open_speeds` (and at the object's own pace when it opens faster), toward the
     /// object setpoint. None where the settings turn them off.
     pub fn guides(&self, x: &[f64], phase: OpenPhase, steps: usize, dt: f64) -> Result<(Vec<f64>, usize)> {
+        let plan = self.guide_plan(x, phase, steps, dt)?;
+        Ok((plan.evaluate(), plan.len()))
+    }
+
+    /// [`Self::guides`] as a plan whose guides are integrated where they are used (targets and
+    /// settings checked here).
+    pub fn guide_plan(&self, x: &[f64], phase: OpenPhase, steps: usize, dt: f64) -> Result<ServoGuidePlan> {
         if steps == 0 || !(dt.is_finite() && dt > 0.0) {
             return Err(SabreError::invalid(
                 "steps, dt",
@@ -518,15 +525,15 @@ impl OpenObjectRules {
         match phase {
             OpenPhase::Release => {
                 if self.config.release_speed <= 0.0 {
-                    return Ok((Vec::new(), 0));
+                    return Ok(ServoGuidePlan::empty(scene.clone()));
                 }
                 let targets = self.release_path(x, steps, dt)?;
                 let config = self.guide_config(2.0 * self.config.release_speed, 1.0);
-                Ok((servo_guide(scene, q, &targets, dt, frame, &config)?, 1))
+                ServoGuidePlan::new(scene.clone(), q, &[targets], dt, frame, &[config])
             }
             OpenPhase::Open => {
                 if self.config.open_speeds.is_empty() {
-                    return Ok((Vec::new(), 0));
+                    return Ok(ServoGuidePlan::empty(scene.clone()));
                 }
                 let travel = self.geometry.travel(o);
                 let upper = scene.object_limits()[0].upper;
@@ -551,11 +558,11 @@ impl OpenObjectRules {
                     })
                     .collect();
                 let configs: Vec<ServoGuideConfig> = speeds.iter().map(|s| self.guide_config(2.0 * s + 0.05, 2.0)).collect();
-                Ok((servo_guides(scene, q, &targets, dt, frame, &configs)?, speeds.len()))
+                ServoGuidePlan::new(scene.clone(), q, &targets, dt, frame, &configs)
             }
             reaching => {
                 if self.config.guide_speed <= 0.0 {
-                    return Ok((Vec::new(), 0));
+                    return Ok(ServoGuidePlan::empty(scene.clone()));
                 }
                 let target = at.handle * self.offset(reaching);
                 let speed = if reaching == OpenPhase::Approach {
@@ -564,10 +571,8 @@ impl OpenObjectRules {
                     self.config.fine_speed
                 };
                 let targets = vec![target; steps + 1];
-                Ok((
-                    servo_guide(scene, q, &targets, dt, frame, &self.guide_config(speed, 4.0 * speed))?,
-                    1,
-                ))
+                let config = self.guide_config(speed, 4.0 * speed);
+                ServoGuidePlan::new(scene.clone(), q, &[targets], dt, frame, &[config])
             }
         }
     }

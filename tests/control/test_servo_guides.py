@@ -54,3 +54,70 @@ def test_bad_batches_are_invalid_values(scene, case, call):
     q0 = scene.default_state()[: scene.nq]
     with pytest.raises(sabre.InvalidValueError):
         call(scene, q0, _sequences(scene, q0, 3, 5))
+
+
+class _EagerGuides(sabre.tasks.OpenObject):
+    """OpenObject whose guides reach the controller as arrays, built before the rollouts."""
+
+    def guide_plan(self, scene, x, phase, steps, dt):
+        return None
+
+
+def _hooked(scene):
+    motion = sabre.hook_and_pull(scene)
+    start = int(np.argmax(motion.phases == 3)) + 20
+    return sabre.RolloutModel(scene).rollout(scene.default_state(), motion.U[None, :start]).states[0, -1]
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_guides_integrated_by_the_rollout_workers_plan_as_the_guides_built_first(scene, threads):
+    """Opening from the hooked state, where the task proposes two guides: a controller whose
+    workers integrate them (the task's guide plan) and one given them as arrays end every
+    iteration with the same policy and statistics, to the bit."""
+    x = _hooked(scene)
+    task = sabre.tasks.OpenObject()
+    guides = task.guides(scene, x, "open", 66, 0.015)
+    plan = task.guide_plan(scene, x, "open", 66, 0.015)
+    assert guides is not None and len(guides) >= 2
+    assert plan.shape == guides.shape
+    np.testing.assert_array_equal(plan.evaluate(), guides)
+    controllers = [sabre.Controller(scene, t, sabre.ControllerConfig(seed=3, threads=threads)) for t in (task, _EagerGuides())]
+    for c in controllers:
+        c.set_phase("open")
+    for i in range(4):
+        planned, eager = (c.update(x, 0.01 * i) for c in controllers)
+        np.testing.assert_array_equal(controllers[0].nominal, controllers[1].nominal)
+        assert (planned.nominal_cost, planned.cost_mean, planned.failed_rollouts) == (
+            eager.nominal_cost,
+            eager.cost_mean,
+            eager.failed_rollouts,
+        )
+
+
+def test_a_batch_takes_the_planned_guides_it_has_room_for(scene):
+    """Three rollouts hold the nominal, the zero sequence and one guide: the first of the plan's."""
+    x = _hooked(scene)
+    q0 = x[: scene.nq]
+    controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(rollouts=3))
+    steps = controller.config.horizon_steps
+    plan = sabre.guides.servo_guide_plan(scene, q0, _sequences(scene, q0, 2, steps), controller.config.dt)
+    controller._planner.set_guide_plan(plan)
+    batch = controller._planner.sample(0.0)
+    np.testing.assert_array_equal(batch[2], np.clip(plan.evaluate()[0], -scene.dq_limit, scene.dq_limit))
+
+
+def test_a_subclass_with_guides_of_its_own_gets_them_and_a_bad_plan_is_refused(scene):
+    class OwnGuides(sabre.tasks.OpenObject):
+        def guides(self, scene, x, phase, steps, dt):
+            return np.zeros((1, steps, scene.nu))
+
+    x = scene.default_state()
+    assert OwnGuides().guide_plan(scene, x, "approach", 66, 0.015) is None
+    assert sabre.tasks.OpenObject().guide_plan(scene, x, "approach", 66, 0.015) is not None
+
+    class BadPlan(sabre.tasks.OpenObject):
+        def guide_plan(self, scene, x, phase, steps, dt):
+            return np.zeros((1, steps, scene.nu))
+
+    with pytest.raises(sabre.InvalidValueError, match="guide_plan"):
+        sabre.Controller(scene, BadPlan()).update(x, 0.0)

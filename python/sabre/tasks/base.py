@@ -12,6 +12,7 @@ from .._validate import as_pose
 from ..scene import Scene
 
 if TYPE_CHECKING:
+    from ..guides import ServoGuidePlan
     from ..planner import Controller
 
 __all__ = ["Task", "Reach", "SafetyWeights"]
@@ -96,6 +97,14 @@ class Task:
         cost, so they can only help. A task proposes what it knows and the sampler cannot find by
         chance, e.g. following a handle along its arc (see :func:`sabre.guides.servo_guide`).
         """
+        return None
+
+    def guide_plan(self, scene: Scene, x: np.ndarray, phase: str, steps: int, dt: float) -> ServoGuidePlan | None:
+        """The task's guides as a plan (:func:`sabre.guides.servo_guide_plan`) whose guides the
+        controller's rollout workers integrate, each the one of the row it rolls out, in parallel
+        with the other rollouts; or None, and the controller takes :meth:`guides`. The controller
+        asks this first: a task overrides it where its guides are servo guides, with the same
+        guides :meth:`guides` gives."""
         return None
 
     def on_step(self, scene: Scene, x: np.ndarray, t: float, controller: Controller) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -18,6 +18,9 @@ from ..base import SafetyWeights, Task
 from . import geometry
 from .config import ApproachConfig, GuideConfig, HookConfig, NoiseConfig, OpenConfig, ReleaseConfig, rules_config
 from .geometry import GraspError, PocketError
+
+if TYPE_CHECKING:
+    from ...guides import ServoGuidePlan
 
 __all__ = ["OpenObject"]
 
@@ -365,6 +368,13 @@ class OpenObject(Task):
         - release: along :meth:`release_path` (None with ``release.speed`` 0).
         """
         return self._rules(scene).guides(_state(x), phase, int(steps), float(dt))
+
+    def guide_plan(self, scene: Scene, x: np.ndarray, phase: str, steps: int, dt: float) -> ServoGuidePlan | None:
+        """:meth:`guides` as a plan the controller's rollout workers integrate; None where a
+        subclass gives guides of its own."""
+        if type(self).guides is not OpenObject.guides:
+            return None
+        return self._rules(scene).guide_plan(_state(x), phase, int(steps), float(dt))
 
     def gain_inertia_floor(self, phase: str) -> float | None:
         return self.open.gain_inertia_floor if phase == "open" else None
