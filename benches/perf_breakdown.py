@@ -24,9 +24,12 @@ CATEGORIES: tuple[tuple[str, str], ...] = (
     ("Rapier multibody (the object's joint)", r"rapier3d_f64::dynamics::joint::multibody"),
     ("Rapier constraint setup and solver", r"rapier3d_f64::dynamics::solver"),
     ("Rapier islands, pipeline upkeep, CCD, integration", r"rapier3d_f64::"),
-    ("parry box–box and convex manifolds (SAT, clipping)", r"parry3d_f64::"),
+    # sabre's box–box generator is inlined into the detection: the two count as one.
+    (
+        "contact detection and manifolds (screens, SAT, clipping, reduction; parry's and sabre's)",
+        r"parry3d_f64::|sabre::sim::reduced::(geometry|box_box)",
+    ),
     ("sabre contact solve (rows, sweeps)", r"sabre::sim::reduced::solver"),
-    ("sabre contact detection (screens, manifold reduction)", r"sabre::sim::reduced::geometry"),
     ("sabre contact step (object terms, proxies, τ_ext)", r"sabre::sim::reduced"),
     ("sabre kinematics, dynamics and servo", r"sabre::model::|sabre::sim::servo|nalgebra::|__sincos|libm\.so"),
     ("sabre cost", r"sabre::cost"),
