@@ -1,8 +1,9 @@
 //! Contact manifolds between two boxes as parry builds them (its separating-axis test, then the
 //! support faces along the chosen axis clipped against each other: the same axis, points, features
-//! and depths), computed with one rotation matrix instead of quaternion rotations, the faces'
-//! crossings found from the vertex sides the inside tests already give, and the manifold rebuilt
-//! in place without the copy parry keeps for transferring contact data the reduced path has none of.
+//! and depths), computed with one rotation matrix instead of quaternion rotations, only the edge
+//! pairs that straddle each other's lines (from the vertex sides the inside tests already give)
+//! intersected, and the manifold rebuilt in place without the copy parry keeps for transferring
+//! contact data the reduced path has none of.
 
 use rapier3d_f64::parry::math::{Matrix, Pose, Vector};
 use rapier3d_f64::parry::query::{ContactManifold, TrackedContact};
