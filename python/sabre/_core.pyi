@@ -54,7 +54,6 @@ __all__ = [
     "likelihood_weights",
     "mesh_triangles",
     "servo_guide",
-    "servo_guides",
     "servo_guide_plan",
     "decode_joint_state",
     "encode_joint_state",
@@ -543,14 +542,6 @@ def servo_guide(
     dt: float,
     frame: str,
     config: ServoGuideConfig,
-) -> npt.NDArray[np.float64]: ...
-def servo_guides(
-    scene: Scene,
-    q0: npt.NDArray[np.float64],
-    targets: npt.NDArray[np.float64],
-    dt: float,
-    frame: str,
-    configs: list[ServoGuideConfig],
 ) -> npt.NDArray[np.float64]: ...
 def servo_guide_plan(
     scene: Scene,

@@ -70,7 +70,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(scene::builtin_urdf, m)?)?;
     m.add_function(wrap_pyfunction!(mppi::likelihood_weights, m)?)?;
     m.add_function(wrap_pyfunction!(mppi::servo_guide, m)?)?;
-    m.add_function(wrap_pyfunction!(mppi::servo_guides, m)?)?;
     m.add_function(wrap_pyfunction!(mppi::servo_guide_plan, m)?)?;
     m.add_function(wrap_pyfunction!(robot::mesh_triangles, m)?)?;
     m.add_function(wrap_pyfunction!(messages::decode_joint_state, m)?)?;

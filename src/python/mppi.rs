@@ -181,23 +181,7 @@ pub fn servo_guide<'py>(
     array(py, out, &[steps, nq])
 }
 
-/// Joint velocities (M, K, nu) of one servo guide per target sequence of `targets` (M, K+1, 4, 4),
-/// guide m with the gains of `configs[m]`, all from q0 (nq,): `sabre.guides.servo_guides`.
-#[pyfunction]
-pub fn servo_guides<'py>(
-    py: Python<'py>,
-    scene: &PyScene,
-    q0: PyReadonlyArrayDyn<'py, f64>,
-    targets: PyReadonlyArrayDyn<'py, f64>,
-    dt: f64,
-    frame: &str,
-    configs: Vec<PyRef<'py, PyServoGuideConfig>>,
-) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-    let plan = servo_guide_plan(scene, q0, targets, dt, frame, configs)?;
-    plan.evaluate(py)
-}
-
-/// The guides of `servo_guides`, checked now and integrated where they are used:
+/// The servo guides of `sabre.guides.servo_guides`, checked now and integrated where they are used:
 /// `sabre.guides.servo_guide_plan`.
 #[pyfunction]
 pub fn servo_guide_plan<'py>(

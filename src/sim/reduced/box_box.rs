@@ -362,21 +362,6 @@ mod tests {
                         && (a.local_p2 - b.local_p2).length() < POINT_TOLERANCE
                         && (a.dist - b.dist).abs() < POINT_TOLERANCE
                 });
-            if !same && std::env::var("SHOW").is_ok() {
-                eprintln!(
-                    "n {:?} vs {:?}; {} vs {} points",
-                    theirs.local_n1,
-                    ours.local_n1,
-                    theirs.points.len(),
-                    ours.points.len()
-                );
-                for p in &theirs.points {
-                    eprintln!("  parry {:?} {:?} {:?} {:.3e}", p.fid1, p.fid2, p.local_p1, p.dist);
-                }
-                for p in &ours.points {
-                    eprintln!("  sabre {:?} {:?} {:?} {:.3e}", p.fid1, p.fid2, p.local_p1, p.dist);
-                }
-            }
             differ += usize::from(!same);
         }
         assert!(skipped < cases / 4, "{skipped} of {cases} cases skipped");
