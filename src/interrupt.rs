@@ -2,7 +2,7 @@
 //! and the core's long loops poll it on the calling thread every [`POLL_PERIOD`].
 
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Condvar, Mutex, OnceLock};
+use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use crate::error::{Result, SabreError};
@@ -33,42 +33,6 @@ pub fn watched() -> bool {
 /// Asks the watcher now (false without one or on an unwatched thread).
 pub fn interrupted_now() -> bool {
     WATCHER.get().is_some_and(|w| w.watches_current_thread() && w.interrupted())
-}
-
-/// Runs `work` on `pool`; a watched calling thread polls the watcher meanwhile and on an
-/// interrupt sets `cancel` (which `work` must poll), waits for `work` to return and reports it.
-/// The calling thread waits on a condition variable, not on a helper thread of its own: spawning
-/// one per call cost more than a small batch's rollouts.
-pub fn run_watched_on<F: FnOnce() + Send>(pool: &rayon::ThreadPool, cancel: &Cancel, work: F) -> Result<()> {
-    if !watched() {
-        pool.install(work);
-        return Ok(());
-    }
-    let finished = (Mutex::new(false), Condvar::new());
-    let mut interrupted = false;
-    pool.in_place_scope(|scope| {
-        scope.spawn(|_| {
-            work();
-            let (done, signal) = &finished;
-            *done.lock().unwrap_or_else(|e| e.into_inner()) = true;
-            signal.notify_one();
-        });
-        let (done, signal) = &finished;
-        let mut is_done = done.lock().unwrap_or_else(|e| e.into_inner());
-        while !*is_done {
-            let (guard, _) = signal.wait_timeout(is_done, POLL_PERIOD).unwrap_or_else(|e| e.into_inner());
-            is_done = guard;
-            if !*is_done && !interrupted && interrupted_now() {
-                cancel.set();
-                interrupted = true;
-            }
-        }
-    });
-    if interrupted {
-        Err(SabreError::Interrupted)
-    } else {
-        Ok(())
-    }
 }
 
 /// A long loop's poller: cheap to call every iteration, asks the watcher at most every

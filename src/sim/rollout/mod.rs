@@ -1,10 +1,10 @@
-//! The reduced-order rollout model and its data-parallel batch rollouts (rayon, one world per worker).
+//! The reduced-order rollout model and its data-parallel batch rollouts (rows handed out to the
+//! calling thread and a rayon pool, longest first; one world per worker).
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
-
-use rayon::iter::Either;
-use rayon::prelude::*;
+use std::time::Instant;
 
 use super::evaluator::StepEvaluator;
 use super::rapier::{RobotColliders, RobotDrive, SimWorld, WorldConfig};
@@ -14,10 +14,12 @@ use super::servo::ServoGains;
 use crate::error::{ensure_finite, Result, SabreError};
 use crate::interrupt::Cancel;
 use crate::model::scene::Scene;
-use pool::pool;
+use pool::run_on_slots;
 pub use pool::{default_threads, MAX_CACHED_POOLS, MAX_THREADS};
+use rows::{Inputs, RolloutSlices, Row, RowInput, Rows, Stop};
 
 mod pool;
+mod rows;
 
 /// How the rollout model resolves the contacts between the robot's contact bodies and the object.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -165,33 +167,18 @@ pub struct RolloutModel {
     template: RolloutWorld,
     /// Worlds handed to workers; each is restored from `template` before every rollout.
     worlds: Mutex<Vec<RolloutWorld>>,
-    /// A world per worker of the pool running a batch (by rayon's thread index): a worker keeps the
-    /// world it used last, whose memory is still in its core's caches, instead of one another core
-    /// left on the shared stack.
-    by_worker: Vec<Mutex<Option<RolloutWorld>>>,
+    /// A world per worker slot of a batch (slot 0: the calling thread): a worker keeps the world it
+    /// used last, whose memory is still in its core's caches, instead of one another core left on
+    /// the shared stack.
+    by_slot: Vec<Mutex<Option<RolloutWorld>>>,
+    /// Each row's wall time (s) in the last batch of more than one row (see `row_order`).
+    row_seconds: Mutex<Vec<f64>>,
     /// Per joint (robot, then object) the speed beyond which a rollout has diverged.
     speed_bounds: Vec<f64>,
 }
 
-/// A single rollout of at most this many steps runs on the calling thread (see `rollout_into`).
-const INLINE_STEPS: usize = 512;
-
 /// Upper bound on the values in one output array of a batch (2^28 doubles = 2 GiB).
 pub const MAX_BATCH_ELEMENTS: usize = 1 << 28;
-
-/// A batch's inputs: given, or written row by row by the worker that rolls the row out.
-enum Inputs<'a> {
-    Given(&'a [f64]),
-    Filled(&'a mut [f64], &'a (dyn Fn(usize, &mut [f64]) + Sync)),
-}
-
-struct RolloutSlices<'a> {
-    states: &'a mut [f64],
-    tau_ext: &'a mut [f64],
-    wrench: &'a mut [f64],
-    contact: &'a mut [bool],
-    cost: &'a mut f64,
-}
 
 impl RolloutModel {
     pub fn new(scene: Arc<Scene>, config: RolloutConfig) -> Result<Self> {
@@ -256,7 +243,8 @@ impl RolloutModel {
             config,
             template,
             worlds: Mutex::new(Vec::new()),
-            by_worker: (0..MAX_THREADS).map(|_| Mutex::new(None)).collect(),
+            by_slot: (0..MAX_THREADS).map(|_| Mutex::new(None)).collect(),
+            row_seconds: Mutex::new(Vec::new()),
         })
     }
 
@@ -308,19 +296,22 @@ impl RolloutModel {
         self.worlds.lock().unwrap_or_else(|e| e.into_inner()).push(world);
     }
 
-    /// The calling worker's own world (see `by_worker`), else one from the shared stack.
-    fn checkout_for_worker(&self) -> RolloutWorld {
-        let slot = rayon::current_thread_index().and_then(|i| self.by_worker.get(i));
-        let own = slot.and_then(|m| m.lock().unwrap_or_else(|e| e.into_inner()).take());
+    /// The worker slot's own world (see `by_slot`), else one from the shared stack (another batch
+    /// running at the same time holds it).
+    fn checkout_for_slot(&self, slot: usize) -> RolloutWorld {
+        let own = self
+            .by_slot
+            .get(slot)
+            .and_then(|m| m.lock().unwrap_or_else(|e| e.into_inner()).take());
         own.unwrap_or_else(|| self.checkout())
     }
 
-    fn checkin_for_worker(&self, world: RolloutWorld) {
-        match rayon::current_thread_index().and_then(|i| self.by_worker.get(i)) {
+    fn checkin_for_slot(&self, slot: usize, world: RolloutWorld) {
+        match self.by_slot.get(slot) {
             Some(m) => {
-                let mut slot = m.lock().unwrap_or_else(|e| e.into_inner());
-                match slot.as_ref() {
-                    None => *slot = Some(world),
+                let mut own = m.lock().unwrap_or_else(|e| e.into_inner());
+                match own.as_ref() {
+                    None => *own = Some(world),
                     Some(_) => self.checkin(world),
                 }
             }
@@ -336,8 +327,8 @@ impl RolloutModel {
         x0: &[f64],
         u: &[f64],
         cost: Option<&dyn StepEvaluator>,
-        out: RolloutSlices,
-        cancel: &Cancel,
+        out: &mut RolloutSlices,
+        stop: &mut Stop,
     ) -> Option<usize> {
         let nx = self.scene.nx();
         let nq = self.scene.nq();
@@ -347,7 +338,7 @@ impl RolloutModel {
         out.states[..nx].copy_from_slice(x0);
         *out.cost = 0.0;
         for step in 0..k {
-            if cancel.is_set() {
+            if stop.now() {
                 return Some(step);
             }
             let u_step = &u[step * nq..(step + 1) * nq];
@@ -485,92 +476,104 @@ impl RolloutModel {
         if let Some(cost) = cost {
             cost.validate(&self.scene)?;
         }
+        let rows = Rows::split(inputs, n, k, nq, nx, batch);
+        let order = self.row_order(n);
+        let next = AtomicUsize::new(0);
         let cancel = Cancel::default();
-        let work = |u_i: &[f64],
-                    states: &mut [f64],
-                    tau: &mut [f64],
-                    wrench: &mut [f64],
-                    contact: &mut [bool],
-                    (failed, total): (&mut bool, &mut f64),
-                    (engine_steps, engine_time): (&mut u64, &mut f64)| {
-            let mut world = self.checkout_for_worker();
-            let clock = world.engine_clock();
-            let slices = RolloutSlices {
-                states: &mut *states,
-                tau_ext: &mut *tau,
-                wrench: &mut *wrench,
-                contact: &mut *contact,
-                cost: &mut *total,
-            };
-            // A panic inside the physics engine must not cross into the caller: that rollout is
-            // marked failed from its first step and its world, possibly inconsistent, is dropped.
-            let failed_at = match catch_unwind(AssertUnwindSafe(|| {
-                self.rollout_one(&mut world, x0, u_i, cost, slices, &cancel)
-            })) {
-                Ok(result) => {
-                    let after = world.engine_clock();
-                    *engine_steps = after.steps - clock.steps;
-                    *engine_time = after.seconds - clock.seconds;
-                    self.checkin_for_worker(world);
-                    result
+        let row_seconds: Vec<AtomicU64> = (0..n).map(|_| AtomicU64::new(0)).collect();
+        let work = |slot: usize| {
+            // The caller's slot also asks the embedding's watcher (Ctrl-C); the others see `cancel`.
+            let mut stop = Stop::new(&cancel, slot == 0);
+            let mut world = None;
+            while !stop.now() {
+                let j = next.fetch_add(1, Ordering::Relaxed);
+                let Some(&i) = order.get(j) else { break };
+                let Some(row) = rows.take(i) else { continue };
+                let started = Instant::now();
+                let w = world.get_or_insert_with(|| self.checkout_for_slot(slot));
+                if !self.rollout_row(w, x0, row, cost, &mut stop) {
+                    world = None;
                 }
-                Err(_) => Some(0),
-            };
-            if let Some(step) = failed_at {
-                *failed = true;
-                *total = f64::INFINITY;
-                states[(step + 1) * nx..].fill(f64::NAN);
-                tau[step * nq..].fill(f64::NAN);
-                wrench[step * 6..].fill(f64::NAN);
-                contact[step..].fill(false);
+                row_seconds[i].store(started.elapsed().as_secs_f64().to_bits(), Ordering::Relaxed);
+            }
+            if let Some(w) = world {
+                self.checkin_for_slot(slot, w);
             }
         };
-        if n == 1 && k <= INLINE_STEPS {
-            // One short rollout (a task's probe, every planning iteration) costs less than handing
-            // it to the pool and back, and ends too soon to need watching for Ctrl-C.
-            let b = &mut *batch;
-            let (failed, costs) = (&mut b.failed[0], &mut b.costs[0]);
-            let (steps, time) = (&mut b.engine_steps[0], &mut b.engine_time[0]);
-            let u = match inputs {
-                Inputs::Given(u) => u,
-                Inputs::Filled(u, fill) => {
-                    fill(0, u);
-                    &*u
-                }
-            };
-            work(
-                u,
-                &mut b.states,
-                &mut b.tau_ext,
-                &mut b.wrench,
-                &mut b.contact,
-                (failed, costs),
-                (steps, time),
-            );
-            return Ok(());
+        run_on_slots(threads.min(n), &work)?;
+        if cancel.is_set() {
+            return Err(SabreError::Interrupted);
         }
-        let rows = match inputs {
-            Inputs::Given(u) => Either::Left(u.par_chunks(k * nq)),
-            Inputs::Filled(u, fill) => Either::Right(u.par_chunks_mut(k * nq).enumerate().map(move |(i, row)| {
-                fill(i, row);
-                &*row
-            })),
-        };
-        let run = || {
-            rows.zip(batch.states.par_chunks_mut((k + 1) * nx))
-                .zip(batch.tau_ext.par_chunks_mut(k * nq))
-                .zip(batch.wrench.par_chunks_mut(k * 6))
-                .zip(batch.contact.par_chunks_mut(k))
-                .zip(batch.failed.par_iter_mut().zip(batch.costs.par_iter_mut()))
-                .zip(batch.engine_steps.par_iter_mut().zip(batch.engine_time.par_iter_mut()))
-                // One rollout per job: rollouts in contact cost several times those in free space,
-                // and rayon's default halving can leave a worker idle behind a chunk of expensive ones.
-                .with_max_len(1)
-                .for_each(|((((((u_i, s), t), w), c), f), e)| work(u_i, s, t, w, c, f, e));
-        };
-        let pool = pool(threads)?;
-        crate::interrupt::run_watched_on(&pool, &cancel, run)?;
+        if n > 1 {
+            self.remember_row_seconds(row_seconds.iter().map(|s| f64::from_bits(s.load(Ordering::Relaxed))));
+        }
         Ok(())
+    }
+
+    /// Rolls one row out in `world`; false if the physics panicked (the row is marked failed from
+    /// its first step and the world, possibly inconsistent, must be dropped).
+    fn rollout_row(
+        &self,
+        world: &mut RolloutWorld,
+        x0: &[f64],
+        row: Row,
+        cost: Option<&dyn StepEvaluator>,
+        stop: &mut Stop,
+    ) -> bool {
+        let (nx, nq) = (self.scene.nx(), self.scene.nq());
+        let Row {
+            input,
+            mut out,
+            failed,
+            steps,
+            time,
+        } = row;
+        let u: &[f64] = match input {
+            RowInput::Given(u) => u,
+            RowInput::Filled(u, i, fill) => {
+                fill(i, u);
+                u
+            }
+        };
+        let clock = world.engine_clock();
+        // A panic inside the physics engine must not cross into the caller.
+        let (failed_at, sound) = match catch_unwind(AssertUnwindSafe(|| self.rollout_one(world, x0, u, cost, &mut out, stop))) {
+            Ok(result) => {
+                let after = world.engine_clock();
+                *steps = after.steps - clock.steps;
+                *time = after.seconds - clock.seconds;
+                (result, true)
+            }
+            Err(_) => (Some(0), false),
+        };
+        if let Some(step) = failed_at {
+            *failed = true;
+            *out.cost = f64::INFINITY;
+            out.states[(step + 1) * nx..].fill(f64::NAN);
+            out.tau_ext[step * nq..].fill(f64::NAN);
+            out.wrench[step * 6..].fill(f64::NAN);
+            out.contact[step..].fill(false);
+        }
+        sound
+    }
+
+    /// The order in which a batch of `n` rows is handed out: the rows that took longest in the
+    /// last batch of that size first, so that the cheap ones fill in at the end and the threads
+    /// finish together (rollouts in contact cost several times those in free space, and a row's
+    /// role in a planner's batch — nominal, guide, kept sample — changes little between batches).
+    fn row_order(&self, n: usize) -> Vec<usize> {
+        let mut order: Vec<usize> = (0..n).collect();
+        let last = self.row_seconds.lock().unwrap_or_else(|e| e.into_inner());
+        if last.len() == n {
+            order.sort_by(|&a, &b| last[b].total_cmp(&last[a]));
+        }
+        order
+    }
+
+    fn remember_row_seconds(&self, seconds: impl Iterator<Item = f64>) {
+        let mut last = self.row_seconds.lock().unwrap_or_else(|e| e.into_inner());
+        last.clear();
+        last.extend(seconds);
     }
 }
 

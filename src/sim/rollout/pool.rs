@@ -1,4 +1,5 @@
-//! The rollouts' worker pools: one per thread count, kept alive between batches.
+//! The rollouts' worker pools (one per thread count, kept alive between batches) and the calling
+//! thread working beside one.
 
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -41,4 +42,23 @@ pub(super) fn pool(threads: usize) -> Result<Arc<rayon::ThreadPool>> {
         pools.remove(0);
     }
     Ok(p)
+}
+
+/// Runs `work(slot)` on `threads` threads at once, slots 0..threads: slot 0 on the calling thread,
+/// the others on a pool of `threads - 1` workers. The caller works instead of waiting for a pool to
+/// wake, do the work and wake it back: a short batch saves both hand-offs, and one thread needs no
+/// pool at all. Returns when every slot's call has returned.
+pub(super) fn run_on_slots(threads: usize, work: &(dyn Fn(usize) + Sync)) -> Result<()> {
+    if threads <= 1 {
+        work(0);
+        return Ok(());
+    }
+    let helpers = pool(threads - 1)?;
+    helpers.in_place_scope(|scope| {
+        for slot in 1..threads {
+            scope.spawn(move |_| work(slot));
+        }
+        work(0);
+    });
+    Ok(())
 }

@@ -218,3 +218,70 @@ fn inputs_filled_by_the_workers_roll_out_as_the_same_inputs_given() {
         );
     }
 }
+
+/// Records the threads that evaluate steps.
+#[derive(Default)]
+struct Threads(Mutex<std::collections::HashSet<std::thread::ThreadId>>);
+
+impl StepEvaluator for Threads {
+    fn validate(&self, _: &Scene) -> Result<()> {
+        Ok(())
+    }
+    fn needs_object_frames(&self) -> bool {
+        false
+    }
+    fn evaluate(&self, _: &Scene, _: &StepView) -> f64 {
+        self.0.lock().unwrap().insert(std::thread::current().id());
+        0.0
+    }
+}
+
+#[test]
+fn the_calling_thread_rolls_out_alone_on_one_thread_and_is_one_of_the_workers_on_more() {
+    let model = RolloutModel::new(probe_and_drawer(), RolloutConfig::default()).expect("model");
+    let x0 = state([0.3, 0.0], [0.0, 0.0], 0.0, 0.0);
+    let u = inputs();
+    let caller = std::thread::current().id();
+    let one = Threads::default();
+    model.rollout_with_cost(&x0, &u, N, K, Some(1), Some(&one)).unwrap();
+    assert_eq!(one.0.lock().unwrap().iter().copied().collect::<Vec<_>>(), vec![caller]);
+    let two = Threads::default();
+    model.rollout_with_cost(&x0, &u, N, K, Some(2), Some(&two)).unwrap();
+    let seen = two.0.lock().unwrap();
+    assert!((1..=2).contains(&seen.len()), "{} threads for a batch on 2", seen.len());
+}
+
+#[test]
+fn rows_are_handed_out_longest_first_and_the_order_changes_no_result() {
+    let probe = Probe { panic_on: f64::NAN };
+    let model = RolloutModel::new(probe_and_drawer(), RolloutConfig::default()).expect("model");
+    let x0 = state([0.3, 0.0], [0.0, 0.0], 0.0, 0.0);
+    let u = inputs();
+    let clean = batch(&u, &probe);
+    assert_eq!(model.row_order(N), (0..N).collect::<Vec<_>>(), "no batch yet: in order");
+    model.rollout_with_cost(&x0, &u, N, K, Some(2), Some(&probe)).unwrap();
+    {
+        let last = model.row_seconds.lock().unwrap();
+        assert!(last.len() == N && last.iter().all(|&s| s > 0.0), "{last:?}");
+    }
+    // A single rollout (a task's probe) keeps the times of the last batch.
+    model
+        .rollout_with_cost(&x0, &u[..K * 2], 1, K, Some(2), Some(&probe))
+        .unwrap();
+    assert_eq!(model.row_seconds.lock().unwrap().len(), N);
+    // Times of an earlier batch order the next one of that size, longest first; another size in order.
+    model.remember_row_seconds([0.1, 0.4, 0.2, 0.3].into_iter());
+    assert_eq!(model.row_order(N), vec![1, 3, 2, 0]);
+    assert_eq!(model.row_order(3), vec![0, 1, 2]);
+    for threads in [1, 2] {
+        model.remember_row_seconds([0.1, 0.2, 0.3, 0.4].into_iter());
+        assert_eq!(model.row_order(N), vec![3, 2, 1, 0]);
+        let reordered = model.rollout_with_cost(&x0, &u, N, K, Some(threads), Some(&probe)).unwrap();
+        for i in 0..N {
+            assert!(
+                same_rollout(&reordered, &clean, i),
+                "rollout {i} on {threads} threads, last row first"
+            );
+        }
+    }
+}

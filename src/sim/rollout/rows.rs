@@ -1,0 +1,111 @@
+//! A batch's rows as jobs: each row's input and output slices, taken by exactly one worker, and
+//! when the workers stop early.
+
+use std::sync::Mutex;
+
+use super::RolloutBatch;
+use crate::interrupt::{Cancel, Poll};
+
+/// A batch's inputs: given, or written row by row by the worker that rolls the row out.
+pub(super) enum Inputs<'a> {
+    Given(&'a [f64]),
+    Filled(&'a mut [f64], &'a (dyn Fn(usize, &mut [f64]) + Sync)),
+}
+
+/// One rollout's slices of the batch's outputs.
+pub(super) struct RolloutSlices<'a> {
+    pub(super) states: &'a mut [f64],
+    pub(super) tau_ext: &'a mut [f64],
+    pub(super) wrench: &'a mut [f64],
+    pub(super) contact: &'a mut [bool],
+    pub(super) cost: &'a mut f64,
+}
+
+/// One row's input: given, or written by `fill(i, row)` on the worker that rolls the row out.
+pub(super) enum RowInput<'a> {
+    Given(&'a [f64]),
+    Filled(&'a mut [f64], usize, &'a (dyn Fn(usize, &mut [f64]) + Sync)),
+}
+
+/// One row of a batch: its input and its slices of every output.
+pub(super) struct Row<'a> {
+    pub(super) input: RowInput<'a>,
+    pub(super) out: RolloutSlices<'a>,
+    pub(super) failed: &'a mut bool,
+    pub(super) steps: &'a mut u64,
+    pub(super) time: &'a mut f64,
+}
+
+/// A batch's rows, each taken by exactly one worker.
+pub(super) struct Rows<'a>(Vec<Mutex<Option<Row<'a>>>>);
+
+impl<'a> Rows<'a> {
+    pub(super) fn split(inputs: Inputs<'a>, n: usize, k: usize, nq: usize, nx: usize, batch: &'a mut RolloutBatch) -> Self {
+        let inputs: Vec<RowInput<'a>> = match inputs {
+            Inputs::Given(u) => u.chunks(k * nq).map(RowInput::Given).collect(),
+            Inputs::Filled(u, fill) => u
+                .chunks_mut(k * nq)
+                .enumerate()
+                .map(|(i, row)| RowInput::Filled(row, i, fill))
+                .collect(),
+        };
+        let b = batch;
+        let rows = inputs
+            .into_iter()
+            .zip(b.states.chunks_mut((k + 1) * nx))
+            .zip(b.tau_ext.chunks_mut(k * nq))
+            .zip(b.wrench.chunks_mut(k * 6))
+            .zip(b.contact.chunks_mut(k))
+            .zip(b.failed.iter_mut().zip(b.costs.iter_mut()))
+            .zip(b.engine_steps.iter_mut().zip(b.engine_time.iter_mut()))
+            .map(
+                |((((((input, states), tau_ext), wrench), contact), (failed, cost)), (steps, time))| {
+                    Mutex::new(Some(Row {
+                        input,
+                        out: RolloutSlices {
+                            states,
+                            tau_ext,
+                            wrench,
+                            contact,
+                            cost,
+                        },
+                        failed,
+                        steps,
+                        time,
+                    }))
+                },
+            )
+            .collect::<Vec<_>>();
+        debug_assert_eq!(rows.len(), n);
+        Self(rows)
+    }
+
+    pub(super) fn take(&self, i: usize) -> Option<Row<'a>> {
+        self.0[i].lock().unwrap_or_else(|e| e.into_inner()).take()
+    }
+}
+
+/// When a worker stops early: `cancel` set by any worker, or (on the watched calling thread) the
+/// embedding's watcher asking to, which sets `cancel` for the others.
+pub(super) struct Stop<'a> {
+    cancel: &'a Cancel,
+    poll: Option<Poll>,
+}
+
+impl<'a> Stop<'a> {
+    pub(super) fn new(cancel: &'a Cancel, caller: bool) -> Self {
+        let poll = (caller && crate::interrupt::watched()).then(Poll::new);
+        Self { cancel, poll }
+    }
+
+    pub(super) fn now(&mut self) -> bool {
+        if self.cancel.is_set() {
+            return true;
+        }
+        if self.poll.as_mut().is_some_and(|p| p.check().is_err()) {
+            self.cancel.set();
+            return true;
+        }
+        false
+    }
+}
