@@ -1,7 +1,7 @@
 """A planning iteration in contact at N rollouts on 1 and 2 threads, next to MuJoCo's bare batch of
 the same size: the scaling with samples and threads, and where the iteration's time goes.
 
-    python benches/planning_scaling.py [--objects shelf drawer] [--rollouts 40 160] [--repeats 20]
+    python benches/planning_scaling.py [--objects shelf drawer] [--rollouts 40 160] [--repeats 20] [--idle MS]
 
 Each object starts hooked on its handle (the open phase planned from rest, as in
 benches/compare_planning.py). For every N, two controllers (variant N, seed 0; one on 1 thread, one
@@ -16,7 +16,8 @@ switch, noise scale and bookkeeping: the iteration's wall time less the core's a
 the ratio of the iteration to MuJoCo's batch (< 1: sabre's whole iteration is faster than
 MuJoCo's rollouts alone), and the speed-up of 2 threads over 1 (the median over rounds of the
 two iterations' ratio within a round). A last line per N gives MuJoCo's own speed-up from 1 thread
-to 2 on the same batch, measured the same way: what the host's two cores allow a peer.
+to 2 on the same batch, measured the same way: what the host's two cores allow a peer. --idle
+sleeps before every measured run, as a loop that re-plans at a fixed rate does between iterations.
 """
 
 from __future__ import annotations
@@ -42,7 +43,13 @@ MUJOCO_THREADS = 2
 
 
 def time_iterations(
-    scene: sabre.Scene, x: np.ndarray, rollouts: int, thread_counts: tuple[int, ...], repeats: int, peer
+    scene: sabre.Scene,
+    x: np.ndarray,
+    rollouts: int,
+    thread_counts: tuple[int, ...],
+    repeats: int,
+    peer,
+    idle: float = 0.0,
 ) -> tuple[dict[int, dict[str, float]], float]:
     """Medians (s) over ``repeats`` rounds from x, per thread count, and MuJoCo's own speed-up.
 
@@ -51,7 +58,9 @@ def time_iterations(
     2 threads (``peer(2)``, the ratio's reference): every run starts on two cores that were just
     busy, so that none pays for an idle core (a virtual CPU left idle can take milliseconds to be
     scheduled again) and a slower or faster stretch of a shared host falls on all alike. A
-    speed-up is the median over rounds of the 1-thread run over the one on more threads."""
+    speed-up is the median over rounds of the 1-thread run over the one on more threads. With
+    ``idle`` (s), every measured run starts after that long a sleep instead, as in a loop that
+    re-plans at a fixed rate."""
     controllers = {}
     for threads in thread_counts:
         config = sabre.ControllerConfig(seed=0, rollouts=rollouts, threads=threads)
@@ -68,6 +77,8 @@ def time_iterations(
         walls: dict[int, float] = {}
         for job in jobs[shift:] + jobs[:shift]:
             reference = peer(MUJOCO_THREADS)
+            if idle > 0.0:
+                time.sleep(idle)
             if job is None:
                 mujoco_speedups.append(peer(1) / reference)
                 continue
@@ -94,10 +105,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--objects", nargs="+", default=["shelf", "drawer"], choices=sabre.OBJECTS)
     parser.add_argument("--rollouts", nargs="+", type=int, default=[40, 160])
     parser.add_argument("--repeats", type=int, default=20)
+    parser.add_argument(
+        "--idle",
+        type=float,
+        default=0.0,
+        help="ms to sleep before each measured run (default 0: right after MuJoCo's batch on 2 threads)",
+    )
     args = parser.parse_args(argv)
     print(
         f"sabre {sabre.__version__} vs MuJoCo {mujoco.__version__}: open phase from the hooked state, variant N, "
         f"median of {args.repeats} alternating rounds; MuJoCo on {MUJOCO_THREADS} threads"
+        + (f"; {args.idle:g} ms idle before each measured run" if args.idle > 0 else "")
     )
     print(
         f"{'object':<8} {'N':>4} {'threads':>7} {'iteration':>10} {'rollouts':>9} {'core rest':>10} {'guides':>7} {'Python':>7} "
@@ -125,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
                 runners[threads].rollout(model, thread_data[:threads], states0, controls, state=out_state)
                 return time.perf_counter() - start
 
-            medians, mujoco_speedup = time_iterations(scene, x, n, (1, 2), args.repeats, peer)
+            medians, mujoco_speedup = time_iterations(scene, x, n, (1, 2), args.repeats, peer, args.idle / 1e3)
             for threads, m in medians.items():
                 speedup = "" if threads == 1 else f"{m['speedup']:.2f}x"
                 print(
