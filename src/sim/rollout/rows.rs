@@ -90,19 +90,35 @@ impl<'a> Rows<'a> {
 pub(super) struct Stop<'a> {
     cancel: &'a Cancel,
     poll: Option<Poll>,
+    /// Calls until the watcher's clock is read again: a step is a few µs, the watcher is asked
+    /// every 20 ms, so reading the clock on every step would be wasted.
+    countdown: u32,
 }
+
+/// Calls of [`Stop::now`] between two readings of the watcher's clock.
+const POLL_EVERY: u32 = 32;
 
 impl<'a> Stop<'a> {
     pub(super) fn new(cancel: &'a Cancel, caller: bool) -> Self {
         let poll = (caller && crate::interrupt::watched()).then(Poll::new);
-        Self { cancel, poll }
+        Self {
+            cancel,
+            poll,
+            countdown: 0,
+        }
     }
 
     pub(super) fn now(&mut self) -> bool {
         if self.cancel.is_set() {
             return true;
         }
-        if self.poll.as_mut().is_some_and(|p| p.check().is_err()) {
+        let Some(poll) = self.poll.as_mut() else { return false };
+        if self.countdown > 0 {
+            self.countdown -= 1;
+            return false;
+        }
+        self.countdown = POLL_EVERY;
+        if poll.check().is_err() {
             self.cancel.set();
             return true;
         }
