@@ -9,7 +9,7 @@ use super::kinematics::{Frames, JointKind, KinematicTree};
 #[derive(Debug, Default, Clone)]
 pub struct DynamicsWorkspace {
     pub frames: Frames,
-    /// Per link, the inertia of the subtree it carries (see [`Composite`]).
+    /// Per rigid body of the tree, the inertia of everything its joint moves (see [`Composite`]).
     composites: Vec<Composite>,
 }
 
@@ -66,52 +66,51 @@ pub fn joint_space_terms(
     if mass_matrix.shape() != (n, n) {
         mass_matrix.resize_mut(n, n, 0.0);
     }
-    mass_matrix.fill(0.0);
+    // Through the slice: nalgebra's own fill walks a dynamic matrix element by element.
+    mass_matrix.as_mut_slice().fill(0.0);
     if gravity_torque.len() != n {
         gravity_torque.resize_vertically_mut(n, 0.0);
     }
-    gravity_torque.fill(0.0);
+    gravity_torque.as_mut_slice().fill(0.0);
     tree.update_frames(root_pose, q, &mut ws.frames);
     let frames = &ws.frames;
     ws.composites.clear();
-    // A link that no movable joint moves (a cabinet's carcass) adds nothing to M or g.
-    ws.composites
-        .extend(tree.links.iter().enumerate().map(|(link, l)| match &l.inertial {
-            Some(inertial) if !tree.ancestor_active_joints(link).is_empty() => {
-                let pose = frames.poses[link];
-                let c = (pose * Point3::from(inertial.com)).coords;
-                let r = pose.rotation.to_rotation_matrix();
-                let inertia_com = r.matrix() * inertial.inertia * r.matrix().transpose();
-                Composite {
-                    mass: inertial.mass,
-                    first_moment: c * inertial.mass,
-                    inertia: inertia_com + (Matrix3::identity() * c.norm_squared() - c * c.transpose()) * inertial.mass,
-                }
+    // One inertia per rigid body a movable joint carries; a link that no movable joint moves (a
+    // cabinet's carcass) adds nothing to M or g.
+    let bodies = tree.rigid_bodies();
+    ws.composites.extend(bodies.iter().map(|body| match &body.inertial {
+        Some(inertial) => {
+            let pose = frames.poses[body.link];
+            let c = (pose * Point3::from(inertial.com)).coords;
+            let r = pose.rotation.to_rotation_matrix();
+            let inertia_com = r.matrix() * inertial.inertia * r.matrix().transpose();
+            Composite {
+                mass: inertial.mass,
+                first_moment: c * inertial.mass,
+                inertia: inertia_com + (Matrix3::identity() * c.norm_squared() - c * c.transpose()) * inertial.mass,
             }
-            _ => Composite::ZERO,
-        }));
-    // Children come after their parents in topological order: summed from the leaves up, each
-    // link's entry becomes the inertia of the subtree it carries.
-    for &j in tree.topological_joints.iter().rev() {
-        let (parent, child) = (tree.joints[j].parent, tree.joints[j].child);
-        if tree.ancestor_active_joints(parent).is_empty() {
-            continue;
         }
-        let below = ws.composites[child];
-        let above = &mut ws.composites[parent];
-        above.mass += below.mass;
-        above.first_moment += below.first_moment;
-        above.inertia += below.inertia;
+        None => Composite::ZERO,
+    }));
+    // Parents come before their children: summed from the leaves up, each body's entry becomes the
+    // inertia of everything its joint moves.
+    for (index, body) in bodies.iter().enumerate().rev() {
+        if let Some(parent) = body.parent {
+            let below = ws.composites[index];
+            let above = &mut ws.composites[parent];
+            above.mass += below.mass;
+            above.first_moment += below.first_moment;
+            above.inertia += below.inertia;
+        }
     }
-    for &j in &tree.active_joints {
-        let joint = &tree.joints[j];
-        let b = joint.q_index.expect("movable");
-        let moved = &ws.composites[joint.child];
+    for (moved, body) in ws.composites.iter().zip(bodies) {
+        let j = body.joint;
+        let b = tree.joints[j].q_index.expect("movable");
         let (omega_b, v_b) = joint_twist(tree, frames, j);
         let (angular, linear) = moved.momentum(&omega_b, &v_b);
         // Gravity's wrench on the moved bodies about the origin: (h × a_g, m a_g).
         gravity_torque[b] = -(omega_b.dot(&moved.first_moment.cross(gravity)) + v_b.dot(&(gravity * moved.mass)));
-        for &i in tree.ancestor_active_joints(joint.child) {
+        for &i in tree.ancestor_active_joints(body.link) {
             let a = tree.joints[i].q_index.expect("movable");
             let (omega_a, v_a) = joint_twist(tree, frames, i);
             let m = omega_a.dot(&angular) + v_a.dot(&linear);
@@ -158,4 +157,93 @@ pub fn gravity_torque(tree: &KinematicTree, root_pose: &Isometry3<f64>, q: &[f64
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Point3, Vector3};
+
+    use super::{joint_space_terms, DynamicsWorkspace};
+    use crate::model::kinematics::{Inertial, KinematicTree};
+    use crate::model::scene::Scene;
+
+    fn mass_matrix(tree: &KinematicTree, q: &[f64]) -> DMatrix<f64> {
+        let (mut m, mut g) = (DMatrix::zeros(0, 0), DVector::zeros(0));
+        let gravity = Vector3::new(0.0, 0.0, -9.81);
+        joint_space_terms(
+            tree,
+            &Isometry3::identity(),
+            q,
+            &gravity,
+            &mut DynamicsWorkspace::default(),
+            &mut m,
+            &mut g,
+        );
+        m
+    }
+
+    /// m J_vᵀ J_v + J_ωᵀ I_world J_ω of one body on `link`: its share of M, from the geometric
+    /// Jacobian at its centre of mass (no composite inertia involved).
+    fn body_share(tree: &KinematicTree, q: &[f64], link: usize, inertial: &Inertial) -> DMatrix<f64> {
+        let n = tree.nq();
+        let poses = tree.link_poses(&Isometry3::identity(), q);
+        let com = poses[link] * Point3::from(inertial.com);
+        let mut jacobian = vec![0.0; 6 * n];
+        tree.point_jacobian_into(&poses, link, &com, &mut jacobian);
+        let j = DMatrix::from_column_slice(6, n, &jacobian);
+        let (jv, jw) = (j.rows(0, 3), j.rows(3, 3));
+        let r = poses[link].rotation.to_rotation_matrix();
+        let i_world = DMatrix::from_iterator(3, 3, (r.matrix() * inertial.inertia * r.matrix().transpose()).iter().copied());
+        jv.transpose() * jv * inertial.mass + jw.transpose() * i_world * jw
+    }
+
+    #[test]
+    fn an_inertial_set_on_a_link_adds_its_body_to_the_mass_matrix() {
+        let scene = Scene::load("royalpanda", "shelf", None).expect("built-in scene");
+        let mut tree = scene.robot.clone();
+        let q: Vec<f64> = (0..tree.nq()).map(|i| 0.3 * (i as f64 + 1.0).sin()).collect();
+        let before = mass_matrix(&tree, &q);
+        // The tool's grasp frame hangs on fixed joints below the last arm joint: its body is
+        // summed with the hand's.
+        let link = tree.link_id("grasp").expect("the hook's grasp frame");
+        assert!(
+            tree.rigid_bodies().iter().all(|b| b.link != link),
+            "grasp is not a joint's child"
+        );
+        let added = Inertial {
+            mass: 1.7,
+            com: Vector3::new(0.03, -0.02, 0.05),
+            inertia: Matrix3::new(0.02, 0.001, 0.0, 0.001, 0.03, -0.002, 0.0, -0.002, 0.01),
+        };
+        let old = tree.links[link].inertial;
+        let expected = match &old {
+            Some(o) => &before - body_share(&tree, &q, link, o) + body_share(&tree, &q, link, &added),
+            None => &before + body_share(&tree, &q, link, &added),
+        };
+        tree.set_inertial(link, Some(added));
+        let after = mass_matrix(&tree, &q);
+        assert!((&after - &expected).abs().max() < 1e-12, "M = {after}\nexpected {expected}");
+        tree.set_inertial(link, old);
+        assert!((mass_matrix(&tree, &q) - &before).abs().max() < 1e-12);
+    }
+
+    #[test]
+    fn the_objects_mass_matrix_is_the_sum_of_its_links_shares() {
+        for object in ["shelf", "drawer", "dishwasher", "microwave"] {
+            let scene = Scene::load("royalpanda", object, None).expect("built-in scene");
+            let tree = &scene.object;
+            let q = vec![0.4; tree.nq()];
+            let expected = tree
+                .links
+                .iter()
+                .enumerate()
+                .filter_map(|(link, l)| l.inertial().map(|i| body_share(tree, &q, link, i)))
+                .fold(DMatrix::zeros(tree.nq(), tree.nq()), |a, b| a + b);
+            let m = mass_matrix(tree, &q);
+            assert!(
+                (&m - &expected).abs().max() < 1e-12 * (1.0 + expected.abs().max()),
+                "{object}: M = {m}\nexpected {expected}"
+            );
+        }
+    }
 }

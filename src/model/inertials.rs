@@ -138,7 +138,7 @@ pub fn assume_missing(tree: &mut KinematicTree, density: f64, source: &str) -> R
             inertia,
             source: described,
         });
-        tree.links[link].inertial = Some(inertial);
+        tree.set_inertial(link, Some(inertial));
     }
     Ok(assumed)
 }

@@ -217,7 +217,7 @@ impl Scene {
     pub fn with_density(mut self, density: f64) -> Result<Self> {
         for assumed in &self.assumed_inertials {
             let link = self.object.link_id(&assumed.link).expect("an object link");
-            self.object.links[link].inertial = None;
+            self.object.set_inertial(link, None);
         }
         self.assumed_inertials = assume_missing(&mut self.object, density, &self.object_source)?;
         self.density = density;

@@ -34,7 +34,7 @@ fn mass_properties(tree: &KinematicTree, group: &[usize], offset: &[Isometry3<f6
         if group[link] != body {
             continue;
         }
-        if let Some(inertial) = &l.inertial {
+        if let Some(inertial) = l.inertial() {
             let m = inertial.inertia;
             let local = MassProperties::with_inertia_matrix(
                 vec_to_rapier(&inertial.com),

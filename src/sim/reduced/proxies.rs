@@ -30,7 +30,7 @@ fn group_mass(tree: &KinematicTree, group: &[usize], offset: &[Isometry3<f64>], 
         .enumerate()
         .filter(|&(link, _)| group[link] == body)
         .filter_map(|(link, l)| {
-            let inertial = l.inertial.as_ref()?;
+            let inertial = l.inertial()?;
             let r = offset[link].rotation.to_rotation_matrix();
             Some((
                 inertial.mass,
