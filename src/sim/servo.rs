@@ -70,8 +70,8 @@ pub struct ServoState {
     pub command: Vec<f64>,
     /// The configuration at the end of the step being taken (see [`Self::advance`]).
     q_next: Vec<f64>,
-    /// The Cholesky factor L of the robot's mass matrix for the contact term (nq × nq, row-major,
-    /// lower triangle; empty until computed) and the configuration it was computed at (recomputed
+    /// The Cholesky factor L of the robot's mass matrix for the contact term (nq × nq, column-major
+    /// as nalgebra keeps it, lower triangle; empty until computed) and the configuration it was computed at (recomputed
     /// once the robot has moved on). Kept in a plain buffer: the two substitutions per step on it
     /// cost a fraction of nalgebra's dynamically sized ones, and a copy of the state reuses it.
     mass_factor: Vec<f64>,
@@ -155,7 +155,7 @@ impl ServoState {
             let matrix = std::mem::replace(mass_matrix, DMatrix::zeros(0, 0));
             if let Some(factor) = matrix.cholesky() {
                 let l = factor.l_dirty();
-                self.mass_factor.extend((0..nq * nq).map(|k| l[(k / nq, k % nq)]));
+                self.mass_factor.extend_from_slice(l.as_slice());
                 *mass_matrix = factor.unpack_dirty();
             }
             self.mass_factor_q.clone_from(&self.q);
@@ -203,18 +203,24 @@ impl ServoState {
     }
 }
 
-/// x = (L Lᵀ)⁻¹ b for the lower-triangular factor L (n × n, row-major; the upper triangle is not
-/// read): forward substitution for L y = b, then back substitution for Lᵀ x = y.
+/// x = (L Lᵀ)⁻¹ b for the lower-triangular factor L (n × n, column-major; the upper triangle is
+/// not read): forward substitution for L y = b column by column, then back substitution for
+/// Lᵀ x = y, each reading L's columns in order.
 fn solve_factored(l: &[f64], b: &[f64], x: &mut [f64]) {
     let n = b.len();
-    for i in 0..n {
-        let row = &l[i * n..i * n + i];
-        let partial: f64 = row.iter().zip(&x[..i]).map(|(a, y)| a * y).sum();
-        x[i] = (b[i] - partial) / l[i * n + i];
+    x[..n].copy_from_slice(b);
+    for j in 0..n {
+        let column = &l[j * n..(j + 1) * n];
+        let y = x[j] / column[j];
+        x[j] = y;
+        for (xk, lk) in x[j + 1..n].iter_mut().zip(&column[j + 1..]) {
+            *xk -= lk * y;
+        }
     }
     for i in (0..n).rev() {
-        let partial: f64 = (i + 1..n).map(|k| l[k * n + i] * x[k]).sum();
-        x[i] = (x[i] - partial) / l[i * n + i];
+        let column = &l[i * n..(i + 1) * n];
+        let partial: f64 = column[i + 1..].iter().zip(&x[i + 1..n]).map(|(a, b)| a * b).sum();
+        x[i] = (x[i] - partial) / column[i];
     }
 }
 
@@ -228,7 +234,7 @@ mod tests {
         let a = DMatrix::from_fn(4, 4, |r, c| ((r * 4 + c) as f64 * 0.37).sin());
         let m = &a * a.transpose() + DMatrix::identity(4, 4);
         let l = m.clone().cholesky().expect("positive definite").l();
-        let l: Vec<f64> = (0..16).map(|k| l[(k / 4, k % 4)]).collect();
+        let l = l.as_slice().to_vec();
         let expected = DVector::from_vec(vec![0.3, -1.2, 2.0, 0.7]);
         let b = &m * &expected;
         let mut x = vec![0.0; 4];

@@ -25,6 +25,9 @@ pub(super) struct Collider {
     primitive_pose: Isometry3<f64>,
     /// Radius of a sphere about the primitive's origin that contains it.
     radius: f64,
+    /// Whether the parry shape sits at the primitive's own pose (all but cylinders): then one
+    /// placement serves both.
+    shape_at_primitive: bool,
     /// Whether a movable joint moves the primitive's link.
     pub moves: bool,
 }
@@ -81,6 +84,7 @@ impl Collider {
             for c in &l.collisions {
                 let (shape, frame) = shared_shape(&c.shape);
                 out.push(Collider {
+                    shape_at_primitive: frame == Isometry3::identity(),
                     link,
                     local: c.origin * frame,
                     shape,
@@ -260,7 +264,13 @@ impl Detector {
     fn place_object(&mut self, object: &[Collider], object_frames: &Frames) {
         let place = |c: &Collider| {
             let link = object_frames.poses[c.link];
-            (link * c.local, Aabb::around(&(link * c.primitive_pose), &c.primitive))
+            let primitive_pose = link * c.primitive_pose;
+            let shape_pose = if c.shape_at_primitive {
+                primitive_pose
+            } else {
+                link * c.local
+            };
+            (shape_pose, Aabb::around(&primitive_pose, &c.primitive))
         };
         if self.object_poses.len() != object.len() {
             self.object_poses = object.iter().map(place).collect();
@@ -325,7 +335,13 @@ impl Detector {
                     manifold.clear();
                     continue;
                 }
-                let pose_r = *pose_r.get_or_insert_with(|| link * rc.local);
+                let pose_r = *pose_r.get_or_insert_with(|| {
+                    if rc.shape_at_primitive {
+                        primitive_pose
+                    } else {
+                        link * rc.local
+                    }
+                });
                 let pos12 = to_pose(&(pose_r.inverse() * pose_o));
                 let previous = (!manifold.points.is_empty()).then_some(manifold.local_n1);
                 if let (Some(cuboid1), Some(cuboid2)) = (rc.shape.as_cuboid(), oc.shape.as_cuboid()) {
