@@ -525,7 +525,17 @@ impl KinematicTree {
         frames.poses[self.root] = *root_pose;
         for &j in &self.topological_joints {
             let joint = &self.joints[j];
-            let frame = frames.poses[joint.parent] * joint.origin;
+            let parent = &frames.poses[joint.parent];
+            // Many joint origins only translate: the rotation product with the identity is left out
+            // (its result would be the parent's rotation to the bit).
+            let frame = if joint.origin.rotation == UnitQuaternion::identity() {
+                Isometry3::from_parts(
+                    Translation3::from(parent.translation.vector + parent.rotation * joint.origin.translation.vector),
+                    parent.rotation,
+                )
+            } else {
+                parent * joint.origin
+            };
             // Only movable joints have an axis anyone asks for (Jacobians, dynamics).
             if let Some(i) = joint.q_index {
                 frames.axes[j] = frame.rotation * joint.axis;

@@ -41,6 +41,7 @@ struct Aabb {
 
 impl Aabb {
     /// The box around `primitive`'s bounding box placed at `pose`.
+    #[inline]
     fn around(pose: &Isometry3<f64>, primitive: &Shape) -> Self {
         let extent = pose.rotation.to_rotation_matrix().matrix().abs() * primitive.half_extents();
         let c = pose.translation.vector;

@@ -450,7 +450,7 @@ impl WorldState {
             PREDICTION,
         );
         self.touches.clear();
-        for contact in &self.detector.contacts {
+        for (index, contact) in self.detector.contacts.iter().enumerate() {
             let object_link = layout.object_colliders[contact.object].link;
             if layout.object_colliders[contact.object].moves {
                 scene.object.frames_linear_jacobian_into(
@@ -462,11 +462,15 @@ impl WorldState {
             } else {
                 self.linear_jacobian.fill(0.0);
             }
-            let warm = self
-                .warm_start
-                .iter()
-                .find(|(key, _)| *key == contact.key)
-                .map(|(_, impulse)| *impulse);
+            // A contact that persists mostly keeps its place in the list: look there first.
+            let warm = match self.warm_start.get(index) {
+                Some((key, impulse)) if *key == contact.key => Some(*impulse),
+                _ => self
+                    .warm_start
+                    .iter()
+                    .find(|(key, _)| *key == contact.key)
+                    .map(|(_, impulse)| *impulse),
+            };
             solver.add_contact(
                 &layout.params,
                 layout.collider_proxy[contact.robot],

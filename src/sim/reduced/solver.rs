@@ -149,6 +149,7 @@ impl<const N: usize> Solver<N> {
 
     /// Adds a row acting on `proxy` at `point` along `dir` (linear part; none for joint rows) and on
     /// the object with J_o = `j`.
+    #[inline(always)]
     fn push_row(&mut self, proxy: Option<(usize, &Point3<f64>, &Vector3<f64>)>, j: ObjectVector<N>) -> usize {
         let no = self.no;
         let mut wj = [0.0; N];
