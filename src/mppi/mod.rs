@@ -496,7 +496,7 @@ impl Mppi {
         let fill = |i: usize, row: &mut [f64]| plan.fill(i, row);
         let result = self
             .model
-            .rollout_filled_into(x, &mut samples, &fill, n, k, threads, Some(cost), batch);
+            .rollout_filled_into(x, &mut samples, &fill, n, k, threads, Some(cost), false, batch);
         self.samples = samples;
         if result.is_err() {
             // Rows that no worker reached are built here, so that the batch is whole.

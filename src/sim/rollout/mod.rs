@@ -16,7 +16,7 @@ use crate::interrupt::Cancel;
 use crate::model::scene::Scene;
 use pool::run_on_slots;
 pub use pool::{default_threads, MAX_CACHED_POOLS, MAX_THREADS};
-use rows::{Inputs, RolloutSlices, Row, RowInput, Rows, Stop};
+use rows::{Inputs, Row, RowInput, Rows, ScratchTrajectory, Stop, Trajectory};
 
 mod pool;
 mod rows;
@@ -103,7 +103,8 @@ pub struct RolloutBatch {
     pub k: usize,
     pub nx: usize,
     pub nq: usize,
-    /// (N, K+1, nx); entry 0 of each rollout is x0.
+    /// (N, K+1, nx); entry 0 of each rollout is x0. This and the other trajectories (τ_ext,
+    /// wrenches, contacts) are empty when the batch was rolled out for its costs alone.
     pub states: Vec<f64>,
     /// (N, K, nq)
     pub tau_ext: Vec<f64>,
@@ -126,9 +127,9 @@ pub struct RolloutBatch {
 impl RolloutBatch {
     /// Sizes the batch for `n` rollouts of `k` steps, keeping its buffers' memory: a planner that
     /// reuses one batch allocates (and the OS maps and zeroes) nothing per iteration. The states,
-    /// τ_ext, wrenches and contacts are left as they were (every rollout writes all of its own);
-    /// the per-rollout flags and totals start from zero.
-    fn prepare(&mut self, n: usize, k: usize, nx: usize, nq: usize) -> Result<()> {
+    /// τ_ext, wrenches and contacts are left as they were (every rollout writes all of its own),
+    /// or emptied without `trajectories`; the per-rollout flags and totals start from zero.
+    fn prepare(&mut self, n: usize, k: usize, nx: usize, nq: usize, trajectories: bool) -> Result<()> {
         fn fit<T: Clone>(v: &mut Vec<T>, len: usize, fill: T) -> Result<()> {
             if len > v.len() {
                 v.try_reserve_exact(len - v.len())
@@ -138,10 +139,11 @@ impl RolloutBatch {
             Ok(())
         }
         (self.n, self.k, self.nx, self.nq) = (n, k, nx, nq);
-        fit(&mut self.states, n * (k + 1) * nx, 0.0)?;
-        fit(&mut self.tau_ext, n * k * nq, 0.0)?;
-        fit(&mut self.wrench, n * k * 6, 0.0)?;
-        fit(&mut self.contact, n * k, false)?;
+        let kept = usize::from(trajectories);
+        fit(&mut self.states, kept * n * (k + 1) * nx, 0.0)?;
+        fit(&mut self.tau_ext, kept * n * k * nq, 0.0)?;
+        fit(&mut self.wrench, kept * n * k * 6, 0.0)?;
+        fit(&mut self.contact, kept * n * k, false)?;
         for (v, fill) in [(&mut self.costs, 0.0), (&mut self.engine_time, 0.0)] {
             fit(v, n, fill)?;
             v.fill(fill);
@@ -319,27 +321,27 @@ impl RolloutModel {
         }
     }
 
-    /// Simulates one input sequence `u` (K × nu) from `x0`; returns the step at which the physics
-    /// produced non-finite numbers, if it did.
+    /// Simulates one input sequence `u` (K × nu) from `x0`; returns the summed cost and the step
+    /// at which the physics produced non-finite numbers, if it did.
     fn rollout_one(
         &self,
         world: &mut RolloutWorld,
         x0: &[f64],
         u: &[f64],
         cost: Option<&dyn StepEvaluator>,
-        out: &mut RolloutSlices,
+        out: &mut Trajectory,
         stop: &mut Stop,
-    ) -> Option<usize> {
+    ) -> (f64, Option<usize>) {
         let nx = self.scene.nx();
         let nq = self.scene.nq();
         let k = out.contact.len();
         world.restore_from(&self.template);
         world.set_state(x0);
         out.states[..nx].copy_from_slice(x0);
-        *out.cost = 0.0;
+        let mut total = 0.0;
         for step in 0..k {
             if stop.now() {
-                return Some(step);
+                return (total, Some(step));
             }
             let u_step = &u[step * nq..(step + 1) * nq];
             let x = &mut out.states[(step + 1) * nx..(step + 2) * nx];
@@ -349,17 +351,17 @@ impl RolloutModel {
             // Non-finite numbers, or a joint faster than anything the actuators or the object can
             // do: the integration diverged and the rest of this rollout means nothing.
             if x.iter().any(|v| !v.is_finite()) || super::diverged_joint(x, nq, self.scene.no(), &self.speed_bounds).is_some() {
-                return Some(step);
+                return (total, Some(step));
             }
             if let Some(cost) = cost {
-                *out.cost += world.evaluate_step(cost, x, u_step);
+                total += world.evaluate_step(cost, x, u_step);
             }
             let interaction = world.interaction();
             out.tau_ext[step * nq..(step + 1) * nq].copy_from_slice(&interaction.tau_ext);
             out.wrench[step * 6..(step + 1) * 6].copy_from_slice(&interaction.wrench);
             out.contact[step] = interaction.contact;
         }
-        None
+        (total, None)
     }
 
     /// Runs N rollouts of K steps from `x0` (nx) with inputs `u` (N × K × nu, row-major).
@@ -397,13 +399,16 @@ impl RolloutModel {
     ) -> Result<()> {
         self.check_inputs(u, n, k)?;
         ensure_finite("U", u)?;
-        self.rollout_rows(x0, Inputs::Given(u), n, k, threads, cost, batch)
+        self.rollout_rows(x0, Inputs::Given(u), n, k, threads, cost, true, batch)
     }
 
     /// [`Self::rollout_into`] of inputs that `fill(i, row)` writes into row i of `u` (K × nu) on
     /// the worker that rolls that row out, just before. `fill` must write finite values within the
     /// joint velocity limits: the rows are not checked. Rows are filled only if rolled out: after
-    /// an error, some may not be.
+    /// an error, some may not be. Without `trajectories`, the batch keeps each rollout's cost and
+    /// flags but not its states, τ_ext, wrenches and contacts: a planner that only weighs the
+    /// costs leaves the batch's trajectories (megabytes at a few hundred rollouts) unwritten, and
+    /// each worker's one rollout of them in its cache.
     #[allow(clippy::too_many_arguments)]
     pub fn rollout_filled_into(
         &self,
@@ -414,10 +419,11 @@ impl RolloutModel {
         k: usize,
         threads: Option<usize>,
         cost: Option<&dyn StepEvaluator>,
+        trajectories: bool,
         batch: &mut RolloutBatch,
     ) -> Result<()> {
         self.check_inputs(u, n, k)?;
-        self.rollout_rows(x0, Inputs::Filled(u, fill), n, k, threads, cost, batch)
+        self.rollout_rows(x0, Inputs::Filled(u, fill), n, k, threads, cost, trajectories, batch)
     }
 
     fn check_inputs(&self, u: &[f64], n: usize, k: usize) -> Result<()> {
@@ -441,6 +447,7 @@ impl RolloutModel {
         k: usize,
         threads: Option<usize>,
         cost: Option<&dyn StepEvaluator>,
+        trajectories: bool,
         batch: &mut RolloutBatch,
     ) -> Result<()> {
         let nx = self.scene.nx();
@@ -466,10 +473,10 @@ impl RolloutModel {
                 )
             })?;
         debug_assert!(elements >= n * k);
-        batch.prepare(n, k, nx, nq)?;
+        batch.prepare(n, k, nx, nq, trajectories)?;
         if n == 0 || k == 0 {
-            for i in 0..n {
-                batch.states[i * nx..(i + 1) * nx].copy_from_slice(x0);
+            for state in batch.states.chunks_exact_mut(nx) {
+                state.copy_from_slice(x0);
             }
             return Ok(());
         }
@@ -485,13 +492,14 @@ impl RolloutModel {
             // The caller's slot also asks the embedding's watcher (Ctrl-C); the others see `cancel`.
             let mut stop = Stop::new(&cancel, slot == 0);
             let mut world = None;
+            let mut scratch = ScratchTrajectory::default();
             while !stop.now() {
                 let j = next.fetch_add(1, Ordering::Relaxed);
                 let Some(&i) = order.get(j) else { break };
                 let Some(row) = rows.take(i) else { continue };
                 let started = Instant::now();
                 let w = world.get_or_insert_with(|| self.checkout_for_slot(slot));
-                if !self.rollout_row(w, x0, row, cost, &mut stop) {
+                if !self.rollout_row(w, x0, row, cost, &mut scratch, &mut stop) {
                     world = None;
                 }
                 row_seconds[i].store(started.elapsed().as_secs_f64().to_bits(), Ordering::Relaxed);
@@ -510,20 +518,23 @@ impl RolloutModel {
         Ok(())
     }
 
-    /// Rolls one row out in `world`; false if the physics panicked (the row is marked failed from
-    /// its first step and the world, possibly inconsistent, must be dropped).
+    /// Rolls one row out in `world` (its trajectory into `scratch` when the batch keeps none);
+    /// false if the physics panicked (the row is marked failed from its first step and the world,
+    /// possibly inconsistent, must be dropped).
     fn rollout_row(
         &self,
         world: &mut RolloutWorld,
         x0: &[f64],
         row: Row,
         cost: Option<&dyn StepEvaluator>,
+        scratch: &mut ScratchTrajectory,
         stop: &mut Stop,
     ) -> bool {
         let (nx, nq) = (self.scene.nx(), self.scene.nq());
         let Row {
             input,
-            mut out,
+            trajectory,
+            cost: total,
             failed,
             steps,
             time,
@@ -535,20 +546,23 @@ impl RolloutModel {
                 u
             }
         };
+        let k = u.len() / nq;
+        let mut out = trajectory.unwrap_or_else(|| scratch.slices(k, nx, nq));
         let clock = world.engine_clock();
         // A panic inside the physics engine must not cross into the caller.
         let (failed_at, sound) = match catch_unwind(AssertUnwindSafe(|| self.rollout_one(world, x0, u, cost, &mut out, stop))) {
-            Ok(result) => {
+            Ok((sum, result)) => {
                 let after = world.engine_clock();
                 *steps = after.steps - clock.steps;
                 *time = after.seconds - clock.seconds;
+                *total = sum;
                 (result, true)
             }
             Err(_) => (Some(0), false),
         };
         if let Some(step) = failed_at {
             *failed = true;
-            *out.cost = f64::INFINITY;
+            *total = f64::INFINITY;
             out.states[(step + 1) * nx..].fill(f64::NAN);
             out.tau_ext[step * nq..].fill(f64::NAN);
             out.wrench[step * 6..].fill(f64::NAN);

@@ -12,13 +12,38 @@ pub(super) enum Inputs<'a> {
     Filled(&'a mut [f64], &'a (dyn Fn(usize, &mut [f64]) + Sync)),
 }
 
-/// One rollout's slices of the batch's outputs.
-pub(super) struct RolloutSlices<'a> {
+/// One rollout's trajectory: its states (K+1 × nx), τ_ext (K × nq), wrenches (K × 6) and
+/// contact flags (K).
+pub(super) struct Trajectory<'a> {
     pub(super) states: &'a mut [f64],
     pub(super) tau_ext: &'a mut [f64],
     pub(super) wrench: &'a mut [f64],
     pub(super) contact: &'a mut [bool],
-    pub(super) cost: &'a mut f64,
+}
+
+/// A worker's own trajectory buffer, for rows whose trajectory the batch does not keep: one
+/// rollout's worth, rewritten by each, stays in the worker's cache.
+#[derive(Default)]
+pub(super) struct ScratchTrajectory {
+    states: Vec<f64>,
+    tau_ext: Vec<f64>,
+    wrench: Vec<f64>,
+    contact: Vec<bool>,
+}
+
+impl ScratchTrajectory {
+    pub(super) fn slices(&mut self, k: usize, nx: usize, nq: usize) -> Trajectory<'_> {
+        self.states.resize((k + 1) * nx, 0.0);
+        self.tau_ext.resize(k * nq, 0.0);
+        self.wrench.resize(k * 6, 0.0);
+        self.contact.resize(k, false);
+        Trajectory {
+            states: &mut self.states,
+            tau_ext: &mut self.tau_ext,
+            wrench: &mut self.wrench,
+            contact: &mut self.contact,
+        }
+    }
 }
 
 /// One row's input: given, or written by `fill(i, row)` on the worker that rolls the row out.
@@ -27,10 +52,12 @@ pub(super) enum RowInput<'a> {
     Filled(&'a mut [f64], usize, &'a (dyn Fn(usize, &mut [f64]) + Sync)),
 }
 
-/// One row of a batch: its input and its slices of every output.
+/// One row of a batch: its input and its slices of every output (its trajectory only when the
+/// batch keeps trajectories).
 pub(super) struct Row<'a> {
     pub(super) input: RowInput<'a>,
-    pub(super) out: RolloutSlices<'a>,
+    pub(super) trajectory: Option<Trajectory<'a>>,
+    pub(super) cost: &'a mut f64,
     pub(super) failed: &'a mut bool,
     pub(super) steps: &'a mut u64,
     pub(super) time: &'a mut f64,
@@ -50,31 +77,39 @@ impl<'a> Rows<'a> {
                 .collect(),
         };
         let b = batch;
+        let trajectories: Vec<Option<Trajectory<'a>>> = if b.states.is_empty() {
+            (0..n).map(|_| None).collect()
+        } else {
+            b.states
+                .chunks_mut((k + 1) * nx)
+                .zip(b.tau_ext.chunks_mut(k * nq))
+                .zip(b.wrench.chunks_mut(k * 6))
+                .zip(b.contact.chunks_mut(k))
+                .map(|(((states, tau_ext), wrench), contact)| {
+                    Some(Trajectory {
+                        states,
+                        tau_ext,
+                        wrench,
+                        contact,
+                    })
+                })
+                .collect()
+        };
         let rows = inputs
             .into_iter()
-            .zip(b.states.chunks_mut((k + 1) * nx))
-            .zip(b.tau_ext.chunks_mut(k * nq))
-            .zip(b.wrench.chunks_mut(k * 6))
-            .zip(b.contact.chunks_mut(k))
+            .zip(trajectories)
             .zip(b.failed.iter_mut().zip(b.costs.iter_mut()))
             .zip(b.engine_steps.iter_mut().zip(b.engine_time.iter_mut()))
-            .map(
-                |((((((input, states), tau_ext), wrench), contact), (failed, cost)), (steps, time))| {
-                    Mutex::new(Some(Row {
-                        input,
-                        out: RolloutSlices {
-                            states,
-                            tau_ext,
-                            wrench,
-                            contact,
-                            cost,
-                        },
-                        failed,
-                        steps,
-                        time,
-                    }))
-                },
-            )
+            .map(|(((input, trajectory), (failed, cost)), (steps, time))| {
+                Mutex::new(Some(Row {
+                    input,
+                    trajectory,
+                    cost,
+                    failed,
+                    steps,
+                    time,
+                }))
+            })
             .collect::<Vec<_>>();
         debug_assert_eq!(rows.len(), n);
         Self(rows)

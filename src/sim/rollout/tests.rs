@@ -209,13 +209,74 @@ fn inputs_filled_by_the_workers_roll_out_as_the_same_inputs_given() {
         let mut filled = vec![f64::NAN; n * row];
         let mut batch = RolloutBatch::default();
         model
-            .rollout_filled_into(&x0, &mut filled, &fill, n, K, Some(threads), None, &mut batch)
+            .rollout_filled_into(&x0, &mut filled, &fill, n, K, Some(threads), None, true, &mut batch)
             .unwrap();
         assert_eq!(filled, given[..n * row], "{n} rollouts on {threads} threads");
         assert!(
             (0..n).all(|i| same_rollout(&batch, &expected, i)),
             "{n} rollouts on {threads} threads"
         );
+    }
+}
+
+/// Scores a step by its state's squared norm.
+struct SquaredState;
+
+impl StepEvaluator for SquaredState {
+    fn validate(&self, _: &Scene) -> Result<()> {
+        Ok(())
+    }
+    fn needs_object_frames(&self) -> bool {
+        false
+    }
+    fn evaluate(&self, _: &Scene, view: &StepView) -> f64 {
+        view.x.iter().map(|v| v * v).sum()
+    }
+}
+
+#[test]
+fn a_batch_for_its_costs_alone_has_the_costs_of_one_that_keeps_its_trajectories() {
+    let model = RolloutModel::new(probe_and_drawer(), RolloutConfig::default()).expect("model");
+    let x0 = state([0.3, 0.0], [0.0, 0.0], 0.0, 0.0);
+    let given = inputs();
+    let row = K * 2;
+    let fill = |i: usize, out: &mut [f64]| out.copy_from_slice(&given[i * row..(i + 1) * row]);
+    for threads in [1, 2] {
+        let mut kept = RolloutBatch::default();
+        let mut alone = RolloutBatch::default();
+        for (trajectories, batch) in [(true, &mut kept), (false, &mut alone)] {
+            let mut u = vec![0.0; N * row];
+            model
+                .rollout_filled_into(
+                    &x0,
+                    &mut u,
+                    &fill,
+                    N,
+                    K,
+                    Some(threads),
+                    Some(&SquaredState),
+                    trajectories,
+                    batch,
+                )
+                .unwrap();
+        }
+        // The sum the evaluator gives, from the kept states: the costs are those of the rollouts.
+        let nx = kept.nx;
+        for i in 0..N {
+            let states = &kept.states[i * (K + 1) * nx..(i + 1) * (K + 1) * nx];
+            let expected: f64 = states[nx..].iter().map(|v| v * v).sum();
+            assert!((kept.costs[i] - expected).abs() <= 1e-9 * expected.max(1.0), "rollout {i}");
+        }
+        assert_eq!(alone.costs, kept.costs, "{threads} threads");
+        assert_eq!(alone.failed, kept.failed);
+        assert_eq!(alone.engine_steps, kept.engine_steps);
+        assert!(alone.states.is_empty() && alone.tau_ext.is_empty() && alone.wrench.is_empty() && alone.contact.is_empty());
+        // The same batch keeps its trajectories again when asked to.
+        let mut u = vec![0.0; N * row];
+        model
+            .rollout_filled_into(&x0, &mut u, &fill, N, K, Some(threads), Some(&SquaredState), true, &mut alone)
+            .unwrap();
+        assert_eq!(alone.states, kept.states);
     }
 }
 
