@@ -4,6 +4,8 @@ use std::collections::HashMap;
 
 use nalgebra::{Isometry3, Matrix3, Point3, Translation3, UnitQuaternion, Vector3};
 
+use super::rigid_bodies::sum_rigid_bodies;
+pub use super::rigid_bodies::RigidBody;
 use crate::error::{Result, SabreError};
 
 /// How a joint moves its child link relative to its parent.
@@ -117,20 +119,6 @@ impl Link {
     pub fn inertial(&self) -> Option<&Inertial> {
         self.inertial.as_ref()
     }
-}
-
-/// The links a movable joint carries with no other movable joint between, as one rigid body: the
-/// joint's child link and its inertial (mass, centre of mass and inertia about it, in that link's
-/// frame) summed over those links (None: they carry no mass).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RigidBody {
-    /// The movable joint and its child link.
-    pub joint: usize,
-    pub link: usize,
-    /// The rigid body the joint's parent link belongs to (its index in
-    /// [`KinematicTree::rigid_bodies`]), None when no movable joint moves the parent.
-    pub parent: Option<usize>,
-    pub inertial: Option<Inertial>,
 }
 
 /// Link poses and world joint axes of one configuration, reused while the configuration is unchanged.
@@ -274,78 +262,20 @@ impl KinematicTree {
             ancestor_columns,
             rigid_bodies: Vec::new(),
         };
-        tree.rigid_bodies = tree.sum_rigid_bodies();
+        tree.rigid_bodies = sum_rigid_bodies(&tree);
         Ok(tree)
     }
 
     /// Sets the inertial of `link` (None: massless).
     pub fn set_inertial(&mut self, link: usize, inertial: Option<Inertial>) {
         self.links[link].inertial = inertial;
-        self.rigid_bodies = self.sum_rigid_bodies();
+        self.rigid_bodies = sum_rigid_bodies(self);
     }
 
     /// The rigid bodies the movable joints carry: what moves with each of them, summed once so
     /// that the dynamics place one inertia per joint instead of one per link.
     pub fn rigid_bodies(&self) -> &[RigidBody] {
         &self.rigid_bodies
-    }
-
-    fn sum_rigid_bodies(&self) -> Vec<RigidBody> {
-        // Each link's rigid body (index into the result) and its pose in the frame of that body's
-        // link; the joints between are fixed, so that pose is constant.
-        let mut in_body: Vec<Option<(usize, Isometry3<f64>)>> = vec![None; self.links.len()];
-        let mut bodies = Vec::new();
-        for &j in &self.topological_joints {
-            let joint = &self.joints[j];
-            in_body[joint.child] = if joint.q_index.is_some() {
-                bodies.push(RigidBody {
-                    joint: j,
-                    link: joint.child,
-                    parent: in_body[joint.parent].map(|(body, _)| body),
-                    inertial: None,
-                });
-                Some((bodies.len() - 1, Isometry3::identity()))
-            } else {
-                in_body[joint.parent].map(|(body, pose)| (body, pose * joint.origin))
-            };
-        }
-        for (index, body) in bodies.iter_mut().enumerate() {
-            let members: Vec<(Isometry3<f64>, &Inertial)> = self
-                .links
-                .iter()
-                .zip(&in_body)
-                .filter_map(|(l, placed)| match (l.inertial.as_ref(), placed) {
-                    (Some(inertial), Some((b, pose))) if *b == index => Some((*pose, inertial)),
-                    _ => None,
-                })
-                .collect();
-            if members.is_empty() {
-                continue;
-            }
-            let mass: f64 = members.iter().map(|(_, i)| i.mass).sum();
-            let com = if mass > 0.0 {
-                members
-                    .iter()
-                    .map(|(pose, i)| (pose * Point3::from(i.com)).coords * i.mass)
-                    .sum::<Vector3<f64>>()
-                    / mass
-            } else {
-                Vector3::zeros()
-            };
-            // Each member's inertia turned into the body frame and moved to the common centre of
-            // mass (parallel axes).
-            let inertia = members
-                .iter()
-                .map(|(pose, i)| {
-                    let r = pose.rotation.to_rotation_matrix();
-                    let d = (pose * Point3::from(i.com)).coords - com;
-                    r.matrix() * i.inertia * r.matrix().transpose()
-                        + (Matrix3::identity() * d.norm_squared() - d * d.transpose()) * i.mass
-                })
-                .sum();
-            body.inertial = Some(Inertial { mass, com, inertia });
-        }
-        bodies
     }
 
     /// The same tree with one movable joint, `keep`: every other movable joint becomes fixed at its

@@ -7,6 +7,7 @@ pub mod generated;
 pub mod inertials;
 pub mod kinematics;
 pub mod mesh;
+mod rigid_bodies;
 pub mod roles;
 pub mod scene;
 pub mod urdf;
