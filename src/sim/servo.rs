@@ -71,8 +71,8 @@ pub struct ServoState {
     /// The configuration at the end of the step being taken (see [`Self::advance`]).
     q_next: Vec<f64>,
     /// The Cholesky factor L of the robot's mass matrix for the contact term (nq × nq, column-major
-    /// as nalgebra keeps it, lower triangle; empty until computed) and the configuration it was computed at (recomputed
-    /// once the robot has moved on). Kept in a plain buffer: the two substitutions per step on it
+    /// as nalgebra keeps it, lower triangle; empty until computed) and the configuration it was
+    /// computed at (recomputed once the robot has moved on). Kept in a plain buffer: the two substitutions per step on it
     /// cost a fraction of nalgebra's dynamically sized ones, and a copy of the state reuses it.
     mass_factor: Vec<f64>,
     mass_factor_q: Vec<f64>,
