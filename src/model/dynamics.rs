@@ -246,4 +246,66 @@ mod tests {
             );
         }
     }
+
+    /// M(q) from the links' own Jacobian shares, independent of the composite-body algorithm.
+    fn summed_mass_matrix(tree: &KinematicTree, q: &[f64]) -> DMatrix<f64> {
+        let n = tree.nq();
+        tree.links
+            .iter()
+            .enumerate()
+            .filter_map(|(link, l)| l.inertial().map(|i| body_share(tree, q, link, i)))
+            .fold(DMatrix::zeros(n, n), |a, b| a + b)
+    }
+
+    #[test]
+    fn the_mass_matrix_does_not_change_with_the_coordinates_named_invariant_and_does_with_the_others() {
+        let royal = Scene::load("royalpanda", "shelf", None).expect("built-in scene");
+        // The same arm on a fixed base: its base joints fixed where they are.
+        let base: Vec<(usize, f64)> = royal.robot.active_joints[..3].iter().map(|&j| (j, 0.3)).collect();
+        let arm = royal.robot.with_joints_fixed(&base, "test").expect("arm on a fixed base");
+        let cabinet = std::fs::read_to_string(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/objects/examples/double_cabinet.urdf"),
+        )
+        .expect("example object");
+        let doors = crate::model::urdf::parse_urdf("double_cabinet", &cabinet).expect("example object").tree;
+        // From the descriptions: a mobile base's x and y (prismatic, at the root) and nothing from
+        // its yaw on; a fixed arm's first joint; a door's hinge; two doors on one carcass, neither
+        // of which carries the other.
+        let expected: Vec<(&KinematicTree, Vec<bool>)> = vec![
+            (&royal.robot, [vec![true, true], vec![false; 8]].concat()),
+            (&arm, [vec![true], vec![false; 6]].concat()),
+            (&royal.object, vec![true]),
+            (&doors, vec![false, false]),
+        ];
+        for (tree, flags) in &expected {
+            assert_eq!(tree.mass_invariant_coordinates(), flags.as_slice(), "{}", tree.name);
+            let n = tree.nq();
+            for trial in 0..4 {
+                let q: Vec<f64> = (0..n).map(|i| 0.5 * ((i * 7 + trial * 3) as f64 + 0.4).sin()).collect();
+                let m = summed_mass_matrix(tree, &q);
+                let scale = 1.0 + m.abs().max();
+                for (c, &invariant) in flags.iter().enumerate() {
+                    let mut moved = q.clone();
+                    moved[c] += 0.7;
+                    let change = (summed_mass_matrix(tree, &moved) - &m).abs().max();
+                    if invariant {
+                        assert!(change < 1e-12 * scale, "{}: M changed by {change} with coordinate {c}", tree.name);
+                    }
+                }
+            }
+        }
+        // The robots' other coordinates do move M (the rule leaves none out that it could name).
+        for tree in [&royal.robot, &arm] {
+            let flags = tree.mass_invariant_coordinates();
+            let q: Vec<f64> = (0..tree.nq()).map(|i| 0.5 * (i as f64 + 0.4).sin()).collect();
+            let m = summed_mass_matrix(tree, &q);
+            // The last joint of an arm turns only the hand about its own axis: M changes little
+            // but it changes.
+            for c in (0..tree.nq()).filter(|&c| !flags[c]) {
+                let mut moved = q.clone();
+                moved[c] += 0.7;
+                assert!((summed_mass_matrix(tree, &moved) - &m).abs().max() > 1e-9, "{}: coordinate {c}", tree.name);
+            }
+        }
+    }
 }

@@ -4,7 +4,7 @@ use std::collections::HashMap;
 
 use nalgebra::{Isometry3, Matrix3, Point3, Translation3, UnitQuaternion, Vector3};
 
-use super::rigid_bodies::sum_rigid_bodies;
+use super::rigid_bodies::{mass_invariant_coordinates, sum_rigid_bodies};
 pub use super::rigid_bodies::RigidBody;
 use crate::error::{Result, SabreError};
 
@@ -174,6 +174,8 @@ pub struct KinematicTree {
     ancestor_columns: Vec<Vec<(usize, usize)>>,
     /// One per movable joint (see [`RigidBody`]), parents before children.
     rigid_bodies: Vec<RigidBody>,
+    /// Per coordinate: M(q) does not depend on it (see [`Self::mass_invariant_coordinates`]).
+    mass_invariant: Vec<bool>,
 }
 
 impl KinematicTree {
@@ -261,8 +263,10 @@ impl KinematicTree {
             ancestor_active_joints,
             ancestor_columns,
             rigid_bodies: Vec::new(),
+            mass_invariant: Vec::new(),
         };
         tree.rigid_bodies = sum_rigid_bodies(&tree);
+        tree.mass_invariant = mass_invariant_coordinates(&tree, &tree.rigid_bodies);
         Ok(tree)
     }
 
@@ -276,6 +280,13 @@ impl KinematicTree {
     /// that the dynamics place one inertia per joint instead of one per link.
     pub fn rigid_bodies(&self) -> &[RigidBody] {
         &self.rigid_bodies
+    }
+
+    /// Per coordinate, whether the joint-space inertia M(q) is independent of it with the root
+    /// held in place (a mobile base's x and y, a door's hinge): a mass matrix computed at q holds
+    /// wherever only these coordinates changed.
+    pub fn mass_invariant_coordinates(&self) -> &[bool] {
+        &self.mass_invariant
     }
 
     /// The same tree with one movable joint, `keep`: every other movable joint becomes fixed at its

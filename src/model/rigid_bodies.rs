@@ -3,7 +3,7 @@
 
 use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 
-use super::kinematics::{Inertial, KinematicTree};
+use super::kinematics::{Inertial, JointKind, KinematicTree};
 
 /// The links a movable joint carries with no other movable joint between, as one rigid body: the
 /// joint's child link and its inertial (mass, centre of mass and inertia about it, in that link's
@@ -76,4 +76,38 @@ pub(super) fn sum_rigid_bodies(tree: &KinematicTree) -> Vec<RigidBody> {
         body.inertial = Some(Inertial { mass, com, inertia });
     }
     bodies
+}
+
+/// For each coordinate of `tree`, whether the joint-space inertia M(q) is independent of it (the
+/// root held in place). A joint qualifies when every other rigid body is its ancestor or its
+/// descendant, so that its motion moves all that it moves as one rigid whole, and when that motion
+/// leaves every other Jacobian column as it was: it is the first movable joint (a rotation or
+/// translation of the whole mechanism, under which every term Jᵢᵀ I Jⱼ keeps its value), or it and
+/// every movable joint before it translate (their columns are fixed directions, and translation
+/// leaves the later columns, axis × (p − o), unchanged). A mobile base's x and y are such joints,
+/// its yaw is not (it turns the arm's columns against the base's fixed ones); a door's or a
+/// drawer's single joint is one.
+pub(super) fn mass_invariant_coordinates(tree: &KinematicTree, bodies: &[RigidBody]) -> Vec<bool> {
+    let mut invariant = vec![false; tree.nq()];
+    // Rigid bodies come parents first: each body's chain of ancestors, as indices into `bodies`.
+    let ancestors = |mut b: usize| {
+        let mut chain = Vec::new();
+        while let Some(p) = bodies[b].parent {
+            chain.push(p);
+            b = p;
+        }
+        chain
+    };
+    let chains: Vec<Vec<usize>> = (0..bodies.len()).map(ancestors).collect();
+    for (b, body) in bodies.iter().enumerate() {
+        let leads = (0..bodies.len()).all(|o| o == b || chains[b].contains(&o) || chains[o].contains(&b));
+        let translates = |i: usize| tree.joints[bodies[i].joint].kind == JointKind::Prismatic;
+        let first = chains[b].is_empty();
+        if leads && (first || (translates(b) && chains[b].iter().all(|&a| translates(a)))) {
+            if let Some(column) = tree.joints[body.joint].q_index {
+                invariant[column] = true;
+            }
+        }
+    }
+    invariant
 }

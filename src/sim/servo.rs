@@ -40,6 +40,9 @@ pub struct ServoLimits {
     pub acceleration: Vec<f64>,
     pub velocity: Vec<f64>,
     pub position: Vec<(f64, f64)>,
+    /// Per joint: whether the mass matrix changes as it moves, the joints whose motion calls for a
+    /// new factor (a mobile base's x and y do not).
+    pub moves_mass: Vec<bool>,
 }
 
 impl ServoLimits {
@@ -54,6 +57,7 @@ impl ServoLimits {
                 .collect(),
             velocity: limits.iter().map(|l| l.velocity).collect(),
             position: limits.iter().map(|l| (l.lower, l.upper)).collect(),
+            moves_mass: scene.robot.mass_invariant_coordinates().iter().map(|&i| !i).collect(),
         })
     }
 }
@@ -80,8 +84,8 @@ pub struct ServoState {
     contact_acceleration: Vec<f64>,
 }
 
-/// M(q) varies slowly; refactorising it only after a joint moved by this much (rad or m) keeps the
-/// contact term within a few percent at a fraction of the cost.
+/// M(q) varies slowly; refactorising it only after a joint it depends on moved by this much (rad or
+/// m) keeps the contact term within a few percent at a fraction of the cost.
 const MASS_REFRESH: f64 = 0.02;
 
 impl ServoState {
@@ -138,7 +142,8 @@ impl ServoState {
                 .mass_factor_q
                 .iter()
                 .zip(&self.q)
-                .any(|(a, b)| (a - b).abs() > MASS_REFRESH);
+                .zip(&limits.moves_mass)
+                .any(|((a, b), &moves)| moves && (a - b).abs() > MASS_REFRESH);
         if in_contact && stale {
             joint_space_terms(
                 &scene.robot,
