@@ -267,7 +267,9 @@ mod tests {
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/objects/examples/double_cabinet.urdf"),
         )
         .expect("example object");
-        let doors = crate::model::urdf::parse_urdf("double_cabinet", &cabinet).expect("example object").tree;
+        let doors = crate::model::urdf::parse_urdf("double_cabinet", &cabinet)
+            .expect("example object")
+            .tree;
         // From the descriptions: a mobile base's x and y (prismatic, at the root) and nothing from
         // its yaw on; a fixed arm's first joint; a door's hinge; two doors on one carcass, neither
         // of which carries the other.
@@ -289,7 +291,11 @@ mod tests {
                     moved[c] += 0.7;
                     let change = (summed_mass_matrix(tree, &moved) - &m).abs().max();
                     if invariant {
-                        assert!(change < 1e-12 * scale, "{}: M changed by {change} with coordinate {c}", tree.name);
+                        assert!(
+                            change < 1e-12 * scale,
+                            "{}: M changed by {change} with coordinate {c}",
+                            tree.name
+                        );
                     }
                 }
             }
@@ -304,7 +310,11 @@ mod tests {
             for c in (0..tree.nq()).filter(|&c| !flags[c]) {
                 let mut moved = q.clone();
                 moved[c] += 0.7;
-                assert!((summed_mass_matrix(tree, &moved) - &m).abs().max() > 1e-9, "{}: coordinate {c}", tree.name);
+                assert!(
+                    (summed_mass_matrix(tree, &moved) - &m).abs().max() > 1e-9,
+                    "{}: coordinate {c}",
+                    tree.name
+                );
             }
         }
     }

@@ -4,8 +4,8 @@ use std::collections::HashMap;
 
 use nalgebra::{Isometry3, Matrix3, Point3, Translation3, UnitQuaternion, Vector3};
 
-use super::rigid_bodies::{mass_invariant_coordinates, sum_rigid_bodies};
 pub use super::rigid_bodies::RigidBody;
+use super::rigid_bodies::{mass_invariant_coordinates, sum_rigid_bodies};
 use crate::error::{Result, SabreError};
 
 /// How a joint moves its child link relative to its parent.
