@@ -196,3 +196,43 @@ fn a_dishwasher_door_past_its_balance_point_opens_by_itself_and_a_closed_one_doe
     // at success the question is not asked
     assert!(!rules.self_opening(&state(&scene, 0.95 * upper)).unwrap());
 }
+
+#[test]
+fn an_object_that_nothing_sets_in_motion_is_not_probed_and_the_probe_agrees_that_it_stays() {
+    let tilted = [0.9, 0.0, 0.0, 0.05, 0.0, 0.0];
+    for (object, pose) in [
+        ("shelf", None),
+        ("drawer", None),
+        ("microwave", None),
+        ("dishwasher", None),
+        ("shelf", Some(&tilted[..])),
+    ] {
+        let scene = Arc::new(Scene::load("royalpanda", object, pose).expect("built-in scene loads"));
+        let tool = scene.tool_frame_name().expect("a tool frame").to_string();
+        let handle = HandleGeometry::new(scene.clone(), "handle_frame", Isometry3::identity(), &tool).expect("handle");
+        let limits = scene.object_limits()[0];
+        // success far above every opening tried, so that the probe's own answer is asked for
+        let rules = OpenObjectRules::new(handle, OpenObjectConfig::default(), 10.0, 10.0).unwrap();
+        let (nq, no) = (scene.nq(), scene.no());
+        let mut resting = 0;
+        for fraction in [-0.02, 0.0, 0.1, 0.3, 0.5, 0.7, 0.9] {
+            let mut x = state(&scene, limits.lower + fraction * (limits.upper - limits.lower));
+            x[2 * nq + no] = 0.3; // moving now: the probe starts from rest all the same
+            let stays = rules.stays_at_rest(&x);
+            let probed = rules.probe_opens(&x).unwrap();
+            if stays {
+                resting += 1;
+                assert!(!probed, "{object} {pose:?} at {fraction}: the probe saw it open");
+                assert!(!rules.self_opening(&x).unwrap());
+            } else {
+                assert_eq!(rules.self_opening(&x).unwrap(), probed, "{object} {pose:?} at {fraction}");
+            }
+            // beyond a limit the limit pushes back: the probe is always run there
+            assert!(!(fraction < 0.0 && stays), "{object}: below its lower limit");
+        }
+        // Level drawers and doors on vertical hinges stay wherever they are; a dishwasher door and
+        // a tilted shelf are probed.
+        let level = pose.is_none() && object != "dishwasher";
+        assert_eq!(resting, if level { 6 } else { 0 }, "{object} {pose:?}");
+    }
+}

@@ -10,7 +10,9 @@ use nalgebra::Isometry3;
 
 use super::handle::{HandAtHandle, HandleGeometry, ReleaseMove};
 use crate::error::{ensure_finite, Result, SabreError};
+use crate::model::dynamics::gravity_torque;
 use crate::model::scene::Scene;
+use crate::model::GRAVITY;
 use crate::mppi::{ServoGuideConfig, ServoGuidePlan};
 use crate::sim::{RolloutConfig, RolloutModel};
 
@@ -305,10 +307,36 @@ impl OpenObjectRules {
         self.geometry.check_state(x)?;
         let scene = self.geometry.scene();
         let upper = scene.object_limits()[0].upper;
-        let (nq, no) = (scene.nq(), scene.no());
-        if self.succeeded(x) || x[2 * nq] >= upper - 1e-3 {
+        let nq = scene.nq();
+        if self.succeeded(x) || x[2 * nq] >= upper - 1e-3 || self.stays_at_rest(x) {
             return Ok(false);
         }
+        self.probe_opens(x)
+    }
+
+    /// Whether nothing can set the object, left alone at rest at x's opening, in motion: within its
+    /// limits (no limit pushes it back) and with no gravity torque on any of its joints (a door on
+    /// a vertical hinge, a drawer sliding level). The probe would see it stay at rest exactly; it is
+    /// not run.
+    pub fn stays_at_rest(&self, x: &[f64]) -> bool {
+        let scene = self.geometry.scene();
+        let (nq, no) = (scene.nq(), scene.no());
+        let o = &x[2 * nq..2 * nq + no];
+        let within = o
+            .iter()
+            .zip(scene.object_limits())
+            .all(|(&v, limits)| limits.lower <= v && v <= limits.upper);
+        within
+            && gravity_torque(&scene.object, &scene.object_pose, o, &GRAVITY)
+                .iter()
+                .all(|&g| g == 0.0)
+    }
+
+    /// The probe of [`Self::self_opening`], run.
+    pub fn probe_opens(&self, x: &[f64]) -> Result<bool> {
+        self.geometry.check_state(x)?;
+        let scene = self.geometry.scene();
+        let (nq, no) = (scene.nq(), scene.no());
         let mut free = x.to_vec();
         if let Some(base) = &scene.roles.base {
             let [ix, iy, _] = base.indices();
