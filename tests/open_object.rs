@@ -218,7 +218,7 @@ fn an_object_that_nothing_sets_in_motion_is_not_probed_and_the_probe_agrees_that
         for fraction in [-0.02, 0.0, 0.1, 0.3, 0.5, 0.7, 0.9] {
             let mut x = state(&scene, limits.lower + fraction * (limits.upper - limits.lower));
             x[2 * nq + no] = 0.3; // moving now: the probe starts from rest all the same
-            let stays = rules.stays_at_rest(&x);
+            let stays = rules.stays_at_rest(&x).unwrap();
             let probed = rules.probe_opens(&x).unwrap();
             if stays {
                 resting += 1;

@@ -308,7 +308,7 @@ impl OpenObjectRules {
         let scene = self.geometry.scene();
         let upper = scene.object_limits()[0].upper;
         let nq = scene.nq();
-        if self.succeeded(x) || x[2 * nq] >= upper - 1e-3 || self.stays_at_rest(x) {
+        if self.succeeded(x) || x[2 * nq] >= upper - 1e-3 || self.stays_at_rest(x)? {
             return Ok(false);
         }
         self.probe_opens(x)
@@ -318,7 +318,8 @@ impl OpenObjectRules {
     /// limits (no limit pushes it back) and with no gravity torque on any of its joints (a door on
     /// a vertical hinge, a drawer sliding level). The probe would see it stay at rest exactly; it is
     /// not run.
-    pub fn stays_at_rest(&self, x: &[f64]) -> bool {
+    pub fn stays_at_rest(&self, x: &[f64]) -> Result<bool> {
+        self.geometry.check_state(x)?;
         let scene = self.geometry.scene();
         let (nq, no) = (scene.nq(), scene.no());
         let o = &x[2 * nq..2 * nq + no];
@@ -326,10 +327,10 @@ impl OpenObjectRules {
             .iter()
             .zip(scene.object_limits())
             .all(|(&v, limits)| limits.lower <= v && v <= limits.upper);
-        within
+        Ok(within
             && gravity_torque(&scene.object, &scene.object_pose, o, &GRAVITY)
                 .iter()
-                .all(|&g| g == 0.0)
+                .all(|&g| g == 0.0))
     }
 
     /// The probe of [`Self::self_opening`], run.
