@@ -3,6 +3,7 @@
 
 pub mod handle;
 pub mod open_object;
+mod self_opening;
 
 pub use handle::{HandAtHandle, HandleGeometry, ReleaseMove};
 pub use open_object::{OpenObjectConfig, OpenObjectRules, OpenPhase};

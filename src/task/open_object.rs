@@ -1,5 +1,6 @@
 //! The open-object task's per-iteration logic: its phase switch (with the probe that tells whether
-//! the object opens by itself), its sampling-noise schedule and its guides, in one place per scene.
+//! the object opens by itself, in `self_opening.rs`), its sampling-noise schedule and its guides, in
+//! one place per scene.
 //!
 //! The phases, their costs and the rationale of every setting are the Python task's
 //! (`sabre.tasks.OpenObject`, docs/design.md); this is the part the planner runs every iteration.
@@ -10,9 +11,7 @@ use nalgebra::Isometry3;
 
 use super::handle::{HandAtHandle, HandleGeometry, ReleaseMove};
 use crate::error::{ensure_finite, Result, SabreError};
-use crate::model::dynamics::gravity_torque;
 use crate::model::scene::Scene;
-use crate::model::GRAVITY;
 use crate::mppi::{ServoGuideConfig, ServoGuidePlan};
 use crate::sim::{RolloutConfig, RolloutModel};
 
@@ -228,14 +227,14 @@ impl OpenObjectConfig {
 /// The open-object task on one scene: its handle geometry, settings, targets and the rollout
 /// model of its probe.
 pub struct OpenObjectRules {
-    geometry: HandleGeometry,
-    config: OpenObjectConfig,
+    pub(super) geometry: HandleGeometry,
+    pub(super) config: OpenObjectConfig,
     /// Grasp targets in the handle frame, by phase (release has none: it uses `open`'s).
     offsets: [Isometry3<f64>; 4],
     target_opening: f64,
     object_setpoint: f64,
     /// The rollout model that watches the object alone (a fixed-base robot's links out of the contact).
-    probe: RolloutModel,
+    pub(super) probe: RolloutModel,
 }
 
 impl OpenObjectRules {
@@ -295,72 +294,8 @@ impl OpenObjectRules {
         Ok(self.succeeded(x))
     }
 
-    fn succeeded(&self, x: &[f64]) -> bool {
+    pub(super) fn succeeded(&self, x: &[f64]) -> bool {
         self.geometry.split(x).2[0] >= self.config.success_fraction * self.target_opening
-    }
-
-    /// Whether the object, left alone at rest, opens further by itself (a dishwasher door past its
-    /// balance point): the probe model run for `probe` s from x with the robot and the object at
-    /// rest and the robot out of the way (a holonomic base moved 5 m away from the object; a
-    /// fixed-base robot's links out of the contact), its opening rate then above `release_rate`.
-    pub fn self_opening(&self, x: &[f64]) -> Result<bool> {
-        self.geometry.check_state(x)?;
-        let scene = self.geometry.scene();
-        let upper = scene.object_limits()[0].upper;
-        let nq = scene.nq();
-        if self.succeeded(x) || x[2 * nq] >= upper - 1e-3 || self.stays_at_rest(x)? {
-            return Ok(false);
-        }
-        self.probe_opens(x)
-    }
-
-    /// Whether nothing can set the object, left alone at rest at x's opening, in motion: within its
-    /// limits (no limit pushes it back) and with no gravity torque on any of its joints (a door on
-    /// a vertical hinge, a drawer sliding level). The probe would see it stay at rest exactly; it is
-    /// not run.
-    pub fn stays_at_rest(&self, x: &[f64]) -> Result<bool> {
-        self.geometry.check_state(x)?;
-        let scene = self.geometry.scene();
-        let (nq, no) = (scene.nq(), scene.no());
-        let o = &x[2 * nq..2 * nq + no];
-        let within = o
-            .iter()
-            .zip(scene.object_limits())
-            .all(|(&v, limits)| limits.lower <= v && v <= limits.upper);
-        Ok(within
-            && gravity_torque(&scene.object, &scene.object_pose, o, &GRAVITY)
-                .iter()
-                .all(|&g| g == 0.0))
-    }
-
-    /// The probe of [`Self::self_opening`], run.
-    pub fn probe_opens(&self, x: &[f64]) -> Result<bool> {
-        self.geometry.check_state(x)?;
-        let scene = self.geometry.scene();
-        let (nq, no) = (scene.nq(), scene.no());
-        let mut free = x.to_vec();
-        if let Some(base) = &scene.roles.base {
-            let [ix, iy, _] = base.indices();
-            let centre = scene.object_pose.translation.vector;
-            let away = [free[ix] - centre.x, free[iy] - centre.y];
-            let norm = away[0].hypot(away[1]);
-            let unit = if norm > 1e-9 {
-                [away[0] / norm, away[1] / norm]
-            } else {
-                [-1.0, 0.0]
-            };
-            free[ix] = centre.x + 5.0 * unit[0];
-            free[iy] = centre.y + 5.0 * unit[1];
-        }
-        free[nq..2 * nq].fill(0.0);
-        free[2 * nq + no..].fill(0.0); // from rest: a drawer still coasting from a pull does not open by itself
-        let steps = ((self.config.probe / self.probe.dt()).round_ties_even() as usize).max(1);
-        // One short rollout runs on the calling thread; a probe whose physics diverged does not
-        // open by itself.
-        let zero = vec![0.0; steps * nq];
-        let watched = self.probe.rollout(&free, &zero, 1, steps, Some(1))?;
-        let nx = scene.nx();
-        Ok(!watched.failed[0] && watched.states[steps * nx + 2 * nq + no] > self.config.release_rate)
     }
 
     /// The bar has left the finger's pocket.
