@@ -249,6 +249,47 @@ mod tests {
         }
     }
 
+    #[test]
+    fn moving_only_the_base_keeps_the_factor_and_its_contact_term_stays_exact() {
+        let scene = Scene::load("royalpanda", "shelf", None).expect("built-in scene");
+        let limits = ServoLimits::new(&scene).expect("limits");
+        let gains = ServoGains {
+            bandwidth: 30.0,
+            integral_gain: 0.0,
+            integral_limit: 1.0,
+        };
+        let nq = scene.nq();
+        let tau: Vec<f64> = (0..nq).map(|i| 0.5 + 0.1 * i as f64).collect();
+        let (mut ws, mut m, mut g) = (DynamicsWorkspace::default(), DMatrix::zeros(0, 0), DVector::zeros(0));
+        let mut servo = ServoState::new(nq);
+        let home = scene.home_configuration();
+        servo.reset(&home, &vec![0.0; nq]);
+        let mut step = |servo: &mut ServoState, q: &[f64]| {
+            servo.q.copy_from_slice(q);
+            servo.advance(&gains, &limits, &scene, &tau, 0.01, &mut ws, &mut m, &mut g);
+            servo.mass_factor_q.clone()
+        };
+        assert_eq!(step(&mut servo, &home), home, "the first contact step factorises");
+        // The base driven 0.8 m away: no new factor, and the contact term is still M(q)⁻¹ τ at
+        // the new configuration.
+        let mut driven = home.clone();
+        driven[0] += 0.5;
+        driven[1] -= 0.6;
+        assert_eq!(step(&mut servo, &driven), home, "x and y do not call for a new factor");
+        let (m_driven, _) = scene.mass_matrix_and_gravity(&driven).expect("M");
+        let expected = m_driven.lu().solve(&DVector::from_column_slice(&tau)).expect("invertible");
+        for (got, want) in servo.contact_acceleration.iter().zip(expected.iter()) {
+            assert!((got - want).abs() <= 1e-9 * (1.0 + want.abs()), "{got} vs {want}");
+        }
+        // The base's yaw and an arm joint past the threshold do.
+        for joint in [2, 5] {
+            let mut turned = driven.clone();
+            turned[joint] += 2.0 * MASS_REFRESH;
+            assert_eq!(step(&mut servo, &turned), turned, "joint {joint} calls for a new factor");
+            driven = turned;
+        }
+    }
+
     fn rejected(dt: f64, bandwidth: Option<f64>) -> Option<String> {
         match validate_step(dt, bandwidth) {
             Err(SabreError::InvalidValue { what, .. }) => Some(what),

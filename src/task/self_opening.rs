@@ -16,10 +16,10 @@ impl OpenObjectRules {
         let scene = self.geometry.scene();
         let upper = scene.object_limits()[0].upper;
         let nq = scene.nq();
-        if self.succeeded(x) || x[2 * nq] >= upper - 1e-3 || self.stays_at_rest(x)? {
+        if self.succeeded(x) || x[2 * nq] >= upper - 1e-3 || self.at_rest_checked(x) {
             return Ok(false);
         }
-        self.probe_opens(x)
+        self.probe_checked(x)
     }
 
     /// Whether nothing can set the object, left alone at rest at x's opening, in motion: within its
@@ -28,6 +28,17 @@ impl OpenObjectRules {
     /// not run.
     pub fn stays_at_rest(&self, x: &[f64]) -> Result<bool> {
         self.geometry.check_state(x)?;
+        Ok(self.at_rest_checked(x))
+    }
+
+    /// The probe of [`Self::self_opening`], run.
+    pub fn probe_opens(&self, x: &[f64]) -> Result<bool> {
+        self.geometry.check_state(x)?;
+        self.probe_checked(x)
+    }
+
+    /// [`Self::stays_at_rest`] of a state already checked.
+    fn at_rest_checked(&self, x: &[f64]) -> bool {
         let scene = self.geometry.scene();
         let (nq, no) = (scene.nq(), scene.no());
         let o = &x[2 * nq..2 * nq + no];
@@ -35,15 +46,14 @@ impl OpenObjectRules {
             .iter()
             .zip(scene.object_limits())
             .all(|(&v, limits)| limits.lower <= v && v <= limits.upper);
-        Ok(within
+        within
             && gravity_torque(&scene.object, &scene.object_pose, o, &GRAVITY)
                 .iter()
-                .all(|&g| g == 0.0))
+                .all(|&g| g == 0.0)
     }
 
-    /// The probe of [`Self::self_opening`], run.
-    pub fn probe_opens(&self, x: &[f64]) -> Result<bool> {
-        self.geometry.check_state(x)?;
+    /// [`Self::probe_opens`] of a state already checked.
+    fn probe_checked(&self, x: &[f64]) -> Result<bool> {
         let scene = self.geometry.scene();
         let (nq, no) = (scene.nq(), scene.no());
         let mut free = x.to_vec();
