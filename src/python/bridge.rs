@@ -8,9 +8,9 @@ use std::sync::Mutex;
 use numpy::{PyArray1, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
-use super::control::{vector, PyRateLimiter};
-use super::convert::lock;
+use super::convert::{lock, vector};
 use super::error::run;
+use super::rate_limit::PyRateLimiter;
 use crate::control::command_stream::{Command, CommandGate, CommandShaper};
 use crate::control::joint_merge::JointMerge;
 use crate::error::SabreError;

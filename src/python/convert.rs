@@ -1,5 +1,5 @@
 //! Conversions at the boundary: checked float64 views of NumPy arrays, arrays out, poses as 4 × 4
-//! matrices, and locking the core objects the Python classes own.
+//! matrices, vectors from arrays or sequences, and locking the core objects the Python classes own.
 
 use std::sync::{Mutex, MutexGuard};
 
@@ -7,6 +7,7 @@ use nalgebra::{Isometry3, Matrix3, Matrix4, Rotation3, Translation3, UnitQuatern
 use numpy::{PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
+use super::error::run;
 use crate::error::{ensure_finite, SabreError};
 
 /// The object behind `mutex`, also after a panic in another call poisoned it: every core object
@@ -84,4 +85,17 @@ pub(crate) fn isometry(name: &str, m: &[f64]) -> crate::Result<Isometry3<f64>> {
         Translation3::new(m[3], m[7], m[11]),
         UnitQuaternion::new_normalize(quaternion.into_inner()),
     ))
+}
+
+/// A float64 vector from a NumPy array (any layout, one dimension) or any sequence of numbers.
+pub(super) fn vector(name: &str, values: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
+    if let Ok(array) = values.cast::<PyArrayDyn<f64>>() {
+        let array = array.readonly();
+        let view = array.as_array();
+        if view.ndim() != 1 {
+            return run(|| Err(SabreError::shape(name, "(n,)", format!("{:?}", view.shape()))));
+        }
+        return Ok(view.iter().copied().collect());
+    }
+    values.extract::<Vec<f64>>()
 }

@@ -14,6 +14,7 @@ mod error;
 mod estimation;
 mod messages;
 mod mppi;
+mod rate_limit;
 mod robot;
 mod safety;
 mod scene;
@@ -43,7 +44,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<control::PyLowLevelController>()?;
     m.add_class::<control::PyPlan>()?;
     m.add_class::<control::PyInnerLoop>()?;
-    m.add_class::<control::PyRateLimiter>()?;
+    m.add_class::<rate_limit::PyRateLimiter>()?;
     m.add_class::<bridge::PyCommandGate>()?;
     m.add_class::<sim_driver::PySimDriver>()?;
     m.add_class::<sim_driver::PyFrankaReflexes>()?;
