@@ -399,6 +399,7 @@ impl KinematicTree {
 
     /// `frame` (a joint's frame in the world) followed by the joint's motion at `value`: the pose
     /// of the joint's child. The axis is a unit vector (the URDF loader normalises it).
+    #[inline(always)]
     fn moved(frame: &Isometry3<f64>, joint: &Joint, value: f64) -> Isometry3<f64> {
         match joint.kind {
             JointKind::Fixed => *frame,
