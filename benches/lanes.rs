@@ -151,9 +151,23 @@ impl<const L: usize> LaneFrames<L> {
     }
 }
 
+/// The walk compiled with AVX2 and FMA; call only where both are present.
+#[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn update_avx2<const L: usize>(frames: &mut LaneFrames<L>, tree: &KinematicTree, q: &[[f64; L]]) {
     frames.update(tree, q);
+}
+
+/// Whether this CPU runs [`update_avx2`] (never elsewhere than on x86-64).
+fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
 }
 
 /// Configurations to walk: each a small step from the last, within the joint limits.
@@ -208,19 +222,24 @@ fn check<const L: usize>(tree: &KinematicTree, configs: &[Vec<f64>]) {
     }
 }
 
-/// Nanoseconds per configuration of the laned walk, `AVX2` selecting the feature-enabled copy.
+/// Nanoseconds per configuration of the laned walk, `avx2` selecting the feature-enabled copy
+/// (which only x86-64 has).
 fn time_lanes<const L: usize>(tree: &KinematicTree, configs: &[Vec<f64>], calls: usize, avx2: bool) -> f64 {
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = avx2;
     let batches: Vec<Vec<[f64; L]>> = (0..configs.len() / L).map(|b| lanes::<L>(configs, b * L)).collect();
     let mut frames = LaneFrames::<L>::new(tree);
     let start = Instant::now();
     for call in 0..calls {
         let q = &batches[call % batches.len()];
+        #[cfg(target_arch = "x86_64")]
         if avx2 {
-            // SAFETY: called only after `is_x86_feature_detected!` confirmed both features.
+            // SAFETY: `avx2` is true only where `has_avx2` found both features.
             unsafe { update_avx2(&mut frames, tree, q) };
-        } else {
-            frames.update(tree, q);
+            black_box(&frames.poses);
+            continue;
         }
+        frames.update(tree, q);
         black_box(&frames.poses);
     }
     start.elapsed().as_secs_f64() * 1e9 / (calls * L) as f64
@@ -249,7 +268,7 @@ fn main() {
     check::<2>(tree, &configs);
     check::<4>(tree, &configs);
     check::<8>(tree, &configs);
-    let avx2 = is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma");
+    let avx2 = has_avx2();
     let calls = 200_000;
     println!(
         "forward kinematics of {} ({} joints, {} movable), ns per configuration; rounds alternate",
