@@ -168,6 +168,9 @@ def bridge(request):
         probe.close()
         domain.release()
         for p in processes:
+            # shown by pytest only when the test failed: what each node said last
+            print(f"--- {p.kind} (exit {p.process.returncode}), last lines of its output:")
+            print("\n".join(p.output().splitlines()[-40:]))
             os.unlink(p.log_path)
 
 
@@ -418,16 +421,22 @@ def test_the_sim_robot_matches_answers_by_stamp_and_stops_on_its_command_timeout
     assert received_span <= window <= 1.01 * span_ticks + 1
     assert int(status["states_published"]) > window + 200
     assert float(status["delivered_fraction"]) == pytest.approx(n / window)
+    # The robot's own ticks decide when a stop is booked, not the host's: 200 of them past the
+    # status that counted the made-up commands, and their stop (50 ticks) is in the list.
+    def after_ticks(ticks: float) -> dict:
+        return probe.wait_for(lambda: (lambda s: s if s.get("ticks", 0) > ticks + 200 else None)(sim_status(probe)), "200 ticks")
+
+    before = len(after_ticks(float(status["ticks"]))["stop_delays_ms"])
     # a slow ramp, then silence: the robot-side timeout stops the arm
-    for step in range(1, 101):
-        probe.arm_pub.publish(probe.Float64MultiArray(data=[0.0, 0.0, 0.0, -0.0005 * step, 0.0, 0.0, 0.0]))
+    ramp = [[0.0, 0.0, 0.0, -0.0005 * step, 0.0, 0.0, 0.0] for step in range(1, 101)]
+    for command in ramp:
+        probe.arm_pub.publish(probe.Float64MultiArray(data=command))
         time.sleep(0.001)
-    stops = probe.wait_for(
-        lambda: (lambda s: json.loads(s[2]["stop_delays_ms"]) if s and len(json.loads(s[2]["stop_delays_ms"])) >= 2 else None)(
-            probe.status("sim_status", "sabre/sim_robot")
-        ),
-        "the sim robot to stop",
+    last = probe.wait_for(
+        lambda: (lambda s: s if s.get("last_arm_command") == ramp[-1] else None)(sim_status(probe)), "the ramp's last command"
     )
+    stops = after_ticks(last["ticks"])["stop_delays_ms"]
+    assert len(stops) > before
     assert stops[-1] <= 50.0 + 1.0 + 1e-6
     probe.wait_for(lambda: (sim_status(probe) or {}).get("robot_speed", 1.0) < 0.02, "the robot to come to rest")
     assert sim_status(probe)["reflex_aborts"] == 0
