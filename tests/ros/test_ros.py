@@ -421,6 +421,7 @@ def test_the_sim_robot_matches_answers_by_stamp_and_stops_on_its_command_timeout
     assert received_span <= window <= 1.01 * span_ticks + 1
     assert int(status["states_published"]) > window + 200
     assert float(status["delivered_fraction"]) == pytest.approx(n / window)
+
     # The robot's own ticks decide when a stop is booked, not the host's: 200 of them past the
     # status that counted the made-up commands, and their stop (50 ticks) is in the list.
     def after_ticks(ticks: float) -> dict:
