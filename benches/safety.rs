@@ -13,13 +13,13 @@
 //!   common case at 1 kHz);
 //! - `binding_full_qp`: the same with every shortcut off (Clarabel solves all 57 rows).
 //!
-//! The tick runs `follow_reference_safe` for one plant step (interpolation, filter with the tank,
+//! The tick runs `Cascade::follow` for one plant step (interpolation, filter with the tank,
 //! low-level controller, plant step, tank update) with the `binding` posture and command.
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use sabre::control::{follow_reference_safe, InnerSafety, LowLevelConfig, LowLevelController, TrackTrace};
+use sabre::control::{Cascade, ExternalTorque, LowLevelConfig, LowLevelController, Plan, TrackTrace};
 use sabre::model::Scene;
 use sabre::safety::{EnergyTank, SafetyConfig, SafetyFilter};
 use sabre::sim::{Plant, PlantConfig};
@@ -117,42 +117,31 @@ fn inner_tick(c: &mut Criterion) {
     let scene = Arc::new(Scene::load("royalpanda", "shelf", None).expect("built-in scene"));
     let (_, binding) = cases(&scene);
     let mut plant = Plant::new(scene.clone(), PlantConfig::default()).expect("plant");
-    let mut controller = LowLevelController::new(scene.clone(), 0.001, LowLevelConfig::default()).expect("controller");
-    let mut f = filter(&scene, true);
-    let mut tank = EnergyTank::new(10.0, 2.0, None, false).expect("tank");
+    let controller = Arc::new(Mutex::new(
+        LowLevelController::new(scene.clone(), 0.001, LowLevelConfig::default()).expect("controller"),
+    ));
+    let f = Arc::new(Mutex::new(filter(&scene, true)));
+    let tank = Arc::new(Mutex::new(EnergyTank::new(10.0, 2.0, None, false).expect("tank")));
     plant.reset(&binding.x).expect("reset");
     // A reference of 66 steps (15 ms) pressing into the limits; past its end it holds its last value.
     let reference: Vec<f64> = (0..66).flat_map(|_| binding.u.iter().copied()).collect();
+    let plan = Arc::new(Plan::new(reference, scene.nq(), 0.0, 0.015).expect("plan"));
+    let tau = || ExternalTorque::new(scene.nq(), None, None, None).expect("tau_ext");
+    let mut full = Cascade::new(controller.clone(), Some(f.clone()), Some(tank), tau()).expect("cascade");
+    let mut bare = Cascade::new(controller, None, None, tau()).expect("cascade");
+    full.hand_over(plan.clone(), None).expect("plan");
+    bare.hand_over(plan, None).expect("plan");
     let mut trace = TrackTrace::default();
     let mut group = c.benchmark_group("inner_loop");
     group.sample_size(50);
     group.bench_function("tick_filter_tank_controller_plant", |b| {
-        b.iter(|| {
-            follow_reference_safe(
-                &mut plant,
-                &mut controller,
-                &reference,
-                0.0,
-                0.015,
-                1,
-                0,
-                &mut trace,
-                Some(InnerSafety {
-                    filter: Some(&mut f),
-                    tank: Some(&mut tank),
-                    predicted_dissipation: None,
-                }),
-            )
-            .expect("tick")
-        })
+        b.iter(|| full.follow(&mut plant, 1, 0, &mut trace).expect("tick"))
     });
     group.bench_function("tick_controller_plant_only", |b| {
-        b.iter(|| {
-            follow_reference_safe(&mut plant, &mut controller, &reference, 0.0, 0.015, 1, 0, &mut trace, None).expect("tick")
-        })
+        b.iter(|| bare.follow(&mut plant, 1, 0, &mut trace).expect("tick"))
     });
     group.finish();
-    let s = f.stats();
+    let s = *f.lock().expect("filter").stats();
     eprintln!(
         "filter during the ticks: {} calls, {} with Clarabel, {} fallbacks, mean {:.1} µs",
         s.calls,

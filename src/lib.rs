@@ -7,6 +7,7 @@ pub mod control;
 pub mod cost;
 pub mod error;
 pub mod interrupt;
+pub mod low_pass;
 pub mod model;
 pub mod mppi;
 pub mod safety;

@@ -5,9 +5,11 @@
 
 mod safety_fixtures;
 
+use std::sync::{Arc, Mutex};
+
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use sabre::control::{follow_reference_safe, InnerSafety, LowLevelConfig, LowLevelController, TrackTrace};
+use sabre::control::{Cascade, ExternalTorque, LowLevelConfig, LowLevelController, Plan, TrackTrace};
 use sabre::model::Scene;
 use sabre::safety::{ConstraintClass, EnergyTank, FilterStatus, SafetyConfig, SafetyFilter};
 use sabre::sim::{Plant, PlantConfig, RolloutConfig, RolloutModel};
@@ -169,9 +171,17 @@ fn sequential_filter_keeps_the_rollout_inside_limits_the_raw_sequence_violates()
 fn inner_loop_filters_every_step_and_keeps_the_tank() {
     let scene = scene();
     let mut plant = Plant::new(scene.clone(), PlantConfig::default()).unwrap();
-    let mut controller = LowLevelController::new(scene.clone(), 0.001, LowLevelConfig::default()).unwrap();
-    let mut filter = SafetyFilter::new(scene.clone(), SafetyConfig::default()).unwrap();
-    let mut tank = EnergyTank::new(10.0, 2.0, None, true).unwrap();
+    let controller = LowLevelController::new(scene.clone(), 0.001, LowLevelConfig::default()).unwrap();
+    let filter = Arc::new(Mutex::new(SafetyFilter::new(scene.clone(), SafetyConfig::default()).unwrap()));
+    let tank = Arc::new(Mutex::new(EnergyTank::new(10.0, 2.0, None, true).unwrap()));
+    let tau = ExternalTorque::new(scene.nq(), None, None, None).unwrap();
+    let mut cascade = Cascade::new(
+        Arc::new(Mutex::new(controller)),
+        Some(filter.clone()),
+        Some(tank.clone()),
+        tau,
+    )
+    .unwrap();
     let (nq, nx) = (scene.nq(), scene.nx());
     let j4 = joint(&scene, "panda_joint4");
     let upper = scene.robot_limits()[j4].upper;
@@ -184,22 +194,11 @@ fn inner_loop_filters_every_step_and_keeps_the_tank() {
     }
     let mut trace = TrackTrace::default();
     let steps = 400;
-    follow_reference_safe(
-        &mut plant,
-        &mut controller,
-        &reference,
-        0.0,
-        0.015,
-        steps,
-        1,
-        &mut trace,
-        Some(InnerSafety {
-            filter: Some(&mut filter),
-            tank: Some(&mut tank),
-            predicted_dissipation: None,
-        }),
-    )
-    .unwrap();
+    cascade
+        .hand_over(Arc::new(Plan::new(reference, nq, 0.0, 0.015).unwrap()), None)
+        .unwrap();
+    cascade.follow(&mut plant, steps, 1, &mut trace).unwrap();
+    let (filter, tank) = (filter.lock().unwrap(), tank.lock().unwrap());
     assert_eq!(trace.filtered.len(), steps * nq);
     assert_eq!(trace.tank_energy.len(), steps);
     assert_eq!(trace.filter_status.len(), steps);

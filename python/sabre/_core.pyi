@@ -25,7 +25,7 @@ __all__ = [
     "LowLevelConfig",
     "LowLevelController",
     "Plan",
-    "InnerLoop",
+    "Cascade",
     "RateLimiter",
     "CommandGate",
     "JointMerge",
@@ -63,11 +63,13 @@ __all__ = [
     "encode_twist",
     "__version__",
     "DEFAULT_TAU_EXT_CUTOFF",
+    "TAKEOVER_TOLERANCE",
     "CONTACT_MODELS",
 ]
 
 __version__: str
 DEFAULT_TAU_EXT_CUTOFF: float
+TAKEOVER_TOLERANCE: float
 CONTACT_MODELS: tuple[str, ...]
 
 def default_threads() -> int: ...
@@ -312,18 +314,6 @@ class LowLevelController:
     def reset(self) -> None: ...
     def torque(self, x: npt.NDArray[np.float64], u_ref: npt.NDArray[np.float64]) -> list[float]: ...
     def track(self, plant: Plant, u_ref: npt.NDArray[np.float64], steps: int) -> None: ...
-    def follow(
-        self,
-        plant: Plant,
-        reference: npt.NDArray[np.float64],
-        t0: float,
-        dt: float,
-        steps: int,
-        record_every: int = 1,
-        safety: SafetyFilter | None = None,
-        tank: EnergyTank | None = None,
-        predicted_dissipation: npt.NDArray[np.float64] | None = None,
-    ) -> dict: ...
 
 @final
 class Plan:
@@ -353,19 +343,40 @@ class Plan:
     def predicted_dissipation_at(self, t: float) -> float | None: ...
 
 @final
-class InnerLoop:
+class Cascade:
     def __new__(
-        cls, low_level: LowLevelController, filter: SafetyFilter | None = None, tank: EnergyTank | None = None
-    ) -> InnerLoop: ...
+        cls,
+        low_level: LowLevelController,
+        filter: SafetyFilter | None = None,
+        tank: EnergyTank | None = None,
+        tau_ext_cutoff: float | None = None,
+        tau_ext_timeout: float | None = None,
+        wrench_frames: tuple[str, str, str] | None = None,
+    ) -> Cascade: ...
     @property
     def low_level(self) -> LowLevelController: ...
     @property
     def filter(self) -> SafetyFilter | None: ...
     @property
     def tank(self) -> EnergyTank | None: ...
+    def hand_over(self, plan: Plan, at: float | None = None) -> int: ...
+    def plan_at(self, t: float) -> int | None: ...
+    @property
+    def in_force(self) -> int | None: ...
+    @property
+    def pending(self) -> tuple[int, float] | None: ...
+    def reset(self) -> None: ...
+    @property
+    def ticks(self) -> int: ...
     def tick(
-        self, plan: Plan, x: npt.NDArray[np.float64], tau_ext: npt.NDArray[np.float64], t: float, dt: float
+        self, x: npt.NDArray[np.float64], tau_ext: npt.NDArray[np.float64], t: float, dt: float
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], float | None, str]: ...
+    def follow(self, plant: Plant, steps: int, record_every: int = 1) -> dict: ...
+    def set_external_torque(self, tau: npt.NDArray[np.float64], force: float, received: float) -> None: ...
+    @property
+    def tau_ext(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def tau_ext_counts(self) -> tuple[int, int]: ...
 
 @final
 class RateLimiter:
@@ -778,7 +789,7 @@ _BridgeStep = tuple[bytes, bytes | None, bytes | None]  # (arm, base, echo) to p
 class BridgeTick:
     def __new__(
         cls,
-        scene: Scene,
+        cascade: Cascade,
         joints: JointMerge,
         gate: CommandGate,
         estimator: ObjectStateEstimator | None,
@@ -787,32 +798,26 @@ class BridgeTick:
         arm_index: list[int],
         base_index: list[int] | None,
         max_tick_dt: float,
-        wrench_timeout: float,
-        tau_cutoff: float | None,
         cmd_vel_stamped: bool,
         cmd_vel_frame: str,
         echo_names: list[str] | None = None,
-        wrench_frames: tuple[str, str, str] | None = None,
     ) -> BridgeTick: ...
     def receive(self, raw: bytes, received: float) -> tuple[str, float, str | None]: ...
     def follow(
-        self, inner_loop: InnerLoop, plan: Plan, t: float, received: float, may_hook: bool
-    ) -> tuple[_BridgeStep, npt.NDArray[np.float64], float | None, str]: ...
+        self, t: float, received: float, may_hook: bool, max_plan_age: float
+    ) -> tuple[str | None, _BridgeStep | None, npt.NDArray[np.float64], float | None, str]: ...
     def observe(self, t: float, may_hook: bool) -> npt.NDArray[np.float64]: ...
     def stop(self, received: float) -> _BridgeStep: ...
     def watchdog(self, now: float, stamp_ns: int, limit: int = 10) -> list[_BridgeStep]: ...
     def next_look(self, now: float) -> float: ...
     def ramp_step(self, stamp_ns: int) -> _BridgeStep | None: ...
     def set_joints(self, indices: list[int], position: _Vector, velocity: _Vector, received: float) -> None: ...
-    def set_external_torque(self, tau: npt.NDArray[np.float64], force: float, received: float) -> None: ...
     def set_wrench(self, raw: bytes, received: float) -> None: ...
     def set_object(self, position: npt.NDArray[np.float64], velocity: npt.NDArray[np.float64]) -> None: ...
     @property
     def stamp(self) -> float: ...
     @property
     def position(self) -> npt.NDArray[np.float64]: ...
-    @property
-    def tau_ext(self) -> npt.NDArray[np.float64]: ...
     @property
     def estimate(self) -> tuple[float, float, bool, float] | None: ...
     @property

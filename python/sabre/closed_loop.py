@@ -17,7 +17,7 @@ import numpy as np
 from ._validate import as_count, as_float_array, as_non_negative, as_positive
 from .episode import Episode, PlanRecorder, TraceChunks
 from .errors import InvalidValueError
-from .inner_loop import LowLevelController, PlanSnapshot
+from .inner_loop import LowLevelController, PlanSnapshot, follow_plant, inner_cascade
 from .planner import Controller, likelihood_weights
 from .plants import PlantInterface, as_plant
 from .scene import Scene
@@ -61,8 +61,8 @@ def run_episode(
     """Runs the controller on the plant for ``duration`` seconds of simulated time; returns the traces.
 
     The controller re-plans every 1/``replan_rate`` s (Hz, default 20) of simulated time from the
-    plant's state; in between, the inner loop (:meth:`LowLevelController.follow`) interpolates its
-    reference, filters it (variants I, IO) and tracks it with the low-level controller (53).
+    plant's state; in between, the core's cascade (the tick :class:`sabre.RealtimeCascade` and the ROS 2 bridge
+    run) interpolates its reference, filters it (variants I, IO) and tracks it with the low-level controller (53).
 
     ``record_plans`` records the nominal plan's hand path and the contacts at every re-plan (see
     :class:`Episode`); a :class:`sabre.viz.viewer.Viewer` passed as ``viewer`` shows the run live (and
@@ -151,7 +151,7 @@ class _ClosedLoop:
         self.scene, self.controller, self.plant, self.low_level = scene, controller, plant, low_level
         self.delay_steps, self.record_every, self.delay_compensation = delay_steps, record_every, delay_compensation
         self.viewer = viewer
-        self.own_floor = low_level.gain_inertia_floor
+        self.cascade = inner_cascade(low_level, controller.inner_filter, controller.tank)
         self.chunks = TraceChunks("cost", "phase")
         self.plans = PlanRecorder(scene) if record_plans else None
         self.kept_samples = controller.keep_samples
@@ -159,7 +159,7 @@ class _ClosedLoop:
             controller.keep_samples = True  # the recorder draws the heaviest sampled rollouts
         self.planning_times: list[float] = []
         self.success_time: float | None = None
-        self.running: PlanSnapshot | None = None
+        self.running: PlanSnapshot | None = None  # the plan the cascade follows until the next takes over
 
     def run(
         self,
@@ -191,8 +191,6 @@ class _ClosedLoop:
                 if stop_on_success and self.success_time is not None and plant.time >= self.success_time + settle_time:
                     break
         finally:
-            # a task's per-phase floor must not outlive the episode, even one that raised
-            self.low_level.gain_inertia_floor = self.own_floor
             self.controller.keep_samples = self.kept_samples
             if bar is not None:
                 bar.close()
@@ -210,24 +208,16 @@ class _ClosedLoop:
         return controller.snapshot()
 
     def follow(self, plan: PlanSnapshot, steps: int) -> None:
-        """``steps`` plant steps of the inner loop: the running plan for the delay, then ``plan``."""
+        """``steps`` plant steps of the cascade: the running plan for the delay, then ``plan``, which is handed
+        over to take over once the delay has passed (at once without one)."""
         delayed = min(self.delay_steps, steps)
+        at = self.plant.time + delayed * self.plant.dt if delayed else None
+        self.cascade.plan_at(self.plant.time)  # a plan handed over for now takes over before the next waits
+        self.cascade.hand_over(plan.plan, at)
         for segment, count in ((self.running or plan, delayed), (plan, steps - delayed)):
             if count == 0:
                 continue
-            floor = segment.gain_inertia_floor
-            self.low_level.gain_inertia_floor = self.own_floor if floor is None else floor
-            trace = self.low_level.follow(
-                self.plant,
-                segment.nominal,
-                segment.t0,
-                segment.dt,
-                count,
-                self.record_every,
-                safety=self.controller.inner_filter,
-                tank=self.controller.tank,
-                predicted_dissipation=segment.predicted,
-            )
+            trace = follow_plant(self.cascade, self.plant, count, self.record_every)
             self.chunks.append(trace, cost=segment.nominal_cost, phase=self.controller.task.phases.index(segment.phase))
         self.running = plan
 

@@ -2,9 +2,10 @@
 planned reference (optionally through the FILTER-QP and the energy tank), and the plan it follows as a value
 (:class:`PlanSnapshot`).
 
-:class:`sabre.Plant` is driven in Rust, a whole stretch of steps per call; any other
-:class:`~sabre.PlantInterface` is driven step by step from Python with the same tick
-(``_core.InnerLoop``), so both record the same :class:`Trace`.
+Every tick is the core's cascade (``_core.Cascade``, built by :func:`inner_cascade`): :class:`sabre.Plant`
+is driven in Rust, a whole stretch of steps per call (:func:`follow_plant`); any other
+:class:`~sabre.PlantInterface` is driven step by step from Python with the same tick, so both record the
+same :class:`Trace`.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from .safety import EnergyTank, SafetyFilter
 from .scene import Scene
 from .sim import Plant
 
-__all__ = ["LowLevelController", "Trace", "PlanSnapshot"]
+__all__ = ["LowLevelController", "Trace", "PlanSnapshot", "inner_cascade", "follow_plant"]
 
 # The core's defaults, the one source of every default below.
 _PLANT = _core.PlantConfig()
@@ -179,15 +180,9 @@ class LowLevelController:
         predicted = (
             None if predicted_dissipation is None else as_float_array("predicted_dissipation", predicted_dissipation, (None,))
         )
-        safety_core = None if safety is None else safety._core
-        tank_core = None if tank is None else tank._core
-        if isinstance(plant, Plant):
-            d = self._core.follow(plant._core, reference, t0, dt, steps, record_every, safety_core, tank_core, predicted)
-        else:
-            plan = _core.Plan(reference, t0, dt, None if predicted is None or predicted.size == 0 else predicted)
-            inner = _core.InnerLoop(self._core, safety_core, tank_core)
-            d = _follow_stepwise(inner, plan, plant, steps, record_every)
-        return _trace(d)
+        cascade = inner_cascade(self, safety, tank)
+        cascade.hand_over(_core.Plan(reference, t0, dt, None if predicted is None or predicted.size == 0 else predicted))
+        return follow_plant(cascade, plant, steps, record_every)
 
     def _check_plant(self, plant: PlantInterface) -> None:
         if not isinstance(plant, Plant):
@@ -206,7 +201,8 @@ def _vector(name: str, value: Any) -> np.ndarray:
 
 
 class _StepRecord:
-    """The rows :func:`_follow_stepwise` records, under the names of the core's trace dict."""
+    """The rows :func:`follow_plant` records stepping a plant from Python, under the names of the core's trace
+    dict."""
 
     def __init__(self, has_filter: bool, has_tank: bool) -> None:
         names = ["time", "state", "reference", "wrench", "tau_ext", "tau_ext_measured", "contact"]
@@ -244,22 +240,38 @@ class _StepRecord:
         return out
 
 
-def _follow_stepwise(inner: Any, plan: Any, plant: PlantInterface, steps: int, record_every: int) -> dict[str, Any]:
-    """``steps`` ticks of ``inner`` (a ``_core.InnerLoop``) on ``plan``, each at the plant's state, τ_ext
-    reading and time, integrating over its step, and a plant step with the torque (a torque plant) or the
-    command (a velocity plant); the trace dict of every ``record_every``-th step, as the core's follow
-    records it."""
+def inner_cascade(
+    low_level: LowLevelController,
+    safety: SafetyFilter | None = None,
+    tank: EnergyTank | None = None,
+    **tau_ext: Any,
+) -> _core.Cascade:
+    """The core's cascade of ``low_level`` with the optional FILTER-QP ``safety`` and energy ``tank`` (their
+    state shared with their holders); ``tau_ext`` are the core's τ_ext conditioning (``tau_ext_cutoff``,
+    ``tau_ext_timeout``, ``wrench_frames``). The one place a cascade is assembled."""
+    return _core.Cascade(
+        low_level._core, None if safety is None else safety._core, None if tank is None else tank._core, **tau_ext
+    )
+
+
+def follow_plant(cascade: _core.Cascade, plant: PlantInterface, steps: int, record_every: int) -> Trace:
+    """``steps`` plant steps of ``cascade`` on the plans handed to it: in one call into the core for a
+    :class:`sabre.Plant`, else one tick per step at the plant's state, τ_ext reading and time, integrating
+    over its step, and a plant step with the torque (a torque plant) or the command (a velocity plant);
+    the :class:`Trace` of every ``record_every``-th step."""
+    if isinstance(plant, Plant):
+        return _trace(cascade.follow(plant._core, steps, record_every))
     velocity = plant.command_interface == "velocity"
     dt = float(plant.dt)
-    record = _StepRecord(inner.filter is not None, inner.tank is not None)
+    record = _StepRecord(cascade.filter is not None, cascade.tank is not None)
     for step in range(steps):
         x = _vector("plant.state", plant.state)
         tau_ext = _vector("plant.measured_tau_ext", plant.measured_tau_ext)
-        reference, command, torque, energy, status = inner.tick(plan, x, tau_ext, float(plant.time), dt)
+        reference, command, torque, energy, status = cascade.tick(x, tau_ext, float(plant.time), dt)
         plant.step(command if velocity else torque)
         if step % record_every == 0:
             record.add(plant, reference, command, energy, status)
-    return record.arrays(plant.scene.nx, plant.scene.nq)
+    return _trace(record.arrays(plant.scene.nx, plant.scene.nq))
 
 
 def _trace(d: dict[str, Any]) -> Trace:

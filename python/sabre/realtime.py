@@ -1,7 +1,8 @@
 """The deployment loop of the cascade, on any clock: :class:`RealtimeCascade` plans (outer loop) and ticks
 (inner loop, Sec. IV) on the states a simulator or a robot hands it.
 
-``tick(x, tau_ext, t)`` is the inner loop: one call into the core's tick (``_core.InnerLoop``), which
+``tick(x, tau_ext, t)`` is the inner loop: one call into the core's cascade (``_core.Cascade``, the same
+tick :func:`sabre.run_episode` and the ROS 2 bridge run), which takes over the plan handed over for t,
 interpolates the plan in force at time t, runs the controller's inner FILTER-QP with the energy tank
 (variants I, IO), refills the tank from the plan's predicted dissipation, integrates it, and computes the
 low-level torque; every input is checked there, once. ``plan(x, t)`` is one planning iteration in the
@@ -26,15 +27,11 @@ import numpy as np
 from . import _core
 from ._validate import as_finite, as_float_array, as_non_negative, as_positive
 from .errors import InvalidValueError, ShapeError
-from .inner_loop import LowLevelController, PlanSnapshot
+from .inner_loop import LowLevelController, PlanSnapshot, inner_cascade
 from .planner import Controller
 from .planner_process import PlannerProcess
 
 __all__ = ["RealtimeCascade", "TickResult"]
-
-#: A plan handed over for time t_a takes over at the first tick at t ≥ t_a − this (s): simulated clocks
-#: that sum their steps land a rounding error short of t_a.
-_TAKEOVER_TOLERANCE = 1e-7
 
 
 @dataclass(frozen=True)
@@ -89,6 +86,11 @@ class RealtimeCascade:
     loop still follows the previous one, so the planner plans from the state
     :meth:`Controller.predict` expects at that moment (the planning time ahead) instead of the
     measured one.
+
+    τ_ext as a robot delivers it (:meth:`set_external_torque`, or a wrist wrench read in the core by the
+    ROS 2 bridge through ``wrench_frames``: world frame, the sensor frame of an empty header, the moment's
+    point frame or "") is low-passed at ``tau_ext_cutoff`` Hz (None: as read) and counts as none once older
+    than ``tau_ext_timeout`` s (None: never); :meth:`tick`'s own τ_ext is taken as read at its time.
     """
 
     def __init__(
@@ -102,6 +104,9 @@ class RealtimeCascade:
         planner_nice: int = 10,
         planner_idle: bool = False,
         delay_compensation: bool = True,
+        tau_ext_cutoff: float | None = None,
+        tau_ext_timeout: float | None = None,
+        wrench_frames: tuple[str, str, str] | None = None,
     ) -> None:
         if not isinstance(controller, Controller):
             raise TypeError(f"controller must be a sabre.Controller, got {type(controller).__name__}")
@@ -121,22 +126,26 @@ class RealtimeCascade:
         self._planner_idle = bool(planner_idle)
         self.delay_compensation = bool(delay_compensation)
         self._low = low_level if low_level is not None else LowLevelController(scene, dt=self.inner_dt)
-        inner_filter = controller.inner_filter
-        self._inner = _core.InnerLoop(
-            self._low._core, None if inner_filter is None else inner_filter._core, controller.tank._core
+        self._cascade = inner_cascade(
+            self._low,
+            controller.inner_filter,
+            controller.tank,
+            tau_ext_cutoff=tau_ext_cutoff,
+            tau_ext_timeout=tau_ext_timeout,
+            wrench_frames=wrench_frames,
         )
         self._delay = 0.0  # the last wall-clock planning's time from reading a state to handing its plan over
         self._process: PlannerProcess | None = None
         self._obstacle_log: list[tuple[str, tuple[object, ...]]] = []  # replayed in each planner process
-        # Each a single reference, swapped whole: the planner thread and the tick never see half of one.
+        # A single reference, swapped whole: the planner thread and the tick never see half of one.
         self._latest: tuple[np.ndarray, float] | None = None
-        self._plan: PlanSnapshot | None = None
-        self._pending: tuple[PlanSnapshot, float] | None = None  # a plan handed over for a later time
+        # The snapshots of the plans the core's cascade holds (in force, waiting), by the number it gave them.
+        self._snapshots: dict[int, PlanSnapshot] = {}
+        self._lock = threading.Lock()  # the cascade's plans: the planner thread hands over, the tick takes over
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._error: BaseException | None = None
         self._stopped = False
-        self.ticks = 0
 
     # Outer loop -----------------------------------------------------------------------------
     def reset(self, seed: int | None = None, t0: float = 0.0) -> None:
@@ -145,8 +154,8 @@ class RealtimeCascade:
         measured planning time: a simulated run after reset repeats exactly. Refused while the planner runs."""
         self._refuse_while_planning("reset()")
         self.controller.reset(seed, as_finite("t0", t0))
-        self._low.reset()
-        self._plan, self._pending, self._latest = None, None, None
+        self._cascade.reset()
+        self._snapshots, self._latest = {}, None
         self._delay = 0.0
         self._stopped = False
 
@@ -170,12 +179,12 @@ class RealtimeCascade:
         self._latest = (x, t)
         if delay is None:
             snapshot = self._plan_now(x, t)
-            self.hand_over(snapshot)
+            self._put(snapshot)
         else:
             delay = as_non_negative("delay", delay)
             self._plan_at(t)  # a plan handed over for t or earlier is in force by now
             snapshot = self._make_plan(x, t, delay if self.delay_compensation else 0.0)
-            self.hand_over(snapshot, at=t + delay if delay > 0.0 else None)
+            self._put(snapshot, t + delay if delay > 0.0 else None)
         return snapshot
 
     def hand_over(self, snapshot: PlanSnapshot, at: float | None = None) -> None:
@@ -186,11 +195,25 @@ class RealtimeCascade:
         if not isinstance(snapshot, PlanSnapshot):
             raise TypeError(f"snapshot must be a sabre.PlanSnapshot, got {type(snapshot).__name__}")
         self._refuse_while_planning("hand_over()")
-        if at is None or self._plan is None:
-            self._plan, self._pending = snapshot, None
-        else:
-            self._pending = (snapshot, as_finite("at", at))
+        self._put(snapshot, None if at is None else as_finite("at", at))
+
+    def _put(self, snapshot: PlanSnapshot, at: float | None = None) -> None:
+        """Hands ``snapshot`` to the core's cascade (see :meth:`hand_over`) and keeps it while the cascade
+        holds its plan."""
+        with self._lock:
+            serial = self._cascade.hand_over(snapshot.plan, at)
+            self._snapshots[serial] = snapshot
+            pending = self._cascade.pending
+            held = {self._cascade.in_force, None if pending is None else pending[0]}
+            for old in [k for k in self._snapshots if k not in held]:
+                del self._snapshots[old]
         self._stopped = False
+
+    @property
+    def _plan(self) -> PlanSnapshot | None:
+        """The snapshot of the plan in force (None before the first)."""
+        with self._lock:
+            return self._snapshots.get(self._cascade.in_force or 0)
 
     def _refuse_while_planning(self, what: str) -> None:
         if self._thread is not None or self._process is not None:
@@ -225,7 +248,7 @@ class RealtimeCascade:
         if self._factory is not None:
             self._start_process(self._factory, x0, t0, wait)
             return self
-        self._plan = self._plan_now(x0, t0)
+        self._put(self._plan_now(x0, t0))
         self._stop.clear()
         self._error = None
         self._thread = threading.Thread(target=self._run, name="sabre-outer-loop", daemon=True)
@@ -250,7 +273,7 @@ class RealtimeCascade:
         try:
             first = self._process.start(x0, t0, wait=wait)
             if first is not None:
-                self._plan = first
+                self._put(first)
         except BaseException:
             self._process.stop()
             self._process = None
@@ -262,7 +285,7 @@ class RealtimeCascade:
                 started = time.perf_counter()
                 latest = self._latest
                 assert latest is not None, "start() stores the first state before the thread starts"
-                self._plan = self._plan_now(*latest)
+                self._put(self._plan_now(*latest))
                 rest = self.min_replan_period - (time.perf_counter() - started)
                 if rest > 0:
                     self._stop.wait(rest)
@@ -366,19 +389,20 @@ class RealtimeCascade:
     def reference(self, t: float) -> np.ndarray:
         """(nu,) the reference a tick at time t would follow: the plan in force at t, linearly
         interpolated (held at its ends)."""
-        plan, pending = self._plan, self._pending
-        if pending is not None and t >= pending[1] - _TAKEOVER_TOLERANCE:
-            plan = pending[0]
+        with self._lock:
+            pending = self._cascade.pending
+            serial = self._cascade.in_force
+            if pending is not None and t >= pending[1] - _core.TAKEOVER_TOLERANCE:
+                serial = pending[0]
+            plan = self._snapshots.get(serial or 0)
         if plan is None:
             raise InvalidValueError("no plan yet: call plan() or start() first (and, with wait=False, wait until ready)")
         return plan.reference(t)
 
     def _plan_at(self, t: float) -> PlanSnapshot | None:
         """The plan in force at time t, after a plan handed over for t or earlier takes over."""
-        pending = self._pending
-        if pending is not None and t >= pending[1] - _TAKEOVER_TOLERANCE:
-            self._plan, self._pending = pending[0], None
-        return self._plan
+        with self._lock:
+            return self._snapshots.get(self._cascade.plan_at(t) or 0)
 
     def observe(self, x: Sequence[float] | np.ndarray, t: float) -> None:
         """Hands the planner the newest measured state x (nx,) at time t without ticking (a caller
@@ -398,7 +422,7 @@ class RealtimeCascade:
         thread may :meth:`stop` the cascade meanwhile."""
         snapshot = process.snapshot()
         if snapshot is not None and snapshot is not self._plan:
-            self._plan = snapshot
+            self._put(snapshot)
 
     @property
     def plan_start(self) -> float | None:
@@ -415,16 +439,10 @@ class RealtimeCascade:
         if self._stopped:
             raise InvalidValueError("the cascade was stopped: its plan is frozen; start() it again")
 
-    @property
-    def inner_loop(self) -> _core.InnerLoop:
-        """The core's inner loop :meth:`tick` runs: a caller that ticks in the core itself (the ROS
-        bridge's ``_core.BridgeTick``) runs it on :meth:`plan_for`'s plan and reports the state with
-        :meth:`note_tick`."""
-        return self._inner
-
-    def plan_for(self, t: float) -> PlanSnapshot | None:
-        """The plan in force at time t (s) for a tick the caller runs on :attr:`inner_loop` (None
-        before the first plan), taking over a newer plan of the planner process first.
+    def poll(self) -> None:
+        """Takes over a newer plan of the planner process, for a caller that ticks the cascade in the core
+        itself (the ROS 2 bridge's ``_core.BridgeTick``, built on :attr:`core`), which then hands the state
+        it answered to :meth:`observe`.
 
         Raises:
             InvalidValueError: a stopped cascade. PlannerError: the planner process failed.
@@ -433,16 +451,22 @@ class RealtimeCascade:
         process = self._process
         if process is not None:
             self._take_newer_plan(process)
-        return self._plan_at(t)
 
-    def note_tick(self, x: np.ndarray, t: float) -> None:
-        """The state x (nx,) a tick on :attr:`inner_loop` answered at time t: the planner's next
-        starting point, as after :meth:`tick`."""
-        self._latest = (x, t)
-        process = self._process
-        if process is not None:
-            process.share_state(x, t)
-        self.ticks += 1
+    @property
+    def core(self) -> _core.Cascade:
+        """The core's cascade the plans are handed to and :meth:`tick` runs; a tick in Rust (the ROS 2
+        bridge's) is built on it, so that the bridge and this loop follow the same plan in force."""
+        return self._cascade
+
+    @property
+    def ticks(self) -> int:
+        """The cascade's ticks since the last reset (also the ones a tick in Rust ran on :attr:`core`)."""
+        return int(self._cascade.ticks)
+
+    def set_external_torque(self, tau_ext: Sequence[float] | np.ndarray, force: float, received: float) -> None:
+        """The newest τ_ext (nq,) a robot delivered and the wrist force's magnitude (N; inf: torques only, contact
+        assumed), arrived at ``received`` (s, the ticks' clock): the ticks of a tick in Rust read it, conditioned."""
+        self._cascade.set_external_torque(_vector("tau_ext", tau_ext, copy=False), float(force), float(received))
 
     def tick(
         self, x: Sequence[float] | np.ndarray, tau_ext: Sequence[float] | np.ndarray, t: float, dt: float | None = None
@@ -471,14 +495,12 @@ class RealtimeCascade:
         process = self._process
         if process is not None:
             self._take_newer_plan(process)
-        plan = self._plan_at(t)
-        if plan is None:
+        if self._cascade.in_force is None:
             raise InvalidValueError("no plan yet: call plan() or start() first (and, with wait=False, wait until ready)")
-        reference, command, torque, energy, status = self._inner.tick(plan.plan, x, tau_ext, t, step)
+        reference, command, torque, energy, status = self._cascade.tick(x, tau_ext, t, step)
         self._latest = (x, t)
         if process is not None:
             process.share_state(x, t)
-        self.ticks += 1
         return TickResult(
             reference=reference,
             command=command,

@@ -7,4 +7,3 @@ pub mod rcl;
 pub mod reflexes;
 pub mod sim_driver;
 pub mod tick;
-pub mod wrench;

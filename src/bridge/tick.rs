@@ -1,11 +1,11 @@
 //! The bridge's tick: one arm joint state in, as rmw delivers it serialized, and one command out,
 //! serialized for the arm's and the base's command topics. Between them: the joint states merged
-//! by name, the object's state (the estimator from the hand pose, or the newest on its topic), τ_ext
-//! low-passed, the inner loop's command (the caller runs it: [`BridgeTick::state`] and
-//! [`BridgeTick::follow`] frame that call), and the rate-limited command gate.
+//! by name, the object's state (the estimator from the hand pose, or the newest on its topic), the
+//! cascade's tick ([`Cascade::tick`], which conditions τ_ext) on the step between two states' stamps,
+//! and the rate-limited command gate.
 
 use crate::bridge::messages::{self, Stamp};
-use crate::bridge::wrench::WrenchFrames;
+use crate::control::cascade::Cascade;
 use crate::control::command_stream::{Command, CommandGate};
 use crate::control::joint_merge::JointMerge;
 use crate::control::object_estimate::{ObjectEstimate, ObjectStateEstimator};
@@ -20,10 +20,6 @@ pub struct BridgeLayout {
     pub base_index: Option<[usize; 3]>,
     /// The longest step (s) the tank integrates over between two states.
     pub max_tick_dt: f64,
-    /// τ_ext older than this (s) counts as none.
-    pub wrench_timeout: f64,
-    /// The low-pass on τ_ext (Hz; None: none).
-    pub tau_cutoff: Option<f64>,
     /// The base command as TwistStamped in `cmd_vel_frame` (else Twist).
     pub cmd_vel_stamped: bool,
     pub cmd_vel_frame: String,
@@ -52,15 +48,24 @@ pub struct Answer {
     pub echo: Option<Vec<u8>>,
 }
 
-/// Counts the controller reports.
+/// Counts the controller reports (τ_ext's are the cascade's: [`crate::control::ExternalTorque`]).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct BridgeCounts {
     pub ticks: u64,
     pub answered: u64,
     pub followed: u64,
     pub rejected: u64,
-    pub wrench_stale: u64,
-    pub wrench_received: u64,
+}
+
+/// How [`BridgeTick::follow`] answered a state.
+#[derive(Debug, Clone)]
+pub enum Followed {
+    /// The cascade's command, shaped and serialized.
+    Answered(Answer),
+    /// No plan yet: nothing was sent (the caller ramps).
+    NoPlan,
+    /// The plan in force is older than its horizon: nothing was sent (the caller ramps).
+    StalePlan,
 }
 
 /// The 1 kHz path's state between two joint states (see the module).
@@ -70,14 +75,8 @@ pub struct BridgeTick {
     joints: JointMerge,
     gate: CommandGate,
     estimator: Option<ObjectStateEstimator>,
-    wrench_frames: Option<WrenchFrames>,
     nq: usize,
     object: (Vec<f64>, Vec<f64>),
-    tau_raw: Vec<f64>,
-    tau_received: f64,
-    force: f64,
-    tau: Vec<f64>,
-    tau_started: bool,
     last_stamp: Option<f64>,
     origin: Option<f64>,
     last_t: Option<f64>,
@@ -91,14 +90,12 @@ pub struct BridgeTick {
 
 impl BridgeTick {
     /// A tick on `joints` (sabre's joints by the robot's names, the arm's driving the ticks) with
-    /// `gate`, the object from `estimator` or, without one, `object` (o, ȯ) until [`Self::set_object`],
-    /// and wrist wrenches read through `wrench_frames` ([`Self::set_wrench`]).
+    /// `gate`, and the object from `estimator` or, without one, `object` (o, ȯ) until [`Self::set_object`].
     pub fn new(
         layout: BridgeLayout,
         joints: JointMerge,
         gate: CommandGate,
         estimator: Option<ObjectStateEstimator>,
-        wrench_frames: Option<WrenchFrames>,
         object: (Vec<f64>, Vec<f64>),
     ) -> Result<Self> {
         let nq = joints.names().len();
@@ -126,14 +123,8 @@ impl BridgeTick {
             joints,
             gate,
             estimator,
-            wrench_frames,
             nq,
             object,
-            tau_raw: vec![0.0; nq],
-            tau_received: f64::NEG_INFINITY,
-            force: 0.0,
-            tau: vec![0.0; nq],
-            tau_started: false,
             last_stamp: None,
             origin: None,
             last_t: None,
@@ -195,15 +186,16 @@ impl BridgeTick {
     }
 
     /// The measured state x = (q, q̇, o, ȯ) at time `t` of the newest state: the object's from the
-    /// estimator (hooking only when `may_hook`) or the newest from its topic.
-    pub fn state(&mut self, t: f64, may_hook: bool) -> Result<&[f64]> {
+    /// estimator (hooking only when `may_hook`, with the wrist force's magnitude `force` in N;
+    /// infinity: torques only, contact assumed) or the newest from its topic.
+    pub fn state(&mut self, t: f64, may_hook: bool, force: f64) -> Result<&[f64]> {
         let nq = self.nq;
         let (q, qd) = (self.joints.position(), self.joints.velocity());
         self.x[..nq].copy_from_slice(q);
         self.x[nq..2 * nq].copy_from_slice(qd);
         let no = self.object.0.len();
         if let Some(estimator) = self.estimator.as_mut() {
-            let force = if self.force.is_finite() { self.force } else { f64::INFINITY };
+            let force = if force.is_finite() { force } else { f64::INFINITY };
             let e = estimator.update(q, t, force, may_hook)?;
             self.object.0[0] = e.position;
             self.object.1[0] = e.velocity;
@@ -214,41 +206,26 @@ impl BridgeTick {
         Ok(&self.x)
     }
 
+    /// The newest measured state (nx), as the last [`Self::state`] left it.
+    pub fn x(&self) -> &[f64] {
+        &self.x
+    }
+
     /// The estimator's newest estimate (None without an estimator or before the first state).
     pub fn estimate(&self) -> Option<&ObjectEstimate> {
         self.estimate.as_ref()
     }
 
     /// The step (s) to integrate over to time `t` from the previous state (capped at `max_tick_dt`;
-    /// one command period for the first), and τ_ext low-passed
-    /// over it: the newest wrench's or torques' while fresh at `received`, else zero.
-    pub fn external_torque(&mut self, t: f64, received: f64) -> (f64, &[f64]) {
+    /// one command period for the first).
+    fn step_to(&mut self, t: f64) -> f64 {
         let dt = match self.last_t {
             Some(last) => (t - last).min(self.layout.max_tick_dt),
             // the first state the inner loop sees: one command period
             None => self.gate.period(),
         };
         self.last_t = Some(t);
-        let fresh = received - self.tau_received <= self.layout.wrench_timeout;
-        if !fresh {
-            self.counts.wrench_stale += 1;
-        }
-        let raw: &[f64] = &self.tau_raw;
-        match (self.layout.tau_cutoff, self.tau_started) {
-            (Some(cutoff), true) => {
-                let a = 1.0 - (-2.0 * std::f64::consts::PI * cutoff * dt.max(0.0)).exp();
-                for (v, &r) in self.tau.iter_mut().zip(raw) {
-                    *v += a * ((if fresh { r } else { 0.0 }) - *v);
-                }
-            }
-            _ => {
-                for (v, &r) in self.tau.iter_mut().zip(raw) {
-                    *v = if fresh { r } else { 0.0 };
-                }
-                self.tau_started = true;
-            }
-        }
-        (dt, &self.tau)
+        dt
     }
 
     /// Notes that a state was observed without ticking the inner loop (the tank's step starts there).
@@ -256,11 +233,34 @@ impl BridgeTick {
         self.last_t = Some(t);
     }
 
-    /// The command answering the newest state from the inner loop's `command` (nq, in sabre's
-    /// joints; the base's in world rates, turned into the base frame here).
-    pub fn follow(&mut self, received: f64, command: &[f64]) -> Result<Answer> {
-        ensure_len("command", command, self.nq)?;
-        ensure_finite("command", command)?;
+    /// Answers the newest state, at its time `t` (received at `received`, s monotonic), with the
+    /// cascade's plan in force: the state (see [`Self::state`]), the cascade's tick over the step
+    /// since the previous state, and the gate's step toward its command (nq, in sabre's joints; the
+    /// base's in world rates, turned into the base frame here). Without a plan, or with one older
+    /// than `max_plan_age` s at t, only the state is taken and nothing is sent.
+    pub fn follow(
+        &mut self,
+        cascade: &mut Cascade,
+        t: f64,
+        received: f64,
+        may_hook: bool,
+        max_plan_age: f64,
+    ) -> Result<Followed> {
+        self.state(t, may_hook, cascade.tau_ext().force())?;
+        let age = cascade.plan_at(t).map(|plan| t - plan.t0());
+        match age {
+            None => {
+                self.skip(t);
+                return Ok(Followed::NoPlan);
+            }
+            Some(age) if age > max_plan_age => {
+                self.skip(t);
+                return Ok(Followed::StalePlan);
+            }
+            Some(_) => {}
+        }
+        let dt = self.step_to(t);
+        let command = &cascade.tick(&self.x, t, dt, received)?.command;
         for (target, &i) in self.arm_target.iter_mut().zip(&self.layout.arm_index) {
             *target = command[i];
         }
@@ -275,7 +275,7 @@ impl BridgeTick {
         let base_target = self.layout.base_index.map(|_| self.base_target.as_slice());
         let out = self.gate.on_tick(received, Some(&self.arm_target), base_target)?.clone();
         self.counts.followed += 1;
-        self.answer(&out, Some(self.stamp))
+        self.answer(&out, Some(self.stamp)).map(Followed::Answered)
     }
 
     /// A step of the ramp to zero answering the newest state (or a rejected one).
@@ -339,33 +339,14 @@ impl BridgeTick {
         self.joints.set(indices, position, velocity, received)
     }
 
-    /// The newest τ_ext (nq) and the wrist force's magnitude (N; infinity: torques only, contact
-    /// assumed), arrived at `received`.
-    pub fn set_external_torque(&mut self, tau: &[f64], force: f64, received: f64) -> Result<()> {
-        ensure_len("tau_ext", tau, self.nq)?;
-        ensure_finite("tau_ext", tau)?;
-        if force.is_nan() || force < 0.0 {
-            return Err(SabreError::invalid("force", format!("must be a magnitude ≥ 0, got {force}")));
-        }
-        self.tau_raw.copy_from_slice(tau);
-        self.force = force;
-        self.tau_received = received;
-        self.counts.wrench_received += 1;
-        Ok(())
-    }
-
-    /// A serialized wrist wrench (geometry_msgs/WrenchStamped) that arrived at `received`: τ_ext
-    /// at the newest joint positions, in the frame its header names. Errors: no wrench frames, a
-    /// malformed message, non-finite values, an unknown frame; nothing changes then.
-    pub fn set_wrench(&mut self, raw: &[u8], received: f64) -> Result<()> {
-        let frames = self
-            .wrench_frames
-            .as_ref()
-            .ok_or_else(|| SabreError::invalid("wrench", "this tick reads no wrench (built without wrench frames)"))?;
+    /// A serialized wrist wrench (geometry_msgs/WrenchStamped) that arrived at `received`: handed to
+    /// the cascade's τ_ext ([`crate::control::ExternalTorque::set_wrench`]) at the newest joint
+    /// positions. Errors: a malformed message, or the cascade's; nothing changes then.
+    pub fn set_wrench(&self, cascade: &mut Cascade, raw: &[u8], received: f64) -> Result<()> {
         let message = messages::decode_wrench(raw)?;
-        let tau = frames.tau_ext(self.joints.position(), &message.wrench, &message.frame_id)?;
-        let w = message.wrench;
-        self.set_external_torque(&tau, (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt(), received)
+        cascade
+            .tau_ext_mut()
+            .set_wrench(self.joints.position(), &message.wrench, &message.frame_id, received)
     }
 
     /// The object's state from its topic.
@@ -384,10 +365,6 @@ impl BridgeTick {
     }
     pub fn gate(&self) -> &CommandGate {
         &self.gate
-    }
-    /// The newest τ_ext as received (before the low-pass).
-    pub fn tau_ext(&self) -> &[f64] {
-        &self.tau_raw
     }
     pub fn counts(&self) -> &BridgeCounts {
         &self.counts

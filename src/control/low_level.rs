@@ -1,15 +1,13 @@
-//! Low-level joint velocity controller (53), and the inner loop driving the plant with it (one
-//! [`InnerLoop::tick`] per plant step).
+//! The low-level joint velocity controller (53): the torques that make the robot track a velocity
+//! command, with gains scaled by the robot's inertia and a floor for its light joints.
 
 use std::sync::Arc;
 
 use nalgebra::{DMatrix, DVector, Isometry3};
 
-use super::inner_loop::{InnerLoop, Plan, TickOutput};
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
 use crate::model::dynamics::{joint_space_terms, DynamicsWorkspace};
 use crate::model::scene::Scene;
-use crate::safety::{EnergyTank, FilterStatus, SafetyFilter};
 
 /// Gains of the velocity controller.
 #[derive(Debug, Clone, PartialEq)]
@@ -253,125 +251,4 @@ impl LowLevelController {
         }
         Ok(())
     }
-}
-
-/// Samples recorded while the plant follows a reference (one row per recorded plant step).
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct TrackTrace {
-    pub time: Vec<f64>,
-    /// nx per row.
-    pub state: Vec<f64>,
-    /// nq per row: the interpolated velocity reference of that step.
-    pub reference: Vec<f64>,
-    /// 6 per row.
-    pub wrench: Vec<f64>,
-    /// nq per row: the simulator's contact τ_ext of the step.
-    pub tau_ext: Vec<f64>,
-    /// nq per row: the plant's τ_ext measurement after the step (`Plant::measured_tau_ext`).
-    pub tau_ext_measured: Vec<f64>,
-    pub contact: Vec<bool>,
-    /// With a filter only (else empty): nq per row, the filtered command that the low-level
-    /// controller tracked in that step.
-    pub filtered: Vec<f64>,
-    /// With a tank only: tank energy after the step.
-    pub tank_energy: Vec<f64>,
-    /// With a filter only: the filter's status in that step.
-    pub filter_status: Vec<FilterStatus>,
-}
-
-/// The optional safety stage of the inner loop: FILTER-QP at every plant step and, with a tank,
-/// its passivity row fed by the plant's measured τ_ext and the tank's energy. A tank without a
-/// filter only keeps the books (the unfiltered Π_N baseline's energy).
-///
-/// The tank is integrated with the same measurement the passivity row saw and the command the
-/// filter returned, S ← S + dt τ̂_kᵀ u_k, as a controller on a real robot must (it cannot know
-/// the next reading). Then a row met without slack gives S_{k+1} − ε ≥ (1 − α dt)(S_k − ε): the
-/// floor holds by construction in discrete time, and any dip below it is slack the filter used.
-///
-/// With `predicted_dissipation` (K values on the reference's time grid: the port power −τ_extᵀu
-/// the rollout model predicts along the plan) a tank with a refill configured is refilled each
-/// step while the measured −τ̂ᵀu of the step's reference agrees with it (see
-/// [`crate::safety::RefillConfig`]).
-#[derive(Default)]
-pub struct InnerSafety<'a> {
-    pub filter: Option<&'a mut SafetyFilter>,
-    pub tank: Option<&'a mut EnergyTank>,
-    pub predicted_dissipation: Option<&'a [f64]>,
-}
-
-/// The inner loop (the paper's, Sec. IV) driving the plant: for `steps` plant steps, one
-/// [`InnerLoop::tick`] of the plan (the reference sequence K × nq starting at `t0`, steps of
-/// `dt`, with the stage's predicted dissipation) at the plant's state, its current τ_ext
-/// measurement and time, integrating over the plant's step, then the plant step with the tick's
-/// torques; records every `record_every`-th step into `trace`. A filter fallback (u = 0) is
-/// tracked like any other command and recorded.
-#[allow(clippy::too_many_arguments)]
-pub fn follow_reference_safe(
-    plant: &mut crate::sim::Plant,
-    controller: &mut LowLevelController,
-    reference: &[f64],
-    t0: f64,
-    dt: f64,
-    steps: usize,
-    record_every: usize,
-    trace: &mut TrackTrace,
-    safety: Option<InnerSafety<'_>>,
-) -> Result<()> {
-    let nq = plant.scene().nq();
-    let InnerSafety {
-        filter,
-        tank,
-        predicted_dissipation,
-    } = safety.unwrap_or_default();
-    let mut plan = Plan::new(reference.to_vec(), nq, t0, dt)?;
-    if let Some(predicted) = predicted_dissipation.filter(|p| !p.is_empty()) {
-        plan = plan.with_predicted_dissipation(predicted.to_vec())?;
-    }
-    if let Some(f) = &filter {
-        if f.scene().nq() != nq || f.scene().nx() != plant.scene().nx() {
-            return Err(SabreError::invalid(
-                "safety filter",
-                "was built for a different scene than the plant's",
-            ));
-        }
-    }
-    let (has_filter, has_tank) = (filter.is_some(), tank.is_some());
-    let plant_dt = plant.dt();
-    controller.check_stable(
-        plan.gain_inertia_floor().unwrap_or(controller.config().gain_inertia_floor),
-        plant_dt,
-    )?;
-    let mut inner = InnerLoop::new(controller, filter, tank)?;
-    let mut out = TickOutput::new(nq, nq);
-    let mut poll = crate::interrupt::Poll::new();
-    for step in 0..steps {
-        poll.check()?;
-        inner.tick(
-            &plan,
-            plant.state(),
-            plant.measured_tau_ext(),
-            plant.time(),
-            plant_dt,
-            &mut out,
-        )?;
-        plant.step(&out.torque)?;
-        if record_every > 0 && step % record_every == 0 {
-            trace.time.push(plant.time());
-            trace.state.extend_from_slice(plant.state());
-            trace.reference.extend_from_slice(&out.reference);
-            let i = plant.interaction();
-            trace.wrench.extend_from_slice(&i.wrench);
-            trace.tau_ext.extend_from_slice(&i.tau_ext);
-            trace.tau_ext_measured.extend_from_slice(plant.measured_tau_ext());
-            trace.contact.push(i.contact);
-            if has_filter {
-                trace.filtered.extend_from_slice(&out.command);
-                trace.filter_status.push(out.status.unwrap_or_default());
-            }
-            if has_tank {
-                trace.tank_energy.push(out.tank_energy.unwrap_or(f64::NAN));
-            }
-        }
-    }
-    Ok(())
 }

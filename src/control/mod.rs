@@ -1,13 +1,17 @@
-//! The control cascade's inner loop: the low-level joint velocity controller that drives the plant, with an optional safety stage,
-//! and the rate limiter that shapes velocity commands for a robot's command interface.
+//! The control cascade's inner loop ([`Cascade`]: the plan in force, τ_ext conditioning, the safety stage
+//! and the low-level joint velocity controller), and the command shaping for a robot's command interface.
 
+pub mod cascade;
 pub mod command_stream;
-pub mod inner_loop;
 pub mod joint_merge;
 pub mod low_level;
 pub mod object_estimate;
+pub mod plan;
 pub mod rate_limit;
+pub mod tau_ext;
 
-pub use inner_loop::{InnerLoop, Plan, TickOutput};
-pub use low_level::{follow_reference_safe, InnerSafety, LowLevelConfig, LowLevelController, TrackTrace};
+pub use cascade::{Cascade, Shared, TickOutput, TrackTrace};
+pub use low_level::{LowLevelConfig, LowLevelController};
+pub use plan::Plan;
 pub use rate_limit::RateLimiter;
+pub use tau_ext::{ExternalTorque, WrenchFrames};

@@ -362,7 +362,7 @@ impl ObjectStateEstimator {
         let filtered = match self.filtered_rate {
             None => raw,
             Some(previous) => {
-                let gain = 1.0 - (-2.0 * std::f64::consts::PI * self.config.rate_cutoff * dt).exp();
+                let gain = crate::low_pass::blend(self.config.rate_cutoff, dt);
                 previous + gain * (raw - previous)
             }
         };

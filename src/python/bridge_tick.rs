@@ -1,5 +1,5 @@
 //! Binding of the bridge's tick (`_core.BridgeTick`): a ROS node's 1 kHz callback hands it the
-//! serialized joint state and publishes the serialized commands it returns, with the inner loop
+//! serialized joint state and publishes the serialized commands it returns, with the cascade's tick
 //! run inside the same call.
 
 use std::sync::Mutex;
@@ -9,20 +9,27 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 
 use super::bridge::{PyCommandGate, PyJointMerge};
-use super::control::{PyInnerLoop, PyPlan};
+use super::cascade::PyCascade;
 use super::convert::{lock, view};
 use super::error::run;
 use super::estimation::PyObjectStateEstimator;
 use super::messages::stamp_of;
 use super::scene::PyScene;
-use crate::bridge::tick::{Answer, BridgeLayout, BridgeTick, Received};
-use crate::bridge::wrench::WrenchFrames;
+use crate::bridge::tick::{Answer, BridgeLayout, BridgeTick, Followed, Received};
+use crate::control::{Cascade, Shared, WrenchFrames};
 
 /// (arm command, base command or None, command echo or None) as bytes to publish.
 type Step<'py> = (Bound<'py, PyBytes>, Option<Bound<'py, PyBytes>>, Option<Bound<'py, PyBytes>>);
 
-/// What `follow` returns: the step, x (nx,), the tank's energy (None without a tank), the filter's status.
-type Followed<'py> = (Step<'py>, Bound<'py, PyArray1<f64>>, Option<f64>, &'static str);
+/// What `follow` returns: why nothing was sent ("planning", "plan stale") or None, the step sent (None
+/// then), x (nx,), the tank's energy (None without a tank), the filter's status.
+type Answered<'py> = (
+    Option<&'static str>,
+    Option<Step<'py>>,
+    Bound<'py, PyArray1<f64>>,
+    Option<f64>,
+    &'static str,
+);
 
 fn step<'py>(py: Python<'py>, answer: &Answer) -> Step<'py> {
     let bytes = |b: &Option<Vec<u8>>| b.as_ref().map(|b| PyBytes::new(py, b));
@@ -30,20 +37,22 @@ fn step<'py>(py: Python<'py>, answer: &Answer) -> Step<'py> {
 }
 
 /// The controller node's 1 kHz path (see `sabre.ros.controller_loop`): joint states merged by
-/// name, the object's state, τ_ext, the inner loop and the rate-limited command gate, on serialized
-/// messages. Takes copies of the merge, gate and estimator it is built from.
+/// name, the object's state, the cascade's tick (which conditions τ_ext) and the rate-limited
+/// command gate, on serialized messages. Takes copies of the merge, gate and estimator it is built
+/// from, and shares the cascade (`_core.Cascade`) its deployment loop hands the plans to.
 #[pyclass(name = "BridgeTick", module = "sabre._core", frozen)]
 pub struct PyBridgeTick {
     inner: Mutex<BridgeTick>,
+    cascade: Shared<Cascade>,
 }
 
 #[pymethods]
 impl PyBridgeTick {
     #[new]
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (scene, joints, gate, estimator, object_position, object_velocity, arm_index, base_index, max_tick_dt, wrench_timeout, tau_cutoff, cmd_vel_stamped, cmd_vel_frame, echo_names=None, wrench_frames=None))]
+    #[pyo3(signature = (cascade, joints, gate, estimator, object_position, object_velocity, arm_index, base_index, max_tick_dt, cmd_vel_stamped, cmd_vel_frame, echo_names=None))]
     fn new(
-        scene: &PyScene,
+        cascade: &PyCascade,
         joints: &PyJointMerge,
         gate: &PyCommandGate,
         estimator: Option<&PyObjectStateEstimator>,
@@ -52,37 +61,31 @@ impl PyBridgeTick {
         arm_index: Vec<usize>,
         base_index: Option<[usize; 3]>,
         max_tick_dt: f64,
-        wrench_timeout: f64,
-        tau_cutoff: Option<f64>,
         cmd_vel_stamped: bool,
         cmd_vel_frame: String,
         echo_names: Option<Vec<String>>,
-        wrench_frames: Option<(String, String, String)>,
     ) -> PyResult<Self> {
         let layout = BridgeLayout {
             arm_index,
             base_index,
             max_tick_dt,
-            wrench_timeout,
-            tau_cutoff: tau_cutoff.filter(|c| *c > 0.0),
             cmd_vel_stamped,
             cmd_vel_frame,
             echo_names,
         };
         let tick = run(|| {
-            let frames = wrench_frames
-                .map(|(world, default, point)| WrenchFrames::new(scene.inner.clone(), &world, &default, &point))
-                .transpose()?;
             BridgeTick::new(
                 layout,
                 joints.merge(),
                 gate.gate(),
                 estimator.map(PyObjectStateEstimator::inner),
-                frames,
                 (object_position, object_velocity),
             )
         })?;
-        Ok(Self { inner: Mutex::new(tick) })
+        Ok(Self {
+            inner: Mutex::new(tick),
+            cascade: cascade.inner.clone(),
+        })
     }
 
     /// Reads and merges a serialized joint state that arrived at `received` (s, monotonic):
@@ -101,36 +104,33 @@ impl PyBridgeTick {
         }
     }
 
-    /// Follows `plan` at the newest state's time `t`: the state (the estimator hooking only when
-    /// `may_hook`), τ_ext, one tick of `inner_loop`, and the gate's step toward its command.
-    /// Returns ((arm, base or None, echo or None) bytes, x (nx,), tank energy or None, filter status).
-    fn follow<'py>(
-        &self,
-        py: Python<'py>,
-        inner_loop: &PyInnerLoop,
-        plan: &PyPlan,
-        t: f64,
-        received: f64,
-        may_hook: bool,
-    ) -> PyResult<Followed<'py>> {
+    /// Answers the newest state at its time `t` with the cascade's plan in force (the estimator
+    /// hooking only when `may_hook`): the state, the cascade's tick and the gate's step. Without a
+    /// plan, or with one older than `max_plan_age` s, nothing is sent. Returns (why nothing was sent
+    /// ("planning", "plan stale") or None, (arm, base or None, echo or None) bytes or None, x (nx,),
+    /// tank energy or None, filter status).
+    fn follow<'py>(&self, py: Python<'py>, t: f64, received: f64, may_hook: bool, max_plan_age: f64) -> PyResult<Answered<'py>> {
+        // Always the bridge's tick, then the cascade: one lock order for every call.
         let mut tick = lock(&self.inner);
-        let x = run(|| tick.state(t, may_hook).map(<[f64]>::to_vec))?;
-        let (dt, tau) = {
-            let (dt, tau) = tick.external_torque(t, received);
-            (dt, tau.to_vec())
-        };
-        let (command, energy, status) = inner_loop.tick_slices(py, plan, &x, &tau, t, dt, |out| {
-            (out.command.clone(), out.tank_energy, out.status_name())
-        })?;
-        let answer = run(|| tick.follow(received, &command))?;
-        Ok((step(py, &answer), PyArray1::from_vec(py, x), energy, status))
+        let mut cascade = lock(&self.cascade);
+        let followed = run(|| tick.follow(&mut cascade, t, received, may_hook, max_plan_age))?;
+        let x = PyArray1::from_slice(py, tick.x());
+        Ok(match followed {
+            Followed::Answered(answer) => {
+                let out = cascade.output();
+                (None, Some(step(py, &answer)), x, out.tank_energy, out.status_name())
+            }
+            Followed::NoPlan => (Some("planning"), None, x, None, "none"),
+            Followed::StalePlan => (Some("plan stale"), None, x, None, "none"),
+        })
     }
 
-    /// The state x (nx,) at the newest state's time `t` without a tick (a stale plan, or the
-    /// planner starting): the planner still sees it.
+    /// The state x (nx,) at the newest state's time `t` without a tick (the planner starting): the
+    /// planner still sees it.
     fn observe<'py>(&self, py: Python<'py>, t: f64, may_hook: bool) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let mut tick = lock(&self.inner);
-        let x = run(|| tick.state(t, may_hook).map(<[f64]>::to_vec))?;
+        let force = lock(&self.cascade).tau_ext().force();
+        let x = run(|| tick.state(t, may_hook, force).map(<[f64]>::to_vec))?;
         tick.skip(t);
         Ok(PyArray1::from_vec(py, x))
     }
@@ -175,16 +175,12 @@ impl PyBridgeTick {
         })
     }
 
-    /// The newest τ_ext (nq,) and wrist force magnitude (N; inf: torques only), arrived at `received`.
-    fn set_external_torque(&self, tau: PyReadonlyArrayDyn<'_, f64>, force: f64, received: f64) -> PyResult<()> {
-        run(|| lock(&self.inner).set_external_torque(view("tau_ext", &tau, &[-1])?, force, received))
-    }
-
-    /// A serialized wrist wrench (WrenchStamped) that arrived at `received` (s, monotonic): τ_ext at
-    /// the newest joint positions, in the frame its header names (`wrench_frames`: (world frame,
-    /// the sensor frame for an empty header, the moment's point frame or "")).
+    /// A serialized wrist wrench (WrenchStamped) that arrived at `received` (s, monotonic): the
+    /// cascade's τ_ext at the newest joint positions, in the frame its header names.
     fn set_wrench(&self, raw: &[u8], received: f64) -> PyResult<()> {
-        run(|| lock(&self.inner).set_wrench(raw, received))
+        let tick = lock(&self.inner);
+        let mut cascade = lock(&self.cascade);
+        run(|| tick.set_wrench(&mut cascade, raw, received))
     }
 
     /// The object's (o, ȯ) from its topic.
@@ -196,11 +192,6 @@ impl PyBridgeTick {
     #[getter]
     fn stamp(&self) -> f64 {
         lock(&self.inner).stamp().seconds()
-    }
-    /// The newest τ_ext (nq,) as received (before the low-pass).
-    #[getter]
-    fn tau_ext<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_slice(py, lock(&self.inner).tau_ext())
     }
     /// The merged joint positions (nq,).
     #[getter]
@@ -245,13 +236,17 @@ impl PyBridgeTick {
     #[getter]
     fn counts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let c = lock(&self.inner).counts().clone();
+        let (received, stale) = {
+            let cascade = lock(&self.cascade);
+            (cascade.tau_ext().readings(), cascade.tau_ext().stale_count())
+        };
         let d = PyDict::new(py);
         d.set_item("ticks", c.ticks)?;
         d.set_item("answered", c.answered)?;
         d.set_item("followed", c.followed)?;
         d.set_item("rejected", c.rejected)?;
-        d.set_item("wrench_stale", c.wrench_stale)?;
-        d.set_item("wrench_received", c.wrench_received)?;
+        d.set_item("wrench_stale", stale)?;
+        d.set_item("wrench_received", received)?;
         Ok(d)
     }
 }

@@ -1,22 +1,18 @@
 //! `_core.LowLevelController`: the dynamics-compensated PI joint-velocity controller (53) of the
-//! plant, with its config object, and the inner loop that drives the plant with it (constant
-//! tracking, and following a reference with the optional safety stage); `_core.Plan` and
-//! `_core.InnerLoop`, the inner loop's tick on a measured state (one call per 1 kHz step).
+//! plant, with its config object and constant-velocity tracking; `_core.Plan`, a plan as the cascade
+//! follows it (the cascade itself: `cascade.rs`).
 
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
-use numpy::{IntoPyArray, PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use numpy::{PyArray1, PyArrayDyn, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyType};
+use pyo3::types::PyType;
 
 use super::convert::{array, lock, view};
 use super::error::{run, run_detached};
-use super::safety::{PyEnergyTank, PySafetyFilter};
 use super::scene::PyScene;
 use super::sim::PyPlant;
-use crate::control::{
-    follow_reference_safe, InnerLoop, InnerSafety, LowLevelConfig, LowLevelController, Plan, TickOutput, TrackTrace,
-};
+use crate::control::{LowLevelConfig, LowLevelController, Plan, Shared};
 use crate::error::SabreError;
 
 /// Gains of the low-level controller (53); `LowLevelConfig()` holds the core's defaults.
@@ -60,7 +56,7 @@ impl From<&PyLowLevelConfig> for LowLevelConfig {
 
 #[pyclass(name = "LowLevelController", module = "sabre._core", frozen)]
 pub struct PyLowLevelController {
-    pub(crate) inner: Mutex<LowLevelController>,
+    pub(crate) inner: Shared<LowLevelController>,
 }
 
 #[pymethods]
@@ -69,7 +65,9 @@ impl PyLowLevelController {
     #[new]
     fn new(scene: &PyScene, dt: f64, config: &PyLowLevelConfig) -> PyResult<Self> {
         let config = LowLevelConfig::from(config);
-        run(|| LowLevelController::new(scene.inner.clone(), dt, config)).map(|c| Self { inner: Mutex::new(c) })
+        run(|| LowLevelController::new(scene.inner.clone(), dt, config)).map(|c| Self {
+            inner: Arc::new(Mutex::new(c)),
+        })
     }
 
     fn reset(&self) {
@@ -124,94 +122,6 @@ impl PyLowLevelController {
             Ok(())
         })
     }
-
-    /// Follows a reference sequence (K, nq) starting at t0 with steps dt for `steps` steps of
-    /// `plant` under this controller, with the optional inner safety stage (FILTER-QP (41) with the
-    /// passivity row (56), the tank (49), or both); returns the trace of every `record_every`-th
-    /// step as a dict: time, state, reference, wrench, tau_ext, tau_ext_measured, contact, and with a
-    /// filter filtered (M, nq) and filter_status (list of str), with a tank tank_energy (M,).
-    /// `predicted_dissipation` (K,), on the reference's time grid, feeds a tank's refill.
-    #[pyo3(signature = (plant, reference, t0, dt, steps, record_every=1, safety=None, tank=None, predicted_dissipation=None))]
-    #[allow(clippy::too_many_arguments)]
-    fn follow<'py>(
-        &self,
-        py: Python<'py>,
-        plant: &PyPlant,
-        reference: PyReadonlyArrayDyn<'py, f64>,
-        t0: f64,
-        dt: f64,
-        steps: usize,
-        record_every: usize,
-        safety: Option<&PySafetyFilter>,
-        tank: Option<&PyEnergyTank>,
-        predicted_dissipation: Option<PyReadonlyArrayDyn<'py, f64>>,
-    ) -> PyResult<Bound<'py, PyDict>> {
-        let (nx, nq) = plant.with(|p| Ok((p.scene().nx(), p.scene().nq())))?;
-        let reference = run(|| view("reference", &reference, &[-1, nq as isize]))?;
-        let predicted = match &predicted_dissipation {
-            Some(p) => Some(run(|| view("predicted_dissipation", p, &[-1]))?),
-            None => None,
-        };
-        let (plant, controller) = (&plant.inner, &self.inner);
-        let (has_filter, has_tank) = (safety.is_some(), tank.is_some());
-        let trace = run_detached(py, || {
-            // Always plant, controller, filter, tank: one lock order for every call.
-            let mut plant = lock(plant);
-            let mut controller = lock(controller);
-            let mut filter = safety.map(|f| lock(&f.inner));
-            let mut tank = tank.map(|t| lock(&t.inner));
-            let stage = InnerSafety {
-                filter: filter.as_deref_mut(),
-                tank: tank.as_deref_mut(),
-                predicted_dissipation: predicted,
-            };
-            let mut trace = TrackTrace::default();
-            follow_reference_safe(
-                &mut plant,
-                &mut controller,
-                reference,
-                t0,
-                dt,
-                steps,
-                record_every,
-                &mut trace,
-                Some(stage),
-            )?;
-            Ok(trace)
-        })?;
-        trace_dict(py, trace, nx, nq, has_filter, has_tank)
-    }
-}
-
-/// The dict of a trace of M recorded steps (see [`PyLowLevelController::follow`]).
-fn trace_dict(
-    py: Python<'_>,
-    trace: TrackTrace,
-    nx: usize,
-    nq: usize,
-    has_filter: bool,
-    has_tank: bool,
-) -> PyResult<Bound<'_, PyDict>> {
-    let m = trace.time.len();
-    let d = PyDict::new(py);
-    d.set_item("time", array(py, trace.time, &[m])?)?;
-    d.set_item("state", array(py, trace.state, &[m, nx])?)?;
-    d.set_item("reference", array(py, trace.reference, &[m, nq])?)?;
-    d.set_item("wrench", array(py, trace.wrench, &[m, 6])?)?;
-    d.set_item("tau_ext", array(py, trace.tau_ext, &[m, nq])?)?;
-    d.set_item("tau_ext_measured", array(py, trace.tau_ext_measured, &[m, nq])?)?;
-    d.set_item("contact", trace.contact.into_pyarray(py).reshape(vec![m])?)?;
-    if has_filter {
-        d.set_item("filtered", array(py, trace.filtered, &[m, nq])?)?;
-        d.set_item(
-            "filter_status",
-            trace.filter_status.iter().map(|s| s.name()).collect::<Vec<_>>(),
-        )?;
-    }
-    if has_tank {
-        d.set_item("tank_energy", array(py, trace.tank_energy, &[m])?)?;
-    }
-    Ok(d)
 }
 
 /// A finite time, else the error naming it.
@@ -238,7 +148,7 @@ fn copied(name: &str, values: &PyReadonlyArrayDyn<'_, f64>, expected: &str, ndim
 #[pyclass(name = "Plan", module = "sabre._core", frozen, eq)]
 #[derive(PartialEq)]
 pub struct PyPlan {
-    inner: Plan,
+    pub(crate) inner: Arc<Plan>,
 }
 
 #[pymethods]
@@ -261,7 +171,7 @@ impl PyPlan {
             if let Some(floor) = gain_inertia_floor {
                 plan = plan.with_gain_inertia_floor(floor)?;
             }
-            Ok(Self { inner: plan })
+            Ok(Self { inner: Arc::new(plan) })
         })
     }
 
@@ -352,147 +262,5 @@ impl PyPlan {
             if p.predicted_dissipation().is_some() { "(K,)" } else { "None" },
             p.gain_inertia_floor(),
         )
-    }
-}
-
-/// The inner loop's tick: the reference, the command after the filter, the torques (nq,), the
-/// tank's energy (None without a tank) and the filter's status ("unfiltered" without a filter).
-type Tick<'py> = (
-    Bound<'py, PyArray1<f64>>,
-    Bound<'py, PyArray1<f64>>,
-    Bound<'py, PyArray1<f64>>,
-    Option<f64>,
-    &'static str,
-);
-
-/// The inner loop on a measured state: the low-level controller with the optional FILTER-QP and
-/// energy tank, the very objects given (their state is shared with every other holder).
-#[pyclass(name = "InnerLoop", module = "sabre._core", frozen)]
-pub struct PyInnerLoop {
-    low_level: Py<PyLowLevelController>,
-    filter: Option<Py<PySafetyFilter>>,
-    tank: Option<Py<PyEnergyTank>>,
-    nx: usize,
-    nq: usize,
-    /// The tick's buffers, reused from call to call.
-    output: Mutex<TickOutput>,
-}
-
-#[pymethods]
-impl PyInnerLoop {
-    /// The inner loop of `low_level`, with `filter` (built for the same robot) and `tank` if given.
-    #[new]
-    #[pyo3(signature = (low_level, filter=None, tank=None))]
-    fn new(
-        low_level: Bound<'_, PyLowLevelController>,
-        filter: Option<Bound<'_, PySafetyFilter>>,
-        tank: Option<Bound<'_, PyEnergyTank>>,
-    ) -> PyResult<Self> {
-        let (nx, nq) = {
-            // The same check as every tick's, once here so that a mismatch fails at construction.
-            let mut controller = lock(&low_level.get().inner);
-            let filter = match &filter {
-                Some(f) => Some(f.try_borrow()?),
-                None => None,
-            };
-            let mut filter_guard = filter.as_ref().map(|f| lock(&f.inner));
-            run(|| InnerLoop::new(&mut controller, filter_guard.as_deref_mut(), None).map(|_| ()))?;
-            let scene = controller.scene();
-            (scene.nx(), scene.nq())
-        };
-        Ok(Self {
-            low_level: low_level.unbind(),
-            filter: filter.map(Bound::unbind),
-            tank: tank.map(Bound::unbind),
-            nx,
-            nq,
-            output: Mutex::new(TickOutput::new(nq, nq)),
-        })
-    }
-
-    #[getter]
-    fn low_level(&self, py: Python<'_>) -> Py<PyLowLevelController> {
-        self.low_level.clone_ref(py)
-    }
-    #[getter]
-    fn filter(&self, py: Python<'_>) -> Option<Py<PySafetyFilter>> {
-        self.filter.as_ref().map(|f| f.clone_ref(py))
-    }
-    #[getter]
-    fn tank(&self, py: Python<'_>) -> Option<Py<PyEnergyTank>> {
-        self.tank.as_ref().map(|t| t.clone_ref(py))
-    }
-
-    /// One tick at the measured state x (nx,) and external torques tau_ext (nq,) at time t,
-    /// integrating the tank over dt (s): the plan's reference at t → FILTER-QP (with the passivity
-    /// row when there is a tank) → the tank's refill and step → the low-level torque with the
-    /// plan's gain inertia floor, else the controller's own. Returns (reference (nu,), command
-    /// (nu,), torque (nq,), tank energy or None, filter status or "unfiltered").
-    ///
-    /// Keeps the GIL: a tick takes tens of µs, and the 1 kHz caller needs the GIL again right
-    /// after it; releasing it would let a planner thread's Python work delay the tick's return.
-    fn tick<'py>(
-        &self,
-        py: Python<'py>,
-        plan: &PyPlan,
-        x: PyReadonlyArrayDyn<'py, f64>,
-        tau_ext: PyReadonlyArrayDyn<'py, f64>,
-        t: f64,
-        dt: f64,
-    ) -> PyResult<Tick<'py>> {
-        let x = run(|| view("x", &x, &[self.nx as isize]))?;
-        let tau_ext = run(|| view("tau_ext", &tau_ext, &[self.nq as isize]))?;
-        self.tick_slices(py, plan, x, tau_ext, t, dt, |out| {
-            (
-                PyArray1::from_slice(py, &out.reference),
-                PyArray1::from_slice(py, &out.command),
-                PyArray1::from_slice(py, &out.torque),
-                out.tank_energy,
-                out.status_name(),
-            )
-        })
-    }
-}
-
-impl PyInnerLoop {
-    /// One tick on plain slices (see `tick`), handing its output to `then`: the bridge's tick runs
-    /// the inner loop this way between its own stages.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn tick_slices<R>(
-        &self,
-        py: Python<'_>,
-        plan: &PyPlan,
-        x: &[f64],
-        tau_ext: &[f64],
-        t: f64,
-        dt: f64,
-        then: impl FnOnce(&TickOutput) -> R,
-    ) -> PyResult<R> {
-        let filter = match &self.filter {
-            Some(f) => Some(f.bind(py).try_borrow()?),
-            None => None,
-        };
-        let tank = match &self.tank {
-            Some(t) => Some(t.bind(py).try_borrow()?),
-            None => None,
-        };
-        let mut out = lock(&self.output);
-        {
-            // Controller, filter, tank: the lock order of every call.
-            let mut controller = lock(&self.low_level.get().inner);
-            let mut filter = filter.as_ref().map(|f| lock(&f.inner));
-            let mut tank = tank.as_ref().map(|t| lock(&t.inner));
-            run(|| {
-                InnerLoop::new(&mut controller, filter.as_deref_mut(), tank.as_deref_mut())?.tick(
-                    &plan.inner,
-                    x,
-                    tau_ext,
-                    t,
-                    dt,
-                    &mut out,
-                )
-            })?;
-        }
-        Ok(then(&out))
     }
 }

@@ -7,6 +7,7 @@
 
 mod bridge;
 mod bridge_tick;
+mod cascade;
 mod control;
 mod convert;
 mod cost;
@@ -43,7 +44,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<control::PyLowLevelConfig>()?;
     m.add_class::<control::PyLowLevelController>()?;
     m.add_class::<control::PyPlan>()?;
-    m.add_class::<control::PyInnerLoop>()?;
+    m.add_class::<cascade::PyCascade>()?;
     m.add_class::<rate_limit::PyRateLimiter>()?;
     m.add_class::<bridge::PyCommandGate>()?;
     m.add_class::<sim_driver::PySimDriver>()?;
@@ -81,6 +82,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(messages::encode_twist, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("DEFAULT_TAU_EXT_CUTOFF", crate::sim::DEFAULT_TAU_EXT_CUTOFF)?;
+    m.add("TAKEOVER_TOLERANCE", crate::control::cascade::TAKEOVER_TOLERANCE)?;
     let contact_models: Vec<&str> = crate::sim::ContactModel::ALL.iter().map(|m| m.name()).collect();
     m.add("CONTACT_MODELS", pyo3::types::PyTuple::new(m.py(), contact_models)?)?;
     Ok(())

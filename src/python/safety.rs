@@ -1,7 +1,7 @@
 //! `_core.SafetyFilter` (FILTER-QP (41) and its sequential form, Algorithm 1) and
 //! `_core.EnergyTank` (49), with their config objects.
 
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 use numpy::{PyArrayDyn, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
@@ -11,6 +11,7 @@ use super::convert::{array, lock, view};
 use super::error::{run, run_detached};
 use super::scene::PyScene;
 use super::sim::PyRolloutModel;
+use crate::control::Shared;
 use crate::error::SabreError;
 use crate::safety::{ConstraintClass, EnergyTank, FilterOutput, PerClass, RefillConfig, SafetyConfig, SafetyFilter};
 
@@ -245,7 +246,7 @@ fn filter_result(py: Python<'_>, out: FilterOutput, active: Vec<String>) -> PyRe
 
 #[pyclass(name = "SafetyFilter", module = "sabre._core")]
 pub struct PySafetyFilter {
-    pub(crate) inner: Mutex<SafetyFilter>,
+    pub(crate) inner: Shared<SafetyFilter>,
     nq: usize,
     nx: usize,
 }
@@ -257,7 +258,7 @@ impl PySafetyFilter {
         run(|| {
             let filter = SafetyFilter::new(scene.inner.clone(), config.to_core()?)?;
             Ok(Self {
-                inner: Mutex::new(filter),
+                inner: Arc::new(Mutex::new(filter)),
                 nq: scene.inner.nq(),
                 nx: scene.inner.nx(),
             })
@@ -407,15 +408,16 @@ impl PySafetyFilter {
 
 #[pyclass(name = "EnergyTank", module = "sabre._core")]
 pub struct PyEnergyTank {
-    pub(crate) inner: Mutex<EnergyTank>,
+    pub(crate) inner: Shared<EnergyTank>,
 }
 
 #[pymethods]
 impl PyEnergyTank {
     #[new]
     fn new(config: &PyEnergyTankConfig) -> PyResult<Self> {
-        run(|| EnergyTank::new(config.initial, config.floor, config.ceiling, config.record_history))
-            .map(|t| Self { inner: Mutex::new(t) })
+        run(|| EnergyTank::new(config.initial, config.floor, config.ceiling, config.record_history)).map(|t| Self {
+            inner: Arc::new(Mutex::new(t)),
+        })
     }
     /// One Euler step of (49), S += dt τ_extᵀu; returns the new energy.
     fn step(&self, tau_ext: PyReadonlyArrayDyn<'_, f64>, u: PyReadonlyArrayDyn<'_, f64>, dt: f64) -> PyResult<f64> {

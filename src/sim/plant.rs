@@ -83,7 +83,7 @@ impl Plant {
         }
         let measurement_blend = match config.tau_ext_cutoff {
             None => None,
-            Some(f) if f.is_finite() && f > 0.0 => Some(1.0 - (-2.0 * std::f64::consts::PI * f * config.dt).exp()),
+            Some(f) if f.is_finite() && f > 0.0 => Some(crate::low_pass::blend(f, config.dt)),
             Some(f) => {
                 return Err(SabreError::invalid(
                     "tau_ext_cutoff",

@@ -104,10 +104,10 @@ class _TwoPhaseReach(sabre.tasks.Reach):
         return 0.1 if phase == "stiff" else None
 
 
-def test_run_episode_applies_the_task_gain_floor_per_phase_and_restores_the_controllers_own(scene):
-    """The floor the low-level controller ticks with after each re-plan is the task's for the planned
-    phase, the controller's own (0.01 here) where the task has none, and the controller's own again
-    after the episode."""
+def test_run_episode_hands_over_the_task_gain_floor_per_phase_and_keeps_the_controllers_own(scene):
+    """Each plan handed to the cascade carries the task's floor for its planned phase (the cascade's tick
+    applies it), None where the task has none, and the low-level controller's own floor (0.01 here) is
+    never changed, also by an episode that raises."""
     task = _TwoPhaseReach(target_pose=scene.fk(scene.default_state()[: scene.nq], "grasp"))
     controller = sabre.Controller(scene, task, sabre.ControllerConfig(rollouts=8, seed=0))
     plant = sabre.Plant(scene)
@@ -122,10 +122,10 @@ def test_run_episode_applies_the_task_gain_floor_per_phase_and_restores_the_cont
         plant=plant,
         low_level=low,
         progress=False,
-        on_replan=lambda t, x, p, c: seen.append((round(t, 6), low.gain_inertia_floor)),
+        on_replan=lambda t, x, p, c: seen.append((round(t, 6), c.snapshot().gain_inertia_floor, low.gain_inertia_floor)),
     )
     # Each entry is read before the re-plan at t, so it is the floor of the plan made at t − 0.05.
-    assert seen == [(0.0, 0.01), (0.05, 0.01), (0.1, 0.01), (0.15, 0.1)]
+    assert seen[1:] == [(0.05, None, 0.01), (0.1, None, 0.01), (0.15, 0.1, 0.01)]
     assert low.gain_inertia_floor == 0.01
 
     # An episode that raises inside the task's phase with a floor still hands the controller back

@@ -1,5 +1,5 @@
-"""The inner loop's tick in the core (`_core.Plan`, `_core.InnerLoop`): one tick per plant step is the inner
-loop `LowLevelController.follow` runs, plans are immutable, validated and picklable, and bad input raises
+"""The cascade's tick in the core (`_core.Plan`, `_core.Cascade`): one tick per plant step is what the
+cascade's `follow` runs on the Rust plant, plans are immutable, validated and picklable, and bad input raises
 sabre errors."""
 
 from __future__ import annotations
@@ -39,17 +39,20 @@ def _stage(scene, x0):
 
 def test_a_tick_and_a_plant_step_per_step_is_what_follow_does(pull):
     scene, U, dt, x0, predicted = pull
+    plan = _core.Plan(U, 0.0, dt, predicted)
     plant, low, safety, tank = _stage(scene, x0)
-    trace = low._core.follow(plant._core, U, 0.0, dt, STEPS, 1, safety._core, tank._core, predicted)
+    followed = _core.Cascade(low._core, safety._core, tank._core)
+    followed.hand_over(plan)
+    trace = followed.follow(plant._core, STEPS, 1)
 
     plant, low, safety, ticked_tank = _stage(scene, x0)
-    inner = _core.InnerLoop(low._core, safety._core, ticked_tank._core)
-    plan = _core.Plan(U, 0.0, dt, predicted)
+    inner = _core.Cascade(low._core, safety._core, ticked_tank._core)
+    inner.hand_over(plan)
     core = plant._core
     states, references, commands, energies, statuses = [], [], [], [], []
     for _ in range(STEPS):
         x, tau = np.array(core.state), np.array(core.measured_tau_ext)
-        reference, command, torque, energy, status = inner.tick(plan, x, tau, core.time, core.dt)
+        reference, command, torque, energy, status = inner.tick(x, tau, core.time, core.dt)
         core.step(torque)
         states.append(core.state)
         references.append(reference)
@@ -74,11 +77,12 @@ def test_without_filter_and_tank_a_tick_is_the_torque_of_the_interpolated_refere
     scene, U, dt, x0, _ = pull
     plan = _core.Plan(U, 0.0, dt, gain_inertia_floor=0.3)
     low, by_hand = (sabre.LowLevelController(scene, dt=0.001, gain_inertia_floor=0.01) for _ in range(2))
-    inner = _core.InnerLoop(low._core)
+    inner = _core.Cascade(low._core)
     assert inner.filter is None and inner.tank is None
+    inner.hand_over(plan)
     tau_ext = np.zeros(scene.nq)
     for t in (0.0071, 0.0072):
-        reference, command, torque, energy, status = inner.tick(plan, x0, tau_ext, t, 0.001)
+        reference, command, torque, energy, status = inner.tick(x0, tau_ext, t, 0.001)
         np.testing.assert_array_equal(reference, plan.reference_at(t))
         np.testing.assert_array_equal(command, reference)
         by_hand.gain_inertia_floor = 0.3
@@ -139,25 +143,33 @@ def test_bad_tick_input_is_a_sabre_error_and_changes_nothing(pull):
     scene, U, dt, x0, _ = pull
     low = sabre.LowLevelController(scene, dt=0.001)
     safety, tank = sabre.SafetyFilter(scene), sabre.EnergyTank(INITIAL, 2.0)
-    inner = _core.InnerLoop(low._core, safety._core, tank._core)
+    inner = _core.Cascade(low._core, safety._core, tank._core)
     plan = _core.Plan(U, 0.0, dt)
     tau = np.zeros(scene.nq)
+    with pytest.raises(InvalidValueError, match="no plan yet"):
+        inner.tick(x0, tau, 0.0, 0.001)
     with pytest.raises(ShapeError):
-        inner.tick(plan, x0[:-1], tau, 0.0, 0.001)
+        inner.hand_over(_core.Plan(U[:, :-1], 0.0, dt))
+    with pytest.raises(InvalidValueError):
+        inner.hand_over(plan, float("nan"))
+    assert inner.in_force is None
+    inner.hand_over(plan)
     with pytest.raises(ShapeError):
-        inner.tick(plan, x0, np.zeros(scene.nq + 1), 0.0, 0.001)
+        inner.tick(x0[:-1], tau, 0.0, 0.001)
     with pytest.raises(ShapeError):
-        inner.tick(_core.Plan(U[:, :-1], 0.0, dt), x0, tau, 0.0, 0.001)
+        inner.tick(x0, np.zeros(scene.nq + 1), 0.0, 0.001)
     with pytest.raises(InvalidValueError):
-        inner.tick(plan, x0, np.full(scene.nq, np.nan), 0.0, 0.001)
+        inner.tick(x0, np.full(scene.nq, np.nan), 0.0, 0.001)
     with pytest.raises(InvalidValueError):
-        inner.tick(plan, x0, tau, float("nan"), 0.001)
+        inner.tick(x0, tau, float("nan"), 0.001)
     with pytest.raises(InvalidValueError):
-        inner.tick(plan, x0, tau, 0.0, 0.0)
+        inner.tick(x0, tau, 0.0, 0.0)
     with pytest.raises(InvalidValueError):
         plan.reference_at(float("inf"))
     assert safety.stats.calls == 0
     assert len(tank.history) == 1
-    *_, energy, status = inner.tick(plan, x0, tau, 0.0, 0.001)
+    assert inner.ticks == 0 and inner.tau_ext_counts == (0, 0)
+    *_, energy, status = inner.tick(x0, tau, 0.0, 0.001)
     assert (energy, status) == (INITIAL, "solved")
+    assert inner.ticks == 1
     assert inner.low_level is low._core and inner.filter is safety._core and inner.tank is tank._core

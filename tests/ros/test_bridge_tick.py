@@ -68,10 +68,18 @@ class Pipeline:
         self.names = list(scene.joint_names)
         self.base = list(scene.base_indices)
         self.arm = [i for i in range(self.nq) if i not in self.base]
-        controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=0, variant="IO"))
-        self.cascade = RealtimeCascade(controller)
+
+        def controller() -> sabre.Controller:
+            return sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=0, variant="IO"))
+
+        frames = ("map", scene.wrist_sensor_link, "")
+        self.cascade = RealtimeCascade(controller(), tau_ext_cutoff=10.0, tau_ext_timeout=0.1, wrench_frames=frames)
         self.x = sabre.paper_start_state(scene)
         self.cascade.plan(self.x, 0.0)
+        # the same plan on stages of their own: the reference the tick's cascade is compared with
+        self.reference = RealtimeCascade(controller())
+        assert self.cascade.current_plan is not None
+        self.reference.hand_over(self.cascade.current_plan)
         limits = command_limits(
             scene.dq_limit[self.arm], scene.dq_limit[self.base], {"command_period": 1e-3, "cmd_vel_rate": 250.0}
         )
@@ -81,7 +89,7 @@ class Pipeline:
         estimator = sabre.ObjectStateEstimator(scene)
         self.estimator = sabre.ObjectStateEstimator(scene)
         self.tick = _core.BridgeTick(
-            scene._core,
+            self.cascade.core,
             joints.core,
             self.gate.core,
             estimator.core,
@@ -90,12 +98,9 @@ class Pipeline:
             self.arm,
             self.base,
             0.005,
-            0.1,
-            10.0,
             False,
             "",
             arm_names,
-            ("map", scene.wrist_sensor_link, ""),
         )
 
     def state(self, k: int, q: np.ndarray, qd: np.ndarray, names: list[str] | None = None) -> bytes:
@@ -112,20 +117,23 @@ def test_the_core_tick_is_the_pipeline_of_its_python_pieces():
 
     s = Pipeline()
     nq, x = s.nq, s.x.copy()
-    plan = s.cascade.plan_for(0.0)
+    horizon = s.cascade.controller.config.horizon
     rng = np.random.default_rng(0)
     for k in range(60):
         q, qd = x[:nq] + 1e-3 * k * rng.normal(size=nq), x[nq : 2 * nq] + 0.01 * rng.normal(size=nq)
         received = 1e-3 * k
         kind, t, error = s.tick.receive(s.state(k, q, qd), received)
         assert (kind, error) == ("tick", None) and t == pytest.approx(1e-3 * k)
-        (arm, base, echo), xs, energy, status = s.tick.follow(s.cascade.inner_loop, plan.plan, t, received, True)
+        reason, answer, xs, energy, status = s.tick.follow(t, received, True, horizon)
+        assert reason is None and answer is not None
+        arm, base, echo = answer
         e = s.estimator.update(q, t, math.inf, may_hook=True)
         expected_x = np.concatenate([q, qd, e.position, e.velocity])
         assert np.array_equal(xs, expected_x)
         # states 1 ms apart; the first integrates over one command period (1 ms too)
-        _, u, _, e_ref, st_ref = s.cascade.inner_loop.tick(plan.plan, expected_x, np.zeros(nq), t, 1e-3)
-        assert (energy, status) == (e_ref, st_ref)
+        r = s.reference.tick(expected_x, np.zeros(nq), t, 1e-3)
+        u = r.command
+        assert (energy, status) == (r.tank_energy, r.status)
         step = s.gate.on_tick(received, u[s.arm], np.asarray(world_to_base(u[s.base], q[s.base[2]])))
         m = deserialize_message(arm, Float64MultiArray)
         assert np.array_equal(m.data, step.arm) and m.layout.data_offset == (k * 10**6) % 10**9
@@ -184,7 +192,7 @@ def test_wrenches_read_in_the_core_give_the_python_frames_tau_ext():
         axes, point = reference.resolve(frame)
         expected = reference.tau_ext(q, w, axes, point)
         assert s.tick.counts["wrench_received"] == k + 1
-        assert np.allclose(s.tick.tau_ext, expected, atol=1e-9), frame
+        assert np.allclose(s.cascade.core.tau_ext, expected, atol=1e-9), frame
     m = WrenchStamped()
     m.header.frame_id = "nowhere"
     with pytest.raises(sabre.SabreError, match="nowhere"):

@@ -3,7 +3,8 @@ the command gate and the endpoints of the 1 kHz path, with the watchdog that ram
 zero when states stop coming. The controller node builds one on configure and drops it on cleanup.
 
 The 1 kHz path runs in the core (``_core.BridgeTick``): each arm joint state arrives serialized,
-and one call merges it, estimates the object, runs the inner loop and the rate-limited gate, and
+and one call merges it, estimates the object, runs the cascade's tick (on the deployment loop's
+:attr:`~sabre.RealtimeCascade.core`, the same tick every loop runs) and the rate-limited gate, and
 returns the serialized commands to publish; Python decides only whether the tick follows the plan."""
 
 from __future__ import annotations
@@ -50,6 +51,8 @@ class ControllerLoop:
         factory = functools.partial(build_controller, descriptions, str(p["variant"]), int(p["seed"]), int(p["threads"]))
         self.controller = factory()
         self.scene = self.controller.scene
+        self._map_joints(p)
+        self._init_inputs(p)
         self.cascade = RealtimeCascade(
             self.controller,
             min_replan_period=float(p["min_replan_period"]),
@@ -57,10 +60,11 @@ class ControllerLoop:
             planner_nice=int(p["planner_nice"]),
             planner_idle=bool(p["planner_idle"]),
             delay_compensation=bool(p["delay_compensation"]),
+            tau_ext_cutoff=float(p["tau_ext_cutoff"]),
+            tau_ext_timeout=float(p["wrench_timeout"]),
+            wrench_frames=self._wrench_frames,
         )
         self.horizon = float(self.controller.config.horizon)
-        self._map_joints(p)
-        self._init_inputs(p)
         dq = self.scene.dq_limit
         self.limits = command_limits(dq[self.arm_index], dq[self.base_index] if self.has_base else None, p)
         self._init_tick(p)
@@ -117,7 +121,7 @@ class ControllerLoop:
         joints = JointStates(self.names, self.arm_joints, self._timeouts)
         gate = CommandGate(CommandShaper(self.limits), float(p["state_timeout"]))
         self.tick = _core.BridgeTick(
-            self.scene._core,
+            self.cascade.core,
             joints.core,
             gate.core,
             None if self.estimator is None else self.estimator.core,
@@ -126,12 +130,9 @@ class ControllerLoop:
             [int(i) for i in self.arm_index],
             [int(i) for i in self.base_index] if self.has_base else None,
             float(p["max_tick_dt"]),
-            float(p["wrench_timeout"]),
-            float(p["tau_ext_cutoff"]),
             bool(p["cmd_vel_stamped"]),
             str(p["cmd_vel_frame"]),
             list(self.arm_joints) if p["command_echo_topic"] else None,
-            self._wrench_frames,
         )
 
     def _init_state(self) -> None:
@@ -241,7 +242,7 @@ class ControllerLoop:
             self._log_rejected("joint torques", exc)
             return
         # torques only: contact assumed (the estimator's hook test is then the distance)
-        self.tick.set_external_torque(tau, math.inf, time.monotonic())
+        self.cascade.set_external_torque(tau, math.inf, time.monotonic())
 
     def on_object(self, msg: Any) -> None:
         names = list(self.scene.object_joint_names)
@@ -319,24 +320,22 @@ class ControllerLoop:
             self.task = "running"
             return "planning"
         try:
-            plan = self.cascade.plan_for(t)
+            self.cascade.poll()  # a newer plan of the planner process takes over
         except SabreError as exc:
             self._fail(f"planner failed: {exc}")
             return "planner stopped"
-        if plan is None or t - plan.t0 > self.horizon:
-            if plan is not None:
-                self.stats["plan_stale"] += 1
-            self._x, self._last_t = self.tick.observe(t, may_hook), t
-            self._observe(self._x, t)
-            return "plan stale" if plan is not None else "planning"
         try:
-            step, x, energy, status = self.tick.follow(self.cascade.inner_loop, plan.plan, t, received, may_hook)
+            reason, step, x, energy, status = self.tick.follow(t, received, may_hook, self.horizon)
         except SabreError as exc:
             self._fail(f"inner loop failed: {exc}")
             return "planner stopped"
-        self._publish(*step)
-        self.cascade.note_tick(x, t)
         self._x, self._last_t = x, t
+        self._observe(x, t)  # the planner's next starting point
+        if reason is not None:
+            self.stats["plan_stale"] += reason == "plan stale"
+            return reason
+        assert step is not None, "a followed tick has its step"
+        self._publish(*step)
         self._last_status, self._last_tank = status, float("nan") if energy is None else energy
         self._min_tank = min(self._min_tank, self._last_tank)
         if self.estimator is not None:

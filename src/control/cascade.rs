@@ -1,0 +1,387 @@
+//! The control cascade's inner loop, one tick for every clock and plant: the plan in force (handed over by
+//! the planner, taking over at its time), τ_ext conditioned, the FILTER-QP (41) with the tank's passivity row
+//! (56), the tank's refill and step (49), and the low-level torque (53). `run_episode`, the deployment loop
+//! and the ROS bridge all tick through [`Cascade::tick`]; [`Cascade::follow`] runs it on the Rust plant.
+
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use super::low_level::LowLevelController;
+use super::plan::Plan;
+use super::tau_ext::ExternalTorque;
+use crate::error::{ensure_finite, ensure_len, Result, SabreError};
+use crate::safety::{EnergyTank, FilterStatus, SafetyFilter};
+
+/// A stage the cascade shares with another holder: the planner reads the tank's energy and edits the
+/// filter's obstacles, a user tunes the low-level controller between ticks.
+pub type Shared<T> = Arc<Mutex<T>>;
+
+/// The object behind `mutex`, also after a panic in another holder poisoned it: every stage checks its
+/// inputs before it mutates, so a panic leaves it usable.
+pub fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// A plan handed over for time t_a takes over at the first tick at t ≥ t_a − this (s): simulated clocks
+/// that sum their steps land a rounding error short of t_a.
+pub const TAKEOVER_TOLERANCE: f64 = 1e-7;
+
+/// What one tick produced; the buffers are reused from tick to tick.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TickOutput {
+    /// The plan's reference at the tick's time (nu).
+    pub reference: Vec<f64>,
+    /// The command after the filter (nu): the reference itself without a filter.
+    pub command: Vec<f64>,
+    /// The low-level controller's joint torques tracking the command (nq).
+    pub torque: Vec<f64>,
+    /// The tank's energy after the tick (J); None without a tank.
+    pub tank_energy: Option<f64>,
+    /// The filter's status; None without a filter.
+    pub status: Option<FilterStatus>,
+}
+
+impl TickOutput {
+    /// Buffers for a robot with nu inputs and nq joints.
+    pub fn new(nu: usize, nq: usize) -> Self {
+        Self {
+            reference: vec![0.0; nu],
+            command: vec![0.0; nu],
+            torque: vec![0.0; nq],
+            tank_energy: None,
+            status: None,
+        }
+    }
+
+    /// The filter status's name, or "unfiltered" without a filter.
+    pub fn status_name(&self) -> &'static str {
+        self.status.map_or("unfiltered", FilterStatus::name)
+    }
+}
+
+/// Samples recorded while [`Cascade::follow`] drives the plant (one row per recorded plant step).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TrackTrace {
+    pub time: Vec<f64>,
+    /// nx per row.
+    pub state: Vec<f64>,
+    /// nq per row: the interpolated velocity reference of that step.
+    pub reference: Vec<f64>,
+    /// 6 per row.
+    pub wrench: Vec<f64>,
+    /// nq per row: the simulator's contact τ_ext of the step.
+    pub tau_ext: Vec<f64>,
+    /// nq per row: the plant's τ_ext measurement after the step (`Plant::measured_tau_ext`).
+    pub tau_ext_measured: Vec<f64>,
+    pub contact: Vec<bool>,
+    /// With a filter only (else empty): nq per row, the filtered command that the low-level
+    /// controller tracked in that step.
+    pub filtered: Vec<f64>,
+    /// With a tank only: tank energy after the step.
+    pub tank_energy: Vec<f64>,
+    /// With a filter only: the filter's status in that step.
+    pub filter_status: Vec<FilterStatus>,
+}
+
+/// A plan handed to the cascade, with the number it was handed over under.
+#[derive(Debug, Clone)]
+struct Handed {
+    plan: Arc<Plan>,
+    serial: u64,
+}
+
+/// The inner loop of the cascade (see the module). Its stages are shared (see [`Shared`]); it owns the
+/// plans it was handed, the τ_ext conditioning and the tick's buffers.
+pub struct Cascade {
+    low_level: Shared<LowLevelController>,
+    filter: Option<Shared<SafetyFilter>>,
+    tank: Option<Shared<EnergyTank>>,
+    tau_ext: ExternalTorque,
+    plan: Option<Handed>,
+    pending: Option<(Handed, f64)>,
+    handed: u64,
+    nx: usize,
+    nq: usize,
+    out: TickOutput,
+    ticks: u64,
+}
+
+impl Cascade {
+    /// The cascade of `low_level` with the optional FILTER-QP `filter` (built for the same robot) and
+    /// energy `tank`, reading τ_ext through `tau_ext` (see [`ExternalTorque`]).
+    pub fn new(
+        low_level: Shared<LowLevelController>,
+        filter: Option<Shared<SafetyFilter>>,
+        tank: Option<Shared<EnergyTank>>,
+        tau_ext: ExternalTorque,
+    ) -> Result<Self> {
+        let (nx, nq) = {
+            let scene = lock(&low_level).scene().clone();
+            (scene.nx(), scene.nq())
+        };
+        if let Some(f) = &filter {
+            let f = lock(f);
+            if f.scene().nq() != nq || f.scene().nx() != nx {
+                return Err(SabreError::invalid(
+                    "safety filter",
+                    "was built for a different scene than the low-level controller's",
+                ));
+            }
+        }
+        if tau_ext.raw().len() != nq {
+            return Err(SabreError::invalid(
+                "tau_ext",
+                format!("reads {} joints, the robot has {nq}", tau_ext.raw().len()),
+            ));
+        }
+        Ok(Self {
+            low_level,
+            filter,
+            tank,
+            tau_ext,
+            plan: None,
+            pending: None,
+            handed: 0,
+            nx,
+            nq,
+            out: TickOutput::new(nq, nq),
+            ticks: 0,
+        })
+    }
+
+    pub fn low_level(&self) -> &Shared<LowLevelController> {
+        &self.low_level
+    }
+    pub fn filter(&self) -> Option<&Shared<SafetyFilter>> {
+        self.filter.as_ref()
+    }
+    pub fn tank(&self) -> Option<&Shared<EnergyTank>> {
+        self.tank.as_ref()
+    }
+    pub fn tau_ext(&self) -> &ExternalTorque {
+        &self.tau_ext
+    }
+    /// The τ_ext readings, to hand it a new one ([`ExternalTorque::set_torque`], [`ExternalTorque::set_wrench`]).
+    pub fn tau_ext_mut(&mut self) -> &mut ExternalTorque {
+        &mut self.tau_ext
+    }
+    pub fn nx(&self) -> usize {
+        self.nx
+    }
+    pub fn nq(&self) -> usize {
+        self.nq
+    }
+    /// Ticks since construction or the last [`Self::reset`].
+    pub fn ticks(&self) -> u64 {
+        self.ticks
+    }
+    /// The last tick's output.
+    pub fn output(&self) -> &TickOutput {
+        &self.out
+    }
+
+    // The plan in force ---------------------------------------------------------------------------
+
+    /// Hands over `plan`; returns the number it is known by from now on ([`Self::in_force`]). It takes
+    /// over at the first tick at time `at` (s) or later; None, or no plan in force yet: at once. A plan
+    /// still waiting for its time is dropped.
+    pub fn hand_over(&mut self, plan: Arc<Plan>, at: Option<f64>) -> Result<u64> {
+        if plan.nu() != self.nq {
+            return Err(SabreError::shape(
+                "plan",
+                format!("(K, {})", self.nq),
+                format!("({}, {})", plan.steps(), plan.nu()),
+            ));
+        }
+        if let Some(at) = at.filter(|a| !a.is_finite()) {
+            return Err(SabreError::invalid("at", format!("must be finite, got {at}")));
+        }
+        self.handed += 1;
+        let handed = Handed {
+            plan,
+            serial: self.handed,
+        };
+        match at {
+            Some(at) if self.plan.is_some() => self.pending = Some((handed, at)),
+            _ => (self.plan, self.pending) = (Some(handed), None),
+        }
+        Ok(self.handed)
+    }
+
+    /// The plan in force at time `t` (s), after one handed over for t or earlier takes over; None
+    /// before the first.
+    pub fn plan_at(&mut self, t: f64) -> Option<&Arc<Plan>> {
+        if self.pending.as_ref().is_some_and(|(_, at)| t >= at - TAKEOVER_TOLERANCE) {
+            self.plan = self.pending.take().map(|(handed, _)| handed);
+        }
+        self.plan.as_ref().map(|h| &h.plan)
+    }
+
+    /// The number of the plan in force (as [`Self::hand_over`] returned it), None before the first.
+    pub fn in_force(&self) -> Option<u64> {
+        self.plan.as_ref().map(|h| h.serial)
+    }
+
+    /// The number of the plan waiting for its time, and the time.
+    pub fn pending(&self) -> Option<(u64, f64)> {
+        self.pending.as_ref().map(|(h, at)| (h.serial, *at))
+    }
+
+    /// Forgets the plans and the low-level controller's integral: the next tick needs a new plan. The
+    /// τ_ext readings are the world's and stay (a robot's wrench stream does not restart with the
+    /// planner); [`ExternalTorque::reset`] forgets them.
+    pub fn reset(&mut self) {
+        self.plan = None;
+        self.pending = None;
+        lock(&self.low_level).reset();
+        self.ticks = 0;
+    }
+
+    // The tick ------------------------------------------------------------------------------------
+
+    /// One tick with `tau_ext` (nq) measured now: [`ExternalTorque::set_torque`] at time `t` (contact
+    /// assumed), then [`Self::tick`] at `t`. Every input is checked before anything changes.
+    pub fn tick_measured(&mut self, x: &[f64], tau_ext: &[f64], t: f64, dt: f64) -> Result<&TickOutput> {
+        ensure_len("tau_ext", tau_ext, self.nq)?;
+        ensure_finite("tau_ext", tau_ext)?;
+        self.check_tick(x, t, dt)?;
+        self.tau_ext.set_torque(tau_ext, f64::INFINITY, t)?;
+        self.tick(x, t, dt, t)
+    }
+
+    /// The checks every tick makes before anything changes: the state as the model reads it, the times,
+    /// a plan to follow.
+    fn check_tick(&self, x: &[f64], t: f64, dt: f64) -> Result<()> {
+        lock(&self.low_level).scene().check_state(x)?;
+        if !t.is_finite() {
+            return Err(SabreError::invalid("t", format!("must be finite, got {t}")));
+        }
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(SabreError::invalid("dt", format!("must be finite and positive, got {dt}")));
+        }
+        if self.plan.is_none() && self.pending.is_none() {
+            return Err(SabreError::invalid(
+                "plan",
+                "no plan yet: hand one over before the first tick",
+            ));
+        }
+        Ok(())
+    }
+
+    /// One inner-loop step at the measured state `x` (nx) at time `t`, integrating over `dt` (s), with
+    /// τ_ext conditioned for `now` (the readings' clock): the plan in force at t, its reference at t →
+    /// FILTER-QP, with the passivity row (56) fed by τ_ext and the tank's energy when there is a tank →
+    /// the tank's refill (when it has one configured and the plan a predicted dissipation) → the tank
+    /// step (49) with τ_ext and the filtered command → the low-level torque (53) with the plan's gain
+    /// inertia floor, else the controller's own.
+    ///
+    /// The tank is integrated with the same measurement the passivity row saw and the command the
+    /// filter returned, S ← S + dt τ̂ᵀu, as a controller on a real robot must (it cannot know the
+    /// next reading): a row met without slack then keeps S above its floor in discrete time.
+    /// Errors: bad inputs or no plan yet, before any stage changes state.
+    pub fn tick(&mut self, x: &[f64], t: f64, dt: f64, now: f64) -> Result<&TickOutput> {
+        self.check_tick(x, t, dt)?;
+        let Some(plan) = self.plan_at(t).cloned() else {
+            return Err(SabreError::invalid(
+                "plan",
+                "no plan yet: hand one over before the first tick",
+            ));
+        };
+        let tau_ext = self.tau_ext.condition(now, dt);
+        let out = &mut self.out;
+        plan.reference_at(t, &mut out.reference);
+        let mut controller = lock(&self.low_level);
+        let mut filter = self.filter.as_deref().map(lock);
+        let mut tank = self.tank.as_deref().map(lock);
+        match filter.as_deref_mut() {
+            Some(filter) => {
+                let passivity = tank.as_ref().map(|tank| (tau_ext, tank.energy()));
+                let filtered = filter.filter(x, &out.reference, passivity)?;
+                out.command.copy_from_slice(&filtered.u);
+                out.status = Some(filtered.status);
+            }
+            None => {
+                out.command.copy_from_slice(&out.reference);
+                out.status = None;
+            }
+        }
+        out.tank_energy = match tank.as_deref_mut() {
+            Some(tank) => {
+                if let Some(predicted) = plan.predicted_dissipation_at(t).filter(|_| tank.refill_config().is_some()) {
+                    // Against the reference, not the filtered command: the test is whether the world
+                    // pushes back as the model predicted, whatever the passivity row let through.
+                    let measured = -EnergyTank::power(tau_ext, &out.reference);
+                    tank.refill(predicted, measured, dt)?;
+                }
+                Some(tank.step(tau_ext, &out.command, dt)?)
+            }
+            None => None,
+        };
+        let floor = plan.gain_inertia_floor().unwrap_or(controller.config().gain_inertia_floor);
+        controller.torque_into(x, &out.command, floor, &mut out.torque)?;
+        self.ticks += 1;
+        Ok(&self.out)
+    }
+
+    /// The cascade driving `plant` for `steps` plant steps: each a [`Self::tick`] at the plant's state,
+    /// its τ_ext measurement and time, integrating over the plant's step, then the plant step with the
+    /// tick's torques; records every `record_every`-th step into `trace` (0: none). A plan taking over
+    /// is checked first for a gain inertia floor the plant's step can keep stable. A filter fallback
+    /// (u = 0) is tracked like any other command and recorded.
+    pub fn follow(
+        &mut self,
+        plant: &mut crate::sim::Plant,
+        steps: usize,
+        record_every: usize,
+        trace: &mut TrackTrace,
+    ) -> Result<()> {
+        if plant.scene().nq() != self.nq || plant.scene().nx() != self.nx {
+            return Err(SabreError::invalid(
+                "plant",
+                "the cascade was built for a different scene than the plant's",
+            ));
+        }
+        let (has_filter, has_tank) = (self.filter.is_some(), self.tank.is_some());
+        let plant_dt = plant.dt();
+        let mut checked = None;
+        let mut poll = crate::interrupt::Poll::new();
+        for step in 0..steps {
+            poll.check()?;
+            let t = plant.time();
+            if let Some(plan) = self.plan_at(t).cloned() {
+                if checked != self.in_force() {
+                    let controller = lock(&self.low_level);
+                    controller.check_stable(
+                        plan.gain_inertia_floor().unwrap_or(controller.config().gain_inertia_floor),
+                        plant_dt,
+                    )?;
+                    checked = self.in_force();
+                }
+            }
+            self.tau_ext.set_torque(plant.measured_tau_ext(), f64::INFINITY, t)?;
+            self.tick(plant.state(), t, plant_dt, t)?;
+            plant.step(&self.out.torque)?;
+            if record_every > 0 && step % record_every == 0 {
+                let out = &self.out;
+                trace.time.push(plant.time());
+                trace.state.extend_from_slice(plant.state());
+                trace.reference.extend_from_slice(&out.reference);
+                let i = plant.interaction();
+                trace.wrench.extend_from_slice(&i.wrench);
+                trace.tau_ext.extend_from_slice(&i.tau_ext);
+                trace.tau_ext_measured.extend_from_slice(plant.measured_tau_ext());
+                trace.contact.push(i.contact);
+                if has_filter {
+                    trace.filtered.extend_from_slice(&out.command);
+                    trace.filter_status.push(out.status.unwrap_or_default());
+                }
+                if has_tank {
+                    trace.tank_energy.push(out.tank_energy.unwrap_or(f64::NAN));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests;
