@@ -70,7 +70,7 @@ class Pipeline:
         self.arm = [i for i in range(self.nq) if i not in self.base]
         controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=0, variant="IO"))
         self.cascade = RealtimeCascade(controller)
-        self.x = sabre.paper_start_state(scene)
+        self.x = sabre.paper.paper_start_state(scene)
         self.cascade.plan(self.x, 0.0)
         limits = command_limits(
             scene.dq_limit[self.arm], scene.dq_limit[self.base], {"command_period": 1e-3, "cmd_vel_rate": 250.0}
