@@ -47,7 +47,7 @@ def reference_time(obj: str, variant: str, seed: int, duration: float) -> float 
     scene = sabre.Scene.load(obj=obj, obj_pose=POSES[obj])
     controller = sabre.Controller(scene, tasks.OpenObject(), sabre.ControllerConfig(variant=variant, seed=seed))
     episode = sabre.run_episode(
-        scene, controller, duration, seed=seed, x0=sabre.paper_start_state(scene), replan_rate=50.0, progress=False
+        scene, controller, duration, seed=seed, x0=sabre.paper.paper_start_state(scene), replan_rate=50.0, progress=False
     )
     return episode.time_to_success if episode.success else None
 

@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from sabre import scenarios as S
+from sabre.paper import scenarios as S
 
 
 def main() -> None:

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 import sabre
-from sabre import scenarios
+from sabre.paper import scenarios
 
 OBJECTS = sabre.OBJECTS
 VARIANTS = ("N", "I", "O", "IO")

@@ -2,7 +2,7 @@
 
     .venv/bin/python experiments/stuck_door_seeds.py --variant IO --seeds 0 20
 
-Runs ``sabre.scenarios.stuck_door(variant, seed)`` for each seed and prints one JSON line per run:
+Runs ``sabre.paper.scenarios.stuck_door(variant, seed)`` for each seed and prints one JSON line per run:
 the mean wrench while the door is held, the lowest tank energy and its floor, the opening in the
 10 s after release, whether the task left the open phase during the hold (the bar was lost) and,
 if so, whether it was in the open phase again afterwards (hooked again); then a summary line.
@@ -16,7 +16,8 @@ import statistics
 
 import numpy as np
 
-from sabre import VARIANTS, scenarios
+from sabre import VARIANTS
+from sabre.paper import scenarios
 
 
 def run(variant: str, seed: int) -> dict:

@@ -1,12 +1,14 @@
 """Every ```python block of README.md and docs/*.md runs as written.
 
 Each file reads as one script: its blocks run in order, each in a fresh namespace that starts from
-the names the previous blocks of the same file defined. Illustrative snippets use ```text or ```sh.
+the names the previous blocks of the same file defined, and none uses a deprecated sabre name.
+Illustrative snippets use ```text or ```sh.
 """
 
 from __future__ import annotations
 
 import re
+import warnings
 from pathlib import Path
 
 import pytest
@@ -43,5 +45,7 @@ def test_every_python_block_runs(document: Path):
     for line, source in python_blocks(document.read_text()):
         namespace = {"__name__": f"docs:{document.name}", **names}
         code = compile(source, f"{document.relative_to(ROOT)}:{line}", "exec")
-        exec(code, namespace)
+        with warnings.catch_warnings():  # the docs teach the current names, never a deprecated one
+            warnings.filterwarnings("error", message=r"sabre\.\S+ is deprecated", category=DeprecationWarning)
+            exec(code, namespace)
         names = {k: v for k, v in namespace.items() if k != "__builtins__"}

@@ -95,7 +95,7 @@ def test_energy_tank(initial, floor, tau, dt):
     parameter=any_float,
 )
 def test_likelihood_weights(costs_, mapping, parameter):
-    w = finite_or_sabre_error(lambda: sabre.likelihood_weights(costs_, mapping, parameter))
+    w = finite_or_sabre_error(lambda: sabre.paper.likelihood_weights(costs_, mapping, parameter))
     if w is not None:
         assert np.all(w >= 0.0)
         assert np.isclose(w.sum(), 1.0) or w.sum() == 0.0

@@ -151,7 +151,7 @@ def test_a_reset_controller_filters_exactly_like_a_fresh_one(scene):
     # command must not depend on what was filtered before it (bit-identical to a fresh controller).
     config = small_config(variant="IO")
     used, fresh = (sabre.Controller(scene, sabre.tasks.OpenObject(), config) for _ in range(2))
-    x = sabre.paper_start_state(scene)  # base outside its box, arm near its limits: rows bind
+    x = sabre.paper.paper_start_state(scene)  # base outside its box, arm near its limits: rows bind
     rng = np.random.default_rng(0)
     for _ in range(20):
         before, after = rng.uniform(-1.0, 1.0, (2, scene.nq))
@@ -300,20 +300,22 @@ def test_open_object_fields_that_cannot_work_on_the_scene_fail_when_the_controll
 @pytest.mark.parametrize("parameter", [-5.0, 0.0, float("nan"), float("inf")])
 def test_likelihood_weights_refuse_a_parameter_that_is_not_positive(mapping, parameter):
     with pytest.raises(InvalidValueError):
-        sabre.likelihood_weights([1.0, 2.0, 3.0], mapping, parameter)
+        sabre.paper.likelihood_weights([1.0, 2.0, 3.0], mapping, parameter)
 
 
 def test_invariant_weights_of_costs_whose_span_overflows_match_the_scaled_problem():
     # (55) is invariant to the cost scale: costs spanning ±1e308 weigh like the same costs / 1e308.
     huge = np.array([1e308, 0.0, -1e308, 5e307])
     np.testing.assert_allclose(
-        sabre.likelihood_weights(huge, "invariant", 10.0), sabre.likelihood_weights(huge / 1e308, "invariant", 10.0), rtol=1e-12
+        sabre.paper.likelihood_weights(huge, "invariant", 10.0),
+        sabre.paper.likelihood_weights(huge / 1e308, "invariant", 10.0),
+        rtol=1e-12,
     )
 
 
 def test_complex_costs_are_refused_by_likelihood_weights():
     with pytest.raises(ShapeError):
-        sabre.likelihood_weights(np.array([1.0 + 1j, 2.0]), "invariant", 10.0)
+        sabre.paper.likelihood_weights(np.array([1.0 + 1j, 2.0]), "invariant", 10.0)
 
 
 def test_open_object_on_a_scene_without_its_frames_or_with_swapped_files_fails_when_the_controller_is_built():

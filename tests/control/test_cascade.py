@@ -245,7 +245,7 @@ def _moved_and_prediction_error(scene, seed: int) -> list[tuple[float, float]]:
     controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=seed))
     plant = sabre.Plant(scene)
     low = sabre.LowLevelController(scene, dt=plant.dt)
-    plant.reset(sabre.paper_start_state(scene))
+    plant.reset(sabre.paper.paper_start_state(scene))
     assert controller.predict(plant.state, 0.0, 0.03)[1] == 0.0  # no plan yet: nothing to predict with
     for _ in range(20):
         controller.update(plant.state, plant.time)

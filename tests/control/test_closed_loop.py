@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import sabre
-from sabre import scenarios, tasks
+from sabre import tasks
+from sabre.paper import scenarios
 
 #: The inner filter's passivity row is softened by a slack (penalty Γ against ‖ũ − u‖²), so a step
 #: taken with the row active may let the tank fall short of its floor by about dt·b/(1 + Γ‖τ̂‖²);

@@ -29,9 +29,9 @@ def test_likelihood_mapping_at_high_cost_scale(scale):
     """Paper Fig. 3: costs uniform between J_max·0.8 and J_max. With λ = h = 10, once J_max is large the
     naive and baseline-subtracted mappings put all weight on one sample, the invariant one does not."""
     costs_ = np.linspace(0.8 * scale, scale, 40)
-    naive = sabre.likelihood_weights(costs_, "naive", 10.0)
-    baseline = sabre.likelihood_weights(costs_, "baseline", 10.0)
-    invariant = sabre.likelihood_weights(costs_, "invariant", 10.0)
+    naive = sabre.paper.likelihood_weights(costs_, "naive", 10.0)
+    baseline = sabre.paper.likelihood_weights(costs_, "baseline", 10.0)
+    invariant = sabre.paper.likelihood_weights(costs_, "invariant", 10.0)
     # Independent reference for (55): exp(−h (J − J_min)/(J_max − J_min)) normalised.
     reference = np.exp(-10.0 * (costs_ - costs_.min()) / (costs_.max() - costs_.min()))
     np.testing.assert_allclose(invariant, reference / reference.sum(), rtol=1e-12)
@@ -45,11 +45,11 @@ def test_likelihood_mapping_at_high_cost_scale(scale):
 
 
 def test_invariant_weights_ignore_non_finite_costs():
-    w = sabre.likelihood_weights([1.0, np.nan, 2.0, np.inf, 3.0], "invariant", 10.0)
+    w = sabre.paper.likelihood_weights([1.0, np.nan, 2.0, np.inf, 3.0], "invariant", 10.0)
     assert w[1] == 0.0 and w[3] == 0.0
     assert w.sum() == pytest.approx(1.0)
     with pytest.raises(InvalidValueError):
-        sabre.likelihood_weights([1.0, 2.0], "exotic", 1.0)
+        sabre.paper.likelihood_weights([1.0, 2.0], "exotic", 1.0)
 
 
 def test_costs_compose_and_validate(scene):
@@ -265,7 +265,7 @@ def test_run_episode_closes_the_loop_on_the_plant(scene):
 
 
 def test_paper_start_state(scene):
-    x = sabre.paper_start_state(scene)
+    x = sabre.paper.paper_start_state(scene)
     assert x.shape == (scene.nx,)
     assert x[0] == -3.0 and x[1] == -3.0
     q = x[: scene.nq]
@@ -373,7 +373,7 @@ def test_guides_enter_the_next_batch_once(scene):
 @pytest.fixture(scope="module")
 def hooked(scene):
     """The plant after the scripted approach and hook (level hand), tip against the bar."""
-    return sabre.scenarios.hooked_state(scene)
+    return sabre.paper.scenarios.hooked_state(scene)
 
 
 def test_servo_guide_tracks_a_moving_target_on_the_kinematics(scene, hooked):

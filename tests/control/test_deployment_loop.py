@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import sabre
-from sabre import scenarios
 from sabre.errors import InvalidValueError
+from sabre.paper import scenarios
 
 SECONDS = 0.3
 CONFIG = sabre.ControllerConfig(variant="IO", rollouts=16, seed=4, threads=1, tank_initial=2.3)

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 import sabre
-from sabre import _core, scenarios
+from sabre import _core
 from sabre.errors import InvalidValueError, ShapeError
+from sabre.paper import scenarios
 
 STEPS = 500
 INITIAL = 2.5  # J: close enough to the floor (2 J) that the passivity row shapes the pull

@@ -17,7 +17,7 @@ def test_first_plan_from_the_process_equals_the_same_controllers_plan_in_this_pr
     same seed gives the plan Controller.update gives here, to rounding."""
     factory = functools.partial(planner_factories.open_shelf, "IO", 3)
     reference = factory()
-    x0 = sabre.paper_start_state(reference.scene)
+    x0 = sabre.paper.paper_start_state(reference.scene)
     reference.reset(t0=0.25)
     reference.update(x0, 0.25)
     cascade = sabre.RealtimeCascade(factory(), planner_process=factory, min_replan_period=10.0)
@@ -184,7 +184,7 @@ def test_the_planner_process_runs_niced_and_under_sched_idle_when_asked(idle):
     OS reports for its main thread; the id is gone once the cascade stops."""
     factory = functools.partial(planner_factories.open_shelf, "IO", 3)
     cascade = sabre.RealtimeCascade(factory(), planner_process=factory, min_replan_period=10.0, planner_nice=7, planner_idle=idle)
-    x0 = sabre.paper_start_state(cascade.controller.scene)
+    x0 = sabre.paper.paper_start_state(cascade.controller.scene)
     assert cascade.planner_pid is None
     with cascade.start(x0):
         pid = cascade.planner_pid
@@ -204,7 +204,7 @@ def test_the_planner_process_runs_single_threaded_blas_unless_the_user_chose(mon
         monkeypatch.setenv("OPENBLAS_NUM_THREADS", user_setting)
     factory = functools.partial(planner_factories.open_shelf, "IO", 3)
     cascade = sabre.RealtimeCascade(factory(), planner_process=factory, min_replan_period=10.0)
-    with cascade.start(sabre.paper_start_state(cascade.controller.scene)):
+    with cascade.start(sabre.paper.paper_start_state(cascade.controller.scene)):
         with open(f"/proc/{cascade.planner_pid}/environ", "rb") as f:
             environ = dict(item.split(b"=", 1) for item in f.read().split(b"\0") if b"=" in item)
     assert environ[b"OPENBLAS_NUM_THREADS"] == (user_setting or "1").encode()

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import sabre
-from sabre import scenarios
 from sabre.errors import InvalidValueError
+from sabre.paper import scenarios
 from sabre.plants import PLANT_MEMBERS, as_plant
 
 SECONDS = 0.3

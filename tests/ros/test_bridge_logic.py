@@ -86,7 +86,7 @@ def test_wrench_frames_take_the_headers_axes_and_reject_unknown_frames():
     assert frames.resolve("panda_link0") == ("panda_link0", "panda_link0")
     with pytest.raises(MessageError, match="neither"):
         frames.resolve("camera_link")
-    q = sabre.paper_start_state(scene)[: scene.nq]
+    q = sabre.paper.paper_start_state(scene)[: scene.nq]
     w = np.array([1.0, -2.0, 3.0, 0.1, 0.2, -0.3])
     r = scene.fk(q, "panda_link8")[:3, :3]
     local = np.concatenate([r.T @ w[:3], r.T @ w[3:]])

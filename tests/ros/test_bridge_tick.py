@@ -74,7 +74,7 @@ class Pipeline:
 
         frames = ("map", scene.wrist_sensor_link, "")
         self.cascade = RealtimeCascade(controller(), tau_ext_cutoff=10.0, tau_ext_timeout=0.1, wrench_frames=frames)
-        self.x = sabre.paper_start_state(scene)
+        self.x = sabre.paper.paper_start_state(scene)
         self.cascade.plan(self.x, 0.0)
         # the same plan on stages of their own: the reference the tick's cascade is compared with
         self.reference = RealtimeCascade(controller())

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 
 import sabre
-from sabre.estimation import SENSOR_FRAME
+from sabre.estimation import SENSOR_FRAME, LowPass, tau_ext_from_wrench
 
 
 def hooked_plant(obj: str = "shelf"):
     scene = sabre.Scene.load(obj=obj)
     plant = sabre.Plant(scene, tau_ext_cutoff=None)
-    plant.reset(sabre.scenarios.hooked_state(scene))
+    plant.reset(sabre.paper.scenarios.hooked_state(scene))
     return scene, plant, sabre.LowLevelController(scene)
 
 
@@ -32,21 +32,21 @@ def test_tau_ext_from_the_wrist_wrench_equals_the_plants_contact_torques_in_worl
         low.track(plant, pull, 1)
         if plant.contact and np.linalg.norm(plant.tau_ext) > 1.0:
             q, w = plant.state[: scene.nq], plant.wrench
-            assert np.allclose(sabre.tau_ext_from_wrench(scene, q, w), plant.tau_ext, rtol=1e-9, atol=1e-9)
+            assert np.allclose(tau_ext_from_wrench(scene, q, w), plant.tau_ext, rtol=1e-9, atol=1e-9)
             r = scene.fk(q, SENSOR_FRAME)[:3, :3]
             local = np.concatenate([r.T @ w[:3], r.T @ w[3:]])
-            assert np.allclose(sabre.tau_ext_from_wrench(scene, q, local, axes=SENSOR_FRAME), plant.tau_ext, atol=1e-9)
+            assert np.allclose(tau_ext_from_wrench(scene, q, local, axes=SENSOR_FRAME), plant.tau_ext, atol=1e-9)
             compared += 1
     assert compared > 10
 
 
 def test_low_pass_follows_a_step_with_its_time_constant_and_passes_through_without_a_cutoff():
-    f = sabre.LowPass(10.0)
+    f = LowPass(10.0)
     f.update(np.zeros(2), 0.001)
     tau = 1.0 / (2 * math.pi * 10.0)
     y = f.update(np.ones(2), tau)
     assert np.allclose(y, 1 - math.exp(-1))
-    assert np.array_equal(sabre.LowPass(None).update(np.array([3.0]), 0.1), [3.0])
+    assert np.array_equal(LowPass(None).update(np.array([3.0]), 0.1), [3.0])
 
 
 @pytest.mark.parametrize("obj", ["shelf", "drawer"])
@@ -77,7 +77,7 @@ def test_estimator_tracks_the_plants_articulation_during_hook_and_pull(obj):
 def hooked_estimator(scene, **options):
     """An estimator hooked on the handle at the closed object (the hand put right at the handle)."""
     estimator = sabre.ObjectStateEstimator(scene, **options)
-    q = sabre.scenarios.hooked_state(scene)[: scene.nq]
+    q = sabre.paper.scenarios.hooked_state(scene)[: scene.nq]
     e = estimator.update(q, 0.0, 10.0)
     assert e.hooked, "the hooked state is within hook_distance of the handle"
     return estimator, q
@@ -87,7 +87,7 @@ def test_estimator_hooks_only_when_allowed_and_the_hand_is_at_the_handle_in_cont
     """At the hooked state in contact the estimator hooks unless told it may not (the task's hook
     not seated yet), and never without force."""
     scene = sabre.Scene.load(obj="shelf")
-    q = sabre.scenarios.hooked_state(scene)[: scene.nq]
+    q = sabre.paper.scenarios.hooked_state(scene)[: scene.nq]
     estimator = sabre.ObjectStateEstimator(scene)
     for k in range(20):
         assert not estimator.update(q, 0.01 * k, 10.0, may_hook=False).hooked
@@ -249,7 +249,7 @@ def test_estimator_rejects_bad_input_and_keeps_its_estimate():
 def test_the_ros_modules_re_export_the_core_estimates():
     from sabre.ros import conversions, estimator
 
-    assert conversions.LowPass is sabre.LowPass and conversions.tau_ext_from_wrench is sabre.tau_ext_from_wrench
+    assert conversions.LowPass is LowPass and conversions.tau_ext_from_wrench is tau_ext_from_wrench
     assert estimator.ObjectStateEstimator is sabre.ObjectStateEstimator
 
 

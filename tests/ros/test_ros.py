@@ -302,7 +302,7 @@ def test_malformed_and_withheld_states_are_answered_with_ramps_never_steps(bridg
     )
     processes.append(ctrl)
     scene = sabre.Scene.load(obj="shelf")
-    x = sabre.paper_start_state(scene)
+    x = sabre.paper.paper_start_state(scene)
     nq, names = scene.nq, list(scene.joint_names)
     sent: dict[int, str] = {}
     k = [0]

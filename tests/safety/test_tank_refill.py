@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import sabre
-from sabre import scenarios
+from sabre.paper import scenarios
 
 SECONDS = 3.0
 INITIAL = 4.0  # J: less than the pull costs, so that the fixed budget runs out

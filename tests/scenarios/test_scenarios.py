@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import sabre
-from sabre import scenarios
+from sabre.paper import scenarios
 
 
 def test_stuck_door_loads_the_held_door_and_io_keeps_the_tank_above_its_floor():

@@ -166,7 +166,7 @@ def test_a_zero_command_holds_the_robot_still(start):
     """2 s of zero command: gravity compensated by MuJoCo's own bias forces, the arm drifts less than 1e-6."""
     plant = _plant("shelf")
     scene = plant.scene
-    x0 = scene.default_state() if start == "default" else sabre.paper_start_state(scene)
+    x0 = scene.default_state() if start == "default" else sabre.paper.paper_start_state(scene)
     plant.reset(x0)
     for _ in range(2000):
         plant.step(np.zeros(scene.nu))
@@ -421,7 +421,7 @@ def test_the_same_seed_opens_the_object_in_both_plants(obj):
     Rapier plant and in MuJoCo's, each run through run_episode."""
     _mujoco()
     scene = sabre.Scene.load(obj=obj)
-    x0 = sabre.scenarios.hooked_state(scene)
+    x0 = sabre.paper.scenarios.hooked_state(scene)
     results = {}
     for name, plant in (("sabre", sabre.Plant(scene)), ("mujoco", sabre.MujocoPlant(scene))):
         controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(variant="IO", seed=0, threads=1))

@@ -433,7 +433,7 @@ def test_contact_report_sums_to_the_wrist_wrench():
     the hook touches the handle, and the forces on the links beyond the wrist sensor add up to
     the sensor's force reading; with nothing touching the list is empty."""
     scene = sabre.Scene.load(obj="shelf")
-    hooked = sabre.scenarios.hooked_state(scene)
+    hooked = sabre.paper.scenarios.hooked_state(scene)
     plant = sabre.Plant(scene)
     low = sabre.LowLevelController(scene, dt=plant.dt)
     plant.reset(hooked)
@@ -459,7 +459,7 @@ def test_measured_tau_ext_is_a_first_order_low_pass_of_the_contact_torques():
     continuous-time filter's factor e^{−2π f_c dt} per step. Pulling the hooked handle and then
     backing off produces both contact and contact-free steps."""
     scene = sabre.Scene.load(obj="shelf")
-    hooked = sabre.scenarios.hooked_state(scene)
+    hooked = sabre.paper.scenarios.hooked_state(scene)
     cutoff = 30.0
     raw_plant = sabre.Plant(scene, tau_ext_cutoff=None)
     plant = sabre.Plant(scene, tau_ext_cutoff=cutoff)

@@ -204,7 +204,7 @@ def opening_episode() -> sabre.Episode:
     scene = sabre.Scene.load(obj="shelf")
     controller = sabre.Controller(scene, sabre.tasks.OpenObject(), sabre.ControllerConfig(seed=0))
     episode = sabre.run_episode(
-        scene, controller, 5.0, seed=0, x0=sabre.scenarios.hooked_state(scene), record_plans=True, progress=False
+        scene, controller, 5.0, seed=0, x0=sabre.paper.scenarios.hooked_state(scene), record_plans=True, progress=False
     )
     assert episode.opening[-1] - episode.opening[0] > 0.3, "the recorded door must swing for this test"
     return episode
@@ -331,7 +331,7 @@ def test_viewer_shows_the_filters_obstacles_and_the_constraints_near_their_bound
     controller.add_obstacle([0.2, -2.0, 0.5], 0.1)
     viewer = Viewer(scene, port=0)
     try:
-        x0 = sabre.paper_start_state(scene)  # elbow 0.12 rad from its limit
+        x0 = sabre.paper.paper_start_state(scene)  # elbow 0.12 rad from its limit
         episode = sabre.run_episode(scene, controller, 0.1, seed=2, x0=x0, viewer=viewer, progress=False)
         np.testing.assert_allclose(episode.obstacles[0, 0], [0.2, -2.0, 0.5, 0.1])
         assert viewer._shown_obstacles == 1

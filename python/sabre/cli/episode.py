@@ -21,11 +21,11 @@ from .. import (
     Scene,
     default_threads,
     hook_and_pull,
-    paper_start_state,
     plot_episode,
     run_episode,
     tasks,
 )
+from ..closed_loop import paper_start_state
 from ..errors import InvalidValueError
 from ._args import HelpFormatter, non_negative_int, positive_float, thread_count
 
