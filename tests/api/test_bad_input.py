@@ -32,7 +32,38 @@ def objs():
 # Vector arguments of every public entry point
 # --------------------------------------------------------------------------------------------------
 
-# name -> (call(objs, value), expected length given objs, a valid value given objs, None is valid)
+
+def _reset(o, x0):
+    o.plant.reset(x0)
+    return o.plant.state
+
+
+def _step_from_rest(o, tau):
+    o.plant.reset()
+    o.plant.step(tau)
+    return o.plant.state
+
+
+def _track_from_rest(o, u_ref):
+    o.plant.reset()
+    o.controller.reset()
+    o.controller.track(o.plant, u_ref, 1)
+    return o.plant.state
+
+
+def _torque(o, x, u_ref):
+    o.controller.reset()
+    return o.controller.torque(x, u_ref)
+
+
+def _plan(o, x):
+    o.planner.reset()  # the same random stream for every call
+    o.planner.update(x, 0.0)
+    return o.planner.nominal
+
+
+# name -> (call(objs, value) -> what the call returned or left behind, expected length given objs,
+# a valid value given objs, None is valid)
 TARGETS = {
     "Scene.fk(q)": (
         lambda o, v: o.scene.fk(v, "grasp"),
@@ -47,53 +78,48 @@ TARGETS = {
         lambda o: np.full(o.scene.no, 0.3),
         False,
     ),
-    "Scene.mass_matrix(q)": (lambda o, v: o.scene.mass_matrix(v), lambda o: o.scene.nq, lambda o: np.zeros(o.scene.nq), False),
-    "RolloutModel.rollout(x0)": (
-        lambda o, v: o.model.rollout(v, np.zeros((1, 2, o.scene.nu))),
-        lambda o: o.scene.nx,
-        lambda o: o.scene.default_state(),
-        False,
-    ),
-    "Plant.reset(x0)": (lambda o, v: o.plant.reset(v), lambda o: o.scene.nx, lambda o: o.scene.default_state(), True),
-    "Controller.update(x)": (
-        lambda o, v: o.planner.update(v, 0.0),
-        lambda o: o.scene.nx,
-        lambda o: o.scene.default_state(),
-        False,
-    ),
-    "Plant.step(tau)": (lambda o, v: o.plant.step(v), lambda o: o.scene.nq, lambda o: np.zeros(o.scene.nq), False),
-    "LowLevelController.track(u_ref)": (
-        lambda o, v: o.controller.track(o.plant, v, 1),
+    "Scene.mass_matrix(q)": (
+        lambda o, v: np.vstack(o.scene.mass_matrix(v)),  # M (nq, nq) over the gravity torque (nq,)
         lambda o: o.scene.nq,
         lambda o: np.zeros(o.scene.nq),
         False,
     ),
+    "RolloutModel.rollout(x0)": (
+        lambda o, v: o.model.rollout(v, np.zeros((1, 2, o.scene.nu))).states,
+        lambda o: o.scene.nx,
+        lambda o: o.scene.default_state(),
+        False,
+    ),
+    "Plant.reset(x0)": (_reset, lambda o: o.scene.nx, lambda o: o.scene.default_state(), True),
+    "Controller.update(x)": (_plan, lambda o: o.scene.nx, lambda o: o.scene.default_state(), False),
+    "Plant.step(tau)": (_step_from_rest, lambda o: o.scene.nq, lambda o: np.zeros(o.scene.nq), False),
+    "LowLevelController.track(u_ref)": (_track_from_rest, lambda o: o.scene.nq, lambda o: np.zeros(o.scene.nq), False),
     "LowLevelController.torque(x)": (
-        lambda o, v: o.controller.torque(v, np.zeros(o.scene.nq)),
+        lambda o, v: _torque(o, v, np.zeros(o.scene.nq)),
         lambda o: o.scene.nx,
         lambda o: o.scene.default_state(),
         False,
     ),
     "LowLevelController.torque(u_ref)": (
-        lambda o, v: o.controller.torque(o.scene.default_state(), v),
+        lambda o, v: _torque(o, o.scene.default_state(), v),
         lambda o: o.scene.nq,
         lambda o: np.zeros(o.scene.nq),
         False,
     ),
     "Scene.load(obj_pose)": (
-        lambda o, v: sabre.Scene.load("royalpanda", "shelf", obj_pose=v),
+        lambda o, v: sabre.Scene.load("royalpanda", "shelf", obj_pose=v).object_pose,
         lambda o: 6,
         lambda o: np.array([1.0, 0, 0, 0, 0, 0]),
         True,
     ),
     "Scene.from_urdf(obj_pose)": (
-        lambda o, v: sabre.Scene.from_urdf(ROBOT_PATH, SHELF_PATH, obj_pose=v),
+        lambda o, v: sabre.Scene.from_urdf(ROBOT_PATH, SHELF_PATH, obj_pose=v).object_pose,
         lambda o: 6,
         lambda o: np.array([1.0, 0, 0, 0, 0, 0.3]),
         True,
     ),
     "Scene.from_urdf_strings(obj_pose)": (
-        lambda o, v: sabre.Scene.from_urdf_strings(ROBOT_PATH.read_text(), SHELF_PATH.read_text(), obj_pose=v),
+        lambda o, v: sabre.Scene.from_urdf_strings(ROBOT_PATH.read_text(), SHELF_PATH.read_text(), obj_pose=v).object_pose,
         lambda o: 6,
         lambda o: np.array([1.0, 0, 0, 0, 0, 0]),
         True,
@@ -170,17 +196,54 @@ def test_non_finite_values_are_invalid_value_errors(objs, target, case):
     check(e, InvalidValueError, ValueError)
 
 
+def _pose(xyz_rpy):
+    """The (4, 4) pose of (x, y, z, roll, pitch, yaw): R = Rz(yaw) Ry(pitch) Rx(roll), as in a URDF origin."""
+    x, y, z, roll, pitch, yaw = xyz_rpy
+    c, s = np.cos, np.sin
+    rx = np.array([[1, 0, 0], [0, c(roll), -s(roll)], [0, s(roll), c(roll)]])
+    ry = np.array([[c(pitch), 0, s(pitch)], [0, 1, 0], [-s(pitch), 0, c(pitch)]])
+    rz = np.array([[c(yaw), -s(yaw), 0], [s(yaw), c(yaw), 0], [0, 0, 1]])
+    pose = np.eye(4)
+    pose[:3, :3], pose[:3, 3] = rz @ ry @ rx, (x, y, z)
+    return pose
+
+
+# where the outcome holds the input itself: (that part of the outcome, what it is for a float64 input)
+HOLDS_INPUT = {
+    "Plant.reset(x0)": (lambda out: out, lambda v: v),
+    "RolloutModel.rollout(x0)": (lambda out: out[0, 0], lambda v: v),
+    "Scene.load(obj_pose)": (lambda out: out, _pose),
+    "Scene.from_urdf(obj_pose)": (lambda out: out, _pose),
+    "Scene.from_urdf_strings(obj_pose)": (lambda out: out, _pose),
+}
+
+
 @pytest.mark.parametrize("dtype", [np.int64, np.int32, np.uint8, np.float32, np.float64])
 @pytest.mark.parametrize("target", list(TARGETS))
-def test_real_numeric_dtypes_are_accepted(objs, target, dtype):
+def test_real_numeric_dtypes_are_read_as_their_float64_values(objs, target, dtype):
+    """Documented: a real numeric array is converted to float64. The call on it (and on it as a plain
+    list) does exactly what it does on the float64 array of the same numbers, converted here; where
+    casting to ``dtype`` moved the numbers, the outcome moved with them (the numbers given are the
+    ones used); where the outcome holds the input, it holds those numbers."""
     call, _, good, _ = TARGETS[target]
-    value = good(objs)
-    if np.issubdtype(dtype, np.unsignedinteger):
+    value = np.asarray(good(objs), dtype=np.float64)
+    unsigned = np.issubdtype(dtype, np.unsignedinteger)
+    if unsigned:
+        # panda_joint4's whole range is negative: no unsigned state lies within the joint limits
         if target == "Plant.reset(x0)":
-            pytest.skip("panda_joint4's whole range is negative: no unsigned state lies within the joint limits")
+            pytest.skip("the plant refuses a state outside the joint limits")
         value = np.abs(value)
-    call(objs, np.asarray(value).astype(dtype))  # must not raise
-    call(objs, np.asarray(value).astype(dtype).tolist())  # plain lists too
+    given = value.astype(dtype)
+    as_float = given.astype(np.float64)
+    expected = np.array(call(objs, as_float))
+    np.testing.assert_array_equal(call(objs, given), expected)
+    np.testing.assert_array_equal(call(objs, given.tolist()), expected)
+    # (from outside the joint limits every rollout fails: the plan is zero whatever the state)
+    if np.abs(as_float - value).max() > 1e-3 and not (unsigned and target == "Controller.update(x)"):
+        assert not np.array_equal(call(objs, value), expected), "the cast moved the numbers, not the outcome"
+    if target in HOLDS_INPUT:
+        part, holds = HOLDS_INPUT[target]
+        np.testing.assert_allclose(part(expected), holds(as_float), rtol=0, atol=1e-12)
 
 
 def test_integer_input_means_the_same_as_float(objs):

@@ -18,7 +18,7 @@ import sabre
 from sabre import costs
 from sabre.errors import InvalidValueError, SabreError, ShapeError, SimulationError
 
-HANG_GUARD = 120  # s: only stops a hung child; nothing asserts on time
+HANG_GUARD = 120  # s: only bounds a wait for a hung child or a condition; nothing asserts on time
 
 
 @pytest.fixture(scope="module")
@@ -101,11 +101,36 @@ def test_coordinates_beyond_the_model_range_are_refused_not_nan(scene):
 # Interrupts and time -----------------------------------------------------------------------------
 INTERRUPTIBLE = textwrap.dedent(
     """
-    import sys, numpy as np, sabre
+    import os, signal, sys, threading, time, numpy as np, sabre
     scene = sabre.Scene.load("royalpanda", "shelf")
     x0 = scene.default_state()
-    what = sys.argv[1]
-    print("ready", flush=True)
+    scene.fk(x0[: scene.nq], "grasp")  # the first array argument loads NumPy's C API (Python code)
+    what, core_call = sys.argv[1], sys.argv[2]
+    caller = []
+
+    def entering(frame, event, arg):
+        # called just before each builtin call, with the frame making it
+        if event == "c_call" and getattr(arg, "__qualname__", None) == core_call:
+            sys.setprofile(None)
+            caller.append(frame)
+
+    def report_when_inside():
+        # Once the profiler has returned, the main thread runs no Python code until the call returns,
+        # its current frame the caller's; in the profiler, the current frame is the profiler's.
+        main = threading.main_thread().ident
+        while not (caller and sys._current_frames().get(main) is caller[0]):
+            time.sleep(0.001)
+        os.write(1, b"inside\\n")
+
+    def on_sigint(signum, frame):
+        if not caller or frame is not caller[0]:  # Python's handler ran outside the core's check for signals
+            os.write(1, f"outside: in {frame and frame.f_code.co_name}\\n".encode())
+            os._exit(4)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, on_sigint)
+    threading.Thread(target=report_when_inside, daemon=True).start()
+    sys.setprofile(entering)
     try:
         if what == "follow":
             plant = sabre.Plant(scene); plant.reset(x0)
@@ -123,18 +148,23 @@ INTERRUPTIBLE = textwrap.dedent(
 )
 
 
-@pytest.mark.parametrize("what", ["follow", "rollout", "episode"])
-def test_ctrl_c_interrupts_a_long_core_call(what):
-    child = subprocess.Popen([sys.executable, "-c", INTERRUPTIBLE, what], stdout=subprocess.PIPE, text=True)
+@pytest.mark.parametrize(
+    "what, core_call",
+    [("follow", "LowLevelController.follow"), ("rollout", "RolloutModel.rollout"), ("episode", "LowLevelController.follow")],
+)
+def test_ctrl_c_interrupts_a_long_core_call(what, core_call):
+    """SIGINT, sent once the child reports its main thread inside the core's long call, ends the call
+    with KeyboardInterrupt, raised by Python's handler from the core's check for signals."""
+    child = subprocess.Popen([sys.executable, "-c", INTERRUPTIBLE, what, core_call], stdout=subprocess.PIPE, text=True)
     try:
-        assert child.stdout.readline().strip() == "ready"
-        time.sleep(1.0)  # the call must be inside Rust when the signal arrives
-        child.send_signal(signal.SIGINT)
+        line = child.stdout.readline().strip()
+        if line == "inside":
+            child.send_signal(signal.SIGINT)
         out, _ = child.communicate(timeout=HANG_GUARD)
     finally:
         child.kill()
-    assert child.returncode == 3, out
-    assert "interrupted" in out
+    assert line == "inside", line
+    assert child.returncode == 3 and out.strip() == "interrupted", out
 
 
 def test_run_episode_simulates_the_duration_asked_for_not_a_whole_plan(scene):
@@ -199,27 +229,61 @@ def test_bad_values_raise_sabre_errors(scene, call, error):
 
 
 # Resources ---------------------------------------------------------------------------------------
-def _threads() -> int:
-    return len(os.listdir("/proc/self/task"))
+def _rollout_workers() -> int:
+    """The process's rollout pool workers (the core names them sabre-rollout-<i>)."""
+    names = []
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            with open(f"/proc/self/task/{tid}/comm") as comm:
+                names.append(comm.read().strip())
+        except OSError:  # the thread ended meanwhile (no such file, or no such process on reading)
+            pass
+    return sum(name.startswith("sabre-rollout-") for name in names)
 
 
 @pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="counts threads through /proc")
-def test_rollouts_with_many_thread_counts_keep_a_bounded_number_of_threads(scene):
+def test_rollouts_with_many_thread_counts_keep_only_the_two_most_recent_pools(scene):
+    """A batch of 32 rollouts on n threads runs one slot on the caller and n - 1 on a pool; of the
+    pools of 1 to 31 workers started here, the two most recent (31 and 30 workers) stay and the
+    others' workers exit. They exit asynchronously: the count is polled until it settles, within a
+    deadline."""
     model = sabre.RolloutModel(scene, dt=0.015)
     x0 = scene.default_state()
-    U = np.zeros((4, 2, scene.nq))
-    model.rollout(x0, U, threads=1)
-    time.sleep(0.5)
-    before = _threads()  # the process's other threads, and at most two pools of earlier tests
-    for threads in range(1, 33):
+    U = np.zeros((32, 2, scene.nq))
+    for threads in range(2, 33):
         model.rollout(x0, U, threads=threads)
-    time.sleep(0.5)  # evicted pools' threads exit asynchronously
-    # without a bound: 1 + 2 + ... + 32 = 528 new workers; with it, the two most recent pools
-    assert _threads() - before <= 32 + 31
+    kept = (32 - 1) + (31 - 1)
+    deadline = time.monotonic() + HANG_GUARD
+    while (workers := _rollout_workers()) != kept and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert workers == kept, f"{workers} rollout workers alive, expected the two most recent pools' {kept}"
 
 
-def test_simulation_errors_are_sabre_errors():
-    assert issubclass(SimulationError, SabreError)
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="reads the address space's size from /proc")
+def test_a_failure_the_core_reports_is_a_simulation_error_caught_as_a_sabre_error(scene):
+    """Rollouts whose outputs cannot be allocated (2 GiB of states, in a child allowed 1 GiB more
+    address space than it has) fail in the core; the error arrives as a SimulationError that
+    ``except sabre.SabreError`` and ``except RuntimeError`` both catch, saying what it could not
+    allocate."""
+    script = textwrap.dedent(
+        """
+        import resource, numpy as np, sabre
+        scene = sabre.Scene.load("royalpanda", "shelf")
+        with open("/proc/self/status") as status:
+            size = next(int(line.split()[1]) * 1024 for line in status if line.startswith("VmSize:"))
+        resource.setrlimit(resource.RLIMIT_AS, (size + 2**30, size + 2**30))
+        n = 2**28 // scene.nx  # states of n rollouts of 0 steps: 2**28 values, the most a batch may have
+        try:
+            sabre.RolloutModel(scene).rollout(scene.default_state(), np.zeros((n, 0, scene.nu)), threads=1)
+        except sabre.SabreError as e:
+            print(type(e).__name__, isinstance(e, RuntimeError), e)
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=HANG_GUARD)
+    assert out.returncode == 0, out.stderr[-2000:]
+    name, runtime, message = out.stdout.strip().split(" ", 2)
+    assert (name, runtime) == (SimulationError.__name__, "True"), out.stdout
+    assert f"cannot allocate {2**28 // scene.nx * scene.nx} values" in message and "rollout outputs" in message, message
 
 
 # Validated at construction ------------------------------------------------------------------------

@@ -323,6 +323,10 @@ def test_malformed_and_withheld_states_are_answered_with_ramps_never_steps(bridg
             send(x[:nq], x[nq : 2 * nq], names)
             time.sleep(0.001)
 
+    def answered() -> set[str | None]:
+        """The labels of the states the commands received so far answer (by the stamp they carry)."""
+        return {sent.get(m.layout.data_offset) for _, m in probe.get("arm")}
+
     feeder = threading.Thread(target=stream_states, daemon=True)
     feeder.start()
     probe.wait_for(lambda: moving(probe, 0, 0.02), "non-zero commands from the controller")
@@ -333,13 +337,13 @@ def test_malformed_and_withheld_states_are_answered_with_ramps_never_steps(bridg
         ("stamp back", x[:nq], x[nq : 2 * nq], names, True),
     ):
         send(position, velocity, joint_names, label, back)
-        time.sleep(0.05)
-    time.sleep(0.3)
+        probe.wait_for(lambda label=label: label in answered(), f"the answer to the {label} state")
+    resumed = len(probe.arm())
+    probe.wait_for(lambda: moving(probe, resumed, 0.02), "the commands to follow the valid states again")
     streaming.clear()
     feeder.join()
     probe.wait_for(lambda: len(probe.arm()) and np.all(probe.arm()[-20:] == 0.0), "the commands to ramp to zero")
-    answered = {sent.get(m.layout.data_offset) for _, m in probe.get("arm")}
-    assert {"wrong length", "NaN", "stamp back", "unknown names"} <= answered
+    assert {"wrong length", "NaN", "stamp back", "unknown names"} <= answered()
     status = probe.wait_for(lambda: probe.status("diagnostics", "sabre/controller"), "diagnostics")
     assert int(status[2]["rejected"]) >= 3 and int(status[2]["stale_events"]) >= 1
     assert ctrl.output().count("joint state rejected") >= 1

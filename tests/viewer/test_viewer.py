@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import sys
 from pathlib import Path
@@ -314,12 +315,58 @@ def test_run_episode_with_a_live_viewer_leaves_it_showing_the_final_state():
         viewer.close()
 
 
-def test_view_command_is_registered():
+def _help_sections(text: str) -> tuple[str, dict[str, str]]:
+    """argparse's help text read back: the usage (on one line) and {argument as listed: its help}."""
+    usage, *_ = text.split("\n\n")
+    entries: dict[str, str] = {}
+    name = None
+    for line in text.splitlines():
+        if re.match(r"^  \S", line):  # an argument: its name, then its help after two spaces or more
+            name, _, help_text = line.strip().partition("  ")
+            entries[name] = help_text.strip()
+        elif name is not None and line.startswith("   "):  # its help, wrapped
+            entries[name] = f"{entries[name]} {line.strip()}".strip()
+        else:
+            name = None
+    return " ".join(usage.split()), entries
+
+
+def test_view_help_lists_the_options_the_parser_declares_which_are_replays_arguments(capsys):
+    """``view --help`` exits 0 with the usage, the description and the argument list of exactly the
+    arguments the parser declares, each with its help; those are the episode's path and replay()'s
+    keyword arguments, with replay()'s defaults."""
+    import argparse
+    import inspect
+
     from sabre.cli import main
+    from sabre.cli.main import build_parser
+    from sabre.viz.viewer import replay
 
     with pytest.raises(SystemExit) as exit_:
         main(["view", "--help"])
     assert exit_.value.code == 0
+    text = capsys.readouterr().out
+    usage, entries = _help_sections(text)
+
+    commands = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    view = commands.choices["view"]
+    expected_usage, expected_entries = ["usage: python -m sabre view"], {}
+    for action in view._actions:
+        if action.option_strings:
+            metavar = "" if action.nargs == 0 else f" {action.metavar or action.dest.upper()}"
+            expected_usage.append(f"[{action.option_strings[0]}{metavar}]")
+            expected_entries[", ".join(f"{o}{metavar}" for o in action.option_strings)] = action.help
+        else:
+            expected_entries[action.dest] = action.help
+    expected_usage += [a.dest for a in view._actions if not a.option_strings]  # positionals last
+    assert usage == " ".join(expected_usage)
+    assert entries == expected_entries
+    assert " ".join(view.description.split()) in " ".join(text.split())
+
+    keywords = {k: p.default for k, p in inspect.signature(replay).parameters.items() if p.kind is p.KEYWORD_ONLY}
+    options = {a.dest: a.default for a in view._actions if a.option_strings and a.dest != "help"}
+    assert options == keywords  # every server setting of replay(), its default unchanged
+    assert [a.dest for a in view._actions if not a.option_strings] == ["episode"]
 
 
 def test_viewer_shows_the_filters_obstacles_and_the_constraints_near_their_bound():
