@@ -1,6 +1,7 @@
 //! The open-object task's core logic against independent references: the handle's travel against
 //! the hinge radius and the drawer's unit ratio, the errors against a target placed on the hand,
-//! the grasp offset's tilt, the settings' checks and the probe on a door that falls open.
+//! the grasp offset's tilt, the settings' checks, the probe on a door that falls open and the
+//! handle named by its link against the handle frame the object declares.
 
 use std::sync::Arc;
 
@@ -11,7 +12,7 @@ use sabre::Scene;
 fn geometry(object: &str) -> HandleGeometry {
     let scene = Arc::new(Scene::load("royalpanda", object, None).expect("built-in scene loads"));
     let tool = scene.tool_frame_name().expect("the robot has a tool frame").to_string();
-    HandleGeometry::new(scene, "handle_frame", Isometry3::identity(), &tool).expect("the handle frame exists")
+    HandleGeometry::new(scene, "handle_frame", &tool).expect("the handle frame exists")
 }
 
 /// A state with the robot at its start posture moved a little and the object at `opening`.
@@ -23,6 +24,32 @@ fn state(scene: &Scene, opening: f64) -> Vec<f64> {
     }
     x[2 * nq] = opening;
     x
+}
+
+#[test]
+fn a_handle_named_by_its_link_moves_as_the_handle_frame_the_object_declares() {
+    for object in ["shelf", "drawer", "microwave", "dishwasher"] {
+        let scene = Arc::new(Scene::load("royalpanda", object, None).expect("built-in scene loads"));
+        let tool = scene.tool_frame_name().expect("the robot has a tool frame").to_string();
+        let by_link = HandleGeometry::new(scene.clone(), "handle", &tool).expect("the handle link has geometry");
+        let limits = scene.object_limits()[0];
+        for fraction in [0.0, 0.4, 1.0] {
+            let o = [limits.lower + fraction * (limits.upper - limits.lower)];
+            let declared = scene.object_fk(&o, "handle_frame").unwrap().to_homogeneous();
+            let inferred = by_link.handle_pose(&o).to_homogeneous();
+            assert!(
+                (inferred - declared).abs().max() < 1e-12,
+                "{object} at {o:?}: {inferred} {declared}"
+            );
+        }
+    }
+    let scene = Arc::new(Scene::load("royalpanda", "shelf", None).expect("built-in scene loads"));
+    let tool = scene.tool_frame_name().expect("the robot has a tool frame").to_string();
+    let missing = HandleGeometry::new(scene, "pull", &tool).unwrap_err().to_string();
+    assert!(
+        missing.contains("'pull'") && missing.contains("links with collision geometry"),
+        "{missing}"
+    );
 }
 
 #[test]
@@ -209,7 +236,7 @@ fn an_object_that_nothing_sets_in_motion_is_not_probed_and_the_probe_agrees_that
     ] {
         let scene = Arc::new(Scene::load("royalpanda", object, pose).expect("built-in scene loads"));
         let tool = scene.tool_frame_name().expect("a tool frame").to_string();
-        let handle = HandleGeometry::new(scene.clone(), "handle_frame", Isometry3::identity(), &tool).expect("handle");
+        let handle = HandleGeometry::new(scene.clone(), "handle_frame", &tool).expect("handle");
         let limits = scene.object_limits()[0];
         // success far above every opening tried, so that the probe's own answer is asked for
         let rules = OpenObjectRules::new(handle, OpenObjectConfig::default(), 10.0, 10.0).unwrap();

@@ -293,12 +293,6 @@ class Scene:
         for a part of the fixed carcass)."""
         return tuple(self._core.object_joints_moving(str(frame)))
 
-    def object_closest_points(self, o: Sequence[float] | np.ndarray, point: Sequence[float] | np.ndarray) -> np.ndarray:
-        """(M, 3) for each collision primitive of :attr:`object_collisions` (a mesh's convex hull, a
-        box, ...), its world point nearest to the world ``point`` (3,) at object configuration o (no,);
-        ``point`` itself where it lies inside the primitive."""
-        return self._core.object_closest_points(as_float_array("o", o, (self.no,)), as_float_array("point", point, (3,)).tolist())
-
     # -- limits ---------------------------------------------------------------------------------
     def _robot_limits(self, i: int) -> np.ndarray:
         return readonly(np.asarray(self._core.robot_limits()[i], dtype=np.float64))

@@ -4,6 +4,7 @@ pub mod assembly;
 pub(crate) mod collision_shape;
 pub mod dynamics;
 pub mod generated;
+pub mod handle_frame;
 pub mod inertials;
 pub mod kinematics;
 pub mod mesh;

@@ -9,9 +9,9 @@ use pyo3::prelude::*;
 use super::convert::{array, pose_array, poses_array, view};
 use super::error::run;
 use super::robot::{parsed, roles_row, visual_rows, RobotOptions, RolesRow, VisualRow};
+use crate::model::handle_frame::{handle_frame, infer_handle_frame};
 use crate::model::inertials::DEFAULT_DENSITY;
 use crate::model::scene::Scene;
-use nalgebra::Point3;
 
 /// A self-collision sphere: (name, link, centre xyz in the link frame, radius).
 type SphereRow = (String, String, [f64; 3], f64);
@@ -176,18 +176,18 @@ impl PyScene {
         run(|| self.inner.object_joints_moving(frame))
     }
 
-    /// (M, 3) for each object collision primitive (in `object_collisions` order) its world point
-    /// nearest to the world point `point` (3,) at object configuration o (no,).
-    fn object_closest_points<'py>(
-        &self,
-        py: Python<'py>,
-        o: PyReadonlyArrayDyn<'py, f64>,
-        point: [f64; 3],
-    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        let no = self.inner.no() as isize;
-        let points = run(|| self.inner.object_closest_points(view("o", &o, &[no])?, &Point3::from(point)))?;
-        let flat: Vec<f64> = points.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
-        array(py, flat, &[points.len(), 3])
+    /// (object frame, (4, 4) offset) whose composition is the handle frame named by `handle`: the
+    /// frame itself when it has no collision geometry, else the frame inferred from it.
+    fn handle_frame<'py>(&self, py: Python<'py>, handle: &str) -> PyResult<(String, Array<'py>)> {
+        let found = run(|| handle_frame(&self.inner, handle))?;
+        let name = self.inner.object.links[found.link].name.clone();
+        Ok((name, pose_array(py, &found.offset)?))
+    }
+
+    /// (4, 4) the handle frame inferred from the collision geometry of object link `link`, in that
+    /// link's frame.
+    fn infer_handle_frame<'py>(&self, py: Python<'py>, link: &str) -> PyResult<Array<'py>> {
+        pose_array(py, &run(|| infer_handle_frame(&self.inner, link))?)
     }
 
     #[getter]

@@ -94,11 +94,11 @@ impl PyHandleGeometry {
 
 #[pymethods]
 impl PyHandleGeometry {
-    /// The handle frame `offset` (4, 4) on object link `handle_link` and the robot frame `tool_frame`.
+    /// The handle frame named by `handle` (an object frame, or a link whose handle frame is inferred
+    /// from its collision geometry) and the robot frame `tool_frame`.
     #[new]
-    fn new(scene: &PyScene, handle_link: &str, offset: PyReadonlyArrayDyn<'_, f64>, tool_frame: &str) -> PyResult<Self> {
-        let offset = run(|| isometry("offset", view("offset", &offset, &[4, 4])?))?;
-        let inner = run(|| HandleGeometry::new(scene.inner.clone(), handle_link, offset, tool_frame))?;
+    fn new(scene: &PyScene, handle: &str, tool_frame: &str) -> PyResult<Self> {
+        let inner = run(|| HandleGeometry::new(scene.inner.clone(), handle, tool_frame))?;
         Ok(Self { inner })
     }
 

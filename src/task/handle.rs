@@ -9,6 +9,7 @@ use std::sync::Arc;
 use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
 use crate::error::{ensure_finite, Result, SabreError};
+use crate::model::handle_frame::{handle_frame, HandleFrame};
 use crate::model::scene::Scene;
 
 /// The handle frame of a scene's object (an object link and a fixed offset from it) and the
@@ -94,16 +95,20 @@ fn sign(v: f64) -> f64 {
 }
 
 impl HandleGeometry {
-    /// The handle frame `handle_offset` on object link `handle_link` and the robot's control frame
+    /// The handle frame named by `handle` (an object frame, or a link whose handle frame is
+    /// inferred from its collision geometry: see [`handle_frame`]) and the robot's control frame
     /// `tool_frame` of `scene`.
-    pub fn new(scene: Arc<Scene>, handle_link: &str, handle_offset: Isometry3<f64>, tool_frame: &str) -> Result<Self> {
+    pub fn new(scene: Arc<Scene>, handle: &str, tool_frame: &str) -> Result<Self> {
         if scene.no() == 0 {
             return Err(SabreError::invalid(
                 "scene",
                 "the object has no movable joint: there is nothing to open",
             ));
         }
-        let handle_link = scene.object.require_link(handle_link)?;
+        let HandleFrame {
+            link: handle_link,
+            offset: handle_offset,
+        } = handle_frame(&scene, handle)?;
         let tool_link = scene.robot.require_link(tool_frame)?;
         let lower: Vec<f64> = scene.object_limits().iter().map(|l| l.lower).collect();
         let closed = scene.object.link_poses(&scene.object_pose, &lower)[handle_link] * handle_offset;

@@ -67,14 +67,13 @@ def handle_frame(scene: Scene, handle: str) -> tuple[str, np.ndarray]:
 
 
 def core_geometry(scene: Scene, handle: str) -> _core.HandleGeometry:
-    """The core's handle geometry of ``scene`` for ``handle``, made once per scene."""
-    # made from the scene itself (not the weak proxy per_scene hands over): the handle frame is kept per scene too
+    """The core's handle geometry of ``scene`` for ``handle`` (which the core resolves and infers
+    itself), made once per scene."""
     return per_scene(scene, ("handle geometry", handle), lambda _: _make_geometry(scene, handle))
 
 
 def _make_geometry(scene: Scene, handle: str) -> _core.HandleGeometry:
-    frame, offset = handle_frame(scene, handle)
-    return _core.HandleGeometry(scene._core, frame, np.ascontiguousarray(offset, dtype=np.float64), tool_frame(scene))
+    return _core.HandleGeometry(scene._core, handle, tool_frame(scene))
 
 
 def _state(x: Sequence[float] | np.ndarray) -> np.ndarray:
