@@ -20,7 +20,7 @@ LINT_STAMP := $(VENV)/.stamp-lint
 BENCH_STAMP := $(VENV)/.stamp-bench
 
 .PHONY: all venv build demo test test-setup test-rust test-python test-ros-jazzy lint lint-rust lint-python lint-ruff lint-format lint-types \
-	lint-length bench bench-rust bench-python clean
+	lint-length lint-cycles bench bench-rust bench-python clean
 
 all: build
 
@@ -111,7 +111,12 @@ lint-length: $(BASE_STAMP)
 
 lint-python: lint-ruff lint-format lint-types lint-length
 
-lint: lint-rust lint-python
+# No two modules of the Rust crate or of python/sabre import each other, directly or around a circle (imports
+# under `if TYPE_CHECKING:` count); the tool's first lines say what counts as an import.
+lint-cycles: $(BASE_STAMP)
+	$(PY) tools/module_cycles.py src python/sabre
+
+lint: lint-rust lint-python lint-cycles
 
 bench-rust:
 	cargo bench --bench rollout

@@ -1,13 +1,11 @@
 //! The base-clearance term's geometry: sample points on the object's moving parts (in clusters
-//! with bounding spheres), the robot base's footprint, and the term built from them.
+//! with bounding spheres) and the robot base's footprint.
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
-use super::Term;
-use crate::error::{Result, SabreError};
 use crate::model::scene::Scene;
 
-/// The sample points of a [`Term::BaseClearance`] (object link, point in its frame), in clusters
+/// The sample points of a base-clearance term (object link, point in its frame), in clusters
 /// of neighbours on one link, each with a bounding sphere: a step skips the clusters that cannot
 /// reach the footprint's band or cylinder, which on most steps is all of them.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -140,7 +138,7 @@ pub fn moving_object_point_count(scene: &Scene, spacing: f64) -> f64 {
     count
 }
 
-/// The most points a [`Term::BaseClearance`] samples: each is tested in every step of every rollout.
+/// The most points a base-clearance term samples: each is tested in every step of every rollout.
 pub const MAX_CLEARANCE_POINTS: usize = 100_000;
 
 /// (radius, bottom, top) of the vertical cylinder about a robot link's origin that bounds its
@@ -169,52 +167,6 @@ pub fn link_footprint(scene: &Scene, link: usize) -> Option<(f64, f64, f64)> {
         }
     }
     bound
-}
-
-/// The [`Term::BaseClearance`] that keeps `base_link`'s footprint (radius, bottom, top; from its
-/// collision primitives when None) plus `margin` clear of the object's moving parts, sampled as
-/// points at most `spacing` apart.
-pub fn base_clearance(
-    scene: &Scene,
-    base_link: usize,
-    footprint: Option<(f64, f64, f64)>,
-    margin: f64,
-    spacing: f64,
-    weight: f64,
-    weight_slope: f64,
-) -> Result<Term> {
-    if !(spacing.is_finite() && spacing > 0.0) {
-        return Err(SabreError::invalid(
-            "base clearance spacing",
-            format!("must be positive, got {spacing}"),
-        ));
-    }
-    let count = moving_object_point_count(scene, spacing);
-    if count > MAX_CLEARANCE_POINTS as f64 {
-        return Err(SabreError::invalid(
-            "base clearance spacing",
-            format!("{spacing} m samples {count:.3e} points on the object's moving parts (limit {MAX_CLEARANCE_POINTS}); use a larger spacing"),
-        ));
-    }
-    let (radius, bottom, top) = match footprint {
-        Some(f) => f,
-        None => link_footprint(scene, base_link).ok_or_else(|| {
-            let name = scene.robot.links.get(base_link).map_or("?", |l| l.name.as_str());
-            SabreError::invalid(
-                "base clearance",
-                format!("link '{name}' has no collision geometry; give its footprint"),
-            )
-        })?,
-    };
-    Ok(Term::BaseClearance {
-        base_link,
-        radius: radius + margin,
-        bottom: bottom - margin,
-        top: top + margin,
-        points: ClearancePoints::new(&moving_object_points(scene, spacing)),
-        weight,
-        weight_slope,
-    })
 }
 
 #[cfg(test)]

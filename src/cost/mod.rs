@@ -9,9 +9,7 @@ use crate::sim::StepEvaluator;
 mod clearance;
 
 pub use crate::sim::StepView;
-pub use clearance::{
-    base_clearance, link_footprint, moving_object_point_count, moving_object_points, ClearancePoints, MAX_CLEARANCE_POINTS,
-};
+pub use clearance::{link_footprint, moving_object_point_count, moving_object_points, ClearancePoints, MAX_CLEARANCE_POINTS};
 
 /// SE(3) logarithm: the twist ξ = (v, ω) (linear first) with exp(ξ) = T.
 pub fn se3_log(t: &Isometry3<f64>) -> Vector6<f64> {
@@ -120,6 +118,52 @@ pub enum Term {
         weight: f64,
         weight_slope: f64,
     },
+}
+
+/// The [`Term::BaseClearance`] that keeps `base_link`'s footprint (radius, bottom, top; from its
+/// collision primitives when None) plus `margin` clear of the object's moving parts, sampled as
+/// points at most `spacing` apart.
+pub fn base_clearance(
+    scene: &Scene,
+    base_link: usize,
+    footprint: Option<(f64, f64, f64)>,
+    margin: f64,
+    spacing: f64,
+    weight: f64,
+    weight_slope: f64,
+) -> Result<Term> {
+    if !(spacing.is_finite() && spacing > 0.0) {
+        return Err(SabreError::invalid(
+            "base clearance spacing",
+            format!("must be positive, got {spacing}"),
+        ));
+    }
+    let count = moving_object_point_count(scene, spacing);
+    if count > MAX_CLEARANCE_POINTS as f64 {
+        return Err(SabreError::invalid(
+            "base clearance spacing",
+            format!("{spacing} m samples {count:.3e} points on the object's moving parts (limit {MAX_CLEARANCE_POINTS}); use a larger spacing"),
+        ));
+    }
+    let (radius, bottom, top) = match footprint {
+        Some(f) => f,
+        None => link_footprint(scene, base_link).ok_or_else(|| {
+            let name = scene.robot.links.get(base_link).map_or("?", |l| l.name.as_str());
+            SabreError::invalid(
+                "base clearance",
+                format!("link '{name}' has no collision geometry; give its footprint"),
+            )
+        })?,
+    };
+    Ok(Term::BaseClearance {
+        base_link,
+        radius: radius + margin,
+        bottom: bottom - margin,
+        top: top + margin,
+        points: ClearancePoints::new(&moving_object_points(scene, spacing)),
+        weight,
+        weight_slope,
+    })
 }
 
 /// A sum of terms, compiled once and evaluated inside the rollout workers.

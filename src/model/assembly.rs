@@ -88,7 +88,7 @@ pub fn attach_tool(tree: KinematicTree, tool: &ToolSpec, source: &str) -> Result
             ),
         )
     })?;
-    let part = fragment.tree;
+    let part = fragment.description;
     for l in &part.links {
         if tree.link_id(&l.name).is_some() {
             return Err(SabreError::urdf(

@@ -5,7 +5,7 @@ use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 use rapier3d_f64::parry::mass_properties::MassProperties;
 use rapier3d_f64::prelude::{Pose, SharedShape, Vector};
 
-use crate::model::kinematics::{Collision, Inertial, Shape};
+use super::description::{Collision, Inertial, Shape};
 
 /// The parry shape of a collision primitive and the rotation that takes it to the URDF's axes
 /// (Rapier's and parry's cylinders run along y, URDF's along z).

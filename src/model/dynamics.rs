@@ -5,6 +5,10 @@ use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Point3, Vector3};
 
 use super::kinematics::{Frames, JointKind, KinematicTree};
 
+/// Gravitational acceleration of the world frame (m/s²), z up: the one value every model of the
+/// robot and object (plant, rollouts, low-level controller, dynamics queries) is built with.
+pub const GRAVITY: Vector3<f64> = Vector3::new(0.0, 0.0, -9.81);
+
 /// Reusable buffers for [`joint_space_terms`]; `frames` holds the link poses of the last call.
 #[derive(Debug, Default, Clone)]
 pub struct DynamicsWorkspace {
@@ -267,9 +271,11 @@ mod tests {
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/objects/examples/double_cabinet.urdf"),
         )
         .expect("example object");
-        let doors = crate::model::urdf::parse_urdf("double_cabinet", &cabinet)
-            .expect("example object")
-            .tree;
+        let doors = KinematicTree::from_description(
+            crate::model::urdf::parse_urdf("double_cabinet", &cabinet)
+                .expect("example object")
+                .description,
+        );
         // From the descriptions: a mobile base's x and y (prismatic, at the root) and nothing from
         // its yaw on; a fixed arm's first joint; a door's hinge; two doors on one carcass, neither
         // of which carries the other.

@@ -20,7 +20,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::assembly::RobotRoles;
 use super::kinematics::{JointKind, KinematicTree, Shape};
-use super::scene::{ArmReach, Sphere};
+use super::safety_geometry::{ArmReach, Sphere};
 
 /// Largest distance (m) between neighbouring surface samples, and the margin every sphere adds.
 pub const SURFACE_SPACING: f64 = 0.005;

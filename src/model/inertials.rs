@@ -1,6 +1,6 @@
-//! Inertials a URDF leaves out: what each link's `<inertial>` declares, and the mass, centre of
-//! mass and inertia of the object's moving links filled in from their collision geometry at a
-//! density when the file does not give them.
+//! Inertials a URDF leaves out: the mass, centre of mass and inertia of the object's moving links
+//! filled in from their collision geometry at a density when the file does not give them (what it
+//! does declare is each link's `DeclaredInertial`).
 //!
 //! Models exported for robot learning often carry no `<inertial>` at all, or a mass without an
 //! inertia tensor. Each of mass, centre of mass and inertia that a moving object link leaves out
@@ -8,27 +8,17 @@
 //! × volume, the centre of mass as the solids' centroid, the inertia as the solids' (scaled to a
 //! declared mass when there is one). A declared part is kept.
 
-use std::collections::HashMap;
-
 use nalgebra::{Matrix3, Vector3};
 
 use super::collision_shape::geometry_inertial;
-use super::kinematics::{Inertial, KinematicTree};
+use super::description::{check_inertia, Inertial};
+use super::kinematics::KinematicTree;
 use crate::error::{Result, SabreError};
 
 /// Density (kg/m³) of the material moving object parts are assumed to be made of when their file
 /// gives no inertial: medium-density fibreboard and particle board, which most cabinet doors,
 /// drawer fronts and drawer boxes are made of, weigh 600–750 kg/m³ and solid pine about 500.
 pub const DEFAULT_DENSITY: f64 = 600.0;
-
-/// What a link's `<inertial>` declares when it is incomplete: each part the file gives (a mass
-/// above zero, an `<origin>`, an inertia tensor that is not all zero), None for each it leaves out.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct DeclaredInertial {
-    pub mass: Option<f64>,
-    pub com: Option<Vector3<f64>>,
-    pub inertia: Option<Matrix3<f64>>,
-}
 
 /// A moving object link's inertial that sabre filled in, as the scene reports it.
 #[derive(Debug, Clone, PartialEq)]
@@ -41,54 +31,6 @@ pub struct AssumedInertial {
     pub inertia: Matrix3<f64>,
     /// Where the values come from, e.g. "collision geometry at 600 kg/m³".
     pub source: String,
-}
-
-/// Which children each `<inertial>` element of the document has, by link name: (mass, origin, inertia).
-pub fn inertial_elements(doc: &roxmltree::Document) -> HashMap<String, (bool, bool, bool)> {
-    let mut out = HashMap::new();
-    for link in doc.root_element().children().filter(|n| n.has_tag_name("link")) {
-        let Some(inertial) = link.children().find(|n| n.has_tag_name("inertial")) else {
-            continue;
-        };
-        let has = |tag: &str| inertial.children().any(|n| n.has_tag_name(tag));
-        out.insert(
-            link.attribute("name").unwrap_or("").to_string(),
-            (has("mass"), has("origin"), has("inertia")),
-        );
-    }
-    out
-}
-
-/// The URDF text with a zero `<mass>` or `<inertia>` added to every `<inertial>` that lacks one,
-/// which the URDF reader requires; the parts added count as left out ([`inertial_elements`]).
-pub fn with_complete_inertials(text: &str, doc: &roxmltree::Document) -> String {
-    let mut inserts: Vec<(usize, usize, String)> = Vec::new();
-    for node in doc.descendants().filter(|n| n.has_tag_name("inertial")) {
-        let has = |tag: &str| node.children().any(|n| n.has_tag_name(tag));
-        let mut missing = String::new();
-        if !has("mass") {
-            missing.push_str(r#"<mass value="0"/>"#);
-        }
-        if !has("inertia") {
-            missing.push_str(r#"<inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/>"#);
-        }
-        if missing.is_empty() {
-            continue;
-        }
-        let range = node.range();
-        let element = &text[range.clone()];
-        if let Some(open) = element.strip_suffix("/>") {
-            let open = open.trim_end();
-            inserts.push((range.start, range.end, format!("{open}>{missing}</inertial>")));
-        } else if let Some(close) = element.rfind("</") {
-            inserts.push((range.start + close, range.start + close, missing));
-        }
-    }
-    let mut out = text.to_string();
-    for (start, end, replacement) in inserts.into_iter().rev() {
-        out.replace_range(start..end, &replacement);
-    }
-    out
 }
 
 /// Fills in the inertial of every link of the object `tree` that a movable joint moves, has
@@ -130,7 +72,7 @@ pub fn assume_missing(tree: &mut KinematicTree, density: f64, source: &str) -> R
             format!("{from}; declared {}", kept.join(", "))
         };
         let inertial = Inertial { mass, com, inertia };
-        super::urdf::check_inertia(source, &l.name, &inertial.inertia)?;
+        check_inertia(source, &l.name, &inertial.inertia)?;
         assumed.push(AssumedInertial {
             link: l.name.clone(),
             mass,
@@ -167,16 +109,7 @@ mod tests {
     }
 
     #[test]
-    fn an_inertial_without_mass_or_inertia_reads_and_keeps_what_it_declares() {
-        let doc_text = r#"<robot><link name="a"><inertial><origin xyz="1 2 3"/><mass value="2"/></inertial></link><link name="b"><inertial/></link></robot>"#;
-        let doc = roxmltree::Document::parse(doc_text).unwrap();
-        let completed = with_complete_inertials(doc_text, &doc);
-        assert!(completed.contains(r#"<mass value="2"/><inertia ixx="0""#), "{completed}");
-        assert!(completed.contains(r#"<inertial><mass value="0"/><inertia"#), "{completed}");
-        let present = inertial_elements(&doc);
-        assert_eq!(present["a"], (true, true, false));
-        assert_eq!(present["b"], (false, false, false));
-
+    fn an_inertial_without_mass_or_inertia_keeps_what_it_declares() {
         let (full, assumed) = tray("", 500.0);
         let m = 500.0 * 0.2 * 0.4 * 0.02;
         assert!((full.mass - m).abs() < 1e-12 && (full.com - Vector3::new(0.1, 0.0, 0.0)).norm() < 1e-12);

@@ -1,125 +1,14 @@
-//! Kinematic trees (links, joints, inertials, primitive colliders): forward kinematics and geometric Jacobians in f64.
+//! Kinematic trees built from a robot or object description: forward kinematics and geometric Jacobians in f64.
 
 use std::collections::HashMap;
 
-use nalgebra::{Isometry3, Matrix3, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
+use super::description::Description;
+pub use super::description::{Collision, Inertial, Joint, JointKind, JointLimits, Link, Shape};
 pub use super::rigid_bodies::RigidBody;
 use super::rigid_bodies::{mass_invariant_coordinates, sum_rigid_bodies};
 use crate::error::{Result, SabreError};
-
-/// How a joint moves its child link relative to its parent.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum JointKind {
-    Fixed,
-    /// Rotation about `axis`; `continuous` URDF joints are revolute without limits.
-    Revolute,
-    /// Translation along `axis`.
-    Prismatic,
-}
-
-/// Position, velocity and effort bounds of one actuated joint.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct JointLimits {
-    pub lower: f64,
-    pub upper: f64,
-    pub velocity: f64,
-    pub effort: f64,
-}
-
-#[derive(Debug, Clone)]
-pub struct Joint {
-    pub name: String,
-    pub kind: JointKind,
-    pub parent: usize,
-    pub child: usize,
-    /// Pose of the joint frame (= child link frame at q = 0) in the parent link frame.
-    pub origin: Isometry3<f64>,
-    /// Unit axis in the joint frame.
-    pub axis: Vector3<f64>,
-    /// Index of this joint's coordinate in q, for movable joints.
-    pub q_index: Option<usize>,
-    pub limits: JointLimits,
-    /// Viscous damping (N·s/m or N·m·s/rad) and dry friction (N or N·m) from `<dynamics>`.
-    pub damping: f64,
-    pub friction: f64,
-}
-
-/// A collision primitive; dimensions are half-sizes, long axes along local z as in URDF.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Shape {
-    Box {
-        half_extents: Vector3<f64>,
-    },
-    Sphere {
-        radius: f64,
-    },
-    Cylinder {
-        radius: f64,
-        half_length: f64,
-    },
-    Capsule {
-        radius: f64,
-        half_length: f64,
-    },
-    /// A mesh's convex hull: its vertices, centred on their bounding box (whose half extents are kept).
-    Hull {
-        points: std::sync::Arc<[nalgebra::Point3<f64>]>,
-        half_extents: Vector3<f64>,
-    },
-}
-
-impl Shape {
-    /// Half extents of the primitive's bounding box in its own frame.
-    pub fn half_extents(&self) -> Vector3<f64> {
-        match *self {
-            Shape::Box { half_extents } => half_extents,
-            Shape::Sphere { radius } => Vector3::repeat(radius),
-            Shape::Cylinder { radius, half_length } => Vector3::new(radius, radius, half_length),
-            Shape::Capsule { radius, half_length } => Vector3::new(radius, radius, half_length + radius),
-            Shape::Hull { half_extents, .. } => half_extents,
-        }
-    }
-}
-
-#[derive(Debug, Clone)]
-pub struct Collision {
-    pub name: Option<String>,
-    pub shape: Shape,
-    /// Pose of the primitive in its link frame.
-    pub origin: Isometry3<f64>,
-}
-
-/// Mass, centre of mass and inertia tensor (about the centre of mass, in the link frame).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Inertial {
-    pub mass: f64,
-    pub com: Vector3<f64>,
-    pub inertia: Matrix3<f64>,
-}
-
-#[derive(Debug, Clone)]
-pub struct Link {
-    pub name: String,
-    /// The joint whose child this link is; `None` for the root.
-    pub parent_joint: Option<usize>,
-    /// Read through [`Link::inertial`]; changed through [`KinematicTree::set_inertial`], which
-    /// keeps the tree's rigid bodies in step.
-    pub(super) inertial: Option<Inertial>,
-    /// What the file declares of an inertial it leaves incomplete or out (None: `inertial` is the
-    /// file's); a scene fills the rest in for moving object links (see `super::inertials`).
-    pub declared_inertial: Option<super::inertials::DeclaredInertial>,
-    pub collisions: Vec<Collision>,
-    /// What the link looks like (URDF `<visual>`), for viewers.
-    pub visuals: Vec<super::visual::Visual>,
-}
-
-impl Link {
-    /// The link's mass, centre of mass and inertia, if it has any.
-    pub fn inertial(&self) -> Option<&Inertial> {
-        self.inertial.as_ref()
-    }
-}
 
 /// Link poses and world joint axes of one configuration, reused while the configuration is unchanged.
 #[derive(Debug, Clone, Default)]
@@ -180,50 +69,20 @@ pub struct KinematicTree {
 
 impl KinematicTree {
     /// Assembles a tree; movable joints get q indices in the order they appear in `joints`.
-    pub fn new(name: String, links: Vec<Link>, mut joints: Vec<Joint>, source: &str) -> Result<Self> {
-        let mut link_index = HashMap::with_capacity(links.len());
-        for (i, link) in links.iter().enumerate() {
-            if link_index.insert(link.name.clone(), i).is_some() {
-                return Err(SabreError::urdf(source, format!("duplicate link '{}'", link.name)));
-            }
-        }
-        let mut links = links;
-        for (j, joint) in joints.iter().enumerate() {
-            if links[joint.child].parent_joint.is_some() {
-                return Err(SabreError::urdf(
-                    source,
-                    format!("link '{}' has more than one parent joint", links[joint.child].name),
-                ));
-            }
-            links[joint.child].parent_joint = Some(j);
-        }
-        let roots: Vec<usize> = (0..links.len()).filter(|&i| links[i].parent_joint.is_none()).collect();
-        if roots.len() != 1 {
-            let names: Vec<&str> = roots.iter().map(|&i| links[i].name.as_str()).collect();
-            return Err(SabreError::urdf(
-                source,
-                format!("expected exactly one root link, found {}: {:?}", roots.len(), names),
-            ));
-        }
-        let root = roots[0];
+    pub fn new(name: String, links: Vec<Link>, joints: Vec<Joint>, source: &str) -> Result<Self> {
+        Ok(Self::from_description(Description::new(name, links, joints, source)?))
+    }
 
-        // Breadth-first from the root gives a parent-before-child order and detects cycles.
-        let mut children: Vec<Vec<usize>> = vec![Vec::new(); links.len()];
-        for (j, joint) in joints.iter().enumerate() {
-            children[joint.parent].push(j);
-        }
-        let mut topological_joints = Vec::with_capacity(joints.len());
-        let mut frontier = vec![root];
-        while let Some(link) = frontier.pop() {
-            for &j in &children[link] {
-                topological_joints.push(j);
-                frontier.push(joints[j].child);
-            }
-        }
-        if topological_joints.len() != joints.len() {
-            return Err(SabreError::urdf(source, "the joints do not form a tree rooted at one link"));
-        }
-
+    /// The tree a description holds; movable joints get q indices in the order they appear in its joints.
+    pub fn from_description(description: Description) -> Self {
+        let Description {
+            name,
+            links,
+            mut joints,
+            root,
+            topological_joints,
+            link_index,
+        } = description;
         let mut active_joints = Vec::new();
         for (j, joint) in joints.iter_mut().enumerate() {
             if joint.kind != JointKind::Fixed {
@@ -265,15 +124,15 @@ impl KinematicTree {
             rigid_bodies: Vec::new(),
             mass_invariant: Vec::new(),
         };
-        tree.rigid_bodies = sum_rigid_bodies(&tree);
-        tree.mass_invariant = mass_invariant_coordinates(&tree, &tree.rigid_bodies);
-        Ok(tree)
+        tree.rigid_bodies = sum_rigid_bodies(&tree.links, &tree.joints, &tree.topological_joints);
+        tree.mass_invariant = mass_invariant_coordinates(&tree.joints, tree.nq(), &tree.rigid_bodies);
+        tree
     }
 
     /// Sets the inertial of `link` (None: massless).
     pub fn set_inertial(&mut self, link: usize, inertial: Option<Inertial>) {
         self.links[link].inertial = inertial;
-        self.rigid_bodies = sum_rigid_bodies(self);
+        self.rigid_bodies = sum_rigid_bodies(&self.links, &self.joints, &self.topological_joints);
     }
 
     /// The rigid bodies the movable joints carry: what moves with each of them, summed once so

@@ -7,7 +7,7 @@ use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
-use super::ServoGuidePlan;
+use super::guide::ServoGuidePlan;
 
 /// log2 of the words of a row's random stream. A row draws a few words per value it holds, and a
 /// batch holds at most 2^28 values (the rollouts' batch limit), so rows never overlap: 2^24 rows

@@ -1,6 +1,7 @@
 //! Simulation: the reduced-order rollout model (batch, parallel; its contacts through Rapier's
 //! pipeline or the reduced path solved in sabre) and the full-dynamics plant on Rapier.
 
+pub mod divergence;
 pub mod engine_clock;
 pub mod evaluator;
 pub mod interaction;
@@ -16,6 +17,7 @@ pub mod servo;
 pub(crate) mod test_scene;
 pub(crate) mod wrist_sensor;
 
+pub use divergence::{diverged_joint, joint_speed_bounds, DIVERGENCE_VELOCITY_FACTOR, MAX_OBJECT_SPEED};
 pub use engine_clock::EngineClock;
 pub use evaluator::{StepEvaluator, StepView};
 pub use interaction::{ContactReport, Interaction};
@@ -24,29 +26,3 @@ pub use rapier::SimWorld;
 pub use reduced::{ReducedConfig, ReducedWorld};
 pub use rollout::{default_threads, ContactModel, RolloutBatch, RolloutConfig, RolloutModel, MAX_BATCH_ELEMENTS};
 pub use rollout_world::RolloutWorld;
-
-/// A joint moving faster than this multiple of its velocity limit (or, for the object's joints,
-/// than [`MAX_OBJECT_SPEED`]) means the integration diverged: no torque within the effort limits
-/// produces it.
-pub const DIVERGENCE_VELOCITY_FACTOR: f64 = 20.0;
-
-/// The fastest (rad/s or m/s) an object joint may move before the simulation calls it diverged.
-pub const MAX_OBJECT_SPEED: f64 = 100.0;
-
-/// (name, position limits, divergence speed bound) of every robot joint, then every object joint.
-pub fn joint_speed_bounds(scene: &crate::model::scene::Scene) -> Vec<(String, crate::model::kinematics::JointLimits, f64)> {
-    let robot = scene.robot.active_joint_names().into_iter().zip(scene.robot_limits());
-    let object = scene.object.active_joint_names().into_iter().zip(scene.object_limits());
-    robot
-        .map(|(n, l)| (n, l, DIVERGENCE_VELOCITY_FACTOR * l.velocity))
-        .chain(object.map(|(n, l)| (n, l, MAX_OBJECT_SPEED)))
-        .collect()
-}
-
-/// The index (into the joints of [`joint_speed_bounds`]) of the first joint of state `x` moving
-/// beyond its bound, if any.
-pub fn diverged_joint(x: &[f64], nq: usize, no: usize, bounds: &[f64]) -> Option<usize> {
-    let speeds = x[nq..2 * nq].iter().chain(&x[2 * nq + no..2 * (nq + no)]);
-    // NaN speeds count as diverged too.
-    speeds.zip(bounds).position(|(v, b)| v.abs() > *b || v.is_nan())
-}

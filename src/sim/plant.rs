@@ -101,7 +101,7 @@ impl Plant {
         let template = SimWorld::new(scene.clone(), &world_config)?;
         let world = template.clone();
         let nq = scene.nq();
-        let joints = super::joint_speed_bounds(&scene);
+        let joints = super::divergence::joint_speed_bounds(&scene);
         let speed_bounds = joints.iter().map(|j| j.2).collect();
         let mut plant = Self {
             joints,
@@ -213,7 +213,7 @@ impl Plant {
     /// The first joint whose speed shows that the integration diverged, as an error naming it.
     fn divergence(&self, x: &[f64]) -> Option<SabreError> {
         let (nq, no) = (self.scene.nq(), self.scene.no());
-        let i = super::diverged_joint(x, nq, no, &self.speed_bounds)?;
+        let i = super::divergence::diverged_joint(x, nq, no, &self.speed_bounds)?;
         let (name, _, bound) = &self.joints[i];
         let speed = if i < nq { x[nq + i] } else { x[2 * nq + no + (i - nq)] };
         Some(SabreError::Simulation(format!(

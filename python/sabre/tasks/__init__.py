@@ -8,7 +8,7 @@ are the tasks that ship (:mod:`sabre.tasks.base`, :mod:`sabre.tasks.open_object`
 
 from __future__ import annotations
 
-from .base import Reach, SafetyWeights, Task
+from .base import Reach, SafetyWeights, Task, TaskController
 from .open_object import (
     ApproachConfig,
     GraspError,
@@ -23,6 +23,7 @@ from .open_object import (
 
 __all__ = [
     "Task",
+    "TaskController",
     "Reach",
     "OpenObject",
     "SafetyWeights",

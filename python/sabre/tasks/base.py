@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, ClassVar, Protocol
 
 import numpy as np
 
@@ -13,9 +13,8 @@ from ..scene import Scene
 
 if TYPE_CHECKING:
     from ..guides import ServoGuidePlan
-    from ..planner import Controller
 
-__all__ = ["Task", "Reach", "SafetyWeights"]
+__all__ = ["Task", "Reach", "SafetyWeights", "TaskController"]
 
 
 @dataclass(frozen=True)
@@ -54,6 +53,22 @@ class SafetyWeights:
         if (self.base_clearance > 0.0 or self.base_clearance_slope > 0.0) and link in scene.frame_names:
             out = out + costs.BaseClearance(link, weight=self.base_clearance, weight_slope=self.base_clearance_slope)
         return out
+
+
+class TaskController(Protocol):
+    """The controller that runs a task, as the task's :meth:`Task.on_step` sees it
+    (:class:`sabre.Controller` is one): the planner sits above its tasks, so they name it by this."""
+
+    @property
+    def scene(self) -> Scene: ...
+
+    @property
+    def task(self) -> Task: ...
+
+    @property
+    def phase(self) -> str:
+        """The phase the controller plans for."""
+        ...
 
 
 class Task:
@@ -107,7 +122,7 @@ class Task:
         guides :meth:`guides` gives."""
         return None
 
-    def on_step(self, scene: Scene, x: np.ndarray, t: float, controller: Controller) -> None:
+    def on_step(self, scene: Scene, x: np.ndarray, t: float, controller: TaskController) -> None:
         """Hook called once per planning iteration, after the phase update."""
 
     def gain_inertia_floor(self, phase: str) -> float | None:

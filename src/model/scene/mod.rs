@@ -1,15 +1,17 @@
 //! The scene: one robot, one articulated object placed in the world, the state layout and built-in assets.
 
-use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion};
 
 use super::assembly::{assemble as assemble_robot, RobotRoles};
 use super::collision_shape::closest_point;
-use super::dynamics::{joint_space_terms, DynamicsWorkspace};
+use super::dynamics::{joint_space_terms, DynamicsWorkspace, GRAVITY};
 use super::generated;
 use super::inertials::{assume_missing, AssumedInertial, DEFAULT_DENSITY};
 use super::kinematics::{Frames, JointKind, JointLimits, KinematicTree};
 use super::roles::RoleDecls;
-use super::urdf::{check_extension, parse_urdf, ParsedUrdf, SabreExtension};
+use super::safety_geometry::{check_extension, declared_geometry};
+pub use super::safety_geometry::{ArmReach, GeometryOrigin, Sphere};
+use super::urdf::{parse_urdf, ParsedUrdf};
 use crate::error::{ensure_coordinates, ensure_finite, ensure_len, Result, SabreError};
 
 /// Built-in robots, compiled into the library so that installed wheels need no data files.
@@ -35,29 +37,6 @@ pub fn default_object_pose(object: &str) -> [f64; 6] {
         _ => DEFAULT_OBJECT_POSE,
     }
 }
-
-/// A collision sphere attached to a robot link, in the self-collision pairs that name it and,
-/// where `obstacles`, against run-time sphere obstacles (see `SphereDecl`).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Sphere {
-    pub name: String,
-    pub link: usize,
-    pub center: Vector3<f64>,
-    pub radius: f64,
-    pub obstacles: bool,
-}
-
-#[derive(Debug, Clone, PartialEq)]
-pub struct ArmReach {
-    pub base_link: usize,
-    pub frame_link: usize,
-    pub max: f64,
-}
-
-/// Where the scene's safety geometry came from: "declared" in the robot's `<sabre>` block or
-/// "generated" from its tree (`super::generated`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct GeometryOrigin(pub &'static str);
 
 /// Robot, object and their placement; all kinematic queries go through here.
 #[derive(Debug, Clone)]
@@ -155,14 +134,16 @@ impl Scene {
     pub fn from_parts(robot: ParsedUrdf, obj: ParsedUrdf, object_pose: Option<&[f64]>, options: &RoleDecls) -> Result<Self> {
         let object_pose = pose_from_xyzrpy(object_pose.unwrap_or(&DEFAULT_OBJECT_POSE))?;
         let ext = robot.extension;
-        let source = robot.tree.name.clone();
-        let (tree, roles) = assemble_robot(robot.tree, &ext.roles.overridden_by(options), &source)?;
+        let source = robot.description.name.clone();
+        let robot = KinematicTree::from_description(robot.description);
+        let object = KinematicTree::from_description(obj.description);
+        let (tree, roles) = assemble_robot(robot, &ext.roles.overridden_by(options), &source)?;
         check_extension(&source, &tree, &ext)?;
         if tree.nq() == 0 {
             return Err(SabreError::urdf(&tree.name, "the robot has no movable joint"));
         }
-        if obj.tree.nq() == 0 {
-            return Err(SabreError::urdf(&obj.tree.name, "the object has no movable joint"));
+        if object.nq() == 0 {
+            return Err(SabreError::urdf(&object.name, "the object has no movable joint"));
         }
         if let Some(link) = tree
             .links
@@ -174,12 +155,12 @@ impl Scene {
                 format!("robot link '{}' declares a mass but no inertia tensor", link.name),
             ));
         }
-        for &j in &obj.tree.active_joints {
-            let l = obj.tree.joints[j].limits;
+        for &j in &object.active_joints {
+            let l = object.joints[j].limits;
             if !(l.lower.is_finite() && l.upper.is_finite()) {
                 return Err(SabreError::urdf(
-                    &obj.tree.name,
-                    format!("object joint '{}' needs finite position limits", obj.tree.joints[j].name),
+                    &object.name,
+                    format!("object joint '{}' needs finite position limits", object.joints[j].name),
                 ));
             }
         }
@@ -196,9 +177,9 @@ impl Scene {
         };
         Self {
             robot_source: tree.name.clone(),
-            object_source: obj.tree.name.clone(),
+            object_source: object.name.clone(),
             robot: tree,
-            object: obj.tree,
+            object,
             object_pose,
             spheres,
             sphere_pairs,
@@ -407,7 +388,7 @@ impl Scene {
     }
 
     /// Joint-space mass matrix M(q) (nq × nq) and gravity torque g(q) (nq) of the robot under
-    /// [`super::GRAVITY`], the terms of the low-level controller (53).
+    /// [`GRAVITY`], the terms of the low-level controller (53).
     pub fn mass_matrix_and_gravity(&self, q: &[f64]) -> Result<(DMatrix<f64>, DVector<f64>)> {
         self.check_q(q)?;
         let nq = self.nq();
@@ -418,7 +399,7 @@ impl Scene {
             &self.robot,
             &Isometry3::identity(),
             q,
-            &super::GRAVITY,
+            &GRAVITY,
             &mut workspace,
             &mut mass_matrix,
             &mut gravity_torque,
@@ -473,44 +454,6 @@ fn poses_many(
             frames.poses[link]
         })
         .collect())
-}
-
-/// The spheres, pairs, contact links and reach a robot's `<sabre>` block declares (checked by
-/// `check_extension`); without declared contact links every link with collision geometry touches.
-#[allow(clippy::type_complexity)]
-fn declared_geometry(
-    tree: &KinematicTree,
-    ext: &SabreExtension,
-) -> (Vec<Sphere>, Vec<(usize, usize)>, Vec<usize>, Option<ArmReach>) {
-    let spheres: Vec<Sphere> = ext
-        .spheres
-        .iter()
-        .map(|s| Sphere {
-            name: s.name.clone(),
-            link: tree.link_id(&s.link).expect("checked"),
-            center: s.center,
-            radius: s.radius,
-            obstacles: s.obstacles,
-        })
-        .collect();
-    let sphere_index = |name: &str| spheres.iter().position(|s| s.name == name).expect("checked");
-    let pairs = ext.pairs.iter().map(|(a, b)| (sphere_index(a), sphere_index(b))).collect();
-    let mut contact: Vec<usize> = ext
-        .rollout_contact_links
-        .iter()
-        .map(|n| tree.link_id(n).expect("checked"))
-        .collect();
-    if contact.is_empty() {
-        contact = (0..tree.links.len())
-            .filter(|&l| !tree.links[l].collisions.is_empty())
-            .collect();
-    }
-    let reach = ext.arm_reach.as_ref().map(|a| ArmReach {
-        base_link: tree.link_id(&a.base).expect("checked"),
-        frame_link: tree.link_id(&a.frame).expect("checked"),
-        max: a.max,
-    });
-    (spheres, pairs, contact, reach)
 }
 
 #[cfg(test)]

@@ -1,50 +1,24 @@
-//! URDF (via urdf-rs) to kinematic trees, plus sabre's `<sabre>` extension block (via roxmltree).
+//! The URDF reader: URDF text (via urdf-rs) to a description of links and joints, plus sabre's
+//! `<sabre>` extension block (via roxmltree); it knows nothing of the model built from them.
 
+mod extension;
+
+use std::collections::HashMap;
 use std::path::Path;
 
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 
-use super::inertials::{inertial_elements, with_complete_inertials, DeclaredInertial};
-use super::kinematics::{Collision, Inertial, Joint, JointKind, JointLimits, KinematicTree, Link, Shape};
+use super::description::{
+    check_inertia, Collision, DeclaredInertial, Description, Inertial, Joint, JointKind, JointLimits, Link, Shape,
+};
 use crate::error::{Result, SabreError};
+use extension::parse_extension;
+pub use extension::{ArmReachDecl, SabreExtension, SphereDecl};
 
-/// A collision sphere rigidly attached to a robot link, for the self-collision pairs that name it
-/// and, unless `obstacles="false"`, against run-time sphere obstacles. A self-collision sphere may
-/// be larger than its link to encode a minimum distance between two links; against an obstacle a
-/// sphere only needs to cover the link's geometry, so such a link gets a second, obstacle-only
-/// sphere (one in no pair).
-#[derive(Debug, Clone, PartialEq)]
-pub struct SphereDecl {
-    pub name: String,
-    pub link: String,
-    pub center: Vector3<f64>,
-    pub radius: f64,
-    pub obstacles: bool,
-}
-
-/// Planar reach limit of a frame relative to the arm base (paper eqs. 32 and 40).
-#[derive(Debug, Clone, PartialEq)]
-pub struct ArmReachDecl {
-    pub base: String,
-    pub frame: String,
-    pub max: f64,
-}
-
-/// Contents of the optional `<sabre>` block of a robot URDF.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct SabreExtension {
-    pub rollout_contact_links: Vec<String>,
-    pub spheres: Vec<SphereDecl>,
-    pub pairs: Vec<(String, String)>,
-    pub arm_reach: Option<ArmReachDecl>,
-    /// The tool, control frame, held joints, base and postures it declares.
-    pub roles: super::roles::RoleDecls,
-}
-
-/// A parsed URDF: its kinematic tree and sabre's extension block.
+/// A parsed URDF: its links and joints and sabre's extension block.
 #[derive(Debug, Clone)]
 pub struct ParsedUrdf {
-    pub tree: KinematicTree,
+    pub description: Description,
     pub extension: SabreExtension,
 }
 
@@ -68,23 +42,52 @@ fn finite_or_err(source: &str, what: &str, values: &[f64]) -> Result<()> {
     }
 }
 
-/// A physical inertia tensor: symmetric positive definite, and its principal moments obey the
-/// triangle inequality (no rigid body has one moment larger than the other two together).
-pub(super) fn check_inertia(source: &str, link: &str, inertia: &Matrix3<f64>) -> Result<()> {
-    let moments = inertia.symmetric_eigenvalues();
-    let scale = moments.abs().max().max(f64::MIN_POSITIVE);
-    let tolerance = 1e-9 * scale;
-    let positive = moments.iter().all(|&m| m > 0.0);
-    let (a, b, c) = (moments[0], moments[1], moments[2]);
-    let triangle = a <= b + c + tolerance && b <= a + c + tolerance && c <= a + b + tolerance;
-    if positive && triangle {
-        Ok(())
-    } else {
-        Err(SabreError::urdf(
-            source,
-            format!("link '{link}' has a non-physical inertia (principal moments {a:.6e}, {b:.6e}, {c:.6e}): it must be positive definite and each moment at most the sum of the other two"),
-        ))
+/// Which children each `<inertial>` element of the document has, by link name: (mass, origin, inertia).
+fn inertial_elements(doc: &roxmltree::Document) -> HashMap<String, (bool, bool, bool)> {
+    let mut out = HashMap::new();
+    for link in doc.root_element().children().filter(|n| n.has_tag_name("link")) {
+        let Some(inertial) = link.children().find(|n| n.has_tag_name("inertial")) else {
+            continue;
+        };
+        let has = |tag: &str| inertial.children().any(|n| n.has_tag_name(tag));
+        out.insert(
+            link.attribute("name").unwrap_or("").to_string(),
+            (has("mass"), has("origin"), has("inertia")),
+        );
     }
+    out
+}
+
+/// The URDF text with a zero `<mass>` or `<inertia>` added to every `<inertial>` that lacks one,
+/// which the URDF reader requires; the parts added count as left out ([`inertial_elements`]).
+fn with_complete_inertials(text: &str, doc: &roxmltree::Document) -> String {
+    let mut inserts: Vec<(usize, usize, String)> = Vec::new();
+    for node in doc.descendants().filter(|n| n.has_tag_name("inertial")) {
+        let has = |tag: &str| node.children().any(|n| n.has_tag_name(tag));
+        let mut missing = String::new();
+        if !has("mass") {
+            missing.push_str(r#"<mass value="0"/>"#);
+        }
+        if !has("inertia") {
+            missing.push_str(r#"<inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/>"#);
+        }
+        if missing.is_empty() {
+            continue;
+        }
+        let range = node.range();
+        let element = &text[range.clone()];
+        if let Some(open) = element.strip_suffix("/>") {
+            let open = open.trim_end();
+            inserts.push((range.start, range.end, format!("{open}>{missing}</inertial>")));
+        } else if let Some(close) = element.rfind("</") {
+            inserts.push((range.start + close, range.start + close, missing));
+        }
+    }
+    let mut out = text.to_string();
+    for (start, end, replacement) in inserts.into_iter().rev() {
+        out.replace_range(start..end, &replacement);
+    }
+    out
 }
 
 /// Deepest element nesting accepted; URDF itself needs about six levels.
@@ -397,97 +400,6 @@ fn convert_joint(source: &str, joint: &urdf_rs::Joint, link_id: &dyn Fn(&str) ->
     })
 }
 
-fn parse_f64(source: &str, node: &roxmltree::Node, attr: &str) -> Result<f64> {
-    let text = node.attribute(attr).ok_or_else(|| {
-        SabreError::urdf(
-            source,
-            format!("<sabre><{}> needs attribute '{attr}'", node.tag_name().name()),
-        )
-    })?;
-    text.trim().parse::<f64>().ok().filter(|v| v.is_finite()).ok_or_else(|| {
-        SabreError::urdf(
-            source,
-            format!(
-                "<sabre><{}> attribute '{attr}'='{text}' is not a finite number",
-                node.tag_name().name()
-            ),
-        )
-    })
-}
-
-fn parse_xyz(source: &str, node: &roxmltree::Node) -> Result<Vector3<f64>> {
-    let Some(text) = node.attribute("xyz") else {
-        return Ok(Vector3::zeros());
-    };
-    let values: Vec<f64> = text.split_whitespace().filter_map(|t| t.parse().ok()).collect();
-    if values.len() != 3 || values.iter().any(|v: &f64| !v.is_finite()) {
-        return Err(SabreError::urdf(
-            source,
-            format!("<sabre> xyz='{text}' must be three finite numbers"),
-        ));
-    }
-    Ok(Vector3::new(values[0], values[1], values[2]))
-}
-
-fn parse_extension(source: &str, doc: &roxmltree::Document) -> Result<SabreExtension> {
-    let mut ext = SabreExtension::default();
-    let Some(block) = doc.root_element().children().find(|n| n.has_tag_name("sabre")) else {
-        return Ok(ext);
-    };
-    for node in block.children().filter(|n| n.is_element()) {
-        let attr = |name: &str| {
-            node.attribute(name).map(str::to_string).ok_or_else(|| {
-                SabreError::urdf(
-                    source,
-                    format!("<sabre><{}> needs attribute '{name}'", node.tag_name().name()),
-                )
-            })
-        };
-        match node.tag_name().name() {
-            "rollout_contact" => ext
-                .rollout_contact_links
-                .extend(attr("links")?.split_whitespace().map(str::to_string)),
-            "sphere" => {
-                let radius = parse_f64(source, &node, "radius")?;
-                if radius <= 0.0 {
-                    return Err(SabreError::urdf(source, "<sabre><sphere> radius must be positive"));
-                }
-                let obstacles = match node.attribute("obstacles").map(str::trim) {
-                    None | Some("true") => true,
-                    Some("false") => false,
-                    Some(other) => {
-                        return Err(SabreError::urdf(
-                            source,
-                            format!("<sabre><sphere> attribute 'obstacles'='{other}' must be true or false"),
-                        ))
-                    }
-                };
-                ext.spheres.push(SphereDecl {
-                    name: attr("name")?,
-                    link: attr("link")?,
-                    center: parse_xyz(source, &node)?,
-                    radius,
-                    obstacles,
-                });
-            }
-            "pair" => ext.pairs.push((attr("a")?, attr("b")?)),
-            "arm_reach" => {
-                ext.arm_reach = Some(ArmReachDecl {
-                    base: attr("base")?,
-                    frame: attr("frame")?,
-                    max: parse_f64(source, &node, "max")?,
-                })
-            }
-            other => {
-                if !super::roles::parse_role(source, &node, &mut ext.roles)? {
-                    return Err(SabreError::urdf(source, format!("unknown element <sabre><{other}>")));
-                }
-            }
-        }
-    }
-    Ok(ext)
-}
-
 /// Parses URDF text; `source` names it in error messages (a path or a built-in asset name).
 pub fn parse_urdf(source: &str, text: &str) -> Result<ParsedUrdf> {
     // roxmltree first: it reports malformed XML with a position, which urdf-rs does not.
@@ -508,42 +420,15 @@ pub fn parse_urdf(source: &str, text: &str) -> Result<ParsedUrdf> {
     for (link, urdf_link) in links.iter_mut().zip(&robot.links) {
         link.visuals = super::visual::convert(source, urdf_link, &robot.materials);
     }
-    let names: std::collections::HashMap<&str, usize> =
-        robot.links.iter().enumerate().map(|(i, l)| (l.name.as_str(), i)).collect();
+    let names: HashMap<&str, usize> = robot.links.iter().enumerate().map(|(i, l)| (l.name.as_str(), i)).collect();
     let lookup = |name: &str| names.get(name).copied();
     let joints = robot
         .joints
         .iter()
         .map(|j| convert_joint(source, j, &lookup))
         .collect::<Result<Vec<_>>>()?;
-    let tree = KinematicTree::new(robot.name.clone(), links, joints, source)?;
-    Ok(ParsedUrdf { tree, extension })
-}
-
-/// Checks that every link and sphere the `<sabre>` block names exists in `tree` (the robot with its
-/// tool attached).
-pub fn check_extension(source: &str, tree: &KinematicTree, extension: &SabreExtension) -> Result<()> {
-    for name in extension
-        .rollout_contact_links
-        .iter()
-        .chain(extension.spheres.iter().map(|s| &s.link))
-        .chain(extension.arm_reach.iter().flat_map(|a| [&a.base, &a.frame]))
-    {
-        if tree.link_id(name).is_none() {
-            return Err(SabreError::urdf(source, format!("<sabre> refers to unknown link '{name}'")));
-        }
-    }
-    for (a, b) in &extension.pairs {
-        for s in [a, b] {
-            if !extension.spheres.iter().any(|sp| &sp.name == s) {
-                return Err(SabreError::urdf(
-                    source,
-                    format!("<sabre><pair> refers to unknown sphere '{s}'"),
-                ));
-            }
-        }
-    }
-    Ok(())
+    let description = Description::new(robot.name.clone(), links, joints, source)?;
+    Ok(ParsedUrdf { description, extension })
 }
 
 /// Reads and parses a URDF file.

@@ -24,8 +24,8 @@ fn link_collisions(body: &str) -> Vec<Collision> {
         <joint name="j" type="revolute"><parent link="a"/><child link="b"/>
         <limit lower="-1" upper="1" effort="1" velocity="1"/></joint></robot>"#
     );
-    let parsed = parse_urdf("robot", &text).unwrap();
-    parsed.tree.links[parsed.tree.link_id("a").unwrap()].collisions.clone()
+    let parsed = parse_urdf("robot", &text).unwrap().description;
+    parsed.links[parsed.link_index["a"]].collisions.clone()
 }
 
 #[test]
@@ -76,12 +76,24 @@ fn spheres_that_do_not_close_the_cylinder_stay_separate() {
 #[test]
 fn the_shipped_robot_is_standard_urdf_and_keeps_its_capsules() {
     assert!(!ROBOT.contains("<capsule"), "standard URDF has no <capsule>");
-    let robot = parse_urdf("robot", ROBOT).unwrap().tree;
+    let robot = parse_urdf("robot", ROBOT).unwrap().description;
     let arm: Vec<&Collision> = (0..=7)
-        .flat_map(|k| &robot.links[robot.link_id(&format!("panda_link{k}")).unwrap()].collisions)
+        .flat_map(|k| &robot.links[robot.link_index[&format!("panda_link{k}")]].collisions)
         .collect();
     assert_eq!(arm.len(), 9);
     assert!(arm.iter().all(|c| matches!(c.shape, Shape::Capsule { .. })), "{arm:?}");
+}
+
+#[test]
+fn an_inertial_without_mass_or_inertia_is_completed_and_its_parts_recorded() {
+    let doc_text = r#"<robot><link name="a"><inertial><origin xyz="1 2 3"/><mass value="2"/></inertial></link><link name="b"><inertial/></link></robot>"#;
+    let doc = roxmltree::Document::parse(doc_text).unwrap();
+    let completed = with_complete_inertials(doc_text, &doc);
+    assert!(completed.contains(r#"<mass value="2"/><inertia ixx="0""#), "{completed}");
+    assert!(completed.contains(r#"<inertial><mass value="0"/><inertia"#), "{completed}");
+    let present = inertial_elements(&doc);
+    assert_eq!(present["a"], (true, true, false));
+    assert_eq!(present["b"], (false, false, false));
 }
 
 #[test]
@@ -133,8 +145,7 @@ fn negative_limits_and_infinite_dynamics_are_refused() {
         "<limit lower=\"0\" upper=\"1\" effort=\"0\" velocity=\"0\"/>",
         "<dynamics damping=\"1\" friction=\"0.5\"/>",
     );
-    let tree = parse_urdf("object", &ok).unwrap().tree;
-    let limits = tree.active_limits()[0];
+    let limits = parse_urdf("object", &ok).unwrap().description.joints[0].limits;
     assert!(
         limits.effort.is_infinite() && limits.velocity.is_infinite(),
         "0 means no bound"

@@ -3,7 +3,7 @@
 
 use std::sync::Mutex;
 
-use super::RolloutBatch;
+use super::batch::RolloutBatch;
 use crate::interrupt::{Cancel, Poll};
 
 /// A batch's inputs: given, or written row by row by the worker that rolls the row out.
