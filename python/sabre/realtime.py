@@ -141,6 +141,7 @@ class RealtimeCascade:
         self._latest: tuple[np.ndarray, float] | None = None
         # The snapshots of the plans the core's cascade holds (in force, waiting), by the number it gave them.
         self._snapshots: dict[int, PlanSnapshot] = {}
+        self._from_process: PlanSnapshot | None = None  # the planner process's plan handed over last
         self._lock = threading.Lock()  # the cascade's plans: the planner thread hands over, the tick takes over
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -155,7 +156,7 @@ class RealtimeCascade:
         self._refuse_while_planning("reset()")
         self.controller.reset(seed, as_finite("t0", t0))
         self._cascade.reset()
-        self._snapshots, self._latest = {}, None
+        self._snapshots, self._latest, self._from_process = {}, None, None
         self._delay = 0.0
         self._stopped = False
 
@@ -273,6 +274,7 @@ class RealtimeCascade:
         try:
             first = self._process.start(x0, t0, wait=wait)
             if first is not None:
+                self._from_process = first
                 self._put(first)
         except BaseException:
             self._process.stop()
@@ -421,7 +423,8 @@ class RealtimeCascade:
         PlannerError once the process has failed. The caller passes the process it saw: another
         thread may :meth:`stop` the cascade meanwhile."""
         snapshot = process.snapshot()
-        if snapshot is not None and snapshot is not self._plan:
+        if snapshot is not None and snapshot is not self._from_process:
+            self._from_process = snapshot
             self._put(snapshot)
 
     @property

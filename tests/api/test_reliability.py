@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 from pathlib import Path
 
@@ -150,18 +151,22 @@ INTERRUPTIBLE = textwrap.dedent(
 
 @pytest.mark.parametrize(
     "what, core_call",
-    [("follow", "LowLevelController.follow"), ("rollout", "RolloutModel.rollout"), ("episode", "LowLevelController.follow")],
+    [("follow", "Cascade.follow"), ("rollout", "RolloutModel.rollout"), ("episode", "Cascade.follow")],
 )
 def test_ctrl_c_interrupts_a_long_core_call(what, core_call):
     """SIGINT, sent once the child reports its main thread inside the core's long call, ends the call
     with KeyboardInterrupt, raised by Python's handler from the core's check for signals."""
     child = subprocess.Popen([sys.executable, "-c", INTERRUPTIBLE, what, core_call], stdout=subprocess.PIPE, text=True)
+    # a child that never reaches the call (a renamed core call) must fail the test, not hang it
+    guard = threading.Timer(HANG_GUARD, child.kill)
+    guard.start()
     try:
         line = child.stdout.readline().strip()
         if line == "inside":
             child.send_signal(signal.SIGINT)
         out, _ = child.communicate(timeout=HANG_GUARD)
     finally:
+        guard.cancel()
         child.kill()
     assert line == "inside", line
     assert child.returncode == 3 and out.strip() == "interrupted", out
