@@ -26,6 +26,8 @@ __all__ = [
     "LowLevelController",
     "Plan",
     "Cascade",
+    "LowPass",
+    "low_pass_blend",
     "RateLimiter",
     "CommandGate",
     "JointMerge",
@@ -366,6 +368,7 @@ class Cascade:
     def in_force(self) -> int | None: ...
     @property
     def pending(self) -> tuple[int, float] | None: ...
+    def set_shaping(self, gate: CommandGate, arm_index: list[int], base_index: list[int] | None = None) -> None: ...
     def reset(self) -> None: ...
     @property
     def ticks(self) -> int: ...
@@ -378,6 +381,18 @@ class Cascade:
     def tau_ext(self) -> npt.NDArray[np.float64]: ...
     @property
     def tau_ext_counts(self) -> tuple[int, int]: ...
+
+@final
+class LowPass:
+    def __new__(cls, n: int, cutoff: float | None = None) -> LowPass: ...
+    @property
+    def cutoff(self) -> float | None: ...
+    def update(self, sample: npt.NDArray[np.float64], dt: float) -> npt.NDArray[np.float64]: ...
+    @property
+    def value(self) -> npt.NDArray[np.float64]: ...
+    def reset(self) -> None: ...
+
+def low_pass_blend(cutoff: float, dt: float) -> float: ...
 
 @final
 class RateLimiter:
@@ -792,12 +807,9 @@ class BridgeTick:
         cls,
         cascade: Cascade,
         joints: JointMerge,
-        gate: CommandGate,
         estimator: ObjectStateEstimator | None,
         object_position: list[float],
         object_velocity: list[float],
-        arm_index: list[int],
-        base_index: list[int] | None,
         max_tick_dt: float,
         cmd_vel_stamped: bool,
         cmd_vel_frame: str,
@@ -839,6 +851,7 @@ class BridgeTick:
 @final
 class WrenchFrames:
     def __new__(cls, scene: Scene, world_frame: str, default_frame: str, point_frame: str) -> WrenchFrames: ...
+    def tau_ext(self, q: npt.NDArray[np.float64], wrench: npt.NDArray[np.float64], frame_id: str) -> npt.NDArray[np.float64]: ...
     def resolve(self, frame_id: str) -> tuple[str | None, str]: ...
 
 def rcl_function_names() -> list[str]: ...

@@ -1,7 +1,7 @@
 """Estimates a controller on a real robot needs besides its joint states: τ_ext from a wrist
-wrench and a first-order low-pass for it (NumPy on the scene's kinematics), and the object's state
-inferred from the hand pose while the hand holds the handle (no door sensor), computed in the core
-(``_core.ObjectStateEstimator``) so that a loop in Rust runs the same estimator."""
+wrench and a first-order low-pass for it (the core's, which the cascade's tick conditions τ_ext with),
+and the object's state inferred from the hand pose while the hand holds the handle (no door sensor),
+computed in the core (``_core.ObjectStateEstimator``) so that a loop in Rust runs the same estimator."""
 
 from __future__ import annotations
 
@@ -35,34 +35,34 @@ def tau_ext_from_wrench(
     exerts on the hand, its moment about ``frame``'s origin (None: the scene's wrist sensor,
     :attr:`sabre.Scene.wrist_sensor_link`). ``axes`` names the robot frame whose
     axes the components are given in (a sensor's own frame, as an F/T driver publishes it); None:
-    world axes. Contacts on links before the sensor do not show in it."""
+    world axes. Contacts on links before the sensor do not show in it. Computed by the core's wrench
+    frames (``_core.WrenchFrames``), the cascade's own."""
     w = as_float_array("wrench", wrench, (6,))
-    q = np.asarray(q, dtype=np.float64)
-    if axes is not None:
-        rotation = scene.fk(q, axes)[:3, :3]
-        w = np.concatenate([rotation @ w[:3], rotation @ w[3:]])
-    return scene.jacobian(q, scene.wrist_sensor_link if frame is None else frame).T @ w
+    q = as_float_array("q", q, (scene.nq,))
+    point = scene.wrist_sensor_link if frame is None else str(frame)
+    frames = _core.WrenchFrames(scene._core, "world", point, point)
+    return np.asarray(frames.tau_ext(q, w, "world" if axes is None else str(axes)), dtype=np.float64)
 
 
 class LowPass:
     """First-order low-pass at ``cutoff`` Hz integrated with the measured step dt (exact
-    exponential update, so irregular message spacing is handled); None passes through."""
+    exponential update, so irregular message spacing is handled); None passes through. The core's
+    (``_core.LowPass``), on an array of any shape (a new shape starts over)."""
 
     def __init__(self, cutoff: float | None) -> None:
         self.cutoff = None if cutoff is None or cutoff <= 0 else float(cutoff)
         self.value: np.ndarray | None = None
+        self._core: _core.LowPass | None = None
 
     def update(self, x: np.ndarray, dt: float) -> np.ndarray:
         x = np.asarray(x, dtype=np.float64)
-        if self.value is None or self.cutoff is None:
-            self.value = x.copy()
-        else:
-            a = 1.0 - math.exp(-2.0 * math.pi * self.cutoff * max(dt, 0.0))
-            self.value = self.value + a * (x - self.value)
+        if self._core is None or self.value is None or self.value.shape != x.shape:
+            self._core = _core.LowPass(x.size, self.cutoff)
+        self.value = np.asarray(self._core.update(np.ascontiguousarray(x).reshape(-1), float(dt))).reshape(x.shape)
         return self.value
 
     def reset(self) -> None:
-        self.value = None
+        self.value, self._core = None, None
 
 
 @dataclass(frozen=True)

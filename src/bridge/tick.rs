@@ -1,23 +1,20 @@
 //! The bridge's tick: one arm joint state in, as rmw delivers it serialized, and one command out,
 //! serialized for the arm's and the base's command topics. Between them: the joint states merged
 //! by name, the object's state (the estimator from the hand pose, or the newest on its topic), the
-//! cascade's tick ([`Cascade::tick`], which conditions τ_ext) on the step between two states' stamps,
-//! and the rate-limited command gate.
+//! cascade's tick and its command shaping ([`Cascade::tick_shaped`]: τ_ext conditioned, the rate-limited
+//! gate) on the step between two states' stamps.
 
 use crate::bridge::messages::{self, Stamp};
 use crate::control::cascade::Cascade;
-use crate::control::command_stream::{Command, CommandGate};
+use crate::control::command_stream::Command;
 use crate::control::joint_merge::JointMerge;
 use crate::control::object_estimate::{ObjectEstimate, ObjectStateEstimator};
+use crate::control::shaping::CommandShaping;
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
 
-/// How a tick's joints map onto the commands and how time and τ_ext are read.
+/// How a tick's steps are timed and its commands serialized.
 #[derive(Debug, Clone)]
 pub struct BridgeLayout {
-    /// sabre's joints the arm command carries, in its order.
-    pub arm_index: Vec<usize>,
-    /// sabre's base x, y and yaw joints (None: a fixed base, no base command).
-    pub base_index: Option<[usize; 3]>,
     /// The longest step (s) the tank integrates over between two states.
     pub max_tick_dt: f64,
     /// The base command as TwistStamped in `cmd_vel_frame` (else Twist).
@@ -73,7 +70,6 @@ pub enum Followed {
 pub struct BridgeTick {
     layout: BridgeLayout,
     joints: JointMerge,
-    gate: CommandGate,
     estimator: Option<ObjectStateEstimator>,
     nq: usize,
     object: (Vec<f64>, Vec<f64>),
@@ -82,38 +78,20 @@ pub struct BridgeTick {
     last_t: Option<f64>,
     stamp: Stamp,
     x: Vec<f64>,
-    arm_target: Vec<f64>,
-    base_target: Vec<f64>,
     estimate: Option<ObjectEstimate>,
     counts: BridgeCounts,
 }
 
 impl BridgeTick {
-    /// A tick on `joints` (sabre's joints by the robot's names, the arm's driving the ticks) with
-    /// `gate`, and the object from `estimator` or, without one, `object` (o, ȯ) until [`Self::set_object`].
+    /// A tick on `joints` (sabre's joints by the robot's names, the arm's driving the ticks) with the
+    /// object from `estimator` or, without one, `object` (o, ȯ) until [`Self::set_object`].
     pub fn new(
         layout: BridgeLayout,
         joints: JointMerge,
-        gate: CommandGate,
         estimator: Option<ObjectStateEstimator>,
         object: (Vec<f64>, Vec<f64>),
     ) -> Result<Self> {
         let nq = joints.names().len();
-        let na = gate.shaper().arm().len();
-        if layout.arm_index.len() != na || layout.arm_index.iter().any(|&i| i >= nq) {
-            return Err(SabreError::invalid(
-                "arm_index",
-                format!("needs {na} distinct joints of {nq}, got {:?}", layout.arm_index),
-            ));
-        }
-        if layout.base_index.is_some() != gate.shaper().base().is_some()
-            || layout.base_index.is_some_and(|b| b.iter().any(|&i| i >= nq))
-        {
-            return Err(SabreError::invalid(
-                "base_index",
-                "a base command needs the base's three joints and a base limiter, a fixed base neither",
-            ));
-        }
         ensure_len("object velocity", &object.1, object.0.len())?;
         ensure_finite("object", &object.0)?;
         ensure_finite("object velocity", &object.1)?;
@@ -121,7 +99,6 @@ impl BridgeTick {
         Ok(Self {
             layout,
             joints,
-            gate,
             estimator,
             nq,
             object,
@@ -130,8 +107,6 @@ impl BridgeTick {
             last_t: None,
             stamp: Stamp::default(),
             x: vec![0.0; nx],
-            arm_target: vec![0.0; na],
-            base_target: vec![0.0; 3],
             estimate: None,
             counts: BridgeCounts::default(),
         })
@@ -217,12 +192,12 @@ impl BridgeTick {
     }
 
     /// The step (s) to integrate over to time `t` from the previous state (capped at `max_tick_dt`;
-    /// one command period for the first).
-    fn step_to(&mut self, t: f64) -> f64 {
+    /// one command period, `period`, for the first).
+    fn step_to(&mut self, t: f64, period: f64) -> f64 {
         let dt = match self.last_t {
             Some(last) => (t - last).min(self.layout.max_tick_dt),
             // the first state the inner loop sees: one command period
-            None => self.gate.period(),
+            None => period,
         };
         self.last_t = Some(t);
         dt
@@ -234,10 +209,10 @@ impl BridgeTick {
     }
 
     /// Answers the newest state, at its time `t` (received at `received`, s monotonic), with the
-    /// cascade's plan in force: the state (see [`Self::state`]), the cascade's tick over the step
-    /// since the previous state, and the gate's step toward its command (nq, in sabre's joints; the
-    /// base's in world rates, turned into the base frame here). Without a plan, or with one older
-    /// than `max_plan_age` s at t, only the state is taken and nothing is sent.
+    /// cascade's plan in force: the state (see [`Self::state`]), and the cascade's tick over the step
+    /// since the previous state with its command shaping ([`Cascade::tick_shaped`]). Without a plan,
+    /// or with one older than `max_plan_age` s at t, only the state is taken and nothing is sent.
+    /// Errors: a cascade that shapes no commands, or its tick's.
     pub fn follow(
         &mut self,
         cascade: &mut Cascade,
@@ -259,28 +234,16 @@ impl BridgeTick {
             }
             Some(_) => {}
         }
-        let dt = self.step_to(t);
-        let command = &cascade.tick(&self.x, t, dt, received)?.command;
-        for (target, &i) in self.arm_target.iter_mut().zip(&self.layout.arm_index) {
-            *target = command[i];
-        }
-        if let Some([ix, iy, iyaw]) = self.layout.base_index {
-            // world rates → the base frame's twist (vx, vy, ωz)
-            let yaw = self.joints.position()[iyaw];
-            let (c, s) = (yaw.cos(), yaw.sin());
-            let (vx, vy) = (command[ix], command[iy]);
-            self.base_target
-                .copy_from_slice(&[c * vx + s * vy, -s * vx + c * vy, command[iyaw]]);
-        }
-        let base_target = self.layout.base_index.map(|_| self.base_target.as_slice());
-        let out = self.gate.on_tick(received, Some(&self.arm_target), base_target)?.clone();
+        let period = shaping_of(cascade)?.gate().period();
+        let dt = self.step_to(t, period);
+        let out = cascade.tick_shaped(&self.x, t, dt, received)?.clone();
         self.counts.followed += 1;
         self.answer(&out, Some(self.stamp)).map(Followed::Answered)
     }
 
-    /// A step of the ramp to zero answering the newest state (or a rejected one).
-    pub fn stop(&mut self, received: f64) -> Result<Answer> {
-        let out = self.gate.on_tick(received, None, None)?.clone();
+    /// A step of the cascade's ramp to zero answering the newest state (or a rejected one).
+    pub fn stop(&mut self, cascade: &mut Cascade, received: f64) -> Result<Answer> {
+        let out = shaping_mut(cascade)?.stop(received)?.clone();
         self.answer(&out, Some(self.stamp))
     }
 
@@ -295,7 +258,7 @@ impl BridgeTick {
     fn encode(&mut self, command: &Command, answers: Option<Stamp>, stamp: Stamp) -> Result<Answer> {
         let mut out = Answer::default();
         messages::encode_float64_array(&mut out.arm, &command.arm, answers.map_or(0, |s| s.nanosec))?;
-        if command.base_due && self.layout.base_index.is_some() {
+        if command.base_due {
             let mut base = Vec::new();
             let (b, stamped) = (&command.base, self.layout.cmd_vel_stamped);
             messages::encode_twist(
@@ -316,21 +279,22 @@ impl BridgeTick {
         Ok(out)
     }
 
-    /// The ramp steps due at `now` (s, monotonic) because no state came for the state timeout
-    /// (at most `limit`), stamped `stamp`.
-    pub fn watchdog(&mut self, now: f64, limit: usize, stamp: Stamp) -> Result<Vec<Answer>> {
+    /// The cascade's ramp steps due at `now` (s, monotonic) because no state came for the state
+    /// timeout (at most `limit`), stamped `stamp`.
+    pub fn watchdog(&mut self, cascade: &mut Cascade, now: f64, limit: usize, stamp: Stamp) -> Result<Vec<Answer>> {
         let mut steps = Vec::new();
-        self.gate.watchdog(now, limit, &mut steps);
+        shaping_mut(cascade)?.gate_mut().watchdog(now, limit, &mut steps);
         steps.iter().map(|c| self.encode(c, None, stamp)).collect()
     }
 
-    /// One step of the ramp to zero outside the ticks (a shutdown's), None once at rest.
-    pub fn ramp_step(&mut self, stamp: Stamp) -> Result<Option<Answer>> {
-        if self.gate.shaper().at_rest() {
+    /// One step of the cascade's ramp to zero outside the ticks (a shutdown's), None once at rest.
+    pub fn ramp_step(&mut self, cascade: &mut Cascade, stamp: Stamp) -> Result<Option<Answer>> {
+        let gate = shaping_mut(cascade)?.gate_mut();
+        if gate.shaper().at_rest() {
             return Ok(None);
         }
-        let mut command = self.gate.shaper().command();
-        self.gate.shaper_mut().step(None, None, &mut command)?;
+        let mut command = gate.shaper().command();
+        gate.shaper_mut().step(None, None, &mut command)?;
         self.encode(&command, None, stamp).map(Some)
     }
 
@@ -363,9 +327,6 @@ impl BridgeTick {
     pub fn joints(&self) -> &JointMerge {
         &self.joints
     }
-    pub fn gate(&self) -> &CommandGate {
-        &self.gate
-    }
     pub fn counts(&self) -> &BridgeCounts {
         &self.counts
     }
@@ -373,4 +334,17 @@ impl BridgeTick {
     pub fn opening(&self) -> f64 {
         self.object.0.first().copied().unwrap_or(f64::NAN)
     }
+}
+
+/// The cascade's command shaping, which a bridge's cascade must have.
+fn shaping_of(cascade: &Cascade) -> Result<&CommandShaping> {
+    cascade
+        .shaping()
+        .ok_or_else(|| SabreError::invalid("cascade", "shapes no commands: give it a command shaping first"))
+}
+
+fn shaping_mut(cascade: &mut Cascade) -> Result<&mut CommandShaping> {
+    cascade
+        .shaping_mut()
+        .ok_or_else(|| SabreError::invalid("cascade", "shapes no commands: give it a command shaping first"))
 }

@@ -1,12 +1,15 @@
 //! The control cascade's inner loop, one tick for every clock and plant: the plan in force (handed over by
 //! the planner, taking over at its time), τ_ext conditioned, the FILTER-QP (41) with the tank's passivity row
-//! (56), the tank's refill and step (49), and the low-level torque (53). `run_episode`, the deployment loop
-//! and the ROS bridge all tick through [`Cascade::tick`]; [`Cascade::follow`] runs it on the Rust plant.
+//! (56), the tank's refill and step (49), the low-level torque (53), and for a robot's command interface the
+//! command shaping ([`CommandShaping`]). `run_episode`, the deployment loop and the ROS bridge all tick
+//! through [`Cascade::tick`]; [`Cascade::follow`] runs it on the Rust plant.
 
 use std::sync::{Arc, Mutex, MutexGuard};
 
+use super::command_stream::Command;
 use super::low_level::LowLevelController;
 use super::plan::Plan;
+use super::shaping::CommandShaping;
 use super::tau_ext::ExternalTorque;
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
 use crate::safety::{EnergyTank, FilterStatus, SafetyFilter};
@@ -96,6 +99,7 @@ pub struct Cascade {
     filter: Option<Shared<SafetyFilter>>,
     tank: Option<Shared<EnergyTank>>,
     tau_ext: ExternalTorque,
+    shaping: Option<CommandShaping>,
     plan: Option<Handed>,
     pending: Option<(Handed, f64)>,
     handed: u64,
@@ -138,6 +142,7 @@ impl Cascade {
             filter,
             tank,
             tau_ext,
+            shaping: None,
             plan: None,
             pending: None,
             handed: 0,
@@ -163,6 +168,26 @@ impl Cascade {
     /// The τ_ext readings, to hand it a new one ([`ExternalTorque::set_torque`], [`ExternalTorque::set_wrench`]).
     pub fn tau_ext_mut(&mut self) -> &mut ExternalTorque {
         &mut self.tau_ext
+    }
+    /// Shapes the commands for a robot's command interface from now on ([`Self::tick_shaped`]); the
+    /// shaping must be for this cascade's robot.
+    pub fn set_shaping(&mut self, shaping: CommandShaping) -> Result<()> {
+        let base = shaping.base_index();
+        let widest = shaping.arm_index().iter().chain(base.iter().flatten()).max();
+        if widest.is_some_and(|&i| i >= self.nq) {
+            return Err(SabreError::invalid(
+                "command shaping",
+                format!("names joints past the robot's {}", self.nq),
+            ));
+        }
+        self.shaping = Some(shaping);
+        Ok(())
+    }
+    pub fn shaping(&self) -> Option<&CommandShaping> {
+        self.shaping.as_ref()
+    }
+    pub fn shaping_mut(&mut self) -> Option<&mut CommandShaping> {
+        self.shaping.as_mut()
     }
     pub fn nx(&self) -> usize {
         self.nx
@@ -320,6 +345,17 @@ impl Cascade {
         controller.torque_into(x, &out.command, floor, &mut out.torque)?;
         self.ticks += 1;
         Ok(&self.out)
+    }
+
+    /// [`Self::tick`], then the command shaping's step at `now` toward the tick's command (see
+    /// [`CommandShaping::follow`]). Errors: no shaping (before anything changes), or the tick's.
+    pub fn tick_shaped(&mut self, x: &[f64], t: f64, dt: f64, now: f64) -> Result<&Command> {
+        if self.shaping.is_none() {
+            return Err(SabreError::invalid("command shaping", "this cascade shapes no commands"));
+        }
+        self.tick(x, t, dt, now)?;
+        let shaping = self.shaping.as_mut().expect("checked above");
+        shaping.follow(now, &self.out.command, x)
     }
 
     /// The cascade driving `plant` for `steps` plant steps: each a [`Self::tick`] at the plant's state,

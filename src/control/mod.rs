@@ -8,10 +8,12 @@ pub mod low_level;
 pub mod object_estimate;
 pub mod plan;
 pub mod rate_limit;
+pub mod shaping;
 pub mod tau_ext;
 
 pub use cascade::{Cascade, Shared, TickOutput, TrackTrace};
 pub use low_level::{LowLevelConfig, LowLevelController};
 pub use plan::Plan;
 pub use rate_limit::RateLimiter;
+pub use shaping::CommandShaping;
 pub use tau_ext::{ExternalTorque, WrenchFrames};

@@ -8,7 +8,7 @@ use numpy::{PyArray1, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 
-use super::bridge::{PyCommandGate, PyJointMerge};
+use super::bridge::PyJointMerge;
 use super::cascade::PyCascade;
 use super::convert::{lock, view};
 use super::error::run;
@@ -16,7 +16,9 @@ use super::estimation::PyObjectStateEstimator;
 use super::messages::stamp_of;
 use super::scene::PyScene;
 use crate::bridge::tick::{Answer, BridgeLayout, BridgeTick, Followed, Received};
+use crate::control::command_stream::CommandGate;
 use crate::control::{Cascade, Shared, WrenchFrames};
+use crate::error::SabreError;
 
 /// (arm command, base command or None, command echo or None) as bytes to publish.
 type Step<'py> = (Bound<'py, PyBytes>, Option<Bound<'py, PyBytes>>, Option<Bound<'py, PyBytes>>);
@@ -37,9 +39,10 @@ fn step<'py>(py: Python<'py>, answer: &Answer) -> Step<'py> {
 }
 
 /// The controller node's 1 kHz path (see `sabre.ros.controller_loop`): joint states merged by
-/// name, the object's state, the cascade's tick (which conditions τ_ext) and the rate-limited
-/// command gate, on serialized messages. Takes copies of the merge, gate and estimator it is built
-/// from, and shares the cascade (`_core.Cascade`) its deployment loop hands the plans to.
+/// name, the object's state, the cascade's tick with its command shaping (τ_ext conditioned, the
+/// rate-limited gate), on serialized messages. Takes copies of the merge and estimator it is built
+/// from, and shares the cascade (`_core.Cascade`, given its shaping with `set_shaping`) its deployment
+/// loop hands the plans to.
 #[pyclass(name = "BridgeTick", module = "sabre._core", frozen)]
 pub struct PyBridgeTick {
     inner: Mutex<BridgeTick>,
@@ -50,24 +53,19 @@ pub struct PyBridgeTick {
 impl PyBridgeTick {
     #[new]
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (cascade, joints, gate, estimator, object_position, object_velocity, arm_index, base_index, max_tick_dt, cmd_vel_stamped, cmd_vel_frame, echo_names=None))]
+    #[pyo3(signature = (cascade, joints, estimator, object_position, object_velocity, max_tick_dt, cmd_vel_stamped, cmd_vel_frame, echo_names=None))]
     fn new(
         cascade: &PyCascade,
         joints: &PyJointMerge,
-        gate: &PyCommandGate,
         estimator: Option<&PyObjectStateEstimator>,
         object_position: Vec<f64>,
         object_velocity: Vec<f64>,
-        arm_index: Vec<usize>,
-        base_index: Option<[usize; 3]>,
         max_tick_dt: f64,
         cmd_vel_stamped: bool,
         cmd_vel_frame: String,
         echo_names: Option<Vec<String>>,
     ) -> PyResult<Self> {
         let layout = BridgeLayout {
-            arm_index,
-            base_index,
             max_tick_dt,
             cmd_vel_stamped,
             cmd_vel_frame,
@@ -77,7 +75,6 @@ impl PyBridgeTick {
             BridgeTick::new(
                 layout,
                 joints.merge(),
-                gate.gate(),
                 estimator.map(PyObjectStateEstimator::inner),
                 (object_position, object_velocity),
             )
@@ -137,7 +134,8 @@ impl PyBridgeTick {
 
     /// A ramp step toward zero answering the newest (or a rejected) state at `received`.
     fn stop<'py>(&self, py: Python<'py>, received: f64) -> PyResult<Step<'py>> {
-        let answer = run(|| lock(&self.inner).stop(received))?;
+        let mut tick = lock(&self.inner);
+        let answer = run(|| tick.stop(&mut lock(&self.cascade), received))?;
         Ok(step(py, &answer))
     }
 
@@ -145,18 +143,20 @@ impl PyBridgeTick {
     /// (at most `limit`), a stamped base command stamped `stamp_ns`.
     #[pyo3(signature = (now, stamp_ns, limit=10))]
     fn watchdog<'py>(&self, py: Python<'py>, now: f64, stamp_ns: i64, limit: usize) -> PyResult<Vec<Step<'py>>> {
-        let steps = run(|| lock(&self.inner).watchdog(now, limit, stamp_of(stamp_ns)))?;
+        let mut tick = lock(&self.inner);
+        let steps = run(|| tick.watchdog(&mut lock(&self.cascade), now, limit, stamp_of(stamp_ns)))?;
         Ok(steps.iter().map(|a| step(py, a)).collect())
     }
 
     /// Seconds until the watchdog has something to do.
-    fn next_look(&self, now: f64) -> f64 {
-        lock(&self.inner).gate().next_look(now)
+    fn next_look(&self, now: f64) -> PyResult<f64> {
+        self.gate(|g| g.next_look(now))
     }
 
     /// One step of the ramp to zero outside the ticks (a shutdown's), None once at rest.
     fn ramp_step<'py>(&self, py: Python<'py>, stamp_ns: i64) -> PyResult<Option<Step<'py>>> {
-        let answer = run(|| lock(&self.inner).ramp_step(stamp_of(stamp_ns)))?;
+        let mut tick = lock(&self.inner);
+        let answer = run(|| tick.ramp_step(&mut lock(&self.cascade), stamp_of(stamp_ns)))?;
         Ok(answer.map(|a| step(py, &a)))
     }
 
@@ -211,25 +211,25 @@ impl PyBridgeTick {
         lock(&self.inner).opening()
     }
     #[getter]
-    fn at_rest(&self) -> bool {
-        lock(&self.inner).gate().shaper().at_rest()
+    fn at_rest(&self) -> PyResult<bool> {
+        self.gate(|g| g.shaper().at_rest())
     }
     /// Whether the watchdog is ramping the commands down because no state came.
     #[getter]
-    fn ramping_for_stale_state(&self) -> bool {
-        lock(&self.inner).gate().stale_since().is_some()
+    fn ramping_for_stale_state(&self) -> PyResult<bool> {
+        self.gate(|g| g.stale_since().is_some())
     }
     #[getter]
-    fn stale_events(&self) -> usize {
-        lock(&self.inner).gate().stale_events()
+    fn stale_events(&self) -> PyResult<usize> {
+        self.gate(CommandGate::stale_events)
     }
     #[getter]
-    fn period(&self) -> f64 {
-        lock(&self.inner).gate().period()
+    fn period(&self) -> PyResult<f64> {
+        self.gate(CommandGate::period)
     }
     #[getter]
-    fn state_timeout(&self) -> f64 {
-        lock(&self.inner).gate().state_timeout()
+    fn state_timeout(&self) -> PyResult<f64> {
+        self.gate(CommandGate::state_timeout)
     }
     /// The counts: ticks (states answered), answered (commands sent), followed, rejected,
     /// wrench_stale, wrench_received.
@@ -251,6 +251,19 @@ impl PyBridgeTick {
     }
 }
 
+impl PyBridgeTick {
+    /// `read` of the cascade's command gate; an error for a cascade that shapes no commands.
+    fn gate<R>(&self, read: impl FnOnce(&CommandGate) -> R) -> PyResult<R> {
+        let cascade = lock(&self.cascade);
+        run(|| {
+            cascade
+                .shaping()
+                .map(|s| read(s.gate()))
+                .ok_or_else(|| SabreError::invalid("cascade", "shapes no commands: give it a command shaping first"))
+        })
+    }
+}
+
 /// How a wrist wrench's header frame is read (`sabre.ros.inputs.WrenchFrames` runs it; the tick
 /// runs a copy built from the same three frames).
 #[pyclass(name = "WrenchFrames", module = "sabre._core", frozen)]
@@ -265,6 +278,23 @@ impl PyWrenchFrames {
     #[new]
     fn new(scene: &PyScene, world_frame: &str, default_frame: &str, point_frame: &str) -> PyResult<Self> {
         run(|| WrenchFrames::new(scene.inner.clone(), world_frame, default_frame, point_frame)).map(|inner| Self { inner })
+    }
+
+    /// τ_ext (nq,) = J(q)ᵀ w of a wrist wrench (6,) [f; m] given in the header frame `frame_id`.
+    fn tau_ext<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArrayDyn<'py, f64>,
+        wrench: PyReadonlyArrayDyn<'py, f64>,
+        frame_id: &str,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let tau = run(|| {
+            let q = view("q", &q, &[-1])?;
+            let w = view("wrench", &wrench, &[6])?;
+            let w: [f64; 6] = [w[0], w[1], w[2], w[3], w[4], w[5]];
+            self.inner.tau_ext(q, &w, frame_id)
+        })?;
+        Ok(PyArray1::from_vec(py, tau))
     }
 
     /// (axes frame or None for world axes, moment point frame) of a header's frame id.

@@ -7,12 +7,13 @@ use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
+use super::bridge::PyCommandGate;
 use super::control::{PyLowLevelController, PyPlan};
 use super::convert::{array, lock, view};
 use super::error::{run, run_detached};
 use super::safety::{PyEnergyTank, PySafetyFilter};
 use super::sim::PyPlant;
-use crate::control::{Cascade, ExternalTorque, Shared, TrackTrace, WrenchFrames};
+use crate::control::{Cascade, CommandShaping, ExternalTorque, Shared, TrackTrace, WrenchFrames};
 
 /// A tick's output: the reference, the command after the filter, the torques (nq,), the tank's energy
 /// (None without a tank) and the filter's status ("unfiltered" without a filter).
@@ -117,7 +118,18 @@ impl PyCascade {
         lock(&self.inner).pending()
     }
 
-    /// Forgets the plans, the τ_ext readings and the low-level controller's integral.
+    /// Shapes the commands for a robot's command interface from now on (a copy of `gate`): the arm
+    /// command carries sabre's joints `arm_index`, the base's twist the joints `base_index` (x, y, yaw;
+    /// None: a fixed base). The ROS 2 bridge's tick runs the shaping.
+    #[pyo3(signature = (gate, arm_index, base_index=None))]
+    fn set_shaping(&self, gate: &PyCommandGate, arm_index: Vec<usize>, base_index: Option<[usize; 3]>) -> PyResult<()> {
+        run(|| {
+            let shaping = CommandShaping::new(gate.gate(), arm_index, base_index, self.nq)?;
+            lock(&self.inner).set_shaping(shaping)
+        })
+    }
+
+    /// Forgets the plans and the low-level controller's integral (the τ_ext readings stay).
     fn reset(&self) {
         lock(&self.inner).reset();
     }

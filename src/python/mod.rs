@@ -13,6 +13,7 @@ mod convert;
 mod cost;
 mod error;
 mod estimation;
+mod low_pass;
 mod messages;
 mod mppi;
 mod rate_limit;
@@ -35,6 +36,9 @@ fn default_threads() -> usize {
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     error::watch_signals(m.py())?;
+    // Loads NumPy's C API now: its first load runs Python code, and a Ctrl-C landing there during an
+    // argument's conversion would panic in rust-numpy, outside the calls that turn panics into errors.
+    numpy::PyArray1::<f64>::from_slice(m.py(), &[]);
     m.add_class::<scene::PyScene>()?;
     m.add_class::<sim::PyRolloutConfig>()?;
     m.add_class::<sim::PyRolloutModel>()?;
@@ -45,6 +49,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<control::PyLowLevelController>()?;
     m.add_class::<control::PyPlan>()?;
     m.add_class::<cascade::PyCascade>()?;
+    m.add_class::<low_pass::PyLowPass>()?;
+    m.add_function(wrap_pyfunction!(low_pass::low_pass_blend, m)?)?;
     m.add_class::<rate_limit::PyRateLimiter>()?;
     m.add_class::<bridge::PyCommandGate>()?;
     m.add_class::<sim_driver::PySimDriver>()?;

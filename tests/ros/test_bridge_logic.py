@@ -90,7 +90,12 @@ def test_wrench_frames_take_the_headers_axes_and_reject_unknown_frames():
     w = np.array([1.0, -2.0, 3.0, 0.1, 0.2, -0.3])
     r = scene.fk(q, "panda_link8")[:3, :3]
     local = np.concatenate([r.T @ w[:3], r.T @ w[3:]])
-    assert np.allclose(frames.tau_ext(q, local, *frames.resolve("")), frames.tau_ext(q, w, *frames.resolve("odom")))
+    # the same wrench in the sensor's axes (empty header) and in world axes: the same τ_ext, J(q)ᵀ w about the sensor
+    expected = scene.jacobian(q, "panda_link8").T @ w
+    assert np.allclose(frames.tau_ext(q, local, ""), expected, atol=1e-9)
+    assert np.allclose(frames.tau_ext(q, w, "odom"), expected, atol=1e-9)
+    with pytest.raises(MessageError, match="neither"):
+        frames.tau_ext(q, w, "camera_link")
     with pytest.raises(MessageError):
         WrenchFrames(scene, "odom", "nowhere")
     torques = JointTorques(scene.joint_names, scene.nq, sign=-1.0)

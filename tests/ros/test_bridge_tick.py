@@ -88,15 +88,13 @@ class Pipeline:
         self.gate = CommandGate(CommandShaper(limits), 0.05)  # the reference's: the tick takes a copy
         estimator = sabre.ObjectStateEstimator(scene)
         self.estimator = sabre.ObjectStateEstimator(scene)
+        self.cascade.core.set_shaping(self.gate.core, self.arm, self.base)
         self.tick = _core.BridgeTick(
             self.cascade.core,
             joints.core,
-            self.gate.core,
             estimator.core,
             [0.0],
             [0.0],
-            self.arm,
-            self.base,
             0.005,
             False,
             "",
@@ -167,7 +165,7 @@ def test_fingers_merge_bad_states_get_ramp_steps_and_a_stale_joint_stops_followi
 
 
 def test_wrenches_read_in_the_core_give_the_python_frames_tau_ext():
-    """τ_ext from a serialized WrenchStamped equals sabre.estimation.tau_ext_from_wrench's J(q)ᵀ w
+    """τ_ext from a serialized WrenchStamped equals J(q)ᵀ w computed here
     (NumPy on the scene's kinematics) for a header in the world frame, in the sensor's, in another
     robot frame and empty; an unknown frame is refused and changes nothing."""
     pytest.importorskip("rclpy")
@@ -190,7 +188,9 @@ def test_wrenches_read_in_the_core_give_the_python_frames_tau_ext():
         m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z = (float(v) for v in w[3:])
         s.tick.set_wrench(serialize_message(m), 0.0)
         axes, point = reference.resolve(frame)
-        expected = reference.tau_ext(q, w, axes, point)
+        # J(q)ᵀ w by hand: the wrench turned into world axes, about the point frame's origin
+        r = np.eye(3) if axes is None else s.scene.fk(q, axes)[:3, :3]
+        expected = s.scene.jacobian(q, point).T @ np.concatenate([r @ w[:3], r @ w[3:]])
         assert s.tick.counts["wrench_received"] == k + 1
         assert np.allclose(s.cascade.core.tau_ext, expected, atol=1e-9), frame
     m = WrenchStamped()

@@ -141,7 +141,7 @@ class MujocoPlant:
         self.servo_integral_limit = as_non_negative("servo_integral_limit", servo_integral_limit)
         self.gain_inertia_floor = as_non_negative("gain_inertia_floor", gain_inertia_floor)
         cutoff = None if tau_ext_cutoff is None else as_positive("tau_ext_cutoff", tau_ext_cutoff)
-        self._blend = 1.0 if cutoff is None else 1.0 - float(np.exp(-2.0 * np.pi * cutoff * dt))
+        self._blend = 1.0 if cutoff is None else _core.low_pass_blend(cutoff, dt)
         self._object_range = self.model.jnt_range[self._layout.object_joints].copy()
         self._object_solref = self.model.jnt_solref[self._layout.object_joints].copy()
         self._speed_bounds = np.concatenate([_DIVERGENCE_VELOCITY_FACTOR * scene.dq_limit, np.full(scene.no, _MAX_OBJECT_SPEED)])

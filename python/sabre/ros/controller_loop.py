@@ -117,18 +117,18 @@ class ControllerLoop:
             self.estimator = ObjectStateEstimator(self.scene, handle=self.descriptions.handle)
 
     def _init_tick(self, p: dict[str, Any]) -> None:
-        """The core's tick, on its own copies of the merge, the gate and the estimator."""
+        """The core's tick, on its own copies of the merge and the estimator, and the cascade's command
+        shaping: the rate-limited gate on the arm's and the base's joints."""
         joints = JointStates(self.names, self.arm_joints, self._timeouts)
         gate = CommandGate(CommandShaper(self.limits), float(p["state_timeout"]))
+        base = [int(i) for i in self.base_index] if self.has_base else None
+        self.cascade.core.set_shaping(gate.core, [int(i) for i in self.arm_index], base)
         self.tick = _core.BridgeTick(
             self.cascade.core,
             joints.core,
-            gate.core,
             None if self.estimator is None else self.estimator.core,
             [float(v) for v in self.scene.o_lower],
             [0.0] * self.scene.no,
-            [int(i) for i in self.arm_index],
-            [int(i) for i in self.base_index] if self.has_base else None,
             float(p["max_tick_dt"]),
             bool(p["cmd_vel_stamped"]),
             str(p["cmd_vel_frame"]),

@@ -12,7 +12,6 @@ import numpy as np
 
 from .. import _core
 from ..errors import InvalidValueError, ShapeError
-from ..estimation import tau_ext_from_wrench
 from ..scene import Scene
 from .conversions import MessageError, base_to_world
 
@@ -113,8 +112,8 @@ class WrenchFrames:
     a robot frame of the scene (a sensor's, panda_link8, panda_link0) its axes at the measured
     configuration, an empty one ``default_frame``. The moment is about ``point_frame``'s origin if
     given, else about the axes frame's (world axes: ``default_frame``'s). Any other frame raises
-    :class:`MessageError`. The frames are read by the core (``_core.WrenchFrames``, which the
-    controller's tick runs too); τ_ext is :func:`sabre.estimation.tau_ext_from_wrench`."""
+    :class:`MessageError`. The core reads the frames and computes τ_ext (``_core.WrenchFrames``, the
+    cascade's own)."""
 
     def __init__(self, scene: Scene, world_frame: str, default_frame: str, point_frame: str = "") -> None:
         self.scene = scene
@@ -130,9 +129,15 @@ class WrenchFrames:
         except InvalidValueError as exc:
             raise MessageError(str(exc)) from exc
 
-    def tau_ext(self, q: np.ndarray, wrench: np.ndarray, axes: str | None, point: str) -> np.ndarray:
-        """(nq,) J(q)ᵀ w of ``wrench`` (6,) in ``axes`` about ``point``'s origin."""
-        return tau_ext_from_wrench(self.scene, q, wrench, point, axes)
+    def tau_ext(self, q: np.ndarray, wrench: np.ndarray, frame_id: str) -> np.ndarray:
+        """(nq,) J(q)ᵀ w of ``wrench`` (6,) given in the header frame ``frame_id``."""
+        try:
+            tau = self._core.tau_ext(
+                np.ascontiguousarray(q, dtype=np.float64), np.ascontiguousarray(wrench, dtype=np.float64), str(frame_id)
+            )
+        except InvalidValueError as exc:
+            raise MessageError(str(exc)) from exc
+        return np.asarray(tau, dtype=np.float64)
 
 
 class JointTorques:

@@ -261,3 +261,28 @@ fn tau_ext_is_low_passed_over_the_ticks_steps_and_counted_stale_past_its_timeout
     assert!(ExternalTorque::new(nq, Some(f64::NAN), None, None).is_err());
     assert!(ExternalTorque::new(nq, None, Some(-1.0), None).is_err());
 }
+
+#[test]
+fn a_shaped_tick_needs_a_shaping_and_then_steps_the_gate_toward_the_ticks_command() {
+    use crate::control::command_stream::{CommandGate, CommandShaper};
+    use crate::control::{CommandShaping, RateLimiter};
+    let scene = scene();
+    let (nq, x) = (scene.nq(), scene.default_state());
+    let mut c = cascade(&scene, None, None);
+    c.hand_over(Arc::new(Plan::new(moving_reference(nq, 3), nq, 0.0, 0.01).unwrap()), None)
+        .unwrap();
+    assert!(matches!(
+        c.tick_shaped(&x, 0.0, 0.001, 0.0),
+        Err(SabreError::InvalidValue { .. })
+    ));
+    assert_eq!(c.ticks(), 0, "refused before the tick");
+    let arm: Vec<usize> = (3..nq).collect();
+    let loose = |n: usize| RateLimiter::new(vec![10.0; n], vec![1e6; n], vec![1e9; n], 0.001).unwrap();
+    let gate = CommandGate::new(CommandShaper::new(loose(arm.len()), Some(loose(3)), 1), 0.05).unwrap();
+    c.set_shaping(CommandShaping::new(gate, arm.clone(), Some([0, 1, 2]), nq).unwrap())
+        .unwrap();
+    let command = c.tick_shaped(&x, 0.004, 0.001, 0.004).unwrap().clone();
+    let ticked = c.output().command.clone();
+    assert!(arm.iter().zip(&command.arm).all(|(&i, a)| (ticked[i] - a).abs() < 1e-9));
+    assert_eq!(c.ticks(), 1);
+}
