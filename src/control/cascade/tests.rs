@@ -176,6 +176,7 @@ fn a_tick_checks_its_inputs_before_changing_anything() {
         2,
         "only the good tick stepped the tank"
     );
+    assert_eq!(c.tau_ext().readings(), 1, "the good tick took its reading");
 }
 
 #[test]
@@ -285,4 +286,37 @@ fn a_shaped_tick_needs_a_shaping_and_then_steps_the_gate_toward_the_ticks_comman
     let ticked = c.output().command.clone();
     assert!(arm.iter().zip(&command.arm).all(|(&i, a)| (ticked[i] - a).abs() < 1e-9));
     assert_eq!(c.ticks(), 1);
+}
+
+#[test]
+fn the_tank_books_tau_ext_against_the_filtered_command_not_the_reference() {
+    let scene = scene();
+    let nq = scene.nq();
+    let j4 = scene
+        .robot
+        .active_joint_names()
+        .iter()
+        .position(|n| n == "panda_joint4")
+        .expect("the Panda's fourth joint");
+    let mut x = scene.default_state();
+    x[j4] = scene.robot_limits()[j4].upper - 0.02;
+    // 1 rad/s into the limit 20 mrad away: the filter brakes it
+    let mut reference = vec![0.0; 2 * nq];
+    reference[j4] = 1.0;
+    reference[nq + j4] = 1.0;
+    let filter = SafetyFilter::new(scene.clone(), SafetyConfig::default()).unwrap();
+    let tank = EnergyTank::new(10.0, 0.0, None, false).unwrap();
+    let mut by_hand = EnergyTank::new(10.0, 0.0, None, false).unwrap();
+    let mut c = cascade(&scene, Some(filter), Some(tank));
+    c.hand_over(Arc::new(Plan::new(reference, nq, 0.0, 0.01).unwrap()), None)
+        .unwrap();
+    let tau: Vec<f64> = (0..nq).map(|i| if i == j4 { 5.0 } else { 0.3 }).collect();
+    let out = c.tick_measured(&x, &tau, 0.0, 0.001).unwrap().clone();
+    assert!(
+        out.reference[j4] - out.command[j4] > 0.1,
+        "the filter braked: {} → {}",
+        out.reference[j4],
+        out.command[j4]
+    );
+    assert_eq!(out.tank_energy, Some(by_hand.step(&tau, &out.command, 0.001).unwrap()));
 }
