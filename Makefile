@@ -88,10 +88,13 @@ test-ros-jazzy: $(BASE_STAMP)
 
 # `make -k lint` reports every tool's findings instead of stopping at the first.
 # clippy with the python feature builds PyO3 against the venv's interpreter.
+# sabre-rcl twice: with the ROS 2 headers it finds (its layouts) and without any (what a build without ROS gets).
 lint-rust: $(BASE_STAMP)
-	cargo fmt --check
+	cargo fmt --all --check
 	cargo clippy --all-targets -- -D warnings
 	cargo clippy --all-targets --features python -- -D warnings
+	cargo clippy -p sabre-rcl --all-targets -- -D warnings
+	SABRE_ROS_PREFIX=none cargo clippy -p sabre-rcl --all-targets -- -D warnings
 
 lint-ruff: $(LINT_STAMP)
 	$(VENV)/bin/ruff check .

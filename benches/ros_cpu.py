@@ -58,12 +58,19 @@ def main() -> None:
     parser.add_argument("--warmup", type=float, default=12.0, help="from the start to the window")
     parser.add_argument("--object", default="shelf")
     parser.add_argument("--variant", default="IO")
+    parser.add_argument(
+        "--executor-path",
+        action="store_true",
+        help="the simulated robot takes its arm commands in an executor callback and publishes its states "
+        "through rclpy (direct_middleware: false) instead of through rcl from the core",
+    )
     args = parser.parse_args()
     from sabre.ros.launch import Domain, start_node
 
     total = args.warmup + args.seconds
     with Domain() as domain:
-        sim = start_node("sim-robot", domain.id, ["--object", args.object], {"duration": total + 30.0})
+        sim_params = {"duration": total + 30.0, "direct_middleware": not args.executor_path}
+        sim = start_node("sim-robot", domain.id, ["--object", args.object], sim_params)
         ctrl = start_node("control", domain.id, ["--object", args.object, "--variant", args.variant], {"autostart": True})
         nodes = {"controller": ctrl, "sim robot": sim}
         try:

@@ -36,6 +36,7 @@ __all__ = [
     "SimDriver",
     "FrankaReflexes",
     "rcl_function_names",
+    "rcl_built_against",
     "WrenchFrames",
     "Cost",
     "MppiConfig",
@@ -855,6 +856,7 @@ class WrenchFrames:
     def resolve(self, frame_id: str) -> tuple[str | None, str]: ...
 
 def rcl_function_names() -> list[str]: ...
+def rcl_built_against() -> tuple[str, list[tuple[str, str]]]: ...
 
 @final
 class FrankaReflexes:

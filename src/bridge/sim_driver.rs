@@ -9,9 +9,20 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use super::messages::{self, Stamp};
-use super::rcl::{RclPublisher, RclSubscription};
 use super::reflexes::FrankaReflexes;
 use crate::error::{Result, SabreError};
+
+/// Where the driver takes its arm commands from at each tick: a middleware subscription.
+pub trait MessageSource: Send {
+    /// The next message waiting (its bytes and the time the middleware received it, ns since the
+    /// epoch, 0 when it does not say), or None.
+    fn take(&mut self) -> Result<Option<(&[u8], i64)>>;
+}
+
+/// Where the driver publishes its joint states: a middleware publisher.
+pub trait MessageSink: Send {
+    fn publish(&self, bytes: &[u8]) -> Result<()>;
+}
 
 /// How the driver is laid out: which of the robot's joints are the arm's and the base's, the
 /// joint state it publishes and how its commands are checked.
@@ -88,8 +99,8 @@ pub struct SimDriver {
     velocity: Vec<f64>,
     rng: ChaCha8Rng,
     message: Vec<u8>,
-    arm_input: Option<RclSubscription>,
-    state_output: Option<RclPublisher>,
+    arm_input: Option<Box<dyn MessageSource>>,
+    state_output: Option<Box<dyn MessageSink>>,
 }
 
 impl SimDriver {
@@ -162,7 +173,7 @@ impl SimDriver {
 
     /// Takes the arm's commands from `input` (see [`Self::take_arm_commands`]) and publishes the
     /// joint states to `output` instead of handing their bytes back.
-    pub fn connect(&mut self, input: Option<RclSubscription>, output: Option<RclPublisher>) {
+    pub fn connect(&mut self, input: Option<Box<dyn MessageSource>>, output: Option<Box<dyn MessageSink>>) {
         self.arm_input = input;
         self.state_output = output;
     }
@@ -449,6 +460,42 @@ mod tests {
         assert_eq!(d.reference(10.06, 0.0), &[0.0; 5], "older than the timeout: stopped");
         assert_eq!(d.stops().len(), 1);
         assert!((d.stops()[0] - 0.06).abs() < 1e-12);
+    }
+
+    /// A subscription's queue: each message with the middleware's reception time (ns), then a failure.
+    struct Queue(VecDeque<(Vec<u8>, i64)>, Option<(Vec<u8>, i64)>, bool);
+
+    impl MessageSource for Queue {
+        fn take(&mut self) -> Result<Option<(&[u8], i64)>> {
+            if self.0.is_empty() && self.2 {
+                return Err(SabreError::Simulation("the middleware failed".into()));
+            }
+            self.1 = self.0.pop_front();
+            Ok(self.1.as_ref().map(|(b, t)| (b.as_slice(), *t)))
+        }
+    }
+
+    #[test]
+    fn every_waiting_command_is_taken_in_order_and_dated_by_the_middleware() {
+        let mut d = SimDriver::new(layout(false), None).unwrap();
+        d.publish_state(&[0.0; 5], &[0.0; 5], 7_000_000_050).unwrap();
+        let queue = [(command(&[0.1, 0.1], 0), 0), (command(&[0.3, 0.2], 50), 7_000_300_000)];
+        d.connect(Some(Box::new(Queue(queue.into(), None, false))), None);
+        assert_eq!(d.take_arm_commands(9.0, 7.5).unwrap(), 2);
+        assert_eq!(d.take_arm_commands(9.0, 7.5).unwrap(), 0, "nothing is taken twice");
+        assert_eq!(d.counts().arm_commands, 2);
+        assert!(
+            (d.step_max[0] - 0.2).abs() < 1e-12 && (d.step_max[1] - 0.1).abs() < 1e-12,
+            "in order: {:?}",
+            d.step_max
+        );
+        assert_eq!(d.reference(9.0, 0.0), &[0.0, 0.0, 0.0, 0.3, 0.2]);
+        // the answer's round trip ends at the middleware's reception, not at the later take (7.5 s)
+        let latency = d.take_latencies();
+        assert!((latency[0] - (7.0003 - 7.000_000_050)).abs() < 1e-9, "{latency:?}");
+
+        d.connect(Some(Box::new(Queue(VecDeque::new(), None, true))), None);
+        assert!(d.take_arm_commands(9.0, 7.5).is_err(), "a failing middleware is reported");
     }
 
     #[test]

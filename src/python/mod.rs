@@ -56,6 +56,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<sim_driver::PySimDriver>()?;
     m.add_class::<sim_driver::PyFrankaReflexes>()?;
     m.add_function(wrap_pyfunction!(sim_driver::rcl_function_names, m)?)?;
+    m.add_function(wrap_pyfunction!(sim_driver::rcl_built_against, m)?)?;
     m.add_class::<bridge::PyJointMerge>()?;
     m.add_class::<bridge_tick::PyBridgeTick>()?;
     m.add_class::<bridge_tick::PyWrenchFrames>()?;

@@ -1,6 +1,6 @@
 //! Bindings of the simulated robot's driver side (`_core.SimDriver`), Franka's reflexes
-//! (`_core.FrankaReflexes`) and the rcl endpoints the driver takes from and publishes to without
-//! Python (`sabre.ros.direct` looks up their addresses).
+//! (`_core.FrankaReflexes`) and the rcl endpoints (the `sabre-rcl` crate) the driver takes from and
+//! publishes to without Python (`sabre.ros.direct` looks up their addresses and checks the versions).
 
 use std::sync::Mutex;
 
@@ -10,14 +10,43 @@ use pyo3::types::{PyBytes, PyDict};
 
 use super::convert::{lock, view};
 use super::error::{run, run_detached};
-use crate::bridge::rcl::{RclLibrary, RclPublisher, RclSubscription, FUNCTION_NAMES};
 use crate::bridge::reflexes::FrankaReflexes;
-use crate::bridge::sim_driver::{SimDriver, SimDriverLayout};
+use crate::bridge::sim_driver::{MessageSink, MessageSource, SimDriver, SimDriverLayout};
+use crate::error::{Result, SabreError};
+use sabre_rcl::{RclError, RclLibrary, RclPublisher, RclSubscription, FUNCTION_NAMES};
 
 /// The names of the rcl and rcutils functions whose addresses `SimDriver.connect` takes, in order.
 #[pyfunction]
 pub fn rcl_function_names() -> Vec<&'static str> {
     FUNCTION_NAMES.to_vec()
+}
+
+/// The ROS 2 the rcl layouts were checked against when sabre was built: its install prefix and
+/// {package: version} of rcl, rcutils and rmw. Raises SabreError when sabre was built without the
+/// ROS 2 headers.
+#[pyfunction]
+pub fn rcl_built_against() -> PyResult<(&'static str, Vec<(&'static str, &'static str)>)> {
+    let (prefix, versions) = run(|| sabre_rcl::built_against().map_err(middleware))?;
+    Ok((prefix, versions.to_vec()))
+}
+
+fn middleware(e: RclError) -> SabreError {
+    SabreError::Simulation(e.0)
+}
+
+struct Subscription(RclSubscription);
+struct Publisher(RclPublisher);
+
+impl MessageSource for Subscription {
+    fn take(&mut self) -> Result<Option<(&[u8], i64)>> {
+        self.0.take().map_err(middleware)
+    }
+}
+
+impl MessageSink for Publisher {
+    fn publish(&self, bytes: &[u8]) -> Result<()> {
+        self.0.publish(bytes).map_err(middleware)
+    }
 }
 
 /// Franka's velocity, acceleration and jerk checks on the command in effect each cycle of `dt` s.
@@ -133,9 +162,15 @@ impl PySimDriver {
         // SAFETY: the addresses are those of the loaded rcl functions and of the handles of the
         // endpoints kept alive in `endpoints` for as long as this driver lives.
         let (input, output) = run(|| unsafe {
-            let library = RclLibrary::from_addresses(functions)?;
-            let input = sub_address.map(|a| RclSubscription::new(library, a)).transpose()?;
-            let output = pub_address.map(|a| RclPublisher::new(library, a)).transpose()?;
+            let library = RclLibrary::from_addresses(functions).map_err(middleware)?;
+            let input = sub_address
+                .map(|a| RclSubscription::new(library, a).map(|s| Box::new(Subscription(s)) as Box<dyn MessageSource>))
+                .transpose()
+                .map_err(middleware)?;
+            let output = pub_address
+                .map(|a| RclPublisher::new(library, a).map(|p| Box::new(Publisher(p)) as Box<dyn MessageSink>))
+                .transpose()
+                .map_err(middleware)?;
             Ok((input, output))
         })?;
         lock(&self.endpoints).extend(sub_owner.into_iter().chain(pub_owner));

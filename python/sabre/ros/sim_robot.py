@@ -199,22 +199,29 @@ class SimRobotNode:
         arm_qos = profile("reliable:1000")
         if p["direct_middleware"]:
             try:
-                functions = rcl_functions()
+                self._connect_direct(Float64MultiArray, p["arm_command_topic"], arm_qos)
+                return
             except SabreError as exc:
                 self.node.get_logger().warning(f"the arm commands go through the executor: {exc}")
-            else:
-                import rclpy
-
-                # on a node of its own, which no executor waits on: only the core takes from it
-                self._direct_node = rclpy.create_node(f"{self.node.get_name()}_direct")
-                arm_sub = self._direct_node.create_subscription(
-                    Float64MultiArray, p["arm_command_topic"], lambda _: None, arm_qos, raw=True
-                )
-                js_pub = self.out.js_pub
-                self._driver.connect(functions, (arm_sub, handle_address(arm_sub)), (js_pub, handle_address(js_pub)))
-                self.direct = True
-                return
         self.node.create_subscription(Float64MultiArray, p["arm_command_topic"], self._on_arm, arm_qos, raw=True)
+
+    def _connect_direct(self, kind: Any, topic: str, qos: Any) -> None:
+        """Hands the arm command subscription and the joint state publisher to the core (SabreError,
+        with nothing left behind, when this build or this ROS 2 cannot)."""
+        import rclpy
+
+        functions = rcl_functions()
+        # on a node of its own, which no executor waits on: only the core takes from it
+        node = rclpy.create_node(f"{self.node.get_name()}_direct")
+        try:
+            arm_sub = node.create_subscription(kind, topic, lambda _: None, qos, raw=True)
+            js_pub = self.out.js_pub
+            self._driver.connect(functions, (arm_sub, handle_address(arm_sub)), (js_pub, handle_address(js_pub)))
+        except SabreError:
+            node.destroy_node()
+            raise
+        self._direct_node = node
+        self.direct = True
 
     def start(self) -> None:
         self._start_wall = time.monotonic()

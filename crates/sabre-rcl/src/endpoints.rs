@@ -1,14 +1,10 @@
-//! Serialized messages taken from and published to rcl endpoints that rclpy created, called from the
-//! core without Python: the 1 kHz streams of a node leave its executor and its interpreter lock.
-//!
-//! The core does not link against ROS 2. The functions' addresses come from the process's already
-//! loaded `librcl` and `librcutils` (looked up by `sabre.ros.direct`), the endpoints' addresses
-//! from rclpy's handles; both stay valid while rclpy keeps the node and its endpoints alive, which
-//! the owner of these values guarantees (the bindings hold the rclpy objects).
+//! The endpoints with the layouts `build.rs` generated from the ROS 2 headers (see the crate's notes).
 
 use std::ffi::c_void;
+use std::mem::{align_of, offset_of, size_of};
 
-use crate::error::{Result, SabreError};
+use crate::layout::{self, RCUTILS_RET_OK, RET_OK, RET_TAKE_FAILED};
+use crate::{built_against, RclError, Result, FUNCTION_NAMES};
 
 /// `rcutils_allocator_t`.
 #[repr(C)]
@@ -21,7 +17,7 @@ struct Allocator {
     state: *mut c_void,
 }
 
-/// `rcl_serialized_message_t` (`rcutils_uint8_array_t`).
+/// `rcl_serialized_message_t`, that is `rcutils_uint8_array_t`.
 #[repr(C)]
 struct SerializedMessage {
     buffer: *mut u8,
@@ -30,13 +26,35 @@ struct SerializedMessage {
     allocator: Allocator,
 }
 
-/// `rmw_message_info_t`: its two leading timestamps (ns); the rest (sequence numbers, the
-/// publisher's gid, whose storage size differs between distributions) fits in `rest`.
-#[repr(C)]
-struct MessageInfo {
-    source_timestamp: i64,
-    received_timestamp: i64,
-    rest: [u64; 24],
+const _: () = {
+    use layout::*;
+    assert!(size_of::<Allocator>() == ALLOCATOR_SIZE && align_of::<Allocator>() == ALLOCATOR_ALIGN);
+    assert!(offset_of!(Allocator, allocate) == ALLOCATOR_ALLOCATE);
+    assert!(offset_of!(Allocator, deallocate) == ALLOCATOR_DEALLOCATE);
+    assert!(offset_of!(Allocator, reallocate) == ALLOCATOR_REALLOCATE);
+    assert!(offset_of!(Allocator, zero_allocate) == ALLOCATOR_ZERO_ALLOCATE);
+    assert!(offset_of!(Allocator, state) == ALLOCATOR_STATE);
+    assert!(size_of::<SerializedMessage>() == ARRAY_SIZE && align_of::<SerializedMessage>() == ARRAY_ALIGN);
+    assert!(offset_of!(SerializedMessage, buffer) == ARRAY_BUFFER);
+    assert!(offset_of!(SerializedMessage, buffer_length) == ARRAY_BUFFER_LENGTH);
+    assert!(offset_of!(SerializedMessage, buffer_capacity) == ARRAY_BUFFER_CAPACITY);
+    assert!(offset_of!(SerializedMessage, allocator) == ARRAY_ALLOCATOR);
+    assert!(MESSAGE_INFO_ALIGN <= align_of::<MessageInfo>() && MESSAGE_INFO_RECEIVED_TIMESTAMP + 8 <= MESSAGE_INFO_SIZE);
+};
+
+/// Storage for an `rmw_message_info_t` of the size and alignment the headers give; only its
+/// `received_timestamp` (at the headers' offset) is read.
+#[repr(C, align(16))]
+struct MessageInfo([u8; MESSAGE_INFO_SIZE]);
+
+const MESSAGE_INFO_SIZE: usize = layout::MESSAGE_INFO_SIZE;
+
+impl MessageInfo {
+    fn received_timestamp(&self) -> i64 {
+        let at = layout::MESSAGE_INFO_RECEIVED_TIMESTAMP;
+        let bytes: [u8; 8] = self.0[at..at + 8].try_into().expect("eight bytes");
+        i64::from_ne_bytes(bytes)
+    }
 }
 
 type TakeFn = unsafe extern "C" fn(*const c_void, *mut SerializedMessage, *mut MessageInfo, *mut c_void) -> i32;
@@ -44,10 +62,6 @@ type PublishFn = unsafe extern "C" fn(*const c_void, *const SerializedMessage, *
 type ArrayInitFn = unsafe extern "C" fn(*mut SerializedMessage, usize, *const Allocator) -> i32;
 type ArrayFiniFn = unsafe extern "C" fn(*mut SerializedMessage) -> i32;
 type DefaultAllocatorFn = unsafe extern "C" fn() -> Allocator;
-
-const RET_OK: i32 = 0;
-/// `RCL_RET_SUBSCRIPTION_TAKE_FAILED`: nothing to take.
-const RET_TAKE_FAILED: i32 = 401;
 
 /// The five rcl and rcutils functions the endpoints call.
 #[derive(Clone, Copy)]
@@ -59,26 +73,17 @@ pub struct RclLibrary {
     default_allocator: DefaultAllocatorFn,
 }
 
-/// The functions' addresses, in the order [`RclLibrary::from_addresses`] takes them.
-pub const FUNCTION_NAMES: [&str; 5] = [
-    "rcl_take_serialized_message",
-    "rcl_publish_serialized_message",
-    "rcutils_uint8_array_init",
-    "rcutils_uint8_array_fini",
-    "rcutils_get_default_allocator",
-];
-
 impl RclLibrary {
-    /// The functions at `addresses` (in the order of [`FUNCTION_NAMES`]).
+    /// The functions at `addresses` (in the order of [`FUNCTION_NAMES`]); an error when this build
+    /// has no layouts or an address is null.
     ///
     /// # Safety
-    /// Each address must be that function of a loaded rcl / rcutils, which stays loaded.
+    /// Each address must be that function of a loaded rcl / rcutils of the version
+    /// [`built_against`] names, which stays loaded.
     pub unsafe fn from_addresses(addresses: [usize; 5]) -> Result<Self> {
+        built_against()?;
         if let Some(i) = addresses.iter().position(|&a| a == 0) {
-            return Err(SabreError::invalid(
-                "rcl functions",
-                format!("{} has no address", FUNCTION_NAMES[i]),
-            ));
+            return Err(RclError(format!("{} has no address", FUNCTION_NAMES[i])));
         }
         Ok(Self {
             take: std::mem::transmute::<usize, TakeFn>(addresses[0]),
@@ -92,7 +97,7 @@ impl RclLibrary {
 
 fn handle(what: &str, address: usize) -> Result<*const c_void> {
     if address == 0 {
-        return Err(SabreError::invalid(what, "a null rcl handle (the endpoint was destroyed?)"));
+        return Err(RclError(format!("a null rcl {what} handle (the endpoint was destroyed?)")));
     }
     Ok(address as *const c_void)
 }
@@ -102,7 +107,7 @@ pub struct RclSubscription {
     library: RclLibrary,
     handle: *const c_void,
     message: SerializedMessage,
-    info: MessageInfo,
+    info: Box<MessageInfo>,
 }
 
 // The handle is used from one thread at a time (`&mut self`); rcl's take is safe from any thread.
@@ -122,37 +127,31 @@ impl RclSubscription {
             allocator,
         };
         let ret = (library.array_init)(&mut message, 256, &allocator);
-        if ret != RET_OK {
-            return Err(SabreError::Simulation(format!("rcutils_uint8_array_init failed ({ret})")));
+        if ret != RCUTILS_RET_OK {
+            return Err(RclError(format!("rcutils_uint8_array_init failed ({ret})")));
         }
         Ok(Self {
             library,
             handle,
             message,
-            info: MessageInfo {
-                source_timestamp: 0,
-                received_timestamp: 0,
-                rest: [0; 24],
-            },
+            info: Box::new(MessageInfo([0; MESSAGE_INFO_SIZE])),
         })
     }
 
     /// The next message waiting (its bytes and the time the middleware received it, ns since the
     /// epoch, 0 when it does not say), or None.
     pub fn take(&mut self) -> Result<Option<(&[u8], i64)>> {
-        self.info.received_timestamp = 0;
+        self.info.0.fill(0);
         // SAFETY: the handle is valid (see `new`); rmw resizes the buffer with its own allocator.
-        let ret = unsafe { (self.library.take)(self.handle, &mut self.message, &mut self.info, std::ptr::null_mut()) };
+        let ret = unsafe { (self.library.take)(self.handle, &mut self.message, &mut *self.info, std::ptr::null_mut()) };
         match ret {
             RET_OK => {
                 // SAFETY: rmw wrote `buffer_length` bytes into `buffer`.
                 let bytes = unsafe { std::slice::from_raw_parts(self.message.buffer, self.message.buffer_length) };
-                Ok(Some((bytes, self.info.received_timestamp)))
+                Ok(Some((bytes, self.info.received_timestamp())))
             }
             RET_TAKE_FAILED => Ok(None),
-            other => Err(SabreError::Simulation(format!(
-                "rcl_take_serialized_message failed ({other})"
-            ))),
+            other => Err(RclError(format!("rcl_take_serialized_message failed ({other})"))),
         }
     }
 }
@@ -182,6 +181,7 @@ impl RclPublisher {
         })
     }
 
+    /// Publishes one serialized message.
     pub fn publish(&self, bytes: &[u8]) -> Result<()> {
         // SAFETY: rcl reads `buffer_length` bytes and never writes or frees the buffer.
         let message = SerializedMessage {
@@ -192,9 +192,7 @@ impl RclPublisher {
         };
         let ret = unsafe { (self.library.publish)(self.handle, &message, std::ptr::null_mut()) };
         if ret != RET_OK {
-            return Err(SabreError::Simulation(format!(
-                "rcl_publish_serialized_message failed ({ret})"
-            )));
+            return Err(RclError(format!("rcl_publish_serialized_message failed ({ret})")));
         }
         Ok(())
     }
