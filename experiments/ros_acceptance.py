@@ -8,12 +8,17 @@ Each run starts the simulated robot and the controller as two processes on a pri
 ROS 2 domain (`sabre.ros.launch.run_bridge`: ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and a free
 ROS_DOMAIN_ID per run). The simulated robot places the object at its pose below and publishes it as a
 perception node would; the controller (autostart) takes it from the pose topic, its robot description
-from the robot_description topic, the object's state from its hand-pose estimator. The same seed,
-variant and pose also run in `run_episode` (simulated time, re-planning at 50 Hz) for the time to open.
-Goals: at least 4 of 5 per object and variant; time to open within 1.5× of run_episode's; no reflex
-abort; state-to-command latency p99 at most 1 ms; at least 99.5 % of the 1 kHz states answered; every
-arm command within the command limits; the stuck door (held 5 s) through the bridge keeps IO's tank
-above its floor. Reports the CPU the two nodes took (the planner process apart) and the planner's rate.
+from the robot_description topic, the object's state from its hand-pose estimator, and ends its task
+once the task's success test passes on its state. The same seed, variant, pose and plant also run in
+`run_episode` (simulated time, re-planning at 50 Hz, every plant step recorded) for the time to open
+and the hand's contact force. Both runs end 0.5 s after the object is open.
+Goals: at least 4 of 5 per object and variant; time to open within 1.5× of run_episode's; the hand's
+contact force while in contact (`sabre.episode.hand_contact_forces`, per plant tick: the simulated
+robot's summary and `Episode.hand_contact_forces`), its mean and its p99 each within 1.5× of
+run_episode's; no reflex abort; state-to-command latency p99 at most 1 ms; at least 99.5 % of the
+1 kHz states answered; every arm command within the command limits; the stuck door (held 5 s)
+through the bridge keeps IO's tank above its floor. Reports the CPU the two nodes took (the planner
+process apart) and the planner's rate.
 """
 
 from __future__ import annotations
@@ -30,8 +35,10 @@ import numpy as np
 
 import sabre
 from sabre import tasks
+from sabre.episode import contact_force_stats
 from sabre.ros import require_ros
 from sabre.ros.launch import run_bridge
+from sabre.ros.sim_robot import make_plant
 
 #: Where each object stands (x, y, z, roll, pitch, yaw): 0.2–0.3 m aside and turned 10–20° from its default.
 POSES: dict[str, tuple[float, ...]] = {
@@ -42,14 +49,34 @@ POSES: dict[str, tuple[float, ...]] = {
 }
 
 
-def reference_time(obj: str, variant: str, seed: int, duration: float) -> float | None:
-    """run_episode's time to open the same object at the same pose (simulated time)."""
+#: The goal on the bridge's time to open and contact force, as a factor on run_episode's.
+WITHIN = 1.5
+
+
+def reference(obj: str, variant: str, seed: int, duration: float, plant: str) -> dict:
+    """run_episode on the same object at the same pose and on the same plant: its time to open
+    (simulated time; None if it did not) and the hand's contact force while in contact."""
     scene = sabre.Scene.load(obj=obj, obj_pose=POSES[obj])
     controller = sabre.Controller(scene, tasks.OpenObject(), sabre.ControllerConfig(variant=variant, seed=seed))
     episode = sabre.run_episode(
-        scene, controller, duration, seed=seed, x0=sabre.paper.paper_start_state(scene), replan_rate=50.0, progress=False
+        scene,
+        controller,
+        duration,
+        seed=seed,
+        x0=sabre.paper.paper_start_state(scene),
+        replan_rate=50.0,
+        progress=False,
+        record_every=1,  # the force at every plant step, as the simulated robot records it
+        plant=make_plant(plant, scene, 0.001),
     )
-    return episode.time_to_success if episode.success else None
+    force = contact_force_stats(episode.hand_contact_forces)
+    return {"time": episode.time_to_success if episode.success else None, "mean": force["mean"], "p99": force["p99"]}
+
+
+def force_kept(row: dict) -> bool:
+    """Whether the bridge's contact force, its mean and its p99, are each within WITHIN× run_episode's."""
+    ref = row["reference"]
+    return all(row[f"force_{k}"] <= WITHIN * ref[k] for k in ("mean", "p99"))
 
 
 def within_limits(s: dict, c: dict) -> bool:
@@ -63,14 +90,16 @@ def within_limits(s: dict, c: dict) -> bool:
     )
 
 
-def one_run(obj: str, variant: str, seed: int, timeout: float) -> dict:
-    run = run_bridge(obj, variant, seed, timeout=timeout, object_pose=list(POSES[obj]))
+def one_run(obj: str, variant: str, seed: int, timeout: float, plant: str) -> dict:
+    run = run_bridge(obj, variant, seed, timeout=timeout, object_pose=list(POSES[obj]), plant=plant)
     s, c = run.sim, run.controller
-    reference = reference_time(obj, variant, seed, timeout)
+    ref = reference(obj, variant, seed, timeout, plant)
     row = {
         "opened": bool(s.get("success")),
         "time": s.get("time_to_open"),
-        "reference": reference,
+        "reference": ref,
+        "force_mean": s.get("contact_force_mean", float("nan")),
+        "force_p99": s.get("contact_force_p99", float("nan")),
         "p50": s.get("latency_p50_ms", float("nan")),
         "p99": s.get("latency_p99_ms", float("nan")),
         "delivered": s.get("delivered_fraction", 0.0),
@@ -82,7 +111,9 @@ def one_run(obj: str, variant: str, seed: int, timeout: float) -> dict:
         "cpu_sim": s.get("cpu_share", float("nan")),
     }
     print(
-        f"{obj} {variant} seed {seed}: opened {row['opened']} in {row['time']} s (run_episode {reference}), "
+        f"{obj} {variant} seed {seed}: opened {row['opened']} in {row['time']} s (run_episode {ref['time']}), "
+        f"contact force mean {row['force_mean']:.1f} N, p99 {row['force_p99']:.1f} N "
+        f"(run_episode {ref['mean']:.1f} N, {ref['p99']:.1f} N), "
         f"p99 {row['p99']:.2f} ms, answered {100 * row['delivered']:.2f} %, reflexes {row['reflexes']}, "
         f"limits kept {row['limits_kept']}, CPU {100 * row['cpu_controller']:.0f} % / {100 * row['cpu_sim']:.0f} %",
         file=sys.stderr,
@@ -91,19 +122,32 @@ def one_run(obj: str, variant: str, seed: int, timeout: float) -> dict:
     return row
 
 
+def force_cell(runs: list, key: str) -> str:
+    """'bridge / run_episode' (N, medians over the runs that both opened) of a contact-force statistic."""
+    both = [r for r in runs if r["opened"] and r["reference"]["time"] is not None]
+    if not both:
+        return "—"
+    bridge = statistics.median(r[f"force_{key}"] for r in both)
+    return f"{bridge:.0f} / {statistics.median(r['reference'][key] for r in both):.0f}"
+
+
 def table(rows: list) -> list[str]:
     lines = [
-        "| object | variant | opened | time to open, bridge / run_episode (median, max) | latency p50 / p99 (ms, worst run) "
+        "| object | variant | opened | time to open, bridge / run_episode (median, max) "
+        "| contact force mean, bridge / run_episode (N, median) | contact force p99, bridge / run_episode (N, median) "
+        f"| force within {WITHIN:g}× | latency p50 / p99 (ms, worst run) "
         "| states answered (worst run) | reflex aborts | limits kept | planner (Hz, median) "
         "| CPU controller / sim robot (median) |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for obj, variant, runs in rows:
         k = sum(r["opened"] for r in runs)
-        ratios = [r["time"] / r["reference"] for r in runs if r["opened"] and r["reference"]]
+        ratios = [r["time"] / r["reference"]["time"] for r in runs if r["opened"] and r["reference"]["time"]]
         ratio = f"{statistics.median(ratios):.2f}×, {max(ratios):.2f}×" if ratios else "—"
+        compared = [r for r in runs if r["opened"] and r["reference"]["time"] is not None]
         lines.append(
             f"| {obj} | {variant} | {k}/{len(runs)} | {ratio} "
+            f"| {force_cell(runs, 'mean')} | {force_cell(runs, 'p99')} | {sum(force_kept(r) for r in compared)}/{len(compared)} "
             f"| {max(r['p50'] for r in runs):.2f} / {max(r['p99'] for r in runs):.2f} "
             f"| {100 * min(r['delivered'] for r in runs):.2f} % | {sum(max(r['reflexes'], 0) for r in runs)} "
             f"| {sum(r['limits_kept'] for r in runs)}/{len(runs)} | {statistics.median(r['planner_hz'] for r in runs):.0f} "
@@ -117,7 +161,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--objects", nargs="+", default=list(sabre.OBJECTS), choices=sabre.OBJECTS)
     parser.add_argument("--variants", nargs="+", default=["N", "IO"], choices=["N", "I", "O", "IO"])
-    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--seeds", type=int, default=5, help="seeds 0 .. SEEDS-1")
+    parser.add_argument("--plant", default="rapier", choices=["rapier", "mujoco"], help="the plant of both runs")
     parser.add_argument("--timeout", type=float, default=60.0, help="wall seconds per bridge run")
     parser.add_argument("--hold", type=float, default=5.0, help="stuck-door hold (s); 0 skips the stuck-door run")
     parser.add_argument("--out", type=Path, default=None, help="markdown report")
@@ -128,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
     rows: list = []
     for obj in args.objects:
         for variant in args.variants:
-            rows.append((obj, variant, [one_run(obj, variant, seed, args.timeout) for seed in range(args.seeds)]))
+            rows.append((obj, variant, [one_run(obj, variant, seed, args.timeout, args.plant) for seed in range(args.seeds)]))
             if args.out is not None:  # the table so far, in case the run is cut short
                 args.out.parent.mkdir(parents=True, exist_ok=True)
                 args.out.write_text("\n".join(["(partial)", ""] + table(rows)) + "\n")

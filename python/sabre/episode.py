@@ -18,7 +18,17 @@ from .scene import OBJECTS, ROBOTS, Scene
 if TYPE_CHECKING:
     from .inner_loop import Trace
 
-__all__ = ["Episode", "RecordedPlan", "TraceChunks", "PlanRecorder", "save_episode", "load_episode", "pose_to_xyz_rpy"]
+__all__ = [
+    "Episode",
+    "RecordedPlan",
+    "TraceChunks",
+    "PlanRecorder",
+    "save_episode",
+    "load_episode",
+    "pose_to_xyz_rpy",
+    "hand_contact_forces",
+    "contact_force_stats",
+]
 
 #: The tank's floor ε (J) an episode reports when the run did not say (the core's default).
 _TANK_FLOOR = _core.SafetyConfig().tank_floor
@@ -31,6 +41,28 @@ def pose_to_xyz_rpy(pose: np.ndarray) -> np.ndarray:
     pitch = -np.arcsin(np.clip(r[2, 0], -1.0, 1.0))
     yaw = np.arctan2(r[1, 0], r[0, 0])
     return np.concatenate([np.asarray(pose, dtype=np.float64)[:3, 3], [roll, pitch, yaw]])
+
+
+def hand_contact_forces(wrench: np.ndarray, contact: np.ndarray) -> np.ndarray:
+    """The hand's contact force (N) at each plant step in contact: |f| of the wrist wrench's force
+    (the first three columns of ``wrench``, (N, 6) as :attr:`sabre.PlantInterface.wrench` reads, or
+    the force alone, (N, 3)) at the steps where a robot–object contact carried force (``contact``,
+    (N,)); steps without contact are left out. The one definition :attr:`Episode.hand_contact_forces`
+    and the simulated robot's summary report."""
+    w = np.atleast_2d(np.asarray(wrench, dtype=np.float64))
+    touching = np.asarray(contact, dtype=bool).reshape(-1)
+    if w.ndim != 2 or w.shape[1] < 3 or len(touching) != len(w):
+        raise InvalidValueError(f"wrench must be (N, 6) or (N, 3) with N = len(contact) = {len(touching)}, got {w.shape}")
+    return np.linalg.norm(w[touching, :3], axis=1)
+
+
+def contact_force_stats(forces: np.ndarray) -> dict[str, float]:
+    """Mean, 99th percentile and maximum (N) of per-step contact forces (:func:`hand_contact_forces`)
+    and how many steps they cover; NaN statistics for none."""
+    f = np.asarray(forces, dtype=np.float64).reshape(-1)
+    if len(f) == 0:
+        return {"mean": float("nan"), "p99": float("nan"), "max": float("nan"), "steps": 0}
+    return {"mean": float(f.mean()), "p99": float(np.percentile(f, 99)), "max": float(f.max()), "steps": len(f)}
 
 
 @dataclass
@@ -127,9 +159,14 @@ class Episode:
 
     def mean_wrench(self, only_contact: bool = True) -> float:
         """Mean wrist force |f| (N), over the steps in contact (all steps if none, or with ``only_contact=False``)."""
-        norms = np.linalg.norm(self.wrench[:, :3], axis=1)
         mask = self.contact if only_contact and self.contact.any() else np.ones_like(self.contact)
-        return float(norms[mask].mean()) if mask.any() else 0.0
+        return float(hand_contact_forces(self.wrench, mask).mean()) if mask.any() else 0.0
+
+    @property
+    def hand_contact_forces(self) -> np.ndarray:
+        """The hand's contact force (N) at each recorded step in contact (:func:`hand_contact_forces`);
+        every plant step with ``run_episode(..., record_every=1)``."""
+        return hand_contact_forces(self.wrench, self.contact)
 
     def dissipated_energy(self) -> float:
         """Σ −uᵀ τ_ext dt over the episode (58) with u the tracked command, J."""

@@ -437,19 +437,26 @@ def test_open_object_guides_follow_the_handle(scene, hooked):
     )
 
 
-def test_object_setpoint_clears_the_power_balance(scene):
+def test_object_setpoint_clears_the_power_balance_within_the_objects_travel(scene):
     """The object cost's set-point lies beyond the requested opening by twice the gap where the
-    power cost (36) cancels the object cost's pull: w_p τ_r / (W_o T), τ_r from the URDF."""
+    power cost (36) cancels the object cost's pull: w_p τ_r / (W_o T), τ_r from the URDF; never past
+    the object's upper limit (the shelf's balance lies past its stop, the microwave's short of it)."""
     task = sabre.tasks.OpenObject()
     travel = task.handle_travel(scene, 0.0)
     # Handle radius about the hinge from the URDF: bar 0.061 m out and 0.265 m across.
     assert travel == pytest.approx(np.hypot(0.061, 0.265), rel=1e-3)
     resisting = 4.0 + 2.0 * task.open.speeds[0] / travel  # shelf friction 4 N·m, damping 2
     gap = 10.0 * resisting / (100.0 * 1.0)
-    assert task.object_setpoint(scene) == pytest.approx(task.target_opening(scene) + 2 * gap, rel=1e-3)
+    assert task.target_opening(scene) + 2 * gap > 1.57
+    assert task.object_setpoint(scene) == 1.57  # the shelf's URDF limit
+    microwave = sabre.Scene.load(obj="microwave")
+    gap = 10.0 * (0.5 + 1.0 * task.open.speeds[0] / task.handle_travel(microwave, 0.0)) / 100.0  # friction 0.5, damping 1
+    assert task.object_setpoint(microwave) == pytest.approx(task.target_opening(microwave) + 2 * gap, rel=1e-3)
+    assert task.object_setpoint(microwave) < 1.57
     assert sabre.tasks.OpenObject(open=sabre.tasks.OpenConfig(object_overshoot=0.1)).object_setpoint(scene) == pytest.approx(
         task.target_opening(scene) + 0.1
     )
+    assert sabre.tasks.OpenObject(open=sabre.tasks.OpenConfig(object_overshoot=1.0)).object_setpoint(scene) == 1.57
 
 
 def test_base_clearance_keeps_the_base_out_of_a_falling_door():

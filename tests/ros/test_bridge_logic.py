@@ -279,3 +279,34 @@ def test_obstacles_are_kept_by_id_moved_re_added_on_a_new_radius_and_cleared():
     with pytest.raises(MessageError):
         registry.apply(("a", 3), 0, (math.nan, 0.0, 0.0), 0.1)
     assert active_constraints(["a", "b", "c"], np.array([0.01, math.nan, 1.0])) == ["a"]
+
+
+def test_the_sim_robots_contact_record_gives_each_contact_ticks_wrist_force_magnitude():
+    """The simulated robot's record of the hand's contact force, fed every tick of a plant pulling the
+    shelf open by a scripted hook, holds exactly the ticks in contact with |f| of each tick's wrist
+    force (computed here per tick with math.hypot), across the growth of its buffer; the episode's
+    definition gives the same from the rows and their contact flags."""
+    from sabre.episode import contact_force_stats, hand_contact_forces
+    from sabre.ros.sim_robot import ContactRecord
+
+    scene = sabre.Scene.load(obj="shelf")
+    motion = sabre.hook_and_pull(scene)
+    plant, low = sabre.Plant(scene), sabre.LowLevelController(scene)
+    plant.reset(scene.default_state())
+    record, wrenches, contacts, expected = ContactRecord(), [], [], []
+    for u in motion.U:
+        for _ in range(int(round(motion.dt / plant.dt))):
+            low.track(plant, u, steps=1)
+            w = plant.wrench
+            wrenches.append(w)
+            contacts.append(plant.contact)
+            if plant.contact:
+                record.record(plant.time, w)
+                expected.append((plant.time, math.hypot(*w[:3])))
+    times, forces = record.forces()
+    assert len(expected) > 4096, "the pull outlasts the record's first buffer"
+    np.testing.assert_array_equal(times, [t for t, _ in expected])
+    np.testing.assert_allclose(forces, [f for _, f in expected], rtol=1e-12)
+    np.testing.assert_allclose(hand_contact_forces(np.array(wrenches), np.array(contacts)), forces, rtol=1e-12)
+    stats = contact_force_stats(forces)
+    assert stats["steps"] == len(expected) and stats["max"] == pytest.approx(max(f for _, f in expected))

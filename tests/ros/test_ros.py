@@ -376,6 +376,34 @@ def test_a_moved_and_turned_shelf_is_opened_through_the_pose_input_within_the_li
     assert np.all(np.array(s["arm_speed_max"]) <= np.array(limits["arm_velocity"]) + 1e-9)
 
 
+def test_once_the_shelf_is_open_the_controller_ends_its_task_and_the_hand_stops_pulling():
+    """The opening's plan pulls the shelf's door toward an object set-point past its stop; the
+    controller (the door's angle from its hand-pose estimator, as the acceptance runs it) ends the
+    task when the task's success test passes on its state, as run_episode ends an episode. The
+    simulated robot runs on for 5 s after the door is open and records the hand's contact force at
+    every tick: after the success the hand never pushes harder than opening the door took (a door
+    driven into its stop does, many times over), the door stays short of its stop, and over the
+    last second the hand pulls no harder than it did on average while opening."""
+    ros()
+    pose = [1.0, 0.3, 0.0, 0.0, 0.0, math.radians(20.0)]
+    run = run_bridge(
+        "shelf", "N", 0, timeout=150.0, object_pose=pose, sim_params={"settle_time": 5.0}, controller_params={"planner_nice": 0}
+    )
+    s, c = run.sim, run.controller
+    assert s and c, run.logs
+    assert s["success"], run.logs["control"][-3000:]
+    assert c["task"] == "succeeded" and c["success_time"] is not None, (c["task"], c["reason"])
+    t, f = np.array(s["contact_force_trace"]).reshape(-1, 2).T
+    opening, after = f[t < s["time_to_open"]], f[t >= s["time_to_open"]]
+    assert len(opening), "the hand opened the door in contact"
+    print({"opening": (opening.mean(), opening.max()), "after": (after.mean() if len(after) else 0.0, after.max(initial=0.0))})
+    assert after.max(initial=0.0) <= opening.max(), (after.max(), opening.max())
+    assert s["opening"] < sabre.Scene.load(obj="shelf").o_upper[0] - 0.05, s["opening"]
+    last = f[t >= s["sim_time"] - 1.0]  # ticks without contact pull with nothing
+    pulled = float(last.sum()) * s["period_ms"] / 1000.0  # N, averaged over the second
+    assert pulled <= opening.mean(), (pulled, opening.mean())
+
+
 @pytest.mark.parametrize("direct", [True, False], ids=["commands-taken-by-the-core", "commands-by-callback"])
 def test_the_sim_robot_matches_answers_by_stamp_and_stops_on_its_command_timeout(bridge, direct):
     """The probe answers every tenth joint state with a zero arm command carrying that state's stamp

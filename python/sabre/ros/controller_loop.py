@@ -36,9 +36,14 @@ __all__ = ["ControllerLoop", "TASK_STATES"]
 #: by itself, along that door's path): the estimator declares and keeps a hook only then.
 HOOK_SEATED_PHASES = ("hook", "open", "release")
 
-#: idle: no task; starting: the planner starts on the next state; running; failed: the planner
-#: stopped on an error (reset to start again).
-TASK_STATES = ("idle", "starting", "running", "failed")
+#: idle: no task; starting: the planner starts on the next state; running; succeeded: the task's
+#: success test passed on the controller's state (``stop_on_success``): the commands ramp to zero and
+#: the planner stops (start it again for another run); failed: the planner stopped on an error
+#: (reset to start again).
+TASK_STATES = ("idle", "starting", "running", "succeeded", "failed")
+
+#: How often (s of state time) a running task's success test is asked: the sim robot's rate too.
+SUCCESS_CHECK_PERIOD = 0.01
 
 
 class ControllerLoop:
@@ -147,6 +152,8 @@ class ControllerLoop:
         self._min_tank = self._last_tank
         self._phase = self.controller.phase
         self._planner_started: float | None = None
+        self.success_time: float | None = None  # the state time the task succeeded at
+        self._success_checked = -math.inf
         self._hooked = False
         self._x: np.ndarray | None = None  # the newest state and its time (the visualization's)
         self._last_t: float | None = None
@@ -303,8 +310,8 @@ class ControllerLoop:
             return "inactive"
         if not fresh:
             return "stale state"
-        if self.task in ("idle", "failed"):
-            return "planner stopped" if self.task == "failed" else "no task"
+        if self.task in ("idle", "succeeded", "failed"):
+            return {"idle": "no task", "succeeded": "task succeeded", "failed": "planner stopped"}[self.task]
         return None
 
     def _run_task(self, received: float, t: float) -> str | None:
@@ -340,7 +347,26 @@ class ControllerLoop:
         self._min_tank = min(self._min_tank, self._last_tank)
         if self.estimator is not None:
             self._note_hook(t)
+        self._check_success(x, t)
         return None
+
+    def _check_success(self, x: np.ndarray, t: float) -> None:
+        """Ends the task once its success test passes on the state x at time t (``stop_on_success``),
+        as :func:`sabre.run_episode` ends its episode: the plan in force would go on pulling (an
+        opening task's object set-point lies past its target, up to the object's stop). The caller
+        holds the lock and has published this tick's step; the next ticks ramp to zero, and the
+        planner stops off the 1 kHz path."""
+        if not self.params["stop_on_success"] or t - self._success_checked < SUCCESS_CHECK_PERIOD:
+            return
+        self._success_checked = t
+        if not self.controller.task.success(self.scene, x):
+            return
+        self.task, self.success_time = "succeeded", t
+        estimated = "estimated " if self.estimator is not None else ""
+        self.node.get_logger().info(
+            f"task succeeded at t = {t:.3f} s ({estimated}opening {self.opening():.3f}): ramping to zero, planner stopped"
+        )
+        self.stop_planner()
 
     def _note_hook(self, t: float) -> None:
         """Logs each hook and release of the object estimate."""
@@ -444,7 +470,7 @@ class ControllerLoop:
             return "not active: activate the node first"
         if self.task in ("starting", "running"):
             return "the task is already running"
-        self.task = "starting"
+        self.task, self.success_time = "starting", None
         return ""
 
     def cancel_task(self) -> None:
@@ -537,6 +563,7 @@ class ControllerLoop:
             "phase_changes": s["phase_changes"],
             "recent_phases": [[round(t, 3), ph] for t, ph in s["recent_phases"]],
             "task": self.task,
+            "success_time": self.success_time,
             "reason": self.reason,
             "opening": self.opening(),
             "estop": self.estop,

@@ -130,6 +130,8 @@ CONTROLLER_PARAMETERS: dict[str, Any] = {
     # lifecycle and task
     "autostart": False,  # configure and activate by itself (retrying until the inputs are there)
     "start_on_activate": True,  # activating starts the task (else the start service does)
+    # the task ends once its success test passes on the controller's state: ramp to zero, planner stops
+    "stop_on_success": True,
     "require_publishers": True,  # configure fails while an input has no publisher
     # timing
     "state_timeout": 0.05,  # s: an arm joint older than this → ramp to zero

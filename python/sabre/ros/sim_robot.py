@@ -20,6 +20,7 @@ import numpy as np
 
 from .. import _core, tasks
 from ..closed_loop import paper_start_state
+from ..episode import contact_force_stats, hand_contact_forces
 from ..errors import SabreError
 from ..inner_loop import LowLevelController
 from ..scene import Scene
@@ -157,8 +158,7 @@ class SimRobotNode:
             "latency": Durations(),
             "loop_work": Durations(),
             "success_time": None,
-            "contact_force_sum": 0.0,
-            "contact_steps": 0,
+            "contact": ContactRecord(),
             "hold_started": None,
             "hold_ended": None,
             "reflex_errors": [],
@@ -323,8 +323,7 @@ class SimRobotNode:
             self.plant.step(u)
         self.stats["ticks"] += 1
         if self.plant.contact:
-            self.stats["contact_force_sum"] += math.hypot(*self.plant.wrench[:3])
-            self.stats["contact_steps"] += 1
+            self.stats["contact"].record(self.plant.time, self.plant.wrench)
 
     def _apply_faults(self) -> None:
         if self._hold_request is not None:
@@ -419,11 +418,27 @@ class SimRobotNode:
             "opening": float(state.o[0]),
             "success": s["success_time"] is not None,
             "time_to_open": s["success_time"],
-            "mean_wrench": s["contact_force_sum"] / s["contact_steps"] if s["contact_steps"] else 0.0,
+            **self._contact_summary(),
             "hold_started": s["hold_started"],
             "hold_ended": s["hold_ended"],
             "robot_speed": float(np.linalg.norm(state.q_dot)),
             "configuration": dict(zip(self.scene.joint_names, state.q.tolist())),
+        }
+
+    def _contact_summary(self) -> dict[str, Any]:
+        """The hand's contact force over the run and from the success on (statistics of
+        :func:`sabre.episode.hand_contact_forces`, as :class:`sabre.Episode` reports it)."""
+        times, forces = self.stats["contact"].forces()
+        opened_at = self.stats["success_time"]
+        total = contact_force_stats(forces)
+        after = contact_force_stats(forces[times >= opened_at] if opened_at is not None else forces[:0])
+        return {
+            "mean_wrench": total["mean"] if total["steps"] else 0.0,
+            "contact_steps": total["steps"],
+            "contact_force_mean": total["mean"],
+            "contact_force_p99": total["p99"],
+            "contact_force_max": total["max"],
+            "contact_force_after_success": after,
         }
 
     def _publish_status(self) -> None:
@@ -470,11 +485,36 @@ class SimRobotNode:
         if self._thread.is_alive():
             self._thread.join()
         summary = self.summary()
+        times, forces = self.stats["contact"].forces()
+        summary["contact_force_trace"] = [[round(float(t), 4), round(float(f), 3)] for t, f in zip(times, forces)]
         self._driver.disconnect()  # before the endpoints it calls into are destroyed
         if self._direct_node is not None:
             self._direct_node.destroy_node()
             self._direct_node = None
         return summary
+
+
+class ContactRecord:
+    """The plant ticks in robot–object contact: their time and the wrist wrench's force, kept in a
+    buffer that doubles when full (a row write per tick on the plant loop)."""
+
+    def __init__(self) -> None:
+        self._rows = np.empty((4096, 4))
+        self._n = 0
+
+    def record(self, t: float, wrench: np.ndarray) -> None:
+        if self._n == len(self._rows):
+            self._rows = np.concatenate([self._rows, np.empty_like(self._rows)])
+        row = self._rows[self._n]
+        row[0] = t
+        row[1:] = wrench[:3]
+        self._n += 1
+
+    def forces(self) -> tuple[np.ndarray, np.ndarray]:
+        """(times (s), the hand's contact forces (N)) of the ticks recorded so far."""
+        n = self._n  # before the buffer: a row is counted only once written, into the buffer in place
+        rows = self._rows[:n]
+        return rows[:, 0].copy(), hand_contact_forces(rows[:, 1:], np.ones(len(rows), dtype=bool))
 
 
 def _pose_of(t: np.ndarray) -> np.ndarray:

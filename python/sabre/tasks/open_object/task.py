@@ -174,9 +174,15 @@ class OpenObject(Task):
         before o*. With o* at the requested opening the object would stall that far short of it,
         so by default o* lies twice that gap beyond it (the object ends up a gap past the
         opening, or at its limit).
+
+        o* never lies past the object's travel (its upper limit): a set-point the object cannot
+        reach has the plan drive it into its stop at speed and pull on it there (the shelf's
+        balance puts o* at 2.12 rad, its stop is at 1.57 rad); at its limit the plan brakes the
+        object on its way there.
         """
+        upper = float(scene.o_upper[0])
         if self.open.object_overshoot is not None:
-            return self.target_opening(scene) + float(self.open.object_overshoot)
+            return min(self.target_opening(scene) + float(self.open.object_overshoot), upper)
         # every input besides the scene, for the value kept per scene (asked for every iteration)
         key = (
             "object setpoint",
@@ -187,7 +193,7 @@ class OpenObject(Task):
             self.open.object_weight,
             self.horizon,
         )
-        return per_scene(scene, key, lambda _: self._object_setpoint(scene))  # a float: keeps no scene
+        return min(per_scene(scene, key, lambda _: self._object_setpoint(scene)), upper)  # a float: keeps no scene
 
     def _object_setpoint(self, scene: Scene) -> float:
         speed = self.open.speeds[0] if self.open.speeds else 0.1
