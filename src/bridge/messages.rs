@@ -1,7 +1,8 @@
 //! The ROS 2 messages the bridge's 1 kHz path reads and writes, in their serialized form (the
 //! 4-byte encapsulation header, then OMG CDR, as rmw hands them to a raw subscription): joint
-//! states, the arm's `Float64MultiArray` command, the base's `Twist` or `TwistStamped`. The layouts
-//! follow the messages' definitions in sensor_msgs, std_msgs and geometry_msgs.
+//! states, the arm's `Float64MultiArray` command or `JointTrajectory`, the base's `Twist` or
+//! `TwistStamped`. The layouts follow the messages' definitions in sensor_msgs, std_msgs,
+//! trajectory_msgs and geometry_msgs.
 
 use byteorder::{BigEndian, LittleEndian};
 use serde::{Deserialize, Serialize};
@@ -156,6 +157,109 @@ pub struct TwistValue {
     pub linear: [f64; 3],
     pub angular: [f64; 3],
     pub stamp: Option<Stamp>,
+}
+
+/// builtin_interfaces/Duration.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+struct DurationMsg {
+    sec: i32,
+    nanosec: u32,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct JointTrajectoryPointMsg {
+    positions: Vec<f64>,
+    velocities: Vec<f64>,
+    accelerations: Vec<f64>,
+    effort: Vec<f64>,
+    time_from_start: DurationMsg,
+}
+
+#[derive(Deserialize)]
+struct JointTrajectoryIn {
+    header: HeaderIn,
+    joint_names: Vec<String>,
+    points: Vec<JointTrajectoryPointMsg>,
+}
+
+#[derive(Serialize)]
+struct JointTrajectoryOut<'a, S: Serialize> {
+    header: Header<'a>,
+    joint_names: &'a [S],
+    points: Vec<JointTrajectoryPointMsg>,
+}
+
+/// A trajectory_msgs/JointTrajectoryPoint: its time from the trajectory's start (s) and its
+/// positions, velocities and accelerations (each empty or one per joint).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TrajectoryPoint {
+    pub time_from_start: f64,
+    pub positions: Vec<f64>,
+    pub velocities: Vec<f64>,
+    pub accelerations: Vec<f64>,
+}
+
+/// A trajectory_msgs/JointTrajectory: its stamp (zero: start on arrival), joint names and points.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TrajectoryValue {
+    pub stamp: Stamp,
+    pub joint_names: Vec<String>,
+    pub points: Vec<TrajectoryPoint>,
+}
+
+/// A serialized trajectory_msgs/JointTrajectory.
+pub fn decode_joint_trajectory(raw: &[u8]) -> Result<TrajectoryValue> {
+    let m: JointTrajectoryIn = decode("JointTrajectory", raw)?;
+    let points = m
+        .points
+        .into_iter()
+        .map(|p| TrajectoryPoint {
+            time_from_start: f64::from(p.time_from_start.sec) + f64::from(p.time_from_start.nanosec) * 1e-9,
+            positions: p.positions,
+            velocities: p.velocities,
+            accelerations: p.accelerations,
+        })
+        .collect();
+    Ok(TrajectoryValue {
+        stamp: m.header.stamp,
+        joint_names: m.joint_names,
+        points,
+    })
+}
+
+/// Serializes a trajectory_msgs/JointTrajectory into `out` (times from the start rounded to ns).
+pub fn encode_joint_trajectory<S: Serialize>(
+    out: &mut Vec<u8>,
+    stamp: Stamp,
+    joint_names: &[S],
+    points: &[TrajectoryPoint],
+) -> Result<()> {
+    let points = points
+        .iter()
+        .map(|p| {
+            let t = Stamp::from_seconds(p.time_from_start);
+            JointTrajectoryPointMsg {
+                positions: p.positions.clone(),
+                velocities: p.velocities.clone(),
+                accelerations: p.accelerations.clone(),
+                effort: Vec::new(),
+                time_from_start: DurationMsg {
+                    sec: t.sec,
+                    nanosec: t.nanosec,
+                },
+            }
+        })
+        .collect();
+    let header = Header { stamp, frame_id: "" };
+    encode(
+        "JointTrajectory",
+        &JointTrajectoryOut {
+            header,
+            joint_names,
+            points,
+        },
+        out,
+    )
 }
 
 fn malformed(what: &str, detail: impl std::fmt::Display) -> SabreError {

@@ -3,6 +3,8 @@
 //! the simulated robot's driver side (its middleware endpoints behind [`sim_driver::MessageSource`]
 //! and [`sim_driver::MessageSink`]).
 
+pub mod cycles;
+pub mod jtc;
 pub mod messages;
 pub mod reflexes;
 pub mod sim_driver;

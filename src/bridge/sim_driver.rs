@@ -8,6 +8,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
+use super::cycles::CycleRecord;
+use super::jtc::TrajectoryFollower;
 use super::messages::{self, Stamp};
 use super::reflexes::FrankaReflexes;
 use crate::error::{Result, SabreError};
@@ -44,8 +46,12 @@ pub struct SimDriverLayout {
     pub position_noise: f64,
     pub velocity_noise: f64,
     pub noise_seed: u64,
-    /// Reflexes checked on every command received (false: on the command in effect every tick).
+    /// Reflexes checked on every command received, a diagnostic (false: on the command in effect
+    /// every cycle, as the robot checks it).
     pub per_message: bool,
+    /// The arm takes trajectory_msgs/JointTrajectory through JTC's topic interface with these
+    /// position gains (1/s, one per arm joint; see [`TrajectoryFollower`]); None: velocity commands.
+    pub trajectory_gains: Option<Vec<f64>>,
     /// How many of the newest states an answer is matched against.
     pub recent_states: usize,
 }
@@ -101,6 +107,11 @@ pub struct SimDriver {
     message: Vec<u8>,
     arm_input: Option<Box<dyn MessageSource>>,
     state_output: Option<Box<dyn MessageSink>>,
+    follower: Option<TrajectoryFollower>,
+    /// An arm command accepted since the last cycle.
+    delivered: bool,
+    cycles: CycleRecord,
+    arm_q: Vec<f64>,
 }
 
 impl SimDriver {
@@ -142,7 +153,15 @@ impl SimDriver {
         }
         let mut position = vec![0.0; layout.names.len()];
         position[na..].copy_from_slice(&layout.held);
+        let follower = match &layout.trajectory_gains {
+            Some(gains) => Some(TrajectoryFollower::new(layout.names[..na].to_vec(), gains.clone())?),
+            None => None,
+        };
         Ok(Self {
+            follower,
+            delivered: false,
+            cycles: CycleRecord::new(layout.period, na),
+            arm_q: vec![0.0; na],
             reflexes,
             arm: vec![0.0; na],
             arm_received: f64::NEG_INFINITY,
@@ -210,6 +229,18 @@ impl SimDriver {
     /// One serialized arm command (std_msgs/Float64MultiArray, its data_offset naming the state it
     /// answers) received at `now` (s, the clock of the ticks) and `wall` (s since the epoch).
     pub fn receive_arm(&mut self, raw: &[u8], now: f64, wall: f64) {
+        if let Some(follower) = self.follower.as_mut() {
+            let taken = messages::decode_joint_trajectory(raw).and_then(|m| follower.receive(&m, now, wall));
+            match taken {
+                Ok(()) => {
+                    self.arm_received = now;
+                    self.delivered = true;
+                    self.counts.arm_commands += 1;
+                }
+                Err(e) => self.reject(e.to_string()),
+            }
+            return;
+        }
         let (v, answered) = match messages::decode_float64_array(raw) {
             Ok(decoded) => decoded,
             Err(e) => {
@@ -252,6 +283,7 @@ impl SimDriver {
         self.arm.copy_from_slice(&v);
         self.last_command = Some(v);
         self.arm_received = now;
+        self.delivered = true;
         self.counts.arm_commands += 1;
     }
 
@@ -319,28 +351,45 @@ impl SimDriver {
         self.latencies.push(latency);
     }
 
-    /// The joint velocity reference (nq,) at a tick's scheduled time `tick_time` with the base at
-    /// `yaw`: each part zero once its command is older than the timeout (or none came), the arm's
-    /// zero after a reflex; the base's command turned into world rates.
-    pub fn reference(&mut self, tick_time: f64, yaw: f64) -> &[f64] {
+    /// The joint velocity reference (nq,) at a tick's scheduled time `tick_time` with the robot at
+    /// `q` (nq,) and the base at `yaw`: the arm's velocity command (zero once older than the
+    /// timeout, or none came) or JTC's command on the trajectory in force, zero after a reflex; the
+    /// base's command turned into world rates (zero once stale). An `excused` tick is one the
+    /// robot's own loop ran late (see [`CycleRecord`]).
+    pub fn reference(&mut self, tick_time: f64, yaw: f64, q: &[f64], excused: bool) -> Result<&[f64]> {
+        if q.len() != self.layout.nq {
+            return Err(SabreError::invalid(
+                "q",
+                format!("need {} joints, got {}", self.layout.nq, q.len()),
+            ));
+        }
         self.u.iter_mut().for_each(|v| *v = 0.0);
         let arm_fresh = tick_time - self.arm_received <= self.layout.command_timeout;
         let base_fresh = tick_time - self.base_received <= self.layout.command_timeout;
-        let per_cycle = !self.layout.per_message;
-        if arm_fresh {
-            if let Some(reflexes) = self.reflexes.as_mut().filter(|r| per_cycle && r.aborted().is_none()) {
-                if let Some(error) = reflexes.check(&self.arm) {
-                    self.events.reflexes.push(error.to_string());
-                }
-            }
-            if self.reflexes.as_ref().is_none_or(|r| r.aborted().is_none()) {
-                for (&i, &v) in self.layout.arm_index.iter().zip(&self.arm) {
-                    self.u[i] = v;
-                }
-            }
-        } else if let Some(reflexes) = self.reflexes.as_mut().filter(|_| per_cycle) {
-            reflexes.follow(&vec![0.0; self.arm.len()]);
+        for (qa, &i) in self.arm_q.iter_mut().zip(&self.layout.arm_index) {
+            *qa = q[i];
         }
+        // a stale stream's stop is the simulated driver's timeout, not a command the robot was sent
+        let unsent = self.follower.is_none() && !arm_fresh;
+        let command: &[f64] = match self.follower.as_mut() {
+            Some(follower) => follower.command(tick_time, &self.arm_q),
+            None if arm_fresh => &self.arm,
+            None => {
+                self.arm_q.iter_mut().for_each(|v| *v = 0.0);
+                &self.arm_q
+            }
+        };
+        let reflexes = self.reflexes.as_mut().filter(|_| !self.layout.per_message);
+        let delivered = std::mem::take(&mut self.delivered);
+        if let Some(error) = self.cycles.cycle(command, delivered, excused || unsent, reflexes) {
+            self.events.reflexes.push(error);
+        }
+        if self.reflexes.as_ref().is_none_or(|r| r.aborted().is_none()) {
+            for (&i, &v) in self.layout.arm_index.iter().zip(command) {
+                self.u[i] = v;
+            }
+        }
+        let arm_fresh = arm_fresh || self.follower.as_ref().is_some_and(TrajectoryFollower::has_trajectory);
         if let (true, Some([x, y, w])) = (base_fresh, self.layout.base_index) {
             let (s, c) = yaw.sin_cos();
             let [vx, vy, wz] = self.base;
@@ -359,7 +408,12 @@ impl SimDriver {
                 self.stopped[part] = false;
             }
         }
-        &self.u
+        Ok(&self.u)
+    }
+
+    /// What the robot saw of the arm's command, cycle by cycle (see [`CycleRecord`]).
+    pub fn cycles(&self) -> &CycleRecord {
+        &self.cycles
     }
 
     /// The arm's (and held joints') state with noise, stamped `stamp_ns` (ns since the epoch),
@@ -431,6 +485,7 @@ mod tests {
             noise_seed: 0,
             per_message,
             recent_states: 4,
+            trajectory_gains: None,
         }
     }
 
@@ -456,8 +511,15 @@ mod tests {
         assert_eq!((c.echoes, c.first_answered, c.late_echoes), (1, Some(0), 0));
         let latency = d.take_latencies();
         assert!((latency[0] - (5.0004 - 5.000_000_123)).abs() < 1e-12, "{latency:?}");
-        assert_eq!(d.reference(10.01, 0.0), &[0.0, 0.0, 0.0, 0.5, -0.5]);
-        assert_eq!(d.reference(10.06, 0.0), &[0.0; 5], "older than the timeout: stopped");
+        assert_eq!(
+            d.reference(10.01, 0.0, &[0.0; 5], false).unwrap(),
+            &[0.0, 0.0, 0.0, 0.5, -0.5]
+        );
+        assert_eq!(
+            d.reference(10.06, 0.0, &[0.0; 5], false).unwrap(),
+            &[0.0; 5],
+            "older than the timeout: stopped"
+        );
         assert_eq!(d.stops().len(), 1);
         assert!((d.stops()[0] - 0.06).abs() < 1e-12);
     }
@@ -489,7 +551,7 @@ mod tests {
             "in order: {:?}",
             d.step_max
         );
-        assert_eq!(d.reference(9.0, 0.0), &[0.0, 0.0, 0.0, 0.3, 0.2]);
+        assert_eq!(d.reference(9.0, 0.0, &[0.0; 5], false).unwrap(), &[0.0, 0.0, 0.0, 0.3, 0.2]);
         // the answer's round trip ends at the middleware's reception, not at the later take (7.5 s)
         let latency = d.take_latencies();
         assert!((latency[0] - (7.0003 - 7.000_000_050)).abs() < 1e-9, "{latency:?}");
@@ -507,7 +569,10 @@ mod tests {
         };
         let mut d = SimDriver::new(layout(true), None).unwrap();
         assert!(d.receive_base(&twist([1.0, 0.0, 0.0], [0.0, 0.0, 0.3]), false, 1.0));
-        let u = d.reference(1.0, std::f64::consts::FRAC_PI_2).to_vec();
+        let u = d
+            .reference(1.0, std::f64::consts::FRAC_PI_2, &[0.0; 5], false)
+            .unwrap()
+            .to_vec();
         assert!(u[0].abs() < 1e-12 && (u[1] - 1.0).abs() < 1e-12 && u[2] == 0.3, "{u:?}");
         assert!(!d.receive_base(&twist([f64::NAN, 0.0, 0.0], [0.0; 3]), false, 1.0));
         assert!(
@@ -525,7 +590,7 @@ mod tests {
         d.receive_arm(b"not cdr", 1.0, 1.0);
         assert_eq!(d.counts().rejected_commands, 3);
         assert_eq!(d.take_events().rejected.len(), 3);
-        assert_eq!(d.reference(1.0, 0.0), &[0.0; 5]);
+        assert_eq!(d.reference(1.0, 0.0, &[0.0; 5], false).unwrap(), &[0.0; 5]);
     }
 
     #[test]
@@ -535,7 +600,11 @@ mod tests {
         d.receive_arm(&command(&[0.0, 0.0], 0), 1.0, 1.0);
         d.receive_arm(&command(&[0.5, 0.0], 0), 1.001, 1.001);
         assert_eq!(d.take_events().reflexes.len(), 1);
-        assert_eq!(d.reference(1.001, 0.0)[3], 0.0, "aborted: the arm's reference is zero");
+        assert_eq!(
+            d.reference(1.001, 0.0, &[0.0; 5], false).unwrap()[3],
+            0.0,
+            "aborted: the arm's reference is zero"
+        );
         d.receive_arm(&command(&[0.0, 0.0], 0), 1.2, 1.2);
         assert!(
             d.reflexes().unwrap().aborted().is_some(),
@@ -551,7 +620,7 @@ mod tests {
         let mut d = SimDriver::new(layout(false), Some(reflexes())).unwrap();
         d.receive_arm(&command(&[0.5, 0.0], 0), 1.0, 1.0);
         assert!(d.take_events().reflexes.is_empty(), "not checked on reception");
-        d.reference(1.0, 0.0);
+        d.reference(1.0, 0.0, &[0.0; 5], false).unwrap();
         assert_eq!(d.take_events().reflexes.len(), 1);
     }
 

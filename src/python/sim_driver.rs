@@ -109,7 +109,7 @@ pub struct PySimDriver {
 impl PySimDriver {
     #[new]
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (nq, arm_index, base_index, command_timeout, period, names, held, position_noise, velocity_noise, noise_seed, per_message, recent_states, reflexes=None))]
+    #[pyo3(signature = (nq, arm_index, base_index, command_timeout, period, names, held, position_noise, velocity_noise, noise_seed, per_message, recent_states, reflexes=None, trajectory_gains=None))]
     fn new(
         nq: usize,
         arm_index: Vec<usize>,
@@ -124,6 +124,7 @@ impl PySimDriver {
         per_message: bool,
         recent_states: usize,
         reflexes: Option<&PyFrankaReflexes>,
+        trajectory_gains: Option<Vec<f64>>,
     ) -> PyResult<Self> {
         let layout = SimDriverLayout {
             nq,
@@ -138,6 +139,7 @@ impl PySimDriver {
             noise_seed,
             per_message,
             recent_states,
+            trajectory_gains,
         };
         let reflexes = reflexes.map(|r| lock(&r.inner).clone());
         let inner = run(|| SimDriver::new(layout, reflexes))?;
@@ -201,9 +203,12 @@ impl PySimDriver {
         lock(&self.inner).match_answer(nanosec, wall);
     }
 
-    /// The reference (nq,) of the tick scheduled at `tick_time` with the base at `yaw`, after
-    /// taking the arm commands waiting (received at `now` / `wall`), and whether anything was
-    /// refused or tripped meanwhile (see `take_events`).
+    /// The reference (nq,) of the tick scheduled at `tick_time` with the robot at `q` (nq,) and the
+    /// base at `yaw`, after taking the arm commands waiting (received at `now` / `wall`), and
+    /// whether anything was refused or tripped meanwhile (see `take_events`). `excused`: a tick
+    /// the robot's own loop ran late (catching up), neither checked nor counted as a gap.
+    #[pyo3(signature = (tick_time, yaw, now, wall, q, excused=false))]
+    #[allow(clippy::too_many_arguments)]
     fn tick<'py>(
         &self,
         py: Python<'py>,
@@ -211,14 +216,30 @@ impl PySimDriver {
         yaw: f64,
         now: f64,
         wall: f64,
+        q: PyReadonlyArrayDyn<'_, f64>,
+        excused: bool,
     ) -> PyResult<(Bound<'py, PyArray1<f64>>, bool)> {
+        let q = q.as_slice()?;
         let (u, events) = run_detached(py, || {
             let mut d = lock(&self.inner);
             d.take_arm_commands(now, wall)?;
-            let u = d.reference(tick_time, yaw).to_vec();
+            let u = d.reference(tick_time, yaw, q, excused)?.to_vec();
             Ok((u, d.has_events()))
         })?;
         Ok((PyArray1::from_vec(py, u), events))
+    }
+
+    /// The gaps between arm command deliveries the robot saw: counts by length in cycles (index 0
+    /// unused; the last bin holds every longer gap).
+    fn delivery_gaps<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<u64>> {
+        PyArray1::from_slice(py, lock(&self.inner).cycles().gaps())
+    }
+
+    /// The largest |v|, |Δv|/dt and |Δ²v|/dt² (each (na,)) of the arm's command in effect over the
+    /// cycles the robot ran on time.
+    fn cycle_maxima<'py>(&self, py: Python<'py>) -> [Bound<'py, PyArray1<f64>>; 3] {
+        let d = lock(&self.inner);
+        d.cycles().maxima.clone().map(|m| PyArray1::from_vec(py, m))
     }
 
     /// The arm's joint state with noise from q and dq (nq,) stamped `stamp_ns`: published to the

@@ -212,6 +212,36 @@ def test_franka_reflexes_trip_on_a_step_and_pass_the_robust_limiter_with_missed_
         assert reflexes.check(command) is None, reflexes.aborted
 
 
+@pytest.mark.parametrize("gap", [0.003, 0.005, 0.008])
+def test_the_velocity_stream_keeps_its_promise_a_gap_up_to_tolerated_gap_passes_the_reflexes(gap):
+    """The robot holds the last command through every gap of up to ``tolerated_gap`` (m missed
+    cycles), wherever the gaps fall; the same stream with gaps twice as long trips a reflex."""
+    misses = round(gap / 0.001) - 1
+
+    def stream(hold: int) -> str | None:
+        shaper = CommandShaper(limits(tolerated_gap=gap))
+        reflexes = FrankaReflexes(0.001)
+        rng = np.random.default_rng(5)
+        target, in_effect = np.zeros(7), np.zeros(7)
+        held = 0
+        for k in range(6000):
+            if k % 400 == 0:
+                target = rng.uniform(-2.0, 2.0, 7)
+            command = shaper.step(target, None).arm
+            if held < hold and k % 23 >= 11:  # this cycle's command is late: the previous one holds
+                held += 1
+            else:
+                held, in_effect = 0, command
+            if (error := reflexes.check(in_effect)) is not None:
+                return error
+        return None
+
+    assert stream(misses) is None
+    assert stream(2 * misses + 2) is not None
+    with pytest.raises(sabre.InvalidValueError, match="tolerated_gap"):
+        limits(tolerated_gap=0.0005)
+
+
 def test_a_fixed_base_has_the_arms_stream_only_and_a_six_joint_arm_passes_its_own_reflexes():
     """Without a base the shaper never emits a base twist and is at rest when the arm is; a UR-like
     six-joint arm's default limits (the slowest Franka joint's on every joint) shape a stream that

@@ -84,7 +84,7 @@ def test_commands_published_by_rclpy_are_taken_and_states_published_by_the_core_
     taken = []
 
     def tick():
-        u, _ = d.tick(0.0, 0.0, time.monotonic(), time.time())
+        u, _ = d.tick(0.0, 0.0, time.monotonic(), time.time(), np.zeros(3))
         taken.append(u.copy())
         return d.counts()["arm_commands"] >= len(sent)
 

@@ -50,6 +50,7 @@ def require_ros():
         "sensor_msgs.msg",
         "std_msgs.msg",
         "std_srvs.srv",
+        "trajectory_msgs.msg",
         "visualization_msgs.msg",
         "threadpoolctl",
         "rclpy.lifecycle",

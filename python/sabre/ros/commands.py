@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import _core
 from ..errors import InvalidValueError
-from .params import BASE_ACCELERATION, BASE_JERK, finite_list, robust_arm_limits
+from .params import BASE_ACCELERATION, BASE_JERK, TOLERATED_GAP, finite_list, robust_arm_limits
 
 __all__ = ["Limits", "CommandLimits", "CommandShaper", "Command", "CommandGate", "command_limits"]
 
@@ -45,14 +45,14 @@ def command_limits(
 ) -> CommandLimits:
     """The limits from the node's parameters, each unset one from its default: velocities from the
     URDF (``arm_velocity``, ``base_velocity``; None: the robot has no base), the arm's acceleration
-    and jerk from Franka's published limits kept robust to one missed command
+    and jerk from Franka's published limits kept robust to a delivery gap of ``tolerated_gap``
     (:func:`sabre.ros.params.robust_arm_limits`), the base's Ridgeback-like ones."""
     period = float(params["command_period"])
     rate = float(params["cmd_vel_rate"])
     if not (period > 0 and math.isfinite(period)) or not (rate > 0 and math.isfinite(rate)):
         raise InvalidValueError(f"command_period and cmd_vel_rate must be positive, got {period}, {rate}")
     n = len(arm_velocity)
-    accel, jerk = robust_arm_limits(period)
+    accel, jerk = robust_arm_limits(period, float(params.get("tolerated_gap", TOLERATED_GAP)))
     if n != len(accel):
         # not a Panda: the same robust rule on the slowest Franka joint's bounds
         accel, jerk = [min(accel)] * n, [min(jerk)] * n

@@ -70,3 +70,18 @@ class Durations:
     def max_ms(self) -> float:
         self._flush()
         return self._max * 1e3 if self._total else math.nan
+
+
+def gap_percentiles(counts: np.ndarray, period: float) -> dict[str, float]:
+    """The p50, p99, p99.9 and largest of gaps counted by length in cycles (``counts[k]``: gaps of
+    k cycles of ``period`` s; the last bin holds every longer one), in ms, and how many there were."""
+    counts = np.asarray(counts, dtype=np.int64)
+    total = int(counts.sum())
+    out: dict[str, float] = {"count": float(total)}
+    if total == 0:
+        return out | {"p50_ms": math.nan, "p99_ms": math.nan, "p99.9_ms": math.nan, "max_ms": math.nan}
+    cumulative = np.cumsum(counts)
+    for name, q in (("p50_ms", 0.5), ("p99_ms", 0.99), ("p99.9_ms", 0.999)):
+        out[name] = float(np.searchsorted(cumulative, q * total) * period * 1e3)
+    out["max_ms"] = float(np.flatnonzero(counts)[-1] * period * 1e3)
+    return out

@@ -37,10 +37,12 @@ FRANKA_JERK = (7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0)
 #: The share of Franka's jerk bound the default command limits keep, so that commands the robot
 #: misses still pass its checks: with m consecutive cycles missed it holds the last command for them
 #: and then sees m + 1 steps at once, accelerations a, 0, …, 0, (m + 1)·a, a jerk of (m + 1)·a/dt;
-#: so the default acceleration bound is ROBUST_FRACTION·j·dt/(m + 1) (never above a_max) with m =
-#: MISSES_TOLERATED, the default jerk bound ROBUST_FRACTION·j.
+#: so the default acceleration bound is ROBUST_FRACTION·j·dt/(m + 1) (never above a_max), the
+#: default jerk bound ROBUST_FRACTION·j, with m the cycles a gap of ``tolerated_gap`` misses.
 ROBUST_FRACTION = 0.9
-MISSES_TOLERATED = 2
+#: The velocity stream's default promise (s): a gap this long between two deliveries (two missed
+#: 1 kHz cycles) passes Franka's checks.
+TOLERATED_GAP = 0.003
 
 #: The base's command limits (Ridgeback-like: its driver ramps at about 1 m/s² itself): acceleration
 #: of vx, vy (m/s²) and ωz (rad/s²) and their jerk; the velocity bounds come from the URDF.
@@ -121,6 +123,8 @@ CONTROLLER_PARAMETERS: dict[str, Any] = {
     "cmd_vel_rate": 50.0,  # Hz
     # command limits (unset: velocity from the URDF, acceleration and jerk from Franka's, robust)
     "arm_velocity_limits": UNSET_DOUBLES,
+    # the delivery gap (s) the velocity stream's default acceleration and jerk limits tolerate
+    "tolerated_gap": TOLERATED_GAP,
     "arm_acceleration_limits": UNSET_DOUBLES,
     "arm_jerk_limits": UNSET_DOUBLES,
     "base_velocity_limits": UNSET_DOUBLES,
@@ -181,10 +185,16 @@ SIM_ROBOT_PARAMETERS: dict[str, Any] = {
     "force_noise": 0.1,  # N (torque: a tenth of it, N·m)
     "noise_seed": 0,
     "reflexes": True,  # Franka's discontinuity reflexes on the arm command
-    # "command": each arm command against the one before, one plant period apart (the stream as sent);
-    # "cycle": the command in effect at each plant tick (delivery jitter too, as the arm sees it; needs
-    # a plant loop that is never late itself)
-    "reflex_check": "command",
+    # "cycle": the command in effect at each plant tick, delivery included, as the arm checks it (a
+    # tick the plant loop itself ran late is excused); "command": each arm command against the one
+    # before, one plant period apart (the stream as sent), a diagnostic only
+    "reflex_check": "cycle",
+    # the arm's command interface the robot runs: "velocity" (a forward command controller on
+    # arm_command_topic) or "trajectory" (joint_trajectory_controller's topic interface on
+    # trajectory_topic, with the velocity command interface v_d + k_p (q_d − q))
+    "arm_interface": "velocity",
+    "trajectory_topic": "joint_trajectory_controller/joint_trajectory",
+    "trajectory_position_gain": 10.0,  # 1/s: JTC's k_p, every arm joint
     # the arm's commands and joint states taken and published by the core from the plant loop (no
     # executor callback per command); False: an executor callback per command
     "direct_middleware": True,
@@ -225,11 +235,16 @@ def declare(node: Any, defaults: dict[str, Any], overrides: dict[str, Any] | Non
     return values
 
 
-def robust_arm_limits(dt: float) -> tuple[list[float], list[float]]:
-    """(acceleration, jerk) bounds per arm joint that keep Franka's checks with up to
-    :data:`MISSES_TOLERATED` missed commands in a row at a control cycle of ``dt`` s (see
-    :data:`ROBUST_FRACTION`)."""
-    accel = [min(a, ROBUST_FRACTION * j * dt / (MISSES_TOLERATED + 1)) for a, j in zip(FRANKA_ACCELERATION, FRANKA_JERK)]
+def robust_arm_limits(dt: float, tolerated_gap: float = TOLERATED_GAP) -> tuple[list[float], list[float]]:
+    """(acceleration, jerk) bounds per arm joint under which a velocity stream at a control cycle of
+    ``dt`` s passes Franka's checks when a delivery gap of up to ``tolerated_gap`` s makes the robot
+    hold a command (see :data:`ROBUST_FRACTION`). A gap of one cycle is no gap."""
+    from ..errors import InvalidValueError
+
+    if not (math.isfinite(dt) and dt > 0 and math.isfinite(tolerated_gap) and tolerated_gap >= dt):
+        raise InvalidValueError(f"tolerated_gap must be at least the control cycle {dt} s, got {tolerated_gap}")
+    misses = math.ceil(tolerated_gap / dt - 1e-9) - 1
+    accel = [min(a, ROBUST_FRACTION * j * dt / (misses + 1)) for a, j in zip(FRANKA_ACCELERATION, FRANKA_JERK)]
     jerk = [ROBUST_FRACTION * j for j in FRANKA_JERK]
     return accel, jerk
 

@@ -27,7 +27,7 @@ from ..scene import Scene
 from ..sim import Plant
 from . import PeriodicThread, gil_priority, realtime_middleware, realtime_thread, require_ros, spin_node
 from .direct import handle_address, rcl_functions
-from .durations import Durations
+from .durations import Durations, gap_percentiles
 from .params import SIM_ROBOT_PARAMETERS, declare
 from .qos import profile
 from .reflexes import FrankaReflexes
@@ -122,6 +122,7 @@ class SimRobotNode:
 
     def _build_driver(self, p: dict[str, Any]) -> None:
         """The core's side of the 1 kHz streams (see :class:`sabre._core.SimDriver`)."""
+        self._trajectory = p["arm_interface"] == "trajectory"
         reflexes = FrankaReflexes.for_arm(self.period, self.scene.dq_limit[self.arm_index]) if p["reflexes"] else None
         out = self.out
         self._driver = _core.SimDriver(
@@ -138,6 +139,7 @@ class SimRobotNode:
             p["reflex_check"] == "command",
             RECENT_STATES,
             None if reflexes is None else reflexes.core,
+            [float(p["trajectory_position_gain"])] * len(self.arm_index) if self._trajectory else None,
         )
         self._direct_node: Any = None
         self.direct = False  # whether the core takes the arm commands and publishes the joint states
@@ -149,6 +151,8 @@ class SimRobotNode:
         self._running = True
         if p["reflex_check"] not in ("command", "cycle"):
             raise SabreError(f"reflex_check must be 'command' or 'cycle', got {p['reflex_check']!r}")
+        if p["arm_interface"] not in ("velocity", "trajectory"):
+            raise SabreError(f"arm_interface must be 'velocity' or 'trajectory', got {p['arm_interface']!r}")
         self.stats: dict[str, Any] = {
             "ticks": 0,
             "loops": 0,
@@ -191,19 +195,24 @@ class SimRobotNode:
         node.create_subscription(MarkerArray, p["set_obstacles_topic"], self.obstacle_pub.publish, reliable)
 
     def _arm_commands_in(self, p: dict[str, Any]) -> None:
-        """The arm's commands taken by the core at each plant tick and the joint states published
-        by it (``direct_middleware``), else an executor callback per command."""
+        """The arm's commands (velocities, or trajectories through JTC's topic interface) taken by
+        the core at each plant tick and the joint states published by it (``direct_middleware``),
+        else an executor callback per command."""
         from std_msgs.msg import Float64MultiArray
+        from trajectory_msgs.msg import JointTrajectory
 
+        kind, topic = (
+            (JointTrajectory, p["trajectory_topic"]) if self._trajectory else (Float64MultiArray, p["arm_command_topic"])
+        )
         # a deep queue: every arm command is checked and recorded, also when this process falls behind
         arm_qos = profile("reliable:1000")
         if p["direct_middleware"]:
             try:
-                self._connect_direct(Float64MultiArray, p["arm_command_topic"], arm_qos)
+                self._connect_direct(kind, topic, arm_qos)
                 return
             except SabreError as exc:
                 self.node.get_logger().warning(f"the arm commands go through the executor: {exc}")
-        self.node.create_subscription(Float64MultiArray, p["arm_command_topic"], self._on_arm, arm_qos, raw=True)
+        self.node.create_subscription(kind, topic, self._on_arm, arm_qos, raw=True)
 
     def _connect_direct(self, kind: Any, topic: str, qos: Any) -> None:
         """Hands the arm command subscription and the joint state publisher to the core (SabreError,
@@ -290,7 +299,8 @@ class SimRobotNode:
                 self.stats["overrun_loops"] += 1
             work = time.monotonic()
             while k < due:
-                self._step(start + (k + 1) * self.period)
+                # the ticks this loop catches up on are the robot's own lateness, not the stream's
+                self._step(start + (k + 1) * self.period, excused=k + 1 < due)
                 k += 1
             if due:
                 self._publish(k)
@@ -309,10 +319,11 @@ class SimRobotNode:
             if rest > 0:
                 time.sleep(rest)
 
-    def _step(self, tick_time: float) -> None:
+    def _step(self, tick_time: float, excused: bool = False) -> None:
         self._apply_faults()
-        yaw = float(self.plant.state[self.base_index[2]]) if len(self.base_index) else 0.0
-        u, events = self._driver.tick(tick_time, yaw, time.monotonic(), time.time())
+        x = np.asarray(self.plant.state)
+        yaw = float(x[self.base_index[2]]) if len(self.base_index) else 0.0
+        u, events = self._driver.tick(tick_time, yaw, time.monotonic(), time.time(), x[: self.scene.nq], excused)
         if events:
             self._events()
         if self._track is not None:
@@ -365,6 +376,18 @@ class SimRobotNode:
             self.out.publish_clock(self.plant.time)
 
     # Reports ---------------------------------------------------------------------------------
+    def _cycle_summary(self) -> dict[str, Any]:
+        """What the arm saw at its cycles: the gaps between command deliveries and the largest
+        acceleration and jerk of the command in effect (the robot's own late ticks excused)."""
+        speed, accel, jerk = self._driver.cycle_maxima()
+        return {
+            "arm_interface": "trajectory" if self._trajectory else "velocity",
+            "delivery_gaps": gap_percentiles(self._driver.delivery_gaps(), self.period),
+            "cycle_speed_max": speed.tolist(),
+            "cycle_accel_max": accel.tolist(),
+            "cycle_jerk_max": jerk.tolist(),
+        }
+
     def summary(self) -> dict[str, Any]:
         s = self.stats
         driver = self._driver
@@ -415,6 +438,7 @@ class SimRobotNode:
             "arm_jerk_max": (step_change_max / self.period**2).tolist(),
             "arm_speed_max": speed_max.tolist(),
             "last_arm_command": command.tolist(),
+            **self._cycle_summary(),
             "opening": float(state.o[0]),
             "success": s["success_time"] is not None,
             "time_to_open": s["success_time"],
