@@ -8,6 +8,7 @@ pub mod low_level;
 pub mod object_estimate;
 pub mod plan;
 pub mod rate_limit;
+pub mod segment;
 pub mod shaping;
 pub mod tau_ext;
 
