@@ -136,9 +136,9 @@ impl Segment {
     fn step(shape: &SegmentShape, s: &KnotState, target: &[f64]) -> KnotState {
         let dt = shape.knot;
         let mut next = s.clone();
-        for j in 0..s.q.len() {
+        for (j, &goal) in target.iter().enumerate() {
             let (v_max, a_max, step) = (shape.velocity[j], shape.acceleration[j], shape.jerk[j] * dt);
-            let wanted = ((target[j].clamp(-v_max, v_max) - s.v[j]) / shape.time_constant).clamp(-a_max, a_max);
+            let wanted = ((goal.clamp(-v_max, v_max) - s.v[j]) / shape.time_constant).clamp(-a_max, a_max);
             let a = wanted.clamp(s.a[j] - step, s.a[j] + step);
             next.q[j] = s.q[j] + s.v[j] * dt + (2.0 * s.a[j] + a) * dt * dt / 6.0;
             next.v[j] = s.v[j] + (s.a[j] + a) * dt / 2.0;
