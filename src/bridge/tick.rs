@@ -344,3 +344,6 @@ pub fn shaping_of(cascade: &Cascade) -> Result<&CommandShaping> {
 fn shaping_mut(cascade: &mut Cascade) -> Result<&mut CommandShaping> {
     cascade.shaping_mut().ok_or_else(shapes_no_commands)
 }
+
+#[cfg(test)]
+mod tests;
