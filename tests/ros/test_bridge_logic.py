@@ -216,7 +216,8 @@ def test_franka_reflexes_trip_on_a_step_and_pass_the_robust_limiter_with_missed_
 def test_a_fixed_base_has_the_arms_stream_only_and_a_six_joint_arm_passes_its_own_reflexes():
     """Without a base the shaper never emits a base twist and is at rest when the arm is; a UR-like
     six-joint arm's default limits (the slowest Franka joint's on every joint) shape a stream that
-    its reflexes (the same rule, its own velocity limits) pass, while a step trips them."""
+    its reflexes (the same rule, its own velocity limits) pass, also when the robot misses two
+    commands in a row, while a step trips them."""
     velocity = [3.15, 3.15, 3.15, 3.2, 3.2, 3.2]
     lim = command_limits(velocity, None, {"command_period": 0.001, "cmd_vel_rate": 50.0})
     assert lim.base is None and len(lim.arm.acceleration) == 6
@@ -227,6 +228,8 @@ def test_a_fixed_base_has_the_arms_stream_only_and_a_six_joint_arm_passes_its_ow
     for k in range(6000):  # 2 s toward the target, then the ramp to rest (about 2 s at 1.125 rad/s²)
         command = gate.on_tick(0.001 * k, target if k < 2000 else None, None)
         assert command.base is None
+        if k % 97 in (5, 6):  # two cycles in a row the robot holds the previous command
+            continue
         assert reflexes.check(command.arm) is None, reflexes.aborted
     assert shaper.at_rest
     assert "velocity_discontinuity" in FrankaReflexes.for_arm(0.001, velocity).check(np.full(6, 0.1))
