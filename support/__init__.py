@@ -1,1 +1,2 @@
-"""What tests, benches and experiments share (scenes for second engines, generated objects); not part of the installed package."""
+"""What tests, benches, tools and experiments share (scenes for second engines, generated objects, start
+states); not part of the installed package."""

@@ -4,12 +4,11 @@ applied to a checkout, the Rust tests that cover it run, and the mutant is put b
     python tools/cascade_mutants.py <a scratch checkout>   # edits files there while it runs; never this one
 """
 
-import os
 import pathlib
-import subprocess
 import sys
 
-root = pathlib.Path(sys.argv[1]).resolve()
+from mutants import Mutant, run
+
 #: (file, code, its mutant, what the mutant breaks)
 MUTANTS = [
     (
@@ -93,20 +92,5 @@ COMMAND = (
     "cargo test --profile quick-release --lib -- control:: low_pass"
     " && cargo test --profile quick-release --test inner_loop --test safety_loop"
 )
-for path, old, new, what in MUTANTS:
-    f = root / path
-    text = f.read_text()
-    if old not in text:
-        print(path, "|", what, "| not applied (the code changed)", flush=True)
-        continue
-    f.write_text(text.replace(old, new, 1))
-    try:
-        r = subprocess.run(COMMAND, shell=True, cwd=root, capture_output=True, text=True, timeout=600, env=dict(os.environ))
-        out = r.stdout + r.stderr
-        if "error[" in out or "could not compile" in out:
-            verdict = "did not compile"
-        else:
-            verdict = "killed" if r.returncode != 0 else "SURVIVED"
-    finally:
-        f.write_text(text)
-    print(path, "|", what, "|", verdict, flush=True)
+if __name__ == "__main__":
+    run(pathlib.Path(sys.argv[1]).resolve(), [Mutant(*m, tests=COMMAND) for m in MUTANTS], timeout=600.0)

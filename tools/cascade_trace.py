@@ -12,11 +12,16 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import sys
+from pathlib import Path
 
 import numpy as np
 
 import sabre
 from sabre import tasks
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository root, for support/
+from support.starts import pre_grasp_state
 
 FIELDS = (
     "time",
@@ -44,16 +49,6 @@ def digest(arrays: list[np.ndarray]) -> str:
 
 def controller(scene: sabre.Scene, variant: str) -> sabre.Controller:
     return sabre.Controller(scene, tasks.OpenObject(), sabre.ControllerConfig(variant=variant, seed=0, threads=1))
-
-
-def pre_grasp_state(scene: sabre.Scene) -> np.ndarray:
-    """The robot where the scripted hook-and-pull ends its approach, at rest, object closed: the runs reach
-    contact, the filter's passivity row and the tank within a few seconds."""
-    motion = sabre.hook_and_pull(scene)
-    end_of_approach = int(np.flatnonzero(motion.phases == 0)[-1]) + 1
-    x0 = scene.default_state()
-    x0[: scene.nq] = motion.planned_states[end_of_approach]
-    return x0
 
 
 def episode_digest(episode: sabre.Episode) -> str:

@@ -444,6 +444,23 @@ mod tests {
     }
 
     #[test]
+    fn big_endian_cdr_is_read_too() {
+        // a Float64MultiArray in big-endian CDR, by hand: no dimensions, data_offset 77, one double
+        // (1.5) after the padding to its 8-byte alignment
+        let raw: Vec<u8> = [
+            [0x00, 0x00, 0x00, 0x00],
+            [0x00, 0x00, 0x00, 0x00],
+            [0x00, 0x00, 0x00, 0x4d],
+            [0x00, 0x00, 0x00, 0x01],
+            [0x00, 0x00, 0x00, 0x00],
+            [0x3f, 0xf8, 0x00, 0x00],
+            [0x00, 0x00, 0x00, 0x00],
+        ]
+        .concat();
+        assert_eq!(decode_float64_array(&raw).unwrap(), (vec![1.5], 77));
+    }
+
+    #[test]
     fn truncated_or_foreign_messages_are_errors() {
         let raw = reference_joint_state();
         assert!(decode_joint_state(&raw[..20]).is_err());

@@ -146,6 +146,26 @@ mod tests {
         let mut r = arm();
         // 6 rad/s² from rest: 6000 rad/s³ in the first cycle
         assert!(r.check(&[0.006, 0.0, 0.0]).unwrap().contains("acceleration_discontinuity"));
+        // 5 rad/s² from rest: the jerk limit itself, within rounding
+        assert!(arm().check(&[0.005, 0.0, 0.0]).is_none());
+    }
+
+    #[test]
+    fn an_acceleration_reached_within_the_jerk_limit_and_held_is_no_jerk() {
+        // 4 then 8 rad/s² (4000 rad/s³ each cycle), then 8 rad/s² held: its jerk is zero
+        let mut stream = vec![0.0, 0.004, 0.012];
+        while stream.len() < 200 {
+            stream.push(stream[stream.len() - 1] + 0.008);
+        }
+        let dt = 0.001;
+        let a: Vec<f64> = stream.windows(2).map(|w| (w[1] - w[0]) / dt).collect();
+        let jerk: Vec<f64> = a.windows(2).map(|w| (w[1] - w[0]) / dt).collect();
+        assert!(stream.iter().all(|v| v.abs() < 2.0) && a.iter().all(|a| a.abs() < 10.0 + 1e-9));
+        assert!(jerk.iter().all(|j| j.abs() < 5000.0 * (1.0 - 1e-6)) && jerk.iter().skip(2).all(|j| j.abs() < 1e-6));
+        let mut r = arm();
+        for (k, v) in stream.iter().enumerate() {
+            assert!(r.check(&[0.0, *v, 0.0]).is_none(), "cycle {k}: {:?}", r.aborted());
+        }
     }
 
     #[test]
@@ -153,6 +173,7 @@ mod tests {
         let mut r = arm();
         r.follow(&[2.0, 0.0, 0.0]);
         r.follow(&[2.0, 0.0, 0.0]);
+        assert!(r.check(&[2.0, 0.0, 0.0]).is_none(), "the limit itself passes");
         let error = r.check(&[2.001, 0.0, 0.0]).unwrap().to_string();
         assert!(error.contains("velocity_limits_violation"), "{error}");
         assert!(arm().check(&[f64::NAN, 0.0, 0.0]).is_some(), "NaN is never within a limit");

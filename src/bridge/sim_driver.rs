@@ -522,6 +522,10 @@ mod tests {
         );
         assert_eq!(d.stops().len(), 1);
         assert!((d.stops()[0] - 0.06).abs() < 1e-12);
+        // an answer 2 ms after its state: two periods, late (though well within the command timeout)
+        d.publish_state(&[0.0; 5], &[0.0; 5], 6_000_000_007).unwrap();
+        d.receive_arm(&command(&[0.5, -0.5], 7), 11.0, 6.002);
+        assert_eq!((d.counts().echoes, d.counts().late_echoes), (2, 1));
     }
 
     /// A subscription's queue: each message with the middleware's reception time (ns), then a failure.
@@ -574,12 +578,22 @@ mod tests {
             .unwrap()
             .to_vec();
         assert!(u[0].abs() < 1e-12 && (u[1] - 1.0).abs() < 1e-12 && u[2] == 0.3, "{u:?}");
+        // forward and sideways at any heading: the base frame's velocity rotated into the world's
+        assert!(d.receive_base(&twist([0.4, -0.7, 0.0], [0.0, 0.0, -0.2]), false, 1.0));
+        for yaw in [-2.5, 0.3, 1.9] {
+            let world = nalgebra::Rotation2::new(yaw) * nalgebra::Vector2::new(0.4, -0.7);
+            let u = d.reference(1.0, yaw).to_vec();
+            assert!(
+                (u[0] - world.x).abs() < 1e-12 && (u[1] - world.y).abs() < 1e-12 && u[2] == -0.2,
+                "{u:?}"
+            );
+        }
         assert!(!d.receive_base(&twist([f64::NAN, 0.0, 0.0], [0.0; 3]), false, 1.0));
         assert!(
             !d.receive_base(&twist([1.0, 0.0, 0.0], [0.0; 3]), true, 1.0),
             "not a TwistStamped"
         );
-        assert_eq!((d.counts().rejected_commands, d.counts().base_commands), (2, 1));
+        assert_eq!((d.counts().rejected_commands, d.counts().base_commands), (2, 2));
     }
 
     #[test]
@@ -630,9 +644,47 @@ mod tests {
         for k in 0..6 {
             d.publish_state(&[0.0; 5], &[0.0; 5], 1_000_000_000 + k).unwrap();
         }
-        d.receive_arm(&command(&[0.0, 0.0], 0), 1.0, 1.0);
-        d.receive_arm(&command(&[0.0, 0.0], 5), 1.0, 1.0);
-        assert_eq!((d.counts().unmatched_echoes, d.counts().echoes), (1, 1));
-        assert_eq!(d.counts().last_answered, Some(5));
+        // four kept (states 2 to 5): the answers to states 0 and 1 are not matched, to 2 and 5 they are
+        for answered in [0, 1, 2, 5] {
+            d.receive_arm(&command(&[0.0, 0.0], answered), 1.0, 1.0);
+        }
+        assert_eq!((d.counts().unmatched_echoes, d.counts().echoes), (2, 2));
+        assert_eq!((d.counts().first_answered, d.counts().last_answered), (Some(2), Some(5)));
+    }
+
+    #[test]
+    fn positions_and_velocities_get_their_own_noise_and_the_held_joints_none() {
+        let (position_noise, velocity_noise) = (1e-3, 1e-1);
+        let mut d = SimDriver::new(
+            SimDriverLayout {
+                position_noise,
+                velocity_noise,
+                noise_seed: 3,
+                ..layout(true)
+            },
+            None,
+        )
+        .unwrap();
+        let (q, dq) = ([0.0, 0.0, 0.0, 0.7, -0.2], [0.0, 0.0, 0.0, 0.1, 0.3]);
+        let (mut position, mut velocity) = (Vec::new(), Vec::new());
+        for k in 0..500 {
+            let raw = d.publish_state(&q, &dq, 1_000_000_000 + k).unwrap().unwrap().to_vec();
+            let state = messages::decode_joint_state(&raw).unwrap();
+            assert_eq!((state.position[2], state.velocity[2]), (0.04, 0.0), "the finger is held");
+            position.extend(state.position[..2].iter().zip(&q[3..]).map(|(p, q)| p - q));
+            velocity.extend(state.velocity[..2].iter().zip(&dq[3..]).map(|(v, dq)| v - dq));
+        }
+        // the sample deviation of 1000 normal draws lies within 10 % of the given one (about 4 σ)
+        let deviation = |e: &[f64]| (e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64).sqrt();
+        assert!(
+            (deviation(&position) / position_noise - 1.0).abs() < 0.1,
+            "{}",
+            deviation(&position)
+        );
+        assert!(
+            (deviation(&velocity) / velocity_noise - 1.0).abs() < 0.1,
+            "{}",
+            deviation(&velocity)
+        );
     }
 }

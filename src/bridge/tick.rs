@@ -9,7 +9,7 @@ use crate::control::cascade::Cascade;
 use crate::control::command_stream::Command;
 use crate::control::joint_merge::JointMerge;
 use crate::control::object_estimate::{ObjectEstimate, ObjectStateEstimator};
-use crate::control::shaping::CommandShaping;
+use crate::control::shaping::{shapes_no_commands, CommandShaping};
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
 
 /// How a tick's steps are timed and its commands serialized.
@@ -337,14 +337,13 @@ impl BridgeTick {
 }
 
 /// The cascade's command shaping, which a bridge's cascade must have.
-fn shaping_of(cascade: &Cascade) -> Result<&CommandShaping> {
-    cascade
-        .shaping()
-        .ok_or_else(|| SabreError::invalid("cascade", "shapes no commands: give it a command shaping first"))
+pub fn shaping_of(cascade: &Cascade) -> Result<&CommandShaping> {
+    cascade.shaping().ok_or_else(shapes_no_commands)
 }
 
 fn shaping_mut(cascade: &mut Cascade) -> Result<&mut CommandShaping> {
-    cascade
-        .shaping_mut()
-        .ok_or_else(|| SabreError::invalid("cascade", "shapes no commands: give it a command shaping first"))
+    cascade.shaping_mut().ok_or_else(shapes_no_commands)
 }
+
+#[cfg(test)]
+mod tests;

@@ -5,6 +5,14 @@
 use super::command_stream::{Command, CommandGate};
 use crate::error::{ensure_finite, Result, SabreError};
 
+/// The error of a cascade asked to shape commands before it was given a [`CommandShaping`].
+pub fn shapes_no_commands() -> SabreError {
+    SabreError::invalid(
+        "command shaping",
+        "this cascade shapes no commands: give it a command shaping first",
+    )
+}
+
 /// How a command of sabre's joints reaches the robot's command streams (see the module).
 #[derive(Debug, Clone)]
 pub struct CommandShaping {

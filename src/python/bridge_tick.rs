@@ -15,10 +15,9 @@ use super::error::run;
 use super::estimation::PyObjectStateEstimator;
 use super::messages::stamp_of;
 use super::scene::PyScene;
-use crate::bridge::tick::{Answer, BridgeLayout, BridgeTick, Followed, Received};
+use crate::bridge::tick::{shaping_of, Answer, BridgeLayout, BridgeTick, Followed, Received};
 use crate::control::command_stream::CommandGate;
 use crate::control::{Cascade, Shared, WrenchFrames};
-use crate::error::SabreError;
 
 /// (arm command, base command or None, command echo or None) as bytes to publish.
 type Step<'py> = (Bound<'py, PyBytes>, Option<Bound<'py, PyBytes>>, Option<Bound<'py, PyBytes>>);
@@ -255,12 +254,7 @@ impl PyBridgeTick {
     /// `read` of the cascade's command gate; an error for a cascade that shapes no commands.
     fn gate<R>(&self, read: impl FnOnce(&CommandGate) -> R) -> PyResult<R> {
         let cascade = lock(&self.cascade);
-        run(|| {
-            cascade
-                .shaping()
-                .map(|s| read(s.gate()))
-                .ok_or_else(|| SabreError::invalid("cascade", "shapes no commands: give it a command shaping first"))
-        })
+        run(|| shaping_of(&cascade).map(|s| read(s.gate())))
     }
 }
 

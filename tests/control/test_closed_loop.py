@@ -11,22 +11,12 @@ import pytest
 import sabre
 from sabre import tasks
 from sabre.paper import scenarios
+from support.starts import pre_grasp_state
 
 #: The inner filter's passivity row is softened by a slack (penalty Γ against ‖ũ − u‖²), so a step
 #: taken with the row active may let the tank fall short of its floor by about dt·b/(1 + Γ‖τ̂‖²);
 #: over a run these shortfalls stay below 1 mJ.
 TANK_SLACK = 1e-3
-
-
-def pre_grasp_state(scene: sabre.Scene) -> np.ndarray:
-    """The robot where the scripted hook-and-pull ends its approach (in front of the handle),
-    at rest, with the object closed."""
-    motion = sabre.hook_and_pull(scene)
-    end_of_approach = int(np.flatnonzero(motion.phases == 0)[-1]) + 1
-    x0 = scene.default_state()
-    x0[: scene.nq] = motion.planned_states[end_of_approach]
-    assert x0[2 * scene.nq] == 0.0
-    return x0
 
 
 def open_from_pre_grasp(obj: str, variant: str, duration: float = 15.0) -> tuple[sabre.Episode, tasks.OpenObject]:

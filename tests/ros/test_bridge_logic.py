@@ -129,6 +129,7 @@ def test_default_limits_come_from_the_urdf_and_franka_kept_robust_to_two_missed_
         assert a <= a_max and j == pytest.approx(0.9 * j_max)
         assert 3 * a / 0.001 <= 0.9 * j_max + 1e-9  # two missed cycles: the robot sees a jerk of 3a/dt
     assert lim.base_period == pytest.approx(0.02)
+    assert (lim.base.acceleration, lim.base.jerk) == (params.BASE_ACCELERATION, params.BASE_JERK)
     assert limits(arm_velocity_limits=[1.0] * 7).arm.velocity == (1.0,) * 7
     with pytest.raises(sabre.InvalidValueError):
         limits(arm_jerk_limits=[1.0] * 6)
@@ -245,7 +246,8 @@ def test_the_velocity_stream_keeps_its_promise_a_gap_up_to_tolerated_gap_passes_
 def test_a_fixed_base_has_the_arms_stream_only_and_a_six_joint_arm_passes_its_own_reflexes():
     """Without a base the shaper never emits a base twist and is at rest when the arm is; a UR-like
     six-joint arm's default limits (the slowest Franka joint's on every joint) shape a stream that
-    its reflexes (the same rule, its own velocity limits) pass, while a step trips them."""
+    its reflexes (the same rule, its own velocity limits) pass, also when the robot misses two
+    commands in a row, while a step trips them."""
     velocity = [3.15, 3.15, 3.15, 3.2, 3.2, 3.2]
     lim = command_limits(velocity, None, {"command_period": 0.001, "cmd_vel_rate": 50.0})
     assert lim.base is None and len(lim.arm.acceleration) == 6
@@ -256,9 +258,20 @@ def test_a_fixed_base_has_the_arms_stream_only_and_a_six_joint_arm_passes_its_ow
     for k in range(6000):  # 2 s toward the target, then the ramp to rest (about 2 s at 1.125 rad/s²)
         command = gate.on_tick(0.001 * k, target if k < 2000 else None, None)
         assert command.base is None
+        if k % 97 in (5, 6):  # two cycles in a row the robot holds the previous command
+            continue
         assert reflexes.check(command.arm) is None, reflexes.aborted
     assert shaper.at_rest
     assert "velocity_discontinuity" in FrankaReflexes.for_arm(0.001, velocity).check(np.full(6, 0.1))
+    # within the jerk of every Franka joint (3000 rad/s³ a cycle) up to 10 rad/s², which only the
+    # slowest joint's acceleration (7.5 rad/s²) forbids: it trips the six-joint arm's reflexes
+    accelerations = np.minimum(3.0 * np.arange(1, 40), 10.0)
+    stream = np.cumsum(accelerations * 0.001)
+    assert min(params.FRANKA_ACCELERATION) < 10.0 < max(params.FRANKA_ACCELERATION)
+    assert np.abs(np.diff(accelerations, prepend=0.0)).max() / 0.001 <= min(params.FRANKA_JERK)
+    six = FrankaReflexes.for_arm(0.001, velocity)
+    tripped = [six.check(np.full(6, v)) for v in stream]
+    assert any(e is not None and "velocity_discontinuity" in e for e in tripped), six.aborted
 
 
 def test_descriptions_wait_for_the_robot_and_the_pose_and_reject_a_pose_in_another_frame(tmp_path):

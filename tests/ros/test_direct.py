@@ -132,6 +132,21 @@ def test_another_release_of_rcl_than_the_build_checked_is_refused(monkeypatch):
         direct.rcl_functions()
 
 
+def test_another_patch_of_the_release_the_build_checked_is_accepted(monkeypatch):
+    """Layouts change between releases (major.minor), not between their patches: a build checked against
+    another patch of each loaded library's release looks the functions up."""
+    import rclpy as _  # noqa: F401  (loads rcl)
+
+    def patched(version: str) -> str:
+        major, minor, patch = version.split(".")
+        return f"{major}.{minor}.{int(patch) + 1}"
+
+    loaded = direct.loaded_versions()
+    built = [(package, patched(version)) for package, version in loaded.items()]
+    monkeypatch.setattr(direct._core, "rcl_built_against", lambda: ("/opt/ros/other", built))
+    assert len(direct.rcl_functions()) == len(_core.rcl_function_names())
+
+
 def test_a_build_without_the_ros_headers_says_how_to_get_them(monkeypatch):
     def missing():
         raise SabreError("sabre was built without the ROS 2 headers")

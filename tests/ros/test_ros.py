@@ -281,8 +281,9 @@ def test_malformed_and_withheld_states_are_answered_with_ramps_never_steps(bridg
     """The probe plays the robot (all joints in one joint state, no odometry). Malformed states (a
     wrong length, NaN, a stamp going back) are each answered, matched by the stamp the command
     carries, with a step of the ramp to zero, and logged; joints it does not know are ignored (the
-    state is answered); withholding the states ramps the commands to zero; the whole stream keeps
-    the limits."""
+    state is answered); states without the base's joints, once those are older than state_timeout,
+    are answered with the ramp to zero; withholding the states ramps the commands to zero; the whole
+    stream keeps the limits."""
     domain, probe, processes = bridge
     from sabre.assets import urdf_text
 
@@ -317,15 +318,21 @@ def test_malformed_and_withheld_states_are_answered_with_ramps_never_steps(bridg
 
     streaming = threading.Event()
     streaming.set()
+    feed = {"joints": np.arange(nq), "label": "valid"}  # what the stream sends: its joints, its label
 
     def stream_states():
         while streaming.is_set():
-            send(x[:nq], x[nq : 2 * nq], names)
+            joints, label = feed["joints"], feed["label"]
+            send(x[joints], x[nq + joints], [names[i] for i in joints], label)
             time.sleep(0.001)
 
     def answered() -> set[str | None]:
         """The labels of the states the commands received so far answer (by the stamp they carry)."""
         return {sent.get(m.layout.data_offset) for _, m in probe.get("arm")}
+
+    def answers_to(label: str) -> np.ndarray:
+        """(T, 7) the commands that answer the states sent with ``label``, in order."""
+        return np.array([list(m.data) for _, m in probe.get("arm") if sent.get(m.layout.data_offset) == label]).reshape(-1, 7)
 
     feeder = threading.Thread(target=stream_states, daemon=True)
     feeder.start()
@@ -340,12 +347,24 @@ def test_malformed_and_withheld_states_are_answered_with_ramps_never_steps(bridg
         probe.wait_for(lambda label=label: label in answered(), f"the answer to the {label} state")
     resumed = len(probe.arm())
     probe.wait_for(lambda: moving(probe, resumed, 0.02), "the commands to follow the valid states again")
+    # the arm's joints alone: the base's go stale, and the states are answered by the ramp to zero
+    feed.update(joints=np.arange(3, nq), label="arm only")
+    probe.wait_for(
+        lambda: len(a := answers_to("arm only")) >= 20 and np.all(a[-20:] == 0.0), "the answers to arm-only states to reach zero"
+    )
+    feed.update(joints=np.arange(nq), label="valid")
+    resumed = len(probe.arm())
+    probe.wait_for(lambda: moving(probe, resumed, 0.02), "the commands to follow once the base's joints come again")
     streaming.clear()
     feeder.join()
     probe.wait_for(lambda: len(probe.arm()) and np.all(probe.arm()[-20:] == 0.0), "the commands to ramp to zero")
     assert {"wrong length", "NaN", "stamp back", "unknown names"} <= answered()
-    status = probe.wait_for(lambda: probe.status("diagnostics", "sabre/controller"), "diagnostics")
-    assert int(status[2]["rejected"]) >= 3 and int(status[2]["stale_events"]) >= 1
+    # a status published after the watchdog found the states withheld (the newest may be older)
+    status = probe.wait_for(
+        lambda: (lambda s: s if s and int(s[2]["stale_events"]) >= 1 else None)(probe.status("diagnostics", "sabre/controller")),
+        "the diagnostics to count the withheld states",
+    )
+    assert int(status[2]["rejected"]) >= 3
     assert ctrl.output().count("joint state rejected") >= 1
     assert_within_limits(probe.arm(), arm_limits())
     ctrl.stop()

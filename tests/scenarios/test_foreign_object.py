@@ -13,6 +13,7 @@ import pytest
 import sabre
 from sabre import tasks
 from sabre.handles import infer_handle_frame
+from support.starts import pre_grasp_configuration
 
 ASSETS = Path(__file__).resolve().parents[2] / "assets"
 RENAMES = {
@@ -77,9 +78,8 @@ def test_a_missing_handle_is_named_with_the_candidates_when_the_controller_is_bu
 
 def test_the_controller_opens_a_foreign_shelf_by_its_handle_link():
     shipped, foreign = sabre.Scene.load("royalpanda", "shelf"), foreign_scene("shelf")
-    motion = sabre.hook_and_pull(shipped)  # the same robot in front of the same handle
     x0 = foreign.default_state()
-    x0[: foreign.nq] = motion.planned_states[int(np.flatnonzero(motion.phases == 0)[-1]) + 1]
+    x0[: foreign.nq] = pre_grasp_configuration(shipped)  # the same robot in front of the same handle
     task = tasks.OpenObject(handle="pull_bar")
     controller = sabre.Controller(foreign, task, sabre.ControllerConfig(variant="N", seed=0, threads=1))
     episode = sabre.run_episode(foreign, controller, 15.0, seed=0, x0=x0, progress=False)
@@ -123,9 +123,8 @@ def test_the_controller_opens_the_left_door_of_a_two_door_cabinet_and_leaves_the
     task = tasks.OpenObject(handle="left_pull")
     # The left pull stands where the shelf's handle does: the shelf's scripted pre-grasp fits it.
     np.testing.assert_allclose(task.handle_pose(scene, [0.0])[:3, 3], shipped.object_fk([0.0], "handle_frame")[:3, 3], atol=1e-9)
-    motion = sabre.hook_and_pull(shipped)
     x0 = scene.default_state()
-    x0[: scene.nq] = motion.planned_states[int(np.flatnonzero(motion.phases == 0)[-1]) + 1]
+    x0[: scene.nq] = pre_grasp_configuration(shipped)
     controller = sabre.Controller(scene, task, sabre.ControllerConfig(variant="N", seed=0, threads=1))
     episode = sabre.run_episode(scene, controller, 15.0, seed=0, x0=x0, progress=False)
     assert episode.success

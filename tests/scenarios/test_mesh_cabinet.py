@@ -17,6 +17,7 @@ import pytest
 
 import sabre
 from support import objects
+from support.starts import pre_grasp_configuration
 
 ASSETS = Path(__file__).resolve().parents[2] / "assets"
 ROBOT = ASSETS / "robots" / "royalpanda.urdf"
@@ -61,9 +62,8 @@ def aligned_scene(shipped: sabre.Scene, handle: str) -> sabre.Scene:
 def test_the_controller_opens_a_mesh_only_part_by_its_handle_link(shipped_name, handle):
     shipped = sabre.Scene.load("royalpanda", shipped_name)
     scene = aligned_scene(shipped, handle)
-    motion = sabre.hook_and_pull(shipped)
     x0 = scene.default_state()
-    x0[: scene.nq] = motion.planned_states[int(np.flatnonzero(motion.phases == 0)[-1]) + 1]
+    x0[: scene.nq] = pre_grasp_configuration(shipped)
     task = sabre.tasks.OpenObject(handle=handle)
     controller = sabre.Controller(scene, task, sabre.ControllerConfig(variant="N", seed=0, threads=1))
     episode = sabre.run_episode(scene, controller, 15.0, seed=0, x0=x0, progress=False)

@@ -3,7 +3,6 @@
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, Translation3, UnitQuaternion};
 
 use super::assembly::{assemble as assemble_robot, RobotRoles};
-use super::collision_shape::closest_point;
 use super::dynamics::{joint_space_terms, DynamicsWorkspace, GRAVITY};
 use super::generated;
 use super::inertials::{assume_missing, AssumedInertial, DEFAULT_DENSITY};
@@ -268,25 +267,6 @@ impl Scene {
                 ),
             )),
         }
-    }
-
-    /// For each collision primitive of the object (link by link, in file order), its point nearest
-    /// to the world point `point` at object configuration `o`.
-    pub fn object_closest_points(&self, o: &[f64], point: &Point3<f64>) -> Result<Vec<Point3<f64>>> {
-        self.check_o(o)?;
-        ensure_finite("point", point.coords.as_slice())?;
-        let poses = self.object.link_poses(&self.object_pose, o);
-        Ok(self
-            .object
-            .links
-            .iter()
-            .zip(&poses)
-            .flat_map(|(link, pose)| {
-                link.collisions
-                    .iter()
-                    .map(move |c| closest_point(&c.shape, &(pose * c.origin), point))
-            })
-            .collect())
     }
 
     pub fn nq(&self) -> usize {
