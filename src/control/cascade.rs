@@ -351,7 +351,7 @@ impl Cascade {
     /// [`CommandShaping::follow`]). Errors: no shaping (before anything changes), or the tick's.
     pub fn tick_shaped(&mut self, x: &[f64], t: f64, dt: f64, now: f64) -> Result<&Command> {
         if self.shaping.is_none() {
-            return Err(SabreError::invalid("command shaping", "this cascade shapes no commands"));
+            return Err(super::shaping::shapes_no_commands());
         }
         self.tick(x, t, dt, now)?;
         let shaping = self.shaping.as_mut().expect("checked above");
