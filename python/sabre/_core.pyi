@@ -43,6 +43,7 @@ __all__ = [
     "ServoGuidePlan",
     "Planner",
     "SafetyConfig",
+    "LimitBoundConfig",
     "SafetyFilter",
     "FilterResult",
     "EnergyTankConfig",
@@ -263,6 +264,13 @@ class ServoGuidePlan:
     def evaluate(self) -> npt.NDArray[np.float64]: ...
 
 @final
+class LimitBoundConfig:
+    margin: float
+    prismatic_margin: float
+    deceleration: float
+    def __new__(cls) -> LimitBoundConfig: ...
+
+@final
 class SafetyConfig:
     gamma: list[float]
     penalty: list[float]
@@ -278,6 +286,7 @@ class SafetyConfig:
     task_weight: float
     sequential_task_weight: float
     task_frame: str
+    limit_bound: LimitBoundConfig
     def __new__(cls) -> SafetyConfig: ...
     @staticmethod
     def classes() -> list[str]: ...
