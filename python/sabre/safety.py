@@ -98,10 +98,11 @@ class SafetyConfig:
 
     ``limit_margin`` (rad), ``prismatic_limit_margin`` (m), ``limit_deceleration`` (rad/s², m/s²):
     the hard joint-limit bound (beyond the paper) that the inner loop's cascade applies to every
-    command after the filter, in every variant, and the sampler to its nominal plan: a joint's
+    command after the filter, in every variant, and a controller to the plan it hands over: a joint's
     command toward a limit is at most the speed from which a stop ends this margin inside the URDF
-    limit, one control period late, braking at the deceleration of the command's rate limiter (the
-    ROS 2 bridge's) or, for a plant the cascade drives directly, at ``limit_deceleration``. A joint
+    limit, starting a control period late (for the ROS 2 bridge, also after its state timeout) and
+    braking at the deceleration of the command's rate limiter (the bridge's) or, for a plant the
+    cascade drives directly, at ``limit_deceleration``. A joint
     within the margin moves inward only. A margin larger than half a joint's range is refused when
     the config meets a robot (:class:`SafetyFilter`, the cascade).
     """
