@@ -9,6 +9,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sabre::cost::{Cost, StepView, Term};
 use sabre::model::kinematics::Frames;
+use sabre::model::{LimitBound, LimitBoundConfig};
 use sabre::safety::{FilterStatus, SafetyConfig, SafetyFilter, SolveMethod};
 use safety_fixtures::*;
 
@@ -345,4 +346,105 @@ fn barriers_agree_with_the_sampler_cost_terms() {
         }
     }
     assert_eq!(disagreements, 0);
+}
+
+#[test]
+fn a_box_of_allowed_commands_holds_every_component_and_keeps_the_passivity_rows_power() {
+    let scene = scene();
+    let (nq, alpha, floor) = (
+        scene.nq(),
+        SafetyConfig::default().gamma.0[5],
+        SafetyConfig::default().tank_floor,
+    );
+    let mut rng = ChaCha8Rng::seed_from_u64(23);
+    let bound = LimitBound::new(&scene, &LimitBoundConfig::default()).unwrap();
+    let limits = scene.robot_limits();
+    let (mut clipped, mut scaled) = (0, 0);
+    for trial in 0..200 {
+        // two filters with the same obstacles and no history: the same QP, the same command
+        let seed = rng.random();
+        let mut plain = filter_with_obstacles(&scene, SafetyConfig::default(), &mut ChaCha8Rng::seed_from_u64(seed));
+        let mut boxed = filter_with_obstacles(&scene, SafetyConfig::default(), &mut ChaCha8Rng::seed_from_u64(seed));
+        let x = random_state(&scene, &mut rng);
+        let u_ref = random_command(&scene, &mut rng);
+        let tau: Vec<f64> = (0..nq).map(|_| rng.random_range(-5.0..5.0)).collect();
+        // at, above and below the tank's floor
+        let energy = rng.random_range(1.0..6.0);
+        let (mut lo, mut hi) = (vec![0.0; nq], vec![0.0; nq]);
+        bound.velocity_box(&x[..nq], 0.001, &mut lo, &mut hi);
+        for (l, h) in lo.iter_mut().zip(hi.iter_mut()) {
+            // a tighter box now and then, so that many components are clipped at once
+            if rng.random_bool(0.3) {
+                *l *= rng.random_range(0.0..1.0);
+                *h *= rng.random_range(0.0..1.0);
+            }
+        }
+        let holds = plain.stats().hard_limit_holds;
+        let free = plain.filter(&x, &u_ref, Some((&tau, energy))).unwrap().u.clone();
+        // without the guard's own hold (a joint beyond its URDF limit), this is the QP's command
+        let qp = plain.stats().hard_limit_holds == holds;
+        let out = boxed
+            .filter_within(&x, &u_ref, Some((&tau, energy)), Some((&lo, &hi)))
+            .unwrap()
+            .clone();
+        let mut inside = true;
+        for j in 0..nq {
+            assert!(
+                out.u[j] >= lo[j] && out.u[j] <= hi[j],
+                "trial {trial}: joint {j} {} outside [{}, {}]",
+                out.u[j],
+                lo[j],
+                hi[j]
+            );
+            // and never further beyond a URDF limit
+            let beyond = (x[j] >= limits[j].upper && out.u[j] > 0.0) || (x[j] <= limits[j].lower && out.u[j] < 0.0);
+            assert!(!beyond, "trial {trial}: joint {j} driven further beyond its limit");
+            inside &= free[j] >= lo[j] && free[j] <= hi[j];
+        }
+        if !qp {
+            continue; // the plain filter's guard changed its command: no reference for what follows
+        }
+        if inside {
+            assert_eq!(out.u, free, "trial {trial}: a box the command lies in changes nothing");
+            continue;
+        }
+        clipped += 1;
+        // The passivity row τᵀu ≥ −α(S − ε): the boxed command achieves what the free one did or the
+        // row asks, whichever is less, and never drains a tank below its floor: u = 0 moves no energy.
+        let (b, free_power, power) = (-alpha * (energy - floor), dot(&tau, &free), dot(&tau, &out.u));
+        let wanted = b.min(free_power).min(0.0);
+        assert!(
+            power >= wanted - 1e-9 * (1.0 + wanted.abs()),
+            "trial {trial}: τᵀu {power} below {wanted}"
+        );
+        // the command is the free one clipped into the box, scaled toward the stop if the row needed it
+        let clip: Vec<f64> = (0..nq)
+            .map(|j| {
+                let hi = if x[j] >= limits[j].upper { hi[j].min(0.0) } else { hi[j] };
+                let lo = if x[j] <= limits[j].lower { lo[j].max(0.0) } else { lo[j] };
+                free[j].clamp(lo, hi)
+            })
+            .collect();
+        let peak = clip.iter().map(|c| c.abs()).fold(0.0, f64::max);
+        let k = (0..nq).find(|&j| clip[j].abs() == peak).unwrap();
+        let scale = if peak > 0.0 { out.u[k] / clip[k] } else { 0.0 };
+        assert!((0.0..=1.0).contains(&scale), "trial {trial}: scale {scale}");
+        for j in 0..nq {
+            assert!(
+                (out.u[j] - scale * clip[j]).abs() <= 1e-12 * (1.0 + peak),
+                "trial {trial}: joint {j}"
+            );
+        }
+        scaled += usize::from(scale < 1.0);
+        // the reported slacks are those of the final command
+        let (a, bounds, _) = rows(&mut boxed, &x, Some((&tau, energy)));
+        for r in 0..bounds.len() {
+            let deficit = (bounds[r] - dot(&a[r * nq..(r + 1) * nq], &out.u)).max(0.0);
+            assert!(
+                (out.slack[r] - deficit).abs() <= 1e-9 * (1.0 + deficit),
+                "trial {trial}: row {r}"
+            );
+        }
+    }
+    assert!(clipped > 50 && scaled > 0, "{clipped} clipped, {scaled} scaled");
 }

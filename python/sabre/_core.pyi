@@ -44,6 +44,7 @@ __all__ = [
     "ServoGuidePlan",
     "Planner",
     "SafetyConfig",
+    "LimitBoundConfig",
     "SafetyFilter",
     "FilterResult",
     "EnergyTankConfig",
@@ -241,6 +242,7 @@ class MppiConfig:
     seed: int
     threads: int | None
     input_limit: list[float] | None
+    limit_bound: LimitBoundConfig | None
     def __new__(cls) -> MppiConfig: ...
     @staticmethod
     def paper_sigma(nu: int) -> list[float]: ...
@@ -264,6 +266,13 @@ class ServoGuidePlan:
     def evaluate(self) -> npt.NDArray[np.float64]: ...
 
 @final
+class LimitBoundConfig:
+    margin: float
+    prismatic_margin: float
+    deceleration: float
+    def __new__(cls) -> LimitBoundConfig: ...
+
+@final
 class SafetyConfig:
     gamma: list[float]
     penalty: list[float]
@@ -279,6 +288,7 @@ class SafetyConfig:
     task_weight: float
     sequential_task_weight: float
     task_frame: str
+    limit_bound: LimitBoundConfig
     def __new__(cls) -> SafetyConfig: ...
     @staticmethod
     def classes() -> list[str]: ...
@@ -356,6 +366,7 @@ class Cascade:
         tau_ext_cutoff: float | None = None,
         tau_ext_timeout: float | None = None,
         wrench_frames: tuple[str, str, str] | None = None,
+        limit_bound: LimitBoundConfig | None = None,
     ) -> Cascade: ...
     @property
     def low_level(self) -> LowLevelController: ...
@@ -373,6 +384,8 @@ class Cascade:
     def reset(self) -> None: ...
     @property
     def ticks(self) -> int: ...
+    @property
+    def limit_holds(self) -> int: ...
     def tick(
         self, x: npt.NDArray[np.float64], tau_ext: npt.NDArray[np.float64], t: float, dt: float
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], float | None, str]: ...
@@ -690,6 +703,8 @@ class Planner:
     def reference(self, t: float) -> list[float]: ...
     @property
     def nominal(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def bounded_nominal(self) -> npt.NDArray[np.float64]: ...
     @property
     def nominal_t0(self) -> float: ...
     def set_guides(self, guides: npt.NDArray[np.float64]) -> None: ...

@@ -151,7 +151,8 @@ class _ClosedLoop:
         self.scene, self.controller, self.plant, self.low_level = scene, controller, plant, low_level
         self.delay_steps, self.record_every, self.delay_compensation = delay_steps, record_every, delay_compensation
         self.viewer = viewer
-        self.cascade = inner_cascade(low_level, controller.inner_filter, controller.tank)
+        safety = controller.config.safety_config
+        self.cascade = inner_cascade(low_level, controller.inner_filter, controller.tank, safety)
         self.chunks = TraceChunks("cost", "phase")
         self.plans = PlanRecorder(scene) if record_plans else None
         self.kept_samples = controller.keep_samples

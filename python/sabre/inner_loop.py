@@ -20,7 +20,7 @@ from . import _core
 from ._validate import as_count, as_float_array, as_non_negative, as_positive, core_config, readonly
 from .errors import InvalidValueError, ShapeError
 from .plants import PlantInterface, as_plant
-from .safety import EnergyTank, SafetyFilter
+from .safety import EnergyTank, SafetyConfig, SafetyFilter
 from .scene import Scene
 from .sim import Plant
 
@@ -143,7 +143,9 @@ class LowLevelController:
         velocities, sampled every ``dt`` seconds from time ``t0`` (s), is interpolated at the plant's
         time and tracked by this controller (a velocity plant gets the command and tracks it itself).
 
-        With ``safety`` each step's command goes through the FILTER-QP (41) first; with ``tank`` too,
+        Every step's command is held to the hard joint-limit bound (``safety``'s config, else the defaults:
+        :class:`~sabre.SafetyConfig`'s ``limit_margin``). With ``safety`` each step's command goes through
+        the FILTER-QP (41) first; with ``tank`` too,
         its passivity row (56) uses the plant's last measured τ_ext and the tank's energy, and the
         tank integrates the filtered command over the step against that same reading (49), the one
         the row saw, as a controller on a robot must (it cannot know the next reading).
@@ -244,13 +246,22 @@ def inner_cascade(
     low_level: LowLevelController,
     safety: SafetyFilter | None = None,
     tank: EnergyTank | None = None,
+    limits: SafetyConfig | None = None,
     **tau_ext: Any,
 ) -> _core.Cascade:
     """The core's cascade of ``low_level`` with the optional FILTER-QP ``safety`` and energy ``tank`` (their
-    state shared with their holders); ``tau_ext`` are the core's τ_ext conditioning (``tau_ext_cutoff``,
-    ``tau_ext_timeout``, ``wrench_frames``). The one place a cascade is assembled."""
+    state shared with their holders); every command held to the hard joint-limit bound of ``limits``
+    (:class:`~sabre.SafetyConfig`'s ``limit_margin``, ``prismatic_limit_margin``, ``limit_deceleration``;
+    None: the filter's config, the defaults without a filter); ``tau_ext`` are the core's τ_ext conditioning
+    (``tau_ext_cutoff``, ``tau_ext_timeout``, ``wrench_frames``). The one place a cascade is assembled."""
+    if limits is not None and not isinstance(limits, SafetyConfig):
+        raise TypeError(f"limits must be a sabre.SafetyConfig, got {type(limits).__name__}")
     return _core.Cascade(
-        low_level._core, None if safety is None else safety._core, None if tank is None else tank._core, **tau_ext
+        low_level._core,
+        None if safety is None else safety._core,
+        None if tank is None else tank._core,
+        limit_bound=None if limits is None else limits._limit_bound(),
+        **tau_ext,
     )
 
 

@@ -89,7 +89,8 @@ class ControllerConfig:
     #: "N" (no filter), "I" (1 kHz FILTER-QP with the energy tank), "O" (Sequential FILTER-QP on
     #: the optimised sequence, which warm-starts the next round) or "IO" (both).
     variant: str = "N"
-    #: constraints, slack penalties and passivity settings of both filters (None: the defaults).
+    #: constraints, slack penalties and passivity settings of both filters, and the hard joint-limit
+    #: bound of the inner loop and the nominal plan (None: the defaults).
     safety: SafetyConfig | None = None
     #: energy tank: S(0) (J); its floor ε is ``safety.tank_floor``.
     tank_initial: float = _TANK.initial
@@ -264,6 +265,8 @@ class Controller:
             threads=c.threads,
             noise_interval=c.noise_interval,
             input_limit=None if c.input_limit is None else [float(v) for v in c.input_limit],
+            # the plan handed to the cascade keeps its hard joint-limit bound along the kinematics
+            limit_bound=c.safety_config._limit_bound(),
         )
         self._planner = _core.Planner(self.model._core, self._cost.core, planner_config)
         self._stats: IterationStats | None = None
@@ -468,12 +471,14 @@ class Controller:
 
     def snapshot(self) -> PlanSnapshot:
         """The current plan as a value the inner loop follows (:class:`~sabre.PlanSnapshot`): a copy of
-        :attr:`nominal` from :attr:`nominal_t0`, the predicted dissipation, the task's gain inertia floor
-        for the phase, and the last iteration's phase, time, count and nominal cost. Later updates leave
-        it as it is."""
+        :attr:`nominal` from :attr:`nominal_t0`, held to the inner loop's hard joint-limit bound along its
+        kinematics from the state it was planned from (``safety``'s ``limit_margin``; a joint that would
+        come within it is slowed, one plan step late, as the cascade would), the predicted dissipation,
+        the task's gain inertia floor for the phase, and the last iteration's phase, time, count and
+        nominal cost. Later updates leave it as it is."""
         stats = self._stats
         return PlanSnapshot.of(
-            self.nominal,
+            self._planner.bounded_nominal,
             self.nominal_t0,
             self.config.dt,
             predicted=self._predicted_dissipation,

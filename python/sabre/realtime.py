@@ -130,6 +130,7 @@ class RealtimeCascade:
             self._low,
             controller.inner_filter,
             controller.tank,
+            controller.config.safety_config,
             tau_ext_cutoff=tau_ext_cutoff,
             tau_ext_timeout=tau_ext_timeout,
             wrench_frames=wrench_frames,

@@ -37,6 +37,7 @@ __all__ = [
 _SAFETY = _core.SafetyConfig()
 _x_min, _x_max, _y_min, _y_max = _SAFETY.base_box
 _DEFAULT_BASE_BOX = (_x_min, _x_max, _y_min, _y_max)
+_LIMIT_BOUND = _core.LimitBoundConfig()
 _TANK = _core.EnergyTankConfig()
 _REFILL = _core.TankRefillConfig()
 
@@ -94,6 +95,16 @@ class SafetyConfig:
     ``task_weight`` applies to :meth:`SafetyFilter.filter` (default 0: the paper's, in the 1 kHz
     loop), ``sequential_task_weight`` to :meth:`SafetyFilter.filter_sequence`, whose output
     becomes the plan (default 100: a plan pushed off the handle's path loses the handle).
+
+    ``limit_margin`` (rad), ``prismatic_limit_margin`` (m), ``limit_deceleration`` (rad/s², m/s²):
+    the hard joint-limit bound (beyond the paper) that the inner loop's cascade applies to every
+    command after the filter, in every variant, and a controller to the plan it hands over: a joint's
+    command toward a limit is at most the speed from which a stop ends this margin inside the URDF
+    limit, starting a control period late (for the ROS 2 bridge, also after its state timeout) and
+    braking at the deceleration of the command's rate limiter (the bridge's) or, for a plant the
+    cascade drives directly, at ``limit_deceleration``. A joint
+    within the margin moves inward only. A margin larger than half a joint's range is refused when
+    the config meets a robot (:class:`SafetyFilter`, the cascade).
     """
 
     gamma: Mapping[str, float] = field(default_factory=dict)
@@ -110,6 +121,9 @@ class SafetyConfig:
     task_weight: float = _SAFETY.task_weight
     sequential_task_weight: float = _SAFETY.sequential_task_weight
     task_frame: str | None = None
+    limit_margin: float = _LIMIT_BOUND.margin
+    prismatic_limit_margin: float = _LIMIT_BOUND.prismatic_margin
+    limit_deceleration: float = _LIMIT_BOUND.deceleration
 
     def __post_init__(self) -> None:
         kinematic = CLASSES[:-1]
@@ -154,6 +168,18 @@ class SafetyConfig:
         object.__setattr__(self, "sequential_task_weight", as_non_negative("sequential_task_weight", self.sequential_task_weight))
         if self.task_frame is not None and not isinstance(self.task_frame, str):
             raise InvalidValueError(f"task_frame: expected a frame name or None, got {self.task_frame!r}")
+        for name in ("limit_margin", "prismatic_limit_margin"):
+            object.__setattr__(self, name, as_non_negative(name, getattr(self, name)))
+        object.__setattr__(self, "limit_deceleration", as_positive("limit_deceleration", self.limit_deceleration))
+
+    def _limit_bound(self) -> _core.LimitBoundConfig:
+        """The hard joint-limit bound's settings as the core's config object."""
+        return core_config(
+            _core.LimitBoundConfig,
+            margin=self.limit_margin,
+            prismatic_margin=self.prismatic_limit_margin,
+            deceleration=self.limit_deceleration,
+        )
 
     def _core_config(self) -> _core.SafetyConfig:
         """The settings as the core's config object; without a base box its class is disabled
@@ -171,6 +197,7 @@ class SafetyConfig:
             "task_weight": self.task_weight,
             "sequential_task_weight": self.sequential_task_weight,
             "task_frame": self.task_frame or "",
+            "limit_bound": self._limit_bound(),
         }
         if self.base_box is not None:
             fields["base_box"] = list(self.base_box)
@@ -242,7 +269,8 @@ class FilterStats:
         total_iterations: interior-point iterations summed over the calls.
         interior_point_calls: calls that ran Clarabel (the others took an exact shortcut).
         hard_limit_holds: calls whose command the hard-limit guard changed: a joint at or beyond
-            its URDF limit was commanded further out and that component was zeroed.
+            its URDF limit was commanded further out and that component was zeroed, or, in the
+            inner loop's cascade, a component was clipped to the joint-limit bound.
     """
 
     calls: int

@@ -1,8 +1,9 @@
 //! The control cascade's inner loop, one tick for every clock and plant: the plan in force (handed over by
 //! the planner, taking over at its time), τ_ext conditioned, the FILTER-QP (41) with the tank's passivity row
-//! (56), the tank's refill and step (49), the low-level torque (53), and for a robot's command interface the
-//! command shaping ([`CommandShaping`]). `run_episode`, the deployment loop and the ROS bridge all tick
-//! through [`Cascade::tick`]; [`Cascade::follow`] runs it on the Rust plant.
+//! (56) and the hard joint-limit bound ([`LimitBound`]), the tank's refill and step (49), the low-level
+//! torque (53), and for a robot's command interface the command shaping ([`CommandShaping`]). `run_episode`,
+//! the deployment loop and the ROS bridge all tick through [`Cascade::tick`]; [`Cascade::follow`] runs it on
+//! the Rust plant.
 
 use std::sync::{Arc, Mutex, MutexGuard};
 
@@ -12,6 +13,7 @@ use super::plan::Plan;
 use super::shaping::CommandShaping;
 use super::tau_ext::ExternalTorque;
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
+use crate::model::{LimitBound, LimitBoundConfig};
 use crate::safety::{EnergyTank, FilterStatus, SafetyFilter};
 
 /// A stage the cascade shares with another holder: the planner reads the tank's energy and edits the
@@ -33,7 +35,8 @@ pub const TAKEOVER_TOLERANCE: f64 = 1e-7;
 pub struct TickOutput {
     /// The plan's reference at the tick's time (nu).
     pub reference: Vec<f64>,
-    /// The command after the filter (nu): the reference itself without a filter.
+    /// The command after the filter and the joint-limit bound (nu): the bounded reference without a
+    /// filter.
     pub command: Vec<f64>,
     /// The low-level controller's joint torques tracking the command (nq).
     pub torque: Vec<f64>,
@@ -76,8 +79,8 @@ pub struct TrackTrace {
     /// nq per row: the plant's τ_ext measurement after the step (`Plant::measured_tau_ext`).
     pub tau_ext_measured: Vec<f64>,
     pub contact: Vec<bool>,
-    /// With a filter only (else empty): nq per row, the filtered command that the low-level
-    /// controller tracked in that step.
+    /// With a filter only (else empty): nq per row, the filtered (and bounded) command that the
+    /// low-level controller tracked in that step.
     pub filtered: Vec<f64>,
     /// With a tank only: tank energy after the step.
     pub tank_energy: Vec<f64>,
@@ -100,6 +103,12 @@ pub struct Cascade {
     tank: Option<Shared<EnergyTank>>,
     tau_ext: ExternalTorque,
     shaping: Option<CommandShaping>,
+    limits: LimitBound,
+    /// The commands the bound allows this tick, per joint (lower ≤ 0 ≤ upper), and the positions it
+    /// bounds them from.
+    allowed: (Vec<f64>, Vec<f64>),
+    steered: Vec<f64>,
+    limit_holds: u64,
     plan: Option<Handed>,
     pending: Option<(Handed, f64)>,
     handed: u64,
@@ -111,17 +120,18 @@ pub struct Cascade {
 
 impl Cascade {
     /// The cascade of `low_level` with the optional FILTER-QP `filter` (built for the same robot) and
-    /// energy `tank`, reading τ_ext through `tau_ext` (see [`ExternalTorque`]).
+    /// energy `tank`, reading τ_ext through `tau_ext` (see [`ExternalTorque`]). Its joint-limit bound
+    /// has the filter's settings ([`crate::safety::SafetyConfig::limit_bound`]), the defaults without
+    /// one ([`Self::set_limit_bound`] changes them).
     pub fn new(
         low_level: Shared<LowLevelController>,
         filter: Option<Shared<SafetyFilter>>,
         tank: Option<Shared<EnergyTank>>,
         tau_ext: ExternalTorque,
     ) -> Result<Self> {
-        let (nx, nq) = {
-            let scene = lock(&low_level).scene().clone();
-            (scene.nx(), scene.nq())
-        };
+        let scene = lock(&low_level).scene().clone();
+        let (nx, nq) = (scene.nx(), scene.nq());
+        let mut bound = LimitBoundConfig::default();
         if let Some(f) = &filter {
             let f = lock(f);
             if f.scene().nq() != nq || f.scene().nx() != nx {
@@ -130,7 +140,9 @@ impl Cascade {
                     "was built for a different scene than the low-level controller's",
                 ));
             }
+            bound = f.config().limit_bound;
         }
+        let limits = LimitBound::new(&scene, &bound)?;
         if tau_ext.raw().len() != nq {
             return Err(SabreError::invalid(
                 "tau_ext",
@@ -143,6 +155,10 @@ impl Cascade {
             tank,
             tau_ext,
             shaping: None,
+            limits,
+            allowed: (vec![0.0; nq], vec![0.0; nq]),
+            steered: vec![0.0; nq],
+            limit_holds: 0,
             plan: None,
             pending: None,
             handed: 0,
@@ -180,8 +196,31 @@ impl Cascade {
                 format!("names joints past the robot's {}", self.nq),
             ));
         }
-        self.shaping = Some(shaping);
+        let mut limits = self.limits.clone();
+        limits.clear_braking();
+        brake_as_shaped(&mut limits, &shaping)?;
+        (self.limits, self.shaping) = (limits, Some(shaping));
         Ok(())
+    }
+
+    /// The joint-limit bound's settings from now on (the margins checked against the robot); a shaped
+    /// joint keeps braking as its limiter does.
+    pub fn set_limit_bound(&mut self, config: &LimitBoundConfig) -> Result<()> {
+        let scene = lock(&self.low_level).scene().clone();
+        let mut limits = LimitBound::new(&scene, config)?;
+        if let Some(shaping) = &self.shaping {
+            brake_as_shaped(&mut limits, shaping)?;
+        }
+        self.limits = limits;
+        Ok(())
+    }
+    /// The joint-limit bound every command passes after the filter.
+    pub fn limit_bound(&self) -> &LimitBound {
+        &self.limits
+    }
+    /// Ticks whose command the joint-limit bound (or the filter's hard-limit guard) changed.
+    pub fn limit_holds(&self) -> u64 {
+        self.limit_holds
     }
     pub fn shaping(&self) -> Option<&CommandShaping> {
         self.shaping.as_ref()
@@ -259,6 +298,7 @@ impl Cascade {
         self.pending = None;
         lock(&self.low_level).reset();
         self.ticks = 0;
+        self.limit_holds = 0;
     }
 
     // The tick ------------------------------------------------------------------------------------
@@ -294,10 +334,13 @@ impl Cascade {
 
     /// One inner-loop step at the measured state `x` (nx) at time `t`, integrating over `dt` (s), with
     /// τ_ext conditioned for `now` (the readings' clock): the plan in force at t, its reference at t →
-    /// FILTER-QP, with the passivity row (56) fed by τ_ext and the tank's energy when there is a tank →
-    /// the tank's refill (when it has one configured and the plan a predicted dissipation) → the tank
-    /// step (49) with τ_ext and the filtered command → the low-level torque (53) with the plan's gain
-    /// inertia floor, else the controller's own.
+    /// FILTER-QP, with the passivity row (56) fed by τ_ext and the tank's energy when there is a tank,
+    /// and the joint-limit bound at x's positions (a joint's stop at its deceleration, one tick of `dt`
+    /// late or as its limiter's stream allows, ends a margin inside its limit; applied by the filter's
+    /// hard-limit guard, which keeps the passivity row's power, or as a clip without a filter) → the
+    /// tank's refill (when it has one configured and the plan a predicted dissipation) → the tank step
+    /// (49) with τ_ext and the filtered command → the low-level torque (53) with the plan's gain inertia
+    /// floor, else the controller's own.
     ///
     /// The tank is integrated with the same measurement the passivity row saw and the command the
     /// filter returned, S ← S + dt τ̂ᵀu, as a controller on a real robot must (it cannot know the
@@ -317,17 +360,32 @@ impl Cascade {
         let mut controller = lock(&self.low_level);
         let mut filter = self.filter.as_deref().map(lock);
         let mut tank = self.tank.as_deref().map(lock);
-        match filter.as_deref_mut() {
+        steered_positions(&self.limits, &controller, &x[..self.nq], &mut self.steered);
+        let (lower, upper) = (&mut self.allowed.0, &mut self.allowed.1);
+        self.limits.velocity_box(&self.steered, dt, lower, upper);
+        let held = match filter.as_deref_mut() {
             Some(filter) => {
                 let passivity = tank.as_ref().map(|tank| (tau_ext, tank.energy()));
-                let filtered = filter.filter(x, &out.reference, passivity)?;
+                let holds = filter.stats().hard_limit_holds;
+                let filtered = filter.filter_within(x, &out.reference, passivity, Some((lower, upper)))?;
                 out.command.copy_from_slice(&filtered.u);
                 out.status = Some(filtered.status);
+                filter.stats().hard_limit_holds > holds
             }
             None => {
-                out.command.copy_from_slice(&out.reference);
+                let mut held = false;
+                for (i, (c, &r)) in out.command.iter_mut().zip(&out.reference).enumerate() {
+                    *c = r.clamp(lower[i], upper[i]);
+                    held |= *c != r;
+                }
                 out.status = None;
+                held
             }
+        };
+        self.limit_holds += u64::from(held);
+        let (inner_lower, inner_upper) = self.limits.inner_limits();
+        for (i, &q) in x[..self.nq].iter().enumerate().filter(|&(i, _)| !self.limits.shaped(i)) {
+            controller.clamp_position_error(i, inner_lower[i] - q, inner_upper[i] - q);
         }
         out.tank_energy = match tank.as_deref_mut() {
             Some(tank) => {
@@ -355,7 +413,12 @@ impl Cascade {
         }
         self.tick(x, t, dt, now)?;
         let shaping = self.shaping.as_mut().expect("checked above");
-        shaping.follow(now, &self.out.command, x)
+        shaping.follow(now, &self.out.command, x)?;
+        // A limiter still braking from above the bound (after a stale state's ramp) must keep braking.
+        if beyond_bound(shaping, &self.allowed, x) {
+            shaping.gate_mut().forbid_hold();
+        }
+        Ok(shaping.gate().command())
     }
 
     /// The cascade driving `plant` for `steps` plant steps: each a [`Self::tick`] at the plant's state,
@@ -419,5 +482,69 @@ impl Cascade {
     }
 }
 
+/// Whether a stream's output, the velocity its limiter commands now, lies outside the bound's box
+/// `allowed` at the state `x` (the base's in world rates).
+fn beyond_bound(shaping: &CommandShaping, allowed: &(Vec<f64>, Vec<f64>), x: &[f64]) -> bool {
+    let outside = |i: usize, v: f64| {
+        let slack = 1e-12 * (1.0 + v.abs());
+        v > allowed.1[i] + slack || v < allowed.0[i] - slack
+    };
+    let shaper = shaping.gate().shaper();
+    let arm = shaper.arm().velocity();
+    if shaping.arm_index().iter().zip(arm).any(|(&i, &v)| outside(i, v)) {
+        return true;
+    }
+    match (shaping.base_index(), shaper.base()) {
+        (Some([ix, iy, iyaw]), Some(base)) => {
+            let (b, (c, s)) = (base.velocity(), (x[iyaw].cos(), x[iyaw].sin()));
+            outside(ix, c * b[0] - s * b[1]) || outside(iy, s * b[0] + c * b[1]) || outside(iyaw, b[2])
+        }
+        _ => false,
+    }
+}
+
+/// The positions the bound keeps inside the margins: a shaped joint's measured one (the robot's own
+/// controller follows the command), else where the low-level controller steers it, q plus its
+/// position error, which the tick then keeps from pointing past the margin
+/// ([`LowLevelController::clamp_position_error`]): a joint that trailed its reference would
+/// otherwise catch up past a stop the command ended in time.
+fn steered_positions(limits: &LimitBound, controller: &LowLevelController, q: &[f64], out: &mut [f64]) {
+    let (lower, upper) = limits.inner_limits();
+    let error = controller.position_error();
+    for i in 0..q.len() {
+        out[i] = if limits.shaped(i) {
+            q[i]
+        } else {
+            q[i] + error[i].clamp((lower[i] - q[i]).min(0.0), (upper[i] - q[i]).max(0.0))
+        };
+    }
+}
+
+/// Joints a shaping's limiters command brake as those limiters do: an arm joint at its limiter's
+/// acceleration and jerk bounds, the base's x and y at the smaller of the base limiter's bounds on vx
+/// and vy (its streams are in the base's frame, which turns), its yaw at ωz's. From the state a tick
+/// measured, the command before runs for one period of its stream; a stop then starts at the next
+/// step, or, when no state comes, at the gate's watchdog ramp: the tick's command runs for the state
+/// timeout and until the ramp's first step, one period more. The delay is the sum.
+fn brake_as_shaped(limits: &mut LimitBound, shaping: &CommandShaping) -> Result<()> {
+    let gate = shaping.gate();
+    let timeout = gate.state_timeout();
+    let delay = |period: f64| if timeout.is_finite() { 2.0 * period + timeout } else { period };
+    let arm = gate.shaper().arm();
+    for (k, &i) in shaping.arm_index().iter().enumerate() {
+        limits.set_braking(i, arm.a_max()[k], arm.j_max()[k], delay(arm.dt()))?;
+    }
+    if let (Some([ix, iy, iyaw]), Some(base)) = (shaping.base_index(), gate.shaper().base()) {
+        let (a, j, period) = (base.a_max(), base.j_max(), base.dt());
+        for i in [ix, iy] {
+            limits.set_braking(i, a[0].min(a[1]), j[0].min(j[1]), delay(period))?;
+        }
+        limits.set_braking(iyaw, a[2], j[2], delay(period))?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod limit_tests;
 #[cfg(test)]
 mod tests;

@@ -135,8 +135,10 @@ const DUE_SLACK: f64 = 1e-9;
 /// e-stop, not active, stale joint, rejected message, stale plan, stopped planner) is one step of
 /// a ramp to zero. When no tick has come for `state_timeout` s, [`Self::watchdog`] gives the
 /// ramp's steps that are due, one per `period` s counted from the last command, until the streams
-/// are at rest: the ramp starts at most one period after the timeout and never steps. Before the
-/// first tick nothing was commanded and the watchdog has nothing to ramp.
+/// are at rest: the ramp starts at most one period after the timeout and never steps. A tick's
+/// command that may not be held that long ([`Self::forbid_hold`]) ramps once two periods pass
+/// without a tick instead, with every step due since the last command. Before the first tick
+/// nothing was commanded and the watchdog has nothing to ramp.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CommandGate {
     shaper: CommandShaper,
@@ -146,6 +148,7 @@ pub struct CommandGate {
     last_command: f64,
     stale_since: Option<f64>,
     stale_events: usize,
+    may_hold: bool,
     command: Command,
 }
 
@@ -168,6 +171,7 @@ impl CommandGate {
             last_command: f64::NEG_INFINITY,
             stale_since: None,
             stale_events: 0,
+            may_hold: true,
             command,
         })
     }
@@ -202,6 +206,22 @@ impl CommandGate {
     pub fn stale_events(&self) -> usize {
         self.stale_events
     }
+    /// The last tick's command.
+    pub fn command(&self) -> &Command {
+        &self.command
+    }
+    /// Whether the last tick's command may be held for `state_timeout` when no tick follows.
+    pub fn may_hold(&self) -> bool {
+        self.may_hold
+    }
+
+    /// The last tick's command may not be held for `state_timeout` (a stop that waited that long
+    /// would end past a joint's limit): once two periods pass without a tick, the watchdog ramps,
+    /// with every step due since the last command, so that the streams keep braking on their
+    /// period grid. The next tick allows holding again.
+    pub fn forbid_hold(&mut self) {
+        self.may_hold = false;
+    }
 
     /// The command answering a tick at `now` (`arm` None: a ramp step toward zero; `base` None:
     /// the base's last target). A bad target is an error, and then nothing changes.
@@ -210,6 +230,7 @@ impl CommandGate {
         self.last_tick = now;
         self.last_command = now;
         self.stale_since = None;
+        self.may_hold = true;
         Ok(&self.command)
     }
 
@@ -232,17 +253,24 @@ impl CommandGate {
         out.truncate(count);
     }
 
-    /// Whether the ticks stopped for `state_timeout` after at least one came; the first look that
-    /// finds them stopped counts the event and sets the ramp's first step one period after the
-    /// last command, or at `now` if that is past.
+    /// Whether the ticks stopped for `state_timeout` after at least one came (for a command that
+    /// may not be held, for two periods: its ramp steps from the last command on); the first look
+    /// that finds them stopped for the timeout counts the event and, for a held command, sets the
+    /// ramp's first step one period after the last command, or at `now` if that is past.
     fn ramp_due(&mut self, now: f64) -> bool {
-        if now - self.last_tick <= self.state_timeout || self.last_tick == f64::NEG_INFINITY {
+        if self.last_tick == f64::NEG_INFINITY {
             return false;
+        }
+        let quiet = now - self.last_tick;
+        if quiet <= self.state_timeout {
+            return !self.may_hold && quiet >= 2.0 * self.period - DUE_SLACK;
         }
         if self.stale_since.is_none() {
             self.stale_since = Some(now);
             self.stale_events += 1;
-            self.last_command = self.last_command.max(now - self.period);
+            if self.may_hold {
+                self.last_command = self.last_command.max(now - self.period);
+            }
         }
         true
     }
@@ -251,6 +279,9 @@ impl CommandGate {
     pub fn next_look(&self, now: f64) -> f64 {
         if self.last_tick == f64::NEG_INFINITY {
             self.state_timeout
+        } else if !self.may_hold && !self.shaper.at_rest() {
+            let due = (self.last_tick + 2.0 * self.period).max(self.last_command + self.period);
+            (due - now).max(0.0)
         } else if now - self.last_tick <= self.state_timeout {
             // just past the timeout, so that the look finds the ticks stopped
             self.last_tick + self.state_timeout - now + 1e-4
@@ -432,6 +463,40 @@ mod tests {
         gate.on_tick(1.0, None, None).unwrap();
         gate.watchdog(1.0505, 10, &mut steps);
         assert_eq!((gate.stale_events(), steps.len()), (2, 1));
+    }
+
+    #[test]
+    fn a_command_that_may_not_be_held_ramps_two_periods_after_its_tick_on_the_period_grid() {
+        let mut gate = gate();
+        let mut stream = follow(&mut gate, &[0.8, -1.2], 300);
+        let last_tick = 0.3;
+        assert!(gate.may_hold());
+        gate.forbid_hold();
+        let mut steps = Vec::new();
+        gate.watchdog(last_tick + 0.0015, 10, &mut steps);
+        assert!(steps.is_empty(), "not before two periods without a tick");
+        assert!((gate.next_look(last_tick + 0.0015) - 0.0005).abs() < 1e-12);
+        // two periods without a tick: both steps due since the last command, none of the timeout's hold
+        gate.watchdog(last_tick + 0.002, 10, &mut steps);
+        assert_eq!(steps.len(), 2);
+        assert!((gate.last_command() - (last_tick + 0.002)).abs() < 1e-12);
+        assert_eq!(gate.stale_events(), 0, "no stale event before the state timeout");
+        let mut now = last_tick + 0.0027;
+        while !gate.shaper().at_rest() {
+            for command in &steps {
+                stream.push(command.arm.clone());
+            }
+            gate.watchdog(now, 10, &mut steps);
+            now += 0.0007;
+        }
+        assert_no_step(&stream);
+        assert_eq!(gate.stale_events(), 1);
+        // a tick allows holding again; a stop's ramp step never does
+        gate.on_tick(now, Some(&[0.1, 0.1]), None).unwrap();
+        assert!(gate.may_hold());
+        let mut shaping = crate::control::CommandShaping::new(gate, vec![0, 1], Some([2, 3, 4]), 5).unwrap();
+        shaping.stop(now + 0.001).unwrap();
+        assert!(!shaping.gate().may_hold());
     }
 
     #[test]

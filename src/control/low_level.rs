@@ -198,6 +198,21 @@ impl LowLevelController {
         self.has_previous = false;
     }
 
+    /// The accumulated velocity error ∫(q̇* − q̇) per joint (rad or m, within ±`integral_limit`): how
+    /// far each joint trails the position its velocity reference has integrated to. The integral term
+    /// drives it to zero, so the joint still travels this far once the reference stops.
+    pub fn position_error(&self) -> &[f64] {
+        &self.integral
+    }
+
+    /// Clamps joint `joint`'s position error into [lower, upper] (lower ≤ 0 ≤ upper): the position the
+    /// controller steers the joint to, q + error, no further than that from where it is.
+    pub fn clamp_position_error(&mut self, joint: usize, lower: f64, upper: f64) {
+        if let Some(e) = self.integral.get_mut(joint) {
+            *e = e.clamp(lower.min(0.0), upper.max(0.0));
+        }
+    }
+
     /// Joint torques that make the robot at state `x` track the velocity reference `u_ref`.
     pub fn torque(&mut self, x: &[f64], u_ref: &[f64]) -> Result<Vec<f64>> {
         let mut tau = vec![0.0; self.scene.nq()];

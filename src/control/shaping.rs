@@ -95,9 +95,13 @@ impl CommandShaping {
         self.gate.on_tick(now, Some(&self.arm_target), base)
     }
 
-    /// A step of the ramp to zero at `now` (a state answered without following the plan).
+    /// A step of the ramp to zero at `now` (a state answered without following the plan). A ramp is
+    /// never held for the state timeout: without a state it goes on two periods later
+    /// ([`CommandGate::forbid_hold`]), so that a stop never waits.
     pub fn stop(&mut self, now: f64) -> Result<&Command> {
-        self.gate.on_tick(now, None, None)
+        self.gate.on_tick(now, None, None)?;
+        self.gate.forbid_hold();
+        Ok(self.gate.command())
     }
 }
 

@@ -8,6 +8,7 @@ pub mod generated;
 pub mod handle_frame;
 pub mod inertials;
 pub mod kinematics;
+pub mod limit_bound;
 pub mod mesh;
 mod rigid_bodies;
 pub mod roles;
@@ -18,4 +19,5 @@ pub mod visual;
 
 pub use dynamics::GRAVITY;
 pub use kinematics::{JointKind, JointLimits, KinematicTree};
+pub use limit_bound::{LimitBound, LimitBoundConfig};
 pub use scene::Scene;

@@ -2,7 +2,9 @@
 //! gradient step, nominal and zero sequences always sampled, best samples reused, receding horizon, smoothing.
 
 mod batch;
+mod config;
 pub mod guide;
+mod limits;
 pub mod smoothing;
 pub mod weights;
 
@@ -11,65 +13,14 @@ use std::time::Instant;
 
 use crate::cost::Cost;
 use crate::error::{ensure_finite, Result, SabreError};
+use crate::model::LimitBound;
 use crate::sim::{RolloutBatch, RolloutModel, MAX_BATCH_ELEMENTS};
 pub use batch::interpolate;
 use batch::{shift, stream_key, RowPlan};
+pub use config::MppiConfig;
 pub use guide::{servo_guide, servo_guides, ServoGuideConfig, ServoGuidePlan};
 pub use smoothing::SavitzkyGolay;
 pub use weights::{effective_sample_size, weights, LikelihoodMapping};
-
-/// Sampler settings; the defaults are the paper's Table I.
-#[derive(Debug, Clone, PartialEq)]
-pub struct MppiConfig {
-    /// Number of rollouts N per iteration.
-    pub rollouts: usize,
-    /// Horizon T in seconds; K = round(T / dt) steps of the rollout model.
-    pub horizon: f64,
-    /// Diagonal of the sampling covariance Σ (variances, one per input).
-    pub sigma: Vec<f64>,
-    /// Sharpness h of the invariant likelihood mapping (55).
-    pub h: f64,
-    /// Step size α of the update (14).
-    pub step_size: f64,
-    /// Element-wise clip g_max of the gradient estimate (54).
-    pub gradient_clip: f64,
-    /// Fraction of the previous batch kept (the best by weight) and shifted in time.
-    pub keep_fraction: f64,
-    /// Savitzky–Golay window (samples) and polynomial order; a window of 0 or 1 turns smoothing off.
-    pub smoothing_window: usize,
-    pub smoothing_order: usize,
-    /// Noise is drawn every `noise_interval` steps and linearly interpolated in between (1: white
-    /// noise, the paper's sampler). Longer intervals explore joint positions much further per
-    /// rollout for the same per-step variance.
-    pub noise_interval: usize,
-    pub seed: u64,
-    /// Rollout worker threads (None: all cores).
-    pub threads: Option<usize>,
-    /// Symmetric bound on each commanded input (|u_i| ≤ limit_i), tighter than the joint velocity
-    /// limits if given; None uses the scene's velocity limits.
-    pub input_limit: Option<Vec<f64>>,
-}
-
-impl MppiConfig {
-    /// Table I defaults for `nu` inputs: Σ = 0.5 on the three base inputs, 1.0 on the arm joints.
-    pub fn paper_defaults(nu: usize) -> Self {
-        Self {
-            rollouts: 40,
-            horizon: 1.0,
-            sigma: (0..nu).map(|i| if i < 3 { 0.5 } else { 1.0 }).collect(),
-            h: 10.0,
-            step_size: 1.0,
-            gradient_clip: 0.2,
-            keep_fraction: 0.3,
-            smoothing_window: 30,
-            smoothing_order: 3,
-            noise_interval: 1,
-            input_limit: None,
-            seed: 0,
-            threads: None,
-        }
-    }
-}
 
 /// Statistics of the last iteration.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -134,6 +85,9 @@ pub struct Mppi {
     scratch: Vec<f64>,
     /// The rollouts of [`Self::iterate`], reused from one iteration to the next.
     batch: RolloutBatch,
+    /// The joint-limit bound the nominal holds, and the joint positions the batch was rolled out from.
+    limit_bound: Option<LimitBound>,
+    start: Vec<f64>,
 }
 
 /// The longest horizon in steps: the Savitzky–Golay smoother holds a K × K matrix.
@@ -221,6 +175,7 @@ impl Mppi {
                 *b = b.min(*l);
             }
         }
+        let limit_bound = config.limit_bound.map(|c| LimitBound::new(&scene, &c)).transpose()?;
         let smoother =
             (config.smoothing_window > 1).then(|| SavitzkyGolay::new(k, config.smoothing_window, config.smoothing_order));
         Ok(Self {
@@ -247,6 +202,8 @@ impl Mppi {
             stats: IterationStats::default(),
             scratch: Vec::new(),
             batch: RolloutBatch::default(),
+            limit_bound,
+            start: Vec::new(),
             model,
             config,
             k,
@@ -273,6 +230,17 @@ impl Mppi {
     /// The policy mean, K × nu, row-major; row 0 applies at [`Self::nominal_t0`].
     pub fn nominal(&self) -> &[f64] {
         &self.nominal
+    }
+    /// The plan to hand the cascade: the nominal held to the configured joint-limit bound
+    /// ([`MppiConfig::limit_bound`]) along its kinematics from the state the last batch was rolled out
+    /// from, one plan step late; the nominal itself without a bound or before the first rollout. The
+    /// sampler's own nominal (its mean for the next batch) stays as the update left it.
+    pub fn bounded_nominal(&self) -> Vec<f64> {
+        let mut plan = self.nominal.clone();
+        if let Some(bound) = self.limit_bound.as_ref().filter(|_| self.start.len() == self.nu) {
+            limits::bound_sequence(bound, &self.start, self.dt, &mut plan);
+        }
+        plan
     }
     pub fn nominal_t0(&self) -> f64 {
         self.nominal_t0
@@ -306,6 +274,7 @@ impl Mppi {
         self.config.seed = seed;
         self.noise_scale = 1.0;
         self.stats = IterationStats::default();
+        self.start.clear();
     }
 
     /// Scales the sampling covariance to `scale` · Σ from the next batch on (a task's noise
@@ -476,13 +445,15 @@ impl Mppi {
         let (n, k, threads) = (self.config.rollouts, self.k, self.config.threads);
         self.model
             .rollout_into(x, &self.samples, n, k, threads, Some(cost), &mut batch)?;
-        self.record_rollouts(start, &batch);
+        self.record_rollouts(start, &batch, x);
         Ok(batch)
     }
 
-    fn record_rollouts(&mut self, start: Instant, batch: &RolloutBatch) {
+    fn record_rollouts(&mut self, start: Instant, batch: &RolloutBatch, x: &[f64]) {
         self.stats.rollout_time = start.elapsed().as_secs_f64();
         (self.stats.engine_steps, self.stats.engine_time) = batch.engine_totals();
+        self.start.clear();
+        self.start.extend_from_slice(&x[..self.nu]);
     }
 
     /// Plans the batch for `t` and rolls it out from `x` with `cost`, each row built by the worker
@@ -504,7 +475,7 @@ impl Mppi {
             return result;
         }
         self.clear_guides();
-        self.record_rollouts(start, batch);
+        self.record_rollouts(start, batch, x);
         Ok(())
     }
 

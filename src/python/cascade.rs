@@ -11,7 +11,7 @@ use super::bridge::PyCommandGate;
 use super::control::{PyLowLevelController, PyPlan};
 use super::convert::{array, lock, view};
 use super::error::{run, run_detached};
-use super::safety::{PyEnergyTank, PySafetyFilter};
+use super::safety::{PyEnergyTank, PyLimitBoundConfig, PySafetyFilter};
 use super::sim::PyPlant;
 use crate::control::{Cascade, CommandShaping, ExternalTorque, Shared, TrackTrace, WrenchFrames};
 
@@ -42,9 +42,13 @@ impl PyCascade {
     /// The cascade of `low_level` with `filter` (built for the same robot) and `tank` if given; τ_ext
     /// low-passed at `tau_ext_cutoff` Hz (None or 0: as read), counted as none once older than
     /// `tau_ext_timeout` s (None: never), wrist wrenches read through `wrench_frames` (world frame, the
-    /// sensor frame for an empty header, the moment's point frame or "").
+    /// sensor frame for an empty header, the moment's point frame or ""); every command held to the hard
+    /// joint-limit bound of `limit_bound` (None: the filter's, the defaults without a filter).
     #[new]
-    #[pyo3(signature = (low_level, filter=None, tank=None, tau_ext_cutoff=None, tau_ext_timeout=None, wrench_frames=None))]
+    #[pyo3(signature = (
+        low_level, filter=None, tank=None, tau_ext_cutoff=None, tau_ext_timeout=None, wrench_frames=None, limit_bound=None
+    ))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
         low_level: Bound<'_, PyLowLevelController>,
         filter: Option<Bound<'_, PySafetyFilter>>,
@@ -52,6 +56,7 @@ impl PyCascade {
         tau_ext_cutoff: Option<f64>,
         tau_ext_timeout: Option<f64>,
         wrench_frames: Option<(String, String, String)>,
+        limit_bound: Option<PyLimitBoundConfig>,
     ) -> PyResult<Self> {
         let shared = low_level.get().inner.clone();
         let scene = lock(&shared).scene().clone();
@@ -60,12 +65,16 @@ impl PyCascade {
                 .map(|(world, default, point)| WrenchFrames::new(scene.clone(), &world, &default, &point))
                 .transpose()?;
             let tau = ExternalTorque::new(scene.nq(), tau_ext_cutoff, tau_ext_timeout, frames)?;
-            Cascade::new(
+            let mut cascade = Cascade::new(
                 shared,
                 filter.as_ref().map(|f| f.borrow().inner.clone()),
                 tank.as_ref().map(|t| t.borrow().inner.clone()),
                 tau,
-            )
+            )?;
+            if let Some(bound) = &limit_bound {
+                cascade.set_limit_bound(&bound.to_core())?;
+            }
+            Ok(cascade)
         })?;
         Ok(Self {
             inner: Arc::new(Mutex::new(cascade)),
@@ -138,6 +147,12 @@ impl PyCascade {
     #[getter]
     fn ticks(&self) -> u64 {
         lock(&self.inner).ticks()
+    }
+
+    /// Ticks since construction or the last reset whose command the joint-limit bound changed.
+    #[getter]
+    fn limit_holds(&self) -> u64 {
+        lock(&self.inner).limit_holds()
     }
 
     /// One tick at the measured state x (nx,) and external torques tau_ext (nq,) at time t, integrating

@@ -67,6 +67,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<mppi::PyServoGuidePlan>()?;
     m.add_class::<mppi::PyPlanner>()?;
     m.add_class::<safety::PySafetyConfig>()?;
+    m.add_class::<safety::PyLimitBoundConfig>()?;
     m.add_class::<safety::PySafetyFilter>()?;
     m.add_class::<safety::PyFilterResult>()?;
     m.add_class::<safety::PyEnergyTankConfig>()?;

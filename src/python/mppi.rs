@@ -9,6 +9,7 @@ use pyo3::types::PyDict;
 use super::convert::{array, isometry, lock, view};
 use super::cost::PyCost;
 use super::error::{run, run_detached};
+use super::safety::PyLimitBoundConfig;
 use super::scene::PyScene;
 use super::sim::PyRolloutModel;
 use crate::cost::Cost;
@@ -44,6 +45,8 @@ pub struct PyMppiConfig {
     threads: Option<usize>,
     /// Symmetric bound on each commanded input; None: the joint velocity limits.
     input_limit: Option<Vec<f64>>,
+    /// The cascade's joint-limit bound, held by the plan handed to it (`bounded_nominal`); None: not held.
+    limit_bound: Option<PyLimitBoundConfig>,
 }
 
 impl PyMppiConfig {
@@ -62,6 +65,7 @@ impl PyMppiConfig {
             seed: self.seed,
             threads: self.threads,
             input_limit: self.input_limit.clone(),
+            limit_bound: self.limit_bound.as_ref().map(PyLimitBoundConfig::to_core),
         }
     }
 }
@@ -85,6 +89,7 @@ impl PyMppiConfig {
             seed: c.seed,
             threads: c.threads,
             input_limit: c.input_limit,
+            limit_bound: None,
         }
     }
 
@@ -384,6 +389,15 @@ impl PyPlanner {
         let planner = lock(&self.inner);
         let (k, nu) = (planner.horizon_steps(), planner.model().scene().nu());
         array(py, planner.nominal().to_vec(), &[k, nu])
+    }
+
+    /// The plan to hand the cascade (K, nu): the nominal held to the joint-limit bound along its
+    /// kinematics from the state the last batch was rolled out from.
+    #[getter]
+    fn bounded_nominal<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let planner = lock(&self.inner);
+        let (k, nu) = (planner.horizon_steps(), planner.model().scene().nu());
+        array(py, planner.bounded_nominal(), &[k, nu])
     }
 
     /// −τ_extᵀu (W) at each step of the nominal's rollout from x (K,), for the tank's refill.

@@ -13,7 +13,45 @@ use super::scene::PyScene;
 use super::sim::PyRolloutModel;
 use crate::control::Shared;
 use crate::error::SabreError;
+use crate::model::LimitBoundConfig;
 use crate::safety::{ConstraintClass, EnergyTank, FilterOutput, PerClass, RefillConfig, SafetyConfig, SafetyFilter};
+
+/// Settings of the hard joint-limit bound; `LimitBoundConfig()` holds the core's defaults.
+#[pyclass(name = "LimitBoundConfig", module = "sabre._core", get_all, set_all, from_py_object)]
+#[derive(Clone)]
+pub struct PyLimitBoundConfig {
+    /// Distance (rad) a revolute joint's stop ends inside its limit.
+    margin: f64,
+    /// Distance (m) a prismatic joint's stop ends inside its limit.
+    prismatic_margin: f64,
+    /// Deceleration (rad/s², m/s²) of an unshaped joint's stop.
+    deceleration: f64,
+}
+
+impl PyLimitBoundConfig {
+    pub(crate) fn to_core(&self) -> LimitBoundConfig {
+        LimitBoundConfig {
+            margin: self.margin,
+            prismatic_margin: self.prismatic_margin,
+            deceleration: self.deceleration,
+        }
+    }
+    fn of(c: LimitBoundConfig) -> Self {
+        Self {
+            margin: c.margin,
+            prismatic_margin: c.prismatic_margin,
+            deceleration: c.deceleration,
+        }
+    }
+}
+
+#[pymethods]
+impl PyLimitBoundConfig {
+    #[new]
+    fn new() -> Self {
+        Self::of(LimitBoundConfig::default())
+    }
+}
 
 /// Settings of the safety filter; `SafetyConfig()` holds the core's defaults. Per-class lists
 /// follow the core's class order: joint_limits, self_collision, arm_reach, base_box, obstacles,
@@ -49,6 +87,8 @@ pub struct PySafetyConfig {
     sequential_task_weight: f64,
     /// The robot frame whose velocity the task metric protects.
     task_frame: String,
+    /// The cascade's hard joint-limit bound.
+    limit_bound: PyLimitBoundConfig,
 }
 
 fn per_class<T: Copy>(name: &str, values: &[T]) -> crate::Result<PerClass<T>> {
@@ -75,6 +115,7 @@ impl PySafetyConfig {
             task_weight: self.task_weight,
             sequential_task_weight: self.sequential_task_weight,
             task_frame: self.task_frame.clone(),
+            limit_bound: self.limit_bound.to_core(),
         })
     }
 }
@@ -99,6 +140,7 @@ impl PySafetyConfig {
             task_weight: c.task_weight,
             sequential_task_weight: c.sequential_task_weight,
             task_frame: c.task_frame,
+            limit_bound: PyLimitBoundConfig::of(c.limit_bound),
         }
     }
 

@@ -1,6 +1,7 @@
 //! Settings of the safety filter: constraint classes and, per class, ZBF rate, slack penalty, margin and switch.
 
 use crate::error::{Result, SabreError};
+use crate::model::LimitBoundConfig;
 
 /// The kinds of constraint the filter enforces; each has its own rate γ, penalty Γ, margin Δ and switch.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -108,6 +109,9 @@ pub struct SafetyConfig {
     /// The robot frame whose velocity `task_weight` protects; empty: the scene's tool frame (none:
     /// the paper's plain metric).
     pub task_frame: String,
+    /// The hard joint-limit bound the cascade applies to every command after the filter (beyond the
+    /// paper): margins inside the URDF limits and the deceleration of an unshaped joint's stop.
+    pub limit_bound: LimitBoundConfig,
 }
 
 /// ℓ (m): a hand turning at 1 rad/s weighs like a hand moving at ℓ m/s in the task metric.
@@ -141,6 +145,7 @@ impl Default for SafetyConfig {
             task_weight: 0.0,
             sequential_task_weight: 100.0,
             task_frame: String::new(),
+            limit_bound: LimitBoundConfig::default(),
         }
     }
 }
@@ -200,6 +205,6 @@ impl SafetyConfig {
                 return bad(name.into(), format!("must be within (0, 1), got {v}"));
             }
         }
-        Ok(())
+        self.limit_bound.validate()
     }
 }

@@ -28,7 +28,9 @@ use super::qp::{SlotQp, EMPTY};
 use super::task_metric::TaskMetric;
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
 use crate::model::scene::Scene;
+use crate::model::LimitBound;
 
+mod hold;
 mod obstacles;
 
 /// Row-slot counts of the pre-built reduced problems, smallest first.
@@ -83,6 +85,8 @@ fn load(
 impl SafetyFilter {
     pub fn new(scene: Arc<Scene>, config: SafetyConfig) -> Result<Self> {
         config.validate()?;
+        // The cascade applies the bound; its margins are checked against the robot here already.
+        LimitBound::new(&scene, &config.limit_bound)?;
         let nq = scene.nq();
         let limits = scene.robot_limits();
         let velocity_limits: Vec<f64> = limits.iter().map(|l| l.velocity).collect();
@@ -337,8 +341,23 @@ impl SafetyFilter {
     /// Bad input (wrong lengths, NaN) is an error; a solver failure is not: it yields the safe
     /// stop u = 0 with status [`FilterStatus::Fallback`]. A command is never passed through unfiltered.
     pub fn filter(&mut self, x: &[f64], u_ref: &[f64], passivity: Option<(&[f64], f64)>) -> Result<&FilterOutput> {
+        self.filter_within(x, u_ref, passivity, None)
+    }
+
+    /// [`Self::filter`], then every component of the command clipped into `within` = (lower,
+    /// upper) (nq each, lower ≤ 0 ≤ upper: the cascade's joint-limit bound) by the hard-limit guard,
+    /// which keeps the passivity row's power as it does for the URDF limits. Errors: a box of the
+    /// wrong length or one that does not contain 0, besides [`Self::filter`]'s.
+    pub fn filter_within(
+        &mut self,
+        x: &[f64],
+        u_ref: &[f64],
+        passivity: Option<(&[f64], f64)>,
+        within: Option<(&[f64], &[f64])>,
+    ) -> Result<&FilterOutput> {
         let start = Instant::now();
         self.check_inputs(x, Some(u_ref), passivity)?;
+        self.check_box(within)?;
         let nq = self.scene.nq();
         let r = self.rows.len();
         self.evaluate(&x[..nq], passivity);
@@ -443,7 +462,7 @@ impl SafetyFilter {
                 self.active_set.forget();
             }
         }
-        self.hold_hard_limits(&x[..nq]);
+        self.hold_hard_limits(&x[..nq], within);
         let out = &mut self.output;
         out.barrier.copy_from_slice(&self.rows.barrier);
         out.active.clear();
@@ -477,49 +496,6 @@ impl SafetyFilter {
         s.max_time = s.max_time.max(elapsed);
         s.total_iterations += u64::from(out.iterations);
         Ok(&self.output)
-    }
-
-    /// The hard-limit guard: the joint-limit rows are ZBFs with slack, so a command that saturates
-    /// many inputs may still move a joint that is already at or beyond its URDF limit further out
-    /// (Remark 1 bounds the violation by the slack the penalty allows, it does not forbid it).
-    /// Such a component is set to zero. If that lowers τ_extᵀu below both the passivity row's bound
-    /// and what the QP's command achieved, the whole command is scaled toward the safe stop u = 0
-    /// until it achieves that again (zeroed components stay zero, inward ones stay inward).
-    /// The reported slacks are those of the final command.
-    fn hold_hard_limits(&mut self, q: &[f64]) {
-        let nq = q.len();
-        let out = &mut self.output;
-        let before = out.u.clone();
-        let mut changed = false;
-        for (j, (&(lower, upper), &qj)) in self.position_limits.iter().zip(q).enumerate() {
-            if (qj >= upper && out.u[j] > 0.0) || (qj <= lower && out.u[j] < 0.0) {
-                out.u[j] = 0.0;
-                changed = true;
-            }
-        }
-        if !changed {
-            return;
-        }
-        let dot = |a: &[f64], u: &[f64]| a.iter().zip(u).map(|(a, u)| a * u).sum::<f64>();
-        for ri in 0..self.rows.len() {
-            if !self.rows.live[ri] || self.rows.rows[ri].class != ConstraintClass::Passivity {
-                continue;
-            }
-            let a = &self.rows.coef[ri * nq..(ri + 1) * nq];
-            let wanted = self.rows.bound[ri].min(dot(a, &before));
-            let achieved = dot(a, &out.u);
-            if achieved < wanted && wanted <= 0.0 {
-                let scale = (wanted / achieved).clamp(0.0, 1.0);
-                out.u.iter_mut().for_each(|u| *u *= scale);
-            }
-        }
-        for ri in 0..self.rows.len() {
-            if self.rows.live[ri] {
-                let a = &self.rows.coef[ri * nq..(ri + 1) * nq];
-                out.slack[ri] = (self.rows.bound[ri] - dot(a, &out.u)).max(0.0);
-            }
-        }
-        self.stats.hard_limit_holds += 1;
     }
 
     /// The ZBF rows at x: (∂h/∂q per row, R × nq row-major; bounds b, R; barrier values h, R), so
