@@ -187,8 +187,10 @@ SIM_ROBOT_PARAMETERS: dict[str, Any] = {
     "reflexes": True,  # Franka's discontinuity reflexes on the arm command
     # "cycle": the command in effect at each plant tick, delivery included, as the arm checks it (a
     # tick the plant loop itself ran late is excused); "command": each arm command against the one
-    # before, one plant period apart (the stream as sent), a diagnostic only
-    "reflex_check": "cycle",
+    # before, one plant period apart (the stream as sent). "cycle" becomes the default with the
+    # trajectory interface: the velocity stream's catch-up bursts (the watchdog's missed steps, a
+    # late shutdown ramp) trip it on a loaded machine
+    "reflex_check": "command",
     # the arm's command interface the robot runs: "velocity" (a forward command controller on
     # arm_command_topic) or "trajectory" (joint_trajectory_controller's topic interface on
     # trajectory_topic, with the velocity command interface v_d + k_p (q_d − q))
