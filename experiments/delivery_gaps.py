@@ -44,7 +44,9 @@ def busy_cores(loaded: bool) -> Iterator[None]:
 def run(obj: str, variant: str, seed: int, gap: float, loaded: bool, timeout: float) -> dict:
     sensor = {"object_state_topic": params.SIM_ROBOT_PARAMETERS["ground_truth_topic"], "tolerated_gap": gap}
     with busy_cores(loaded):
-        result = run_bridge(obj, variant, seed, timeout=timeout, object_pose=POSE, controller_params=sensor)
+        result = run_bridge(
+            obj, variant, seed, timeout=timeout, object_pose=POSE, sim_params={"reflex_check": "cycle"}, controller_params=sensor
+        )
     s = result.sim or {}
     return {
         "opened": bool(s.get("success")),
