@@ -381,6 +381,21 @@ class Cascade:
     @property
     def pending(self) -> tuple[int, float] | None: ...
     def set_shaping(self, gate: CommandGate, arm_index: list[int], base_index: list[int] | None = None) -> None: ...
+    def set_trajectory(
+        self,
+        velocity: list[float],
+        acceleration: list[float],
+        jerk: list[float],
+        position_gain: list[float],
+        period: float = ...,
+        lead: float = ...,
+        tolerated_gap: float = ...,
+        filter_step: float = ...,
+        knot: float = ...,
+        time_constant: float = ...,
+    ) -> None: ...
+    @property
+    def trajectory_counts(self) -> dict[str, int] | None: ...
     def reset(self) -> None: ...
     @property
     def ticks(self) -> int: ...
@@ -815,7 +830,7 @@ def encode_float64_array(data: npt.NDArray[np.float64], data_offset: int) -> byt
 def decode_twist(raw: bytes, stamped: bool) -> tuple[list[float], list[float], int | None]: ...
 def encode_twist(linear: Sequence[float], angular: Sequence[float], stamp_ns: int | None = None, frame_id: str = "") -> bytes: ...
 
-_BridgeStep = tuple[bytes, bytes | None, bytes | None]  # (arm, base, echo) to publish
+_BridgeStep = tuple[bytes | None, bytes | None, bytes | None, bytes | None]  # (arm, base, echo, segment) to publish
 
 @final
 class BridgeTick:
@@ -830,6 +845,8 @@ class BridgeTick:
         cmd_vel_stamped: bool,
         cmd_vel_frame: str,
         echo_names: list[str] | None = None,
+        trajectory_names: list[str] | None = None,
+        trajectory_accelerations: bool = False,
     ) -> BridgeTick: ...
     def receive(self, raw: bytes, received: float) -> tuple[str, float, str | None]: ...
     def follow(

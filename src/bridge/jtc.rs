@@ -5,7 +5,7 @@
 //! (positions, velocities) or linearly (positions only); after the last point it holds that
 //! position at rest; the velocity command interface then sends v_d + k_p (q_d − q).
 
-use super::messages::TrajectoryValue;
+use super::messages::{Stamp, TrajectoryValue};
 use crate::error::{Result, SabreError};
 
 /// A desired state: positions, velocities and accelerations, one each per joint.
@@ -40,6 +40,8 @@ pub struct TrajectoryFollower {
     held: Option<Vec<f64>>,
     desired: Desired,
     command: Vec<f64>,
+    /// The ticks' time and the stamps' (ns) of the first reception.
+    clock: Option<(f64, i64)>,
 }
 
 /// Position, velocity and acceleration at `s` ∈ [0, T] of the polynomial of order 1, 3 or 5 that
@@ -102,6 +104,7 @@ impl TrajectoryFollower {
                 a: vec![0.0; n],
             },
             command: vec![0.0; n],
+            clock: None,
         })
     }
 
@@ -156,8 +159,22 @@ impl TrajectoryFollower {
             }
             previous = p.time_from_start;
         }
-        let stamp = message.stamp.seconds();
-        let start = if stamp == 0.0 { now } else { now + (stamp - wall) };
+        // JTC reads stamps on its own clock. Here the stamps' clock is mapped onto the ticks' by the
+        // pair (now, wall) of the first reception (re-taken only when the two moved apart by more
+        // than a cycle: a clock that jumped): two clocks read one after the other differ by the
+        // instants between the reads, and a pair per message would shift each replacement by those
+        // microseconds. Stamps stay in nanoseconds (epoch seconds in an f64 lose a tenth of a µs).
+        let wall_ns = (wall * 1e9).round() as i64;
+        let reference = match self.clock {
+            Some((t0, w0)) if ((now - t0) - (wall_ns - w0) as f64 * 1e-9).abs() <= 1e-3 => (t0, w0),
+            _ => (now, wall_ns),
+        };
+        self.clock = Some(reference);
+        let start = if message.stamp == Stamp::default() {
+            now
+        } else {
+            reference.0 + (message.stamp.nanoseconds() - reference.1) as f64 * 1e-9
+        };
         if start + previous < now {
             return Err(SabreError::invalid("header.stamp", "the trajectory ended before it arrived"));
         }
@@ -244,6 +261,11 @@ impl TrajectoryFollower {
             d.v[j] = v;
             d.a[j] = a;
         }
+    }
+
+    /// The velocity command of the last [`Self::command`] (zeros before the first).
+    pub fn last_command(&self) -> &[f64] {
+        &self.command
     }
 
     /// Whether a trajectory is in force or waiting.

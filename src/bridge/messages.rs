@@ -25,6 +25,15 @@ impl Stamp {
     pub fn seconds(&self) -> f64 {
         f64::from(self.sec) + f64::from(self.nanosec) * 1e-9
     }
+    /// Nanoseconds since the epoch of the stamp's clock, exactly.
+    pub fn nanoseconds(&self) -> i64 {
+        i64::from(self.sec) * 1_000_000_000 + i64::from(self.nanosec)
+    }
+    /// Seconds from `earlier` to this stamp, exact to the nanosecond (the difference of two
+    /// [`Self::seconds`] near today's epoch time loses a tenth of a microsecond).
+    pub fn seconds_since(&self, earlier: &Stamp) -> f64 {
+        (self.nanoseconds() - earlier.nanoseconds()) as f64 * 1e-9
+    }
     /// The stamp of `seconds` (nanoseconds rounded, carried into the seconds at 1e9).
     pub fn from_seconds(seconds: f64) -> Self {
         let mut sec = seconds.floor();

@@ -323,7 +323,15 @@ impl SimDriver {
             match input.take() {
                 Ok(Some((raw, received_ns))) => {
                     let received = if received_ns > 0 { received_ns as f64 * 1e-9 } else { wall };
-                    self.receive_arm(raw, now, received.min(wall));
+                    let received = received.min(wall);
+                    // a trajectory's stamp maps onto the ticks' clock from both clocks at the
+                    // reception, as JTC maps it onto its own, without the wait for this take
+                    let at = if self.follower.is_some() {
+                        now - (wall - received)
+                    } else {
+                        now
+                    };
+                    self.receive_arm(raw, at, received);
                     taken += 1;
                 }
                 Ok(None) => break Ok(taken),
@@ -388,6 +396,10 @@ impl SimDriver {
             for (&i, &v) in self.layout.arm_index.iter().zip(command) {
                 self.u[i] = v;
             }
+        }
+        if let Some(follower) = &self.follower {
+            // on the trajectory interface the command in effect is JTC's, reported as the last one
+            self.arm.copy_from_slice(follower.last_command());
         }
         let arm_fresh = arm_fresh || self.follower.as_ref().is_some_and(TrajectoryFollower::has_trajectory);
         if let (true, Some([x, y, w])) = (base_fresh, self.layout.base_index) {

@@ -2,13 +2,16 @@
 //! serialized for the arm's and the base's command topics. Between them: the joint states merged
 //! by name, the object's state (the estimator from the hand pose, or the newest on its topic), the
 //! cascade's tick and its command shaping ([`Cascade::tick_shaped`]: τ_ext conditioned, the rate-limited
-//! gate) on the step between two states' stamps.
+//! gate) on the step between two states' stamps; for an arm on a joint_trajectory_controller the
+//! cascade's trajectory tick ([`Cascade::tick_trajectory`]) and its segments as JointTrajectory messages
+//! stamped with the answered state's stamp.
 
-use crate::bridge::messages::{self, Stamp};
+use crate::bridge::messages::{self, Stamp, TrajectoryPoint};
 use crate::control::cascade::Cascade;
 use crate::control::command_stream::Command;
 use crate::control::joint_merge::JointMerge;
 use crate::control::object_estimate::{ObjectEstimate, ObjectStateEstimator};
+use crate::control::segment::Segment;
 use crate::control::shaping::{shapes_no_commands, CommandShaping};
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
 
@@ -23,6 +26,19 @@ pub struct BridgeLayout {
     /// The arm joints' names for an echo of each arm command as a JointState (velocities, the
     /// answered state's stamp) for a robot whose command interface drops `data_offset`; None: no echo.
     pub echo_names: Option<Vec<String>>,
+    /// The arm on a joint_trajectory_controller: its segments as JointTrajectory messages instead of
+    /// the velocity stream (the cascade streams a trajectory, [`Cascade::set_trajectory`]).
+    pub trajectory: Option<TrajectoryLayout>,
+}
+
+/// How the arm's segments are serialized.
+#[derive(Debug, Clone)]
+pub struct TrajectoryLayout {
+    /// The arm's joint names, in the segments' order.
+    pub names: Vec<String>,
+    /// Points with accelerations (JTC interpolates them with quintics), else with positions and
+    /// velocities (cubics, which reproduce the segments exactly too).
+    pub accelerations: bool,
 }
 
 /// What a received joint state is.
@@ -37,12 +53,14 @@ pub enum Received {
     Rejected { error: SabreError, ticks: bool },
 }
 
-/// The serialized commands of one step: the arm's, and the base's when one is due.
+/// The serialized commands of one step: the arm's velocity command (None when the arm takes
+/// segments), the base's when one is due, and the arm's next segment when one is due.
 #[derive(Debug, Clone, Default)]
 pub struct Answer {
-    pub arm: Vec<u8>,
+    pub arm: Option<Vec<u8>>,
     pub base: Option<Vec<u8>>,
     pub echo: Option<Vec<u8>>,
+    pub trajectory: Option<Vec<u8>>,
 }
 
 /// Counts the controller reports (τ_ext's are the cascade's: [`crate::control::ExternalTorque`]).
@@ -73,8 +91,8 @@ pub struct BridgeTick {
     estimator: Option<ObjectStateEstimator>,
     nq: usize,
     object: (Vec<f64>, Vec<f64>),
-    last_stamp: Option<f64>,
-    origin: Option<f64>,
+    last_stamp: Option<Stamp>,
+    origin: Option<Stamp>,
     last_t: Option<f64>,
     stamp: Stamp,
     x: Vec<f64>,
@@ -141,16 +159,18 @@ impl BridgeTick {
             return Received::Merged;
         }
         if let Some(last) = self.last_stamp {
-            if t_abs <= last {
+            if stamp.nanoseconds() <= last.nanoseconds() {
                 self.counts.rejected += 1;
                 let error = SabreError::invalid("joint state", format!("stamp {t_abs:.6} is not after the previous one"));
                 return Received::Rejected { error, ticks: true };
             }
         }
-        self.last_stamp = Some(t_abs);
-        let origin = *self.origin.get_or_insert(t_abs);
+        self.last_stamp = Some(stamp);
+        // the ticks' time from the first state's stamp, exact to the nanosecond: a segment stamped with
+        // a state's stamp starts at exactly that time
+        let origin = *self.origin.get_or_insert(stamp);
         Received::Tick {
-            t: t_abs - origin,
+            t: stamp.seconds_since(&origin),
             fresh: self.joints.fresh(received),
         }
     }
@@ -236,20 +256,66 @@ impl BridgeTick {
         }
         let period = shaping_of(cascade)?.gate().period();
         let dt = self.step_to(t, period);
-        let out = cascade.tick_shaped(&self.x, t, dt, received)?.clone();
         self.counts.followed += 1;
-        self.answer(&out, Some(self.stamp)).map(Followed::Answered)
+        if cascade.trajectory().is_some() {
+            let tick = cascade.tick_trajectory(&self.x, t, dt, received)?;
+            return self
+                .answer(&tick.command, tick.segment.as_ref(), Some(self.stamp))
+                .map(Followed::Answered);
+        }
+        let out = cascade.tick_shaped(&self.x, t, dt, received)?.clone();
+        self.answer(&out, None, Some(self.stamp)).map(Followed::Answered)
     }
 
-    /// A step of the cascade's ramp to zero answering the newest state (or a rejected one).
+    /// A step of the cascade's ramp to zero answering the newest state (or a rejected one); an arm
+    /// on segments gets its stop segment once, from the newest state's time.
     pub fn stop(&mut self, cascade: &mut Cascade, received: f64) -> Result<Answer> {
+        if cascade.trajectory().is_some() {
+            let t = self.time_of(self.stamp);
+            let tick = cascade.stop_trajectory(t, received)?;
+            return self.answer(&tick.command, tick.segment.as_ref(), Some(self.stamp));
+        }
         let out = shaping_mut(cascade)?.stop(received)?.clone();
-        self.answer(&out, Some(self.stamp))
+        self.answer(&out, None, Some(self.stamp))
     }
 
-    fn answer(&mut self, command: &Command, answers: Option<Stamp>) -> Result<Answer> {
+    /// The ticks' time of a stamp on the states' clock (0 before the first state).
+    fn time_of(&self, stamp: Stamp) -> f64 {
+        self.origin.map_or(0.0, |origin| stamp.seconds_since(&origin))
+    }
+
+    fn answer(&mut self, command: &Command, segment: Option<&Segment>, answers: Option<Stamp>) -> Result<Answer> {
         self.counts.ticks += u64::from(answers.is_some());
-        self.encode(command, answers, answers.unwrap_or_default())
+        let stamp = answers.unwrap_or_default();
+        let mut out = self.encode(command, answers, stamp)?;
+        if let Some(segment) = segment {
+            out.trajectory = Some(self.encode_segment(segment, stamp)?);
+        }
+        Ok(out)
+    }
+
+    /// A segment as a JointTrajectory stamped `stamp` (its start).
+    fn encode_segment(&self, segment: &Segment, stamp: Stamp) -> Result<Vec<u8>> {
+        let layout = self.layout.trajectory.as_ref().ok_or_else(|| {
+            SabreError::invalid(
+                "trajectory",
+                "the cascade streams segments but the bridge names no trajectory joints",
+            )
+        })?;
+        let points: Vec<TrajectoryPoint> = segment
+            .times
+            .iter()
+            .zip(&segment.states)
+            .map(|(&t, s)| TrajectoryPoint {
+                time_from_start: t,
+                positions: s.q.clone(),
+                velocities: s.v.clone(),
+                accelerations: if layout.accelerations { s.a.clone() } else { Vec::new() },
+            })
+            .collect();
+        let mut out = Vec::new();
+        messages::encode_joint_trajectory(&mut out, stamp, &layout.names, &points)?;
+        Ok(out)
     }
 
     /// Serializes one step: the arm command carries the answered state's stamp's nanoseconds in
@@ -257,7 +323,11 @@ impl BridgeTick {
     /// 0 for a step that answers none; a stamped base command carries `stamp`.
     fn encode(&mut self, command: &Command, answers: Option<Stamp>, stamp: Stamp) -> Result<Answer> {
         let mut out = Answer::default();
-        messages::encode_float64_array(&mut out.arm, &command.arm, answers.map_or(0, |s| s.nanosec))?;
+        if self.layout.trajectory.is_none() {
+            let mut arm = Vec::new();
+            messages::encode_float64_array(&mut arm, &command.arm, answers.map_or(0, |s| s.nanosec))?;
+            out.arm = Some(arm);
+        }
         if command.base_due {
             let mut base = Vec::new();
             let (b, stamped) = (&command.base, self.layout.cmd_vel_stamped);
@@ -270,7 +340,7 @@ impl BridgeTick {
             )?;
             out.base = Some(base);
         }
-        if let Some(names) = &self.layout.echo_names {
+        if let Some(names) = self.layout.echo_names.as_ref().filter(|_| self.layout.trajectory.is_none()) {
             let mut echo = Vec::new();
             messages::encode_joint_state(&mut echo, stamp, "", names, &[], &command.arm, &[])?;
             out.echo = Some(echo);
@@ -287,8 +357,18 @@ impl BridgeTick {
         steps.iter().map(|c| self.encode(c, None, stamp)).collect()
     }
 
-    /// One step of the cascade's ramp to zero outside the ticks (a shutdown's), None once at rest.
+    /// One step of the cascade's ramp to zero outside the ticks (a shutdown's) stamped `stamp` (the
+    /// states' clock), None once at rest; an arm on segments gets its stop segment first, from the
+    /// time of `stamp`.
     pub fn ramp_step(&mut self, cascade: &mut Cascade, stamp: Stamp) -> Result<Option<Answer>> {
+        if cascade.trajectory().is_some_and(|s| !s.stopped() && s.sent().is_some()) {
+            let segment = cascade.stop_segment(self.time_of(stamp))?;
+            let command = shaping_of(cascade)?.gate().command().clone();
+            let mut out = self.encode(&command, None, stamp)?;
+            out.base = None;
+            out.trajectory = segment.map(|s| self.encode_segment(&s, stamp)).transpose()?;
+            return Ok(Some(out));
+        }
         let gate = shaping_mut(cascade)?.gate_mut();
         if gate.shaper().at_rest() {
             return Ok(None);

@@ -2,8 +2,9 @@
 //! the planner, taking over at its time), τ_ext conditioned, the FILTER-QP (41) with the tank's passivity row
 //! (56) and the hard joint-limit bound ([`LimitBound`]), the tank's refill and step (49), the low-level
 //! torque (53), and for a robot's command interface the command shaping ([`CommandShaping`]). `run_episode`,
-//! the deployment loop and the ROS bridge all tick through [`Cascade::tick`]; [`Cascade::follow`] runs it on
-//! the Rust plant.
+//! the deployment loop and the ROS bridge's velocity stream all tick through [`Cascade::tick`];
+//! [`Cascade::follow`] runs it on the Rust plant. An arm on a joint_trajectory_controller ticks through
+//! [`Cascade::tick_trajectory`] instead (the `trajectory` child module).
 
 use std::sync::{Arc, Mutex, MutexGuard};
 
@@ -12,6 +13,7 @@ use super::low_level::LowLevelController;
 use super::plan::Plan;
 use super::shaping::CommandShaping;
 use super::tau_ext::ExternalTorque;
+use super::trajectory_stream::{FilteredSteps, TrajectoryStream};
 use crate::error::{ensure_finite, ensure_len, Result, SabreError};
 use crate::model::{LimitBound, LimitBoundConfig};
 use crate::safety::{EnergyTank, FilterStatus, SafetyFilter};
@@ -116,6 +118,8 @@ pub struct Cascade {
     nq: usize,
     out: TickOutput,
     ticks: u64,
+    trajectory: Option<TrajectoryStream>,
+    filtered_steps: FilteredSteps,
 }
 
 impl Cascade {
@@ -166,6 +170,8 @@ impl Cascade {
             nq,
             out: TickOutput::new(nq, nq),
             ticks: 0,
+            trajectory: None,
+            filtered_steps: Default::default(),
         })
     }
 
@@ -199,6 +205,7 @@ impl Cascade {
         let mut limits = self.limits.clone();
         limits.clear_braking();
         brake_as_shaped(&mut limits, &shaping)?;
+        self.rebrake_trajectory(&mut limits, shaping.arm_index())?;
         (self.limits, self.shaping) = (limits, Some(shaping));
         Ok(())
     }
@@ -210,6 +217,7 @@ impl Cascade {
         let mut limits = LimitBound::new(&scene, config)?;
         if let Some(shaping) = &self.shaping {
             brake_as_shaped(&mut limits, shaping)?;
+            self.rebrake_trajectory(&mut limits, shaping.arm_index())?;
         }
         self.limits = limits;
         Ok(())
@@ -544,7 +552,11 @@ fn brake_as_shaped(limits: &mut LimitBound, shaping: &CommandShaping) -> Result<
     Ok(())
 }
 
+mod trajectory;
+
 #[cfg(test)]
 mod limit_tests;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod trajectory_tests;

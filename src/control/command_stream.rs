@@ -234,21 +234,21 @@ impl CommandGate {
         Ok(&self.command)
     }
 
-    /// The ramp steps due at `now` because no tick came for `state_timeout`, at most `limit` of
-    /// them (a late look catches up over the next ones), into `out`: its length becomes their
-    /// number, and the commands already in it are reused.
+    /// The ramp step due at `now` because no tick came for `state_timeout` (none when `limit` is 0),
+    /// into `out`: its length becomes the number of steps, and a command already in it is reused.
+    /// One step per look, a period after the last command at the earliest: a late look slows the
+    /// ramp and never steepens it (a robot that missed cycles would see the steps it caught up on
+    /// arrive in one cycle).
     pub fn watchdog(&mut self, now: f64, limit: usize, out: &mut Vec<Command>) {
         let mut count = 0;
-        if self.ramp_due(now) {
-            while count < limit && !self.shaper.at_rest() && now - self.last_command >= self.period - DUE_SLACK {
-                if count == out.len() {
-                    out.push(self.shaper.command());
-                }
-                self.last_command += self.period;
-                // Neither target is given, so the step cannot fail.
-                let _ = self.shaper.step(None, None, &mut out[count]);
-                count += 1;
+        if limit > 0 && self.ramp_due(now) && !self.shaper.at_rest() && now - self.last_command >= self.period - DUE_SLACK {
+            if out.is_empty() {
+                out.push(self.shaper.command());
             }
+            self.last_command = now.max(self.last_command + self.period);
+            // Neither target is given, so the step cannot fail.
+            let _ = self.shaper.step(None, None, &mut out[0]);
+            count = 1;
         }
         out.truncate(count);
     }
@@ -416,9 +416,9 @@ mod tests {
         while now < last_tick + 1.0 {
             // an irregular watchdog: looks 0.7 periods apart
             gate.watchdog(now, 10, &mut steps);
-            let end = gate.last_command();
-            for (k, command) in steps.iter().enumerate() {
-                times.push(end - (steps.len() - 1 - k) as f64 * DT);
+            assert!(steps.len() <= 1, "one step per look");
+            for command in &steps {
+                times.push(gate.last_command());
                 stream.push(command.arm.clone());
             }
             let wait = gate.next_look(now);
@@ -428,7 +428,10 @@ mod tests {
         assert_eq!(gate.stale_events(), 1);
         assert_eq!(gate.stale_since(), Some(last_tick + 0.0503));
         assert!(times[0] > last_tick + 0.05 && times[0] <= last_tick + 0.05 + DT + 1e-9);
-        assert!(times.windows(2).all(|w| (w[1] - w[0] - DT).abs() < 1e-9));
+        // a period apart, or the look after (0.7 periods later) when a look fell just short
+        assert!(times
+            .windows(2)
+            .all(|w| w[1] - w[0] >= DT - 1e-9 && w[1] - w[0] <= DT + 0.0007 + 1e-9));
         assert!(times.len() <= bound, "{} steps, bound {bound}", times.len());
         assert!(gate.shaper().at_rest() && stream.last().unwrap().iter().all(|v| *v == 0.0));
         assert_eq!(gate.next_look(now), 0.05);
@@ -439,7 +442,7 @@ mod tests {
     }
 
     #[test]
-    fn a_late_look_catches_up_at_most_limit_steps_at_once() {
+    fn a_late_look_takes_one_step_and_the_next_comes_a_period_later() {
         let mut gate = gate();
         follow(&mut gate, &[0.8, -1.2], 300);
         let mut steps = Vec::new();
@@ -447,17 +450,24 @@ mod tests {
         gate.watchdog(first, 10, &mut steps);
         assert_eq!(steps.len(), 1);
         assert!((gate.last_command() - first).abs() < 1e-12);
-        // 10.5 periods later: 10 steps are due, 3 at a time
+        // 10.5 periods late: one step, never the ten that were due (they would reach the robot in one
+        // of its cycles); the ramp goes on a period after it
         let late = first + 0.0105;
-        gate.watchdog(late, 3, &mut steps);
-        assert_eq!(steps.len(), 3);
-        assert_eq!(gate.next_look(late), 0.0);
-        gate.watchdog(late, 100, &mut steps);
-        assert_eq!(steps.len(), 7);
-        assert!((gate.last_command() - (first + 0.010)).abs() < 1e-12);
-        gate.watchdog(late, 100, &mut steps);
+        let before = gate.command().arm.clone();
+        gate.watchdog(late, 10, &mut steps);
+        assert_eq!(steps.len(), 1);
+        let step = steps[0]
+            .arm
+            .iter()
+            .zip(&before)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(step <= 10.0 * DT + 1e-12, "one step of the ramp (at most A_MAX·DT): {step}");
+        gate.watchdog(late, 10, &mut steps);
         assert!(steps.is_empty());
-        assert!((gate.next_look(late) - 0.0005).abs() < 1e-9);
+        assert!((gate.next_look(late) - DT).abs() < 1e-9);
+        gate.watchdog(late + DT, 0, &mut steps);
+        assert!(steps.is_empty(), "limit 0: none");
         assert_eq!(gate.stale_events(), 1);
         // the ticks come back, then stop again: a second event
         gate.on_tick(1.0, None, None).unwrap();
@@ -476,9 +486,9 @@ mod tests {
         gate.watchdog(last_tick + 0.0015, 10, &mut steps);
         assert!(steps.is_empty(), "not before two periods without a tick");
         assert!((gate.next_look(last_tick + 0.0015) - 0.0005).abs() < 1e-12);
-        // two periods without a tick: both steps due since the last command, none of the timeout's hold
+        // two periods without a tick: a step (one per look), none of the timeout's hold
         gate.watchdog(last_tick + 0.002, 10, &mut steps);
-        assert_eq!(steps.len(), 2);
+        assert_eq!(steps.len(), 1);
         assert!((gate.last_command() - (last_tick + 0.002)).abs() < 1e-12);
         assert_eq!(gate.stale_events(), 0, "no stale event before the state timeout");
         let mut now = last_tick + 0.0027;

@@ -11,6 +11,7 @@ pub mod rate_limit;
 pub mod segment;
 pub mod shaping;
 pub mod tau_ext;
+pub mod trajectory_stream;
 
 pub use cascade::{Cascade, Shared, TickOutput, TrackTrace};
 pub use low_level::{LowLevelConfig, LowLevelController};

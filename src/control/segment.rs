@@ -94,43 +94,142 @@ const REST_ACCELERATION: f64 = 1e-4;
 /// The longest stop (s) a segment holds; a stop that takes longer is an error (limits far too low).
 const LONGEST_STOP: f64 = 60.0;
 
-impl Segment {
-    /// The segment from `start` that follows `targets[k]` (velocities, one per joint) over knot
-    /// interval k, then stops at rest (see the module).
-    pub fn build(shape: &SegmentShape, start: &KnotState, targets: &[Vec<f64>]) -> Result<Self> {
+/// A segment built knot by knot: from a start, each [`Self::push`] follows a target velocity over one
+/// knot interval (see the module); [`Self::finish`] adds the stop to rest and drops the knots one
+/// cubic spans. The caller can read the state reached between pushes ([`Self::state`]), as the
+/// sequential filter does to filter the next target at the state the segment will be in.
+#[derive(Debug, Clone)]
+pub struct SegmentBuilder<'a> {
+    shape: &'a SegmentShape,
+    states: Vec<KnotState>,
+}
+
+impl<'a> SegmentBuilder<'a> {
+    /// A segment of `shape` from `start`. Errors: a start of the wrong size or not finite.
+    pub fn new(shape: &'a SegmentShape, start: &KnotState) -> Result<Self> {
         let n = shape.joints();
         for (name, v) in [("q", &start.q), ("v", &start.v), ("a", &start.a)] {
             if v.len() != n || !v.iter().all(|x| x.is_finite()) {
                 return Err(SabreError::invalid(name, format!("need {n} finite values, got {v:?}")));
             }
         }
-        if let Some(t) = targets.iter().find(|t| t.len() != n || !t.iter().all(|x| x.is_finite())) {
+        Ok(Self {
+            shape,
+            states: vec![start.clone()],
+        })
+    }
+
+    /// The state reached so far.
+    pub fn state(&self) -> &KnotState {
+        self.states.last().expect("the start")
+    }
+
+    /// Knots so far, the start included.
+    pub fn len(&self) -> usize {
+        self.states.len()
+    }
+
+    /// Always false: a builder holds its start.
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// One knot interval following `target` (one velocity per joint). Errors: a target of the wrong
+    /// size or not finite; nothing changes then.
+    pub fn push(&mut self, target: &[f64]) -> Result<()> {
+        let n = self.shape.joints();
+        if target.len() != n || !target.iter().all(|x| x.is_finite()) {
             return Err(SabreError::invalid(
                 "targets",
-                format!("need {n} finite velocities each, got {t:?}"),
+                format!("need {n} finite velocities each, got {target:?}"),
             ));
         }
-        let mut states = vec![start.clone()];
-        let mut state = start.clone();
-        let zero = vec![0.0; n];
-        let stop_knots = (LONGEST_STOP / shape.knot).ceil() as usize;
-        for k in 0..targets.len() + stop_knots {
-            let target = targets.get(k).unwrap_or(&zero);
-            if k >= targets.len()
-                && state.v.iter().all(|v| v.abs() < REST_VELOCITY)
-                && state.a.iter().all(|a| a.abs() < REST_ACCELERATION)
-            {
-                let last = states.last_mut().expect("the start");
+        let next = Segment::step(self.shape, self.state(), target);
+        self.states.push(next);
+        Ok(())
+    }
+
+    /// The segment: the knots pushed, then a stop to rest (see the module). Errors: a stop longer
+    /// than a minute (limits far too low).
+    pub fn finish(mut self) -> Result<Segment> {
+        let zero = vec![0.0; self.shape.joints()];
+        let stop_knots = (LONGEST_STOP / self.shape.knot).ceil() as usize;
+        for _ in 0..=stop_knots {
+            let state = self.state();
+            if state.v.iter().all(|v| v.abs() < REST_VELOCITY) && state.a.iter().all(|a| a.abs() < REST_ACCELERATION) {
+                let last = self.states.last_mut().expect("the start");
                 last.v.iter_mut().chain(last.a.iter_mut()).for_each(|x| *x = 0.0);
-                return Ok(Self::compressed(shape.knot, states));
+                return Ok(Segment::compressed(self.shape.knot, self.states));
             }
-            state = Self::step(shape, &state, target);
-            states.push(state.clone());
+            let next = Segment::step(self.shape, state, &zero);
+            self.states.push(next);
         }
         Err(SabreError::invalid(
             "limits",
             format!("the stop takes longer than {LONGEST_STOP} s"),
         ))
+    }
+}
+
+impl Segment {
+    /// The segment from `start` that follows `targets[k]` (velocities, one per joint) over knot
+    /// interval k, then stops at rest (see the module).
+    pub fn build(shape: &SegmentShape, start: &KnotState, targets: &[Vec<f64>]) -> Result<Self> {
+        let mut builder = SegmentBuilder::new(shape, start)?;
+        for target in targets {
+            builder.push(target)?;
+        }
+        builder.finish()
+    }
+
+    /// The segment that follows `old` (in force from its own time 0) from its time `from` to `splice`
+    /// and then `new`, which must start at `old`'s state at `splice`: times from `from`. Sampled, it
+    /// is `old` itself up to `splice` (a cubic's piece is that cubic), so a robot that takes it over
+    /// anywhere in [from, splice] sees no change. Errors: `splice` before `from`, or `new` not
+    /// starting where `old` is at `splice`.
+    pub fn spliced(old: &Segment, from: f64, splice: f64, new: &Segment) -> Result<Self> {
+        if !(from.is_finite() && splice.is_finite() && splice >= from) {
+            return Err(SabreError::invalid(
+                "splice",
+                format!("must be finite and not before {from}, got {splice}"),
+            ));
+        }
+        let at = old.sample(splice);
+        let first = new
+            .states
+            .first()
+            .ok_or_else(|| SabreError::invalid("segment", "has no knots"))?;
+        let close = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= 1e-9 * (1.0 + x.abs()));
+        if !(close(&at.q, &first.q) && close(&at.v, &first.v) && close(&at.a, &first.a)) {
+            return Err(SabreError::invalid(
+                "segment",
+                "does not start where the segment in force is at the splice",
+            ));
+        }
+        let mut times = vec![0.0];
+        let mut states = vec![old.sample(from)];
+        // a knot closer than this to the ends is left out: a message carries times in whole
+        // nanoseconds, which must increase
+        let apart = 1e-6;
+        for (&t, s) in old.times.iter().zip(&old.states) {
+            if t > from + apart && t < splice - apart {
+                times.push(t - from);
+                states.push(s.clone());
+            }
+        }
+        let offset = splice - from;
+        let skip = usize::from(offset <= 0.0);
+        for (k, (&t, s)) in new.times.iter().zip(&new.states).enumerate().skip(skip) {
+            // the splice's own state: the segment in force's there, exactly
+            states.push(if k == 0 { at.clone() } else { s.clone() });
+            times.push(t + offset);
+        }
+        Ok(Self { times, states })
+    }
+
+    /// The time (s from its start) at which the segment is at rest for good: its last knot's.
+    pub fn end(&self) -> f64 {
+        self.times.last().copied().unwrap_or(0.0)
     }
 
     fn step(shape: &SegmentShape, s: &KnotState, target: &[f64]) -> KnotState {

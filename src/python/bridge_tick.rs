@@ -15,12 +15,18 @@ use super::error::run;
 use super::estimation::PyObjectStateEstimator;
 use super::messages::stamp_of;
 use super::scene::PyScene;
-use crate::bridge::tick::{shaping_of, Answer, BridgeLayout, BridgeTick, Followed, Received};
+use crate::bridge::tick::{shaping_of, Answer, BridgeLayout, BridgeTick, Followed, Received, TrajectoryLayout};
 use crate::control::command_stream::CommandGate;
 use crate::control::{Cascade, Shared, WrenchFrames};
 
-/// (arm command, base command or None, command echo or None) as bytes to publish.
-type Step<'py> = (Bound<'py, PyBytes>, Option<Bound<'py, PyBytes>>, Option<Bound<'py, PyBytes>>);
+/// (arm velocity command or None, base command or None, command echo or None, arm trajectory
+/// segment or None) as bytes to publish.
+type Step<'py> = (
+    Option<Bound<'py, PyBytes>>,
+    Option<Bound<'py, PyBytes>>,
+    Option<Bound<'py, PyBytes>>,
+    Option<Bound<'py, PyBytes>>,
+);
 
 /// What `follow` returns: why nothing was sent ("planning", "plan stale") or None, the step sent (None
 /// then), x (nx,), the tank's energy (None without a tank), the filter's status.
@@ -34,7 +40,12 @@ type Answered<'py> = (
 
 fn step<'py>(py: Python<'py>, answer: &Answer) -> Step<'py> {
     let bytes = |b: &Option<Vec<u8>>| b.as_ref().map(|b| PyBytes::new(py, b));
-    (PyBytes::new(py, &answer.arm), bytes(&answer.base), bytes(&answer.echo))
+    (
+        bytes(&answer.arm),
+        bytes(&answer.base),
+        bytes(&answer.echo),
+        bytes(&answer.trajectory),
+    )
 }
 
 /// The controller node's 1 kHz path (see `sabre.ros.controller_loop`): joint states merged by
@@ -52,7 +63,7 @@ pub struct PyBridgeTick {
 impl PyBridgeTick {
     #[new]
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (cascade, joints, estimator, object_position, object_velocity, max_tick_dt, cmd_vel_stamped, cmd_vel_frame, echo_names=None))]
+    #[pyo3(signature = (cascade, joints, estimator, object_position, object_velocity, max_tick_dt, cmd_vel_stamped, cmd_vel_frame, echo_names=None, trajectory_names=None, trajectory_accelerations=false))]
     fn new(
         cascade: &PyCascade,
         joints: &PyJointMerge,
@@ -63,12 +74,18 @@ impl PyBridgeTick {
         cmd_vel_stamped: bool,
         cmd_vel_frame: String,
         echo_names: Option<Vec<String>>,
+        trajectory_names: Option<Vec<String>>,
+        trajectory_accelerations: bool,
     ) -> PyResult<Self> {
         let layout = BridgeLayout {
             max_tick_dt,
             cmd_vel_stamped,
             cmd_vel_frame,
             echo_names,
+            trajectory: trajectory_names.map(|names| TrajectoryLayout {
+                names,
+                accelerations: trajectory_accelerations,
+            }),
         };
         let tick = run(|| {
             BridgeTick::new(

@@ -13,6 +13,11 @@ use super::convert::{array, lock, view};
 use super::error::{run, run_detached};
 use super::safety::{PyEnergyTank, PyLimitBoundConfig, PySafetyFilter};
 use super::sim::PyPlant;
+use crate::control::segment::SegmentShape;
+use crate::control::trajectory_stream::{
+    TrajectoryConfig, TRAJECTORY_FILTER_STEP, TRAJECTORY_KNOT, TRAJECTORY_LEAD, TRAJECTORY_PERIOD, TRAJECTORY_TIME_CONSTANT,
+    TRAJECTORY_TOLERATED_GAP,
+};
 use crate::control::{Cascade, CommandShaping, ExternalTorque, Shared, TrackTrace, WrenchFrames};
 
 /// A tick's output: the reference, the command after the filter, the torques (nq,), the tank's energy
@@ -136,6 +141,58 @@ impl PyCascade {
             let shaping = CommandShaping::new(gate.gate(), arm_index, base_index, self.nq)?;
             lock(&self.inner).set_shaping(shaping)
         })
+    }
+
+    /// Streams the arm's commands as trajectory segments for a joint_trajectory_controller from now on
+    /// (after `set_shaping`, whose arm joints they carry; the base keeps its stream): per arm joint the
+    /// segments' `velocity`, `acceleration` and `jerk` bounds and JTC's `position_gain` (1/s), a
+    /// segment every `period` s spliced `lead` s after its stamp, following the filtered plan for
+    /// `tolerated_gap` + `period` before its stop, filtered every `filter_step` s on knots `knot` s
+    /// apart with the velocity's time constant `time_constant`. The targets take JTC's feedback
+    /// k_p (q_d − q) off, so that the robot executes the filtered command.
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (velocity, acceleration, jerk, position_gain, period=TRAJECTORY_PERIOD, lead=TRAJECTORY_LEAD, tolerated_gap=TRAJECTORY_TOLERATED_GAP, filter_step=TRAJECTORY_FILTER_STEP, knot=TRAJECTORY_KNOT, time_constant=TRAJECTORY_TIME_CONSTANT))]
+    fn set_trajectory(
+        &self,
+        velocity: Vec<f64>,
+        acceleration: Vec<f64>,
+        jerk: Vec<f64>,
+        position_gain: Vec<f64>,
+        period: f64,
+        lead: f64,
+        tolerated_gap: f64,
+        filter_step: f64,
+        knot: f64,
+        time_constant: f64,
+    ) -> PyResult<()> {
+        run(|| {
+            let config = TrajectoryConfig {
+                shape: SegmentShape::new(velocity, acceleration, jerk, knot, time_constant)?,
+                period,
+                lead,
+                tolerated_gap,
+                filter_step,
+                position_gain,
+            };
+            lock(&self.inner).set_trajectory(config)
+        })
+    }
+
+    /// The trajectory stream's counts as a dict (published, stops, refused, fallbacks), None when the
+    /// arm's commands are not segments.
+    #[getter]
+    fn trajectory_counts<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let cascade = lock(&self.inner);
+        let Some(stream) = cascade.trajectory() else {
+            return Ok(None);
+        };
+        let c = stream.counts();
+        let d = PyDict::new(py);
+        d.set_item("published", c.published)?;
+        d.set_item("stops", c.stops)?;
+        d.set_item("refused", c.refused)?;
+        d.set_item("fallbacks", c.fallbacks)?;
+        Ok(Some(d))
     }
 
     /// Forgets the plans and the low-level controller's integral (the τ_ext readings stay).

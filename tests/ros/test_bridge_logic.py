@@ -164,12 +164,15 @@ def test_gate_ramps_to_zero_on_a_fake_clock_once_states_stop_and_never_steps():
     looks = np.arange(last_tick + 0.0503, last_tick + 1.5, 0.0007)  # an irregular watchdog
     times = []
     for now in looks:
-        for command in gate.watchdog(float(now)):
+        steps = gate.watchdog(float(now))
+        assert len(steps) <= 1  # one step per look: a late look slows the ramp, never steepens it
+        for command in steps:
             times.append(gate.last_command)
             stream.append(command.arm)
     assert gate.stale_events == 1
     assert times[0] <= last_tick + 0.05 + 0.001 + 1e-9
-    assert np.allclose(np.diff(times), 0.001)
+    gaps = np.diff(times)
+    assert np.all(gaps >= 0.001 - 1e-9) and np.all(gaps <= 0.001 + 0.0007 + 1e-9)
     assert shaper.at_rest and np.all(stream[-1] == 0.0)
     assert len(times) <= bound
     check_stream(np.array(stream), lim.arm, 0.001)

@@ -124,7 +124,8 @@ def test_the_core_tick_is_the_pipeline_of_its_python_pieces():
         assert (kind, error) == ("tick", None) and t == pytest.approx(1e-3 * k)
         reason, answer, xs, energy, status = s.tick.follow(t, received, True, horizon)
         assert reason is None and answer is not None
-        arm, base, echo = answer
+        arm, base, echo, segment = answer
+        assert segment is None  # the velocity stream: no segments
         e = s.estimator.update(q, t, math.inf, may_hook=True)
         expected_x = np.concatenate([q, qd, e.position, e.velocity])
         assert np.array_equal(xs, expected_x)
@@ -155,7 +156,7 @@ def test_fingers_merge_bad_states_get_ramp_steps_and_a_stale_joint_stops_followi
     kind, _, error = s.tick.receive(s.state(2, bad, qd), 0.003)
     assert kind == "rejected-tick" and "non-finite" in error
     assert s.tick.receive(b"\x00\x01\x00\x00", 0.004)[0] == "rejected-tick"  # unreadable: still answered
-    arm, _, _ = s.tick.stop(0.004)
+    arm, _, _, _ = s.tick.stop(0.004)
     assert np.array_equal(_core.decode_float64_array(arm)[0], np.zeros(len(s.arm)))  # at rest: zero
     assert s.tick.counts["rejected"] == 3
     # the base's joints are not in the arm's messages: they go stale after their timeout

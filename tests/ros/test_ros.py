@@ -220,24 +220,44 @@ def commanded(probe: Probe, condition) -> dict | None:
     return b if b["arm_commands"] > a["arm_commands"] and condition(a) and condition(b) else None
 
 
+def settled(probe: Probe, condition) -> dict | None:
+    """The sim robot's newest status once ``condition(status)`` holds on two statuses in a row with
+    the robot's ticks advancing in between (the trajectory interface sends nothing once it stopped)."""
+    seen = [m for _, m in probe.get("sim_status")][-2:]
+    if len(seen) < 2:
+        return None
+    a, b = ({kv.key: json.loads(kv.value) for kv in m.status[0].values} for m in seen)
+    return b if b["ticks"] > a["ticks"] and condition(a) and condition(b) else None
+
+
 def arm_speed(status: dict) -> float:
     return float(np.abs(status["last_arm_command"]).max())
 
 
 @pytest.mark.record("diagnostics", "sim_status", "hand_path", "markers")
-def test_lifecycle_ramps_in_and_down_on_estop_deactivate_and_sigterm_within_the_urdfs_limits(bridge, tmp_path):
+@pytest.mark.parametrize("interface", ["trajectory", "velocity"])
+def test_lifecycle_ramps_in_and_down_on_estop_deactivate_and_sigterm_within_the_urdfs_limits(bridge, tmp_path, interface):
     """The simulated robot publishes a robot description whose arm is limited to ARM_SPEED and a
     best-effort wrench. The controller answers with zeros until activated, ramps in, ramps to
     exactly zero on the e-stop (the robot stops; diagnostics at ERROR), resumes after reset and
-    start, ramps to zero on deactivation and, after reactivating, on SIGTERM; every command the
-    robot received (its own record) kept the description's velocity limit and the default
-    acceleration and jerk, and tripped no reflex."""
+    start, ramps to zero on deactivation and, after reactivating, on SIGTERM; every command in
+    effect at the robot's cycles (its own record) kept the description's velocity limit and the
+    interface's acceleration and jerk, and tripped no reflex: on joint_trajectory_controller's
+    interface (the segments' limits) and on the velocity stream (the stream's)."""
     domain, probe, processes = bridge
-    sim = start_node("sim-robot", domain.id, ["--object", "shelf"], {"robot_description_file": slow_robot(tmp_path)})
-    ctrl = start_node("control", domain.id, ["--object", "shelf"], {"autostart": False})
+    choice = {"arm_interface": interface}
+    sim = start_node("sim-robot", domain.id, ["--object", "shelf"], {"robot_description_file": slow_robot(tmp_path)} | choice)
+    ctrl = start_node("control", domain.id, ["--object", "shelf"], {"autostart": False} | choice)
     processes += [sim, ctrl]
     probe.wait_for(lambda: probe.transition("configure"), "the controller to configure (descriptions and publishers there)")
-    inactive = probe.wait_for(lambda: commanded(probe, lambda s: s["arm_commands"] > 300), "commands while inactive")
+    # a stop is waited for as a robot at rest: the velocity stream keeps sending zeros, the trajectory
+    # interface sends one stop segment and then nothing
+    stopped = commanded if interface == "velocity" else settled
+    if interface == "velocity":
+        inactive = probe.wait_for(lambda: commanded(probe, lambda s: s["arm_commands"] > 300), "commands while inactive")
+    else:
+        inactive = probe.wait_for(lambda: settled(probe, lambda s: s["ticks"] > 300), "the robot's ticks while inactive")
+        assert inactive["arm_commands"] == 0  # no trajectory until activated: JTC holds the arm
     assert max(inactive["arm_speed_max"]) == 0.0  # zeros until activated
     assert probe.transition("activate")
     probe.wait_for(lambda: commanded(probe, lambda s: arm_speed(s) > 0.05), "the arm to move")
@@ -253,25 +273,32 @@ def test_lifecycle_ramps_in_and_down_on_estop_deactivate_and_sigterm_within_the_
         "the e-stop in the diagnostics",
     )
     assert level == 2
-    probe.wait_for(lambda: commanded(probe, lambda s: arm_speed(s) == 0.0 and s["robot_speed"] < 0.05), "the robot to stop")
+    probe.wait_for(lambda: stopped(probe, lambda s: arm_speed(s) == 0.0 and s["robot_speed"] < 0.05), "the robot to stop")
     assert not probe.trigger("start").success  # latched until reset
     assert probe.trigger("reset").success and probe.trigger("start").success
     probe.wait_for(lambda: commanded(probe, lambda s: arm_speed(s) > 0.05), "the arm to move again")
 
     assert probe.transition("deactivate")
-    probe.wait_for(lambda: commanded(probe, lambda s: arm_speed(s) == 0.0), "the commands to ramp to zero on deactivation")
+    probe.wait_for(lambda: stopped(probe, lambda s: arm_speed(s) == 0.0), "the commands to ramp to zero on deactivation")
     assert probe.transition("activate")
     probe.wait_for(lambda: commanded(probe, lambda s: arm_speed(s) > 0.05), "the arm to move after reactivating")
     ctrl.process.send_signal(15)
     ctrl.process.wait(60)
     assert ctrl.process.returncode == 0
     summary = ctrl.summary()
-    assert summary["ramped_to_rest"] and summary["limits"]["arm_velocity"] == [ARM_SPEED] * 7
+    assert summary["ramped_to_rest"] and summary["arm_interface"] == interface
     sim.stop()
     record = sim.summary()
     assert record["last_arm_command"] == [0.0] * 7 and record["reflex_aborts"] == 0, record["reflex_errors"]
-    v_max, a_max, j_max = arm_limits(ARM_SPEED)
-    assert np.all(np.array(record["arm_speed_max"]) <= v_max + 1e-9), record["arm_speed_max"]
+    if interface == "velocity":
+        assert summary["limits"]["arm_velocity"] == [ARM_SPEED] * 7
+        v_max, a_max, j_max = arm_limits(ARM_SPEED)
+    else:
+        # the segments keep a share of the description's velocity and half of Franka's acceleration and jerk
+        v_max, a_max, j_max = (np.array(summary["limits"][k]) for k in ("arm_velocity", "arm_acceleration", "arm_jerk"))
+        assert np.all(v_max < ARM_SPEED) and np.all(a_max <= 0.5 * np.array(params.FRANKA_ACCELERATION))
+    # a segment's velocity peaks between its knots a few parts in 10⁷ above its bound
+    assert np.all(np.array(record["arm_speed_max"]) <= v_max * (1 + 1e-6) + 1e-9), record["arm_speed_max"]
     assert np.all(np.array(record["arm_accel_max"]) <= a_max * (1 + 1e-6) + 1e-6), record["arm_accel_max"]
     assert np.all(np.array(record["arm_jerk_max"]) <= j_max * (1 + 1e-6) + 1e-3), record["arm_jerk_max"]
 
@@ -295,6 +322,7 @@ def test_malformed_and_withheld_states_are_answered_with_ramps_never_steps(bridg
         ["--object", "shelf"],
         {
             "autostart": True,
+            "arm_interface": "velocity",  # the probe records the velocity stream's every command
             "odometry_topic": "",  # the base's joints come in the joint state too
             "wrench_topic": "",  # no wrist sensor here
             "robot_description_file": str(path),
@@ -431,7 +459,12 @@ def test_the_sim_robot_matches_answers_by_stamp_and_stops_on_its_command_timeout
     the arm at most command_timeout plus one tick after the last command, and it comes to rest;
     with the commands taken by the core at each tick and with an executor callback per command."""
     domain, probe, processes = bridge
-    sim = start_node("sim-robot", domain.id, ["--object", "shelf"], {"command_timeout": 0.05, "direct_middleware": direct})
+    sim = start_node(
+        "sim-robot",
+        domain.id,
+        ["--object", "shelf"],
+        {"command_timeout": 0.05, "direct_middleware": direct, "arm_interface": "velocity"},
+    )
     processes.append(sim)
     answered: list[float] = []
     answered_at: list[int] = []
@@ -511,7 +544,8 @@ def test_a_fixed_base_arm_is_driven_by_the_roles_of_its_own_description(bridge):
     assert len(opening["last_arm_command"]) == 7
     cmd_vel, odom = params.CONTROLLER_PARAMETERS["cmd_vel_topic"], params.CONTROLLER_PARAMETERS["odometry_topic"]
     assert probe.node.count_publishers(cmd_vel) == 0 and probe.node.count_subscribers(odom) == 0
-    arm_publishers = probe.node.get_publishers_info_by_topic(params.CONTROLLER_PARAMETERS["arm_command_topic"])
+    # the default interface: joint_trajectory_controller's topic
+    arm_publishers = probe.node.get_publishers_info_by_topic(params.CONTROLLER_PARAMETERS["trajectory_topic"])
     assert "sabre_controller" in {p.node_name for p in arm_publishers}
     sim.stop()
     record = sim.summary()

@@ -29,6 +29,7 @@ from .descriptions import Descriptions, build_controller
 from .durations import Durations
 from .inputs import JointStates, JointTorques, base_from_odometry
 from .qos import profile
+from .trajectory import arm_interface, stream_trajectory, trajectory_limits
 
 __all__ = ["ControllerLoop", "TASK_STATES"]
 
@@ -128,6 +129,12 @@ class ControllerLoop:
         gate = CommandGate(CommandShaper(self.limits), float(p["state_timeout"]))
         base = [int(i) for i in self.base_index] if self.has_base else None
         self.cascade.core.set_shaping(gate.core, [int(i) for i in self.arm_index], base)
+        self.arm_interface = arm_interface(p)
+        accelerations = False
+        if self.arm_interface == "trajectory":
+            self.trajectory_limits = trajectory_limits(self.scene.dq_limit[self.arm_index], p)
+            accelerations = stream_trajectory(self.cascade.core, self.trajectory_limits, p)
+        segments = self.arm_interface == "trajectory"
         self.tick = _core.BridgeTick(
             self.cascade.core,
             joints.core,
@@ -138,6 +145,8 @@ class ControllerLoop:
             bool(p["cmd_vel_stamped"]),
             str(p["cmd_vel_frame"]),
             list(self.arm_joints) if p["command_echo_topic"] else None,
+            list(self.arm_joints) if segments else None,
+            accelerations,
         )
 
     def _init_state(self) -> None:
@@ -173,11 +182,15 @@ class ControllerLoop:
         from nav_msgs.msg import Odometry
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Float64MultiArray
+        from trajectory_msgs.msg import JointTrajectory
 
         node = self.node
         self._subs: list[Any] = []
         self._pubs: list[Any] = []
-        self.arm_pub = node.create_publisher(Float64MultiArray, p["arm_command_topic"], profile(p["arm_command_qos"]))
+        if self.arm_interface == "trajectory":
+            self.arm_pub = node.create_publisher(JointTrajectory, p["trajectory_topic"], profile(p["trajectory_qos"]))
+        else:
+            self.arm_pub = node.create_publisher(Float64MultiArray, p["arm_command_topic"], profile(p["arm_command_qos"]))
         self.base_pub = None
         if self.has_base:
             kind = TwistStamped if p["cmd_vel_stamped"] else Twist
@@ -389,13 +402,17 @@ class ControllerLoop:
         self.task = "failed"
         self.stop_planner()
 
-    def _publish(self, arm: bytes, base: bytes | None, echo: bytes | None) -> None:
+    def _publish(self, arm: bytes | None, base: bytes | None, echo: bytes | None, segment: bytes | None) -> None:
         """Publishes one step of the command streams, serialized by the core tick (the caller holds
-        the lock). A command that answers a joint state carries that state's stamp's nanoseconds in
-        ``layout.data_offset``, which a velocity controller ignores and a robot (or the simulated
-        one) can match to the state, to measure the round trip without a message of its own; the
-        watchdog's and the shutdown's carry 0."""
-        self.arm_pub.publish(arm)
+        the lock): the arm's velocity command or, on the trajectory interface, its segment when one is
+        due (stamped with the answered state's stamp). A velocity command that answers a joint state
+        carries that state's stamp's nanoseconds in ``layout.data_offset``, which a velocity
+        controller ignores and a robot (or the simulated one) can match to the state, to measure the
+        round trip without a message of its own; the watchdog's and the shutdown's carry 0."""
+        if arm is not None:
+            self.arm_pub.publish(arm)
+        elif segment is not None:
+            self.arm_pub.publish(segment)
         if base is not None and self.base_pub is not None:
             self.base_pub.publish(base)
         if echo is not None and self.echo_pub is not None:
@@ -486,22 +503,21 @@ class ControllerLoop:
         self.failure = ""
 
     def ramp_down(self, deadline: float) -> bool:
-        """Publishes the ramp to zero from this thread, one step per period, until the streams rest
-        (the shutdown's stop: no executor delivers states any more). The watchdog stops first: two
-        threads stepping the limiters would put two steps into one period. Returns whether they did."""
+        """Publishes the ramp to zero from this thread, one step per period at most, until the
+        streams rest (the shutdown's stop: no executor delivers states any more; on the trajectory
+        interface the arm's stop segment goes first). The watchdog stops first: two threads stepping
+        the limiters would put two steps into one period. A late step delays the next one, never
+        brings it forward, so that a late wake-up slows the ramp and never steepens it. Returns
+        whether they came to rest."""
         self._stop_watchdog()
         period = self.tick.period
-        next_time = time.monotonic()
         while time.monotonic() < deadline:
             with self._lock:
                 step = self.tick.ramp_step(self.node.get_clock().now().nanoseconds)
                 if step is None:
                     return True
                 self._publish(*step)
-            next_time += period
-            rest = next_time - time.monotonic()
-            if rest > 0:
-                time.sleep(rest)
+            time.sleep(period)  # from the step just sent: the next is a period later or more
         return bool(self.tick.at_rest)
 
     def destroy(self) -> None:
@@ -569,9 +585,12 @@ class ControllerLoop:
             "estop": self.estop,
             "cpu_share": self.cpu_share(),
             "planner_process": self.cascade.planner_in_process,
-            "limits": {
-                "arm_velocity": list(self.limits.arm.velocity),
-                "arm_acceleration": list(self.limits.arm.acceleration),
-                "arm_jerk": list(self.limits.arm.jerk),
-            },
+            "arm_interface": self.arm_interface,
+            "trajectory": self.cascade.core.trajectory_counts,
+            "limits": self._limits_report(),
         }
+
+    def _limits_report(self) -> dict[str, list[float]]:
+        """The arm's command limits: the segments' on the trajectory interface, else the stream's."""
+        arm = self.trajectory_limits if self.arm_interface == "trajectory" else self.limits.arm
+        return {"arm_velocity": list(arm.velocity), "arm_acceleration": list(arm.acceleration), "arm_jerk": list(arm.jerk)}

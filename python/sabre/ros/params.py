@@ -19,6 +19,7 @@ __all__ = [
     "FRANKA_ACCELERATION",
     "FRANKA_JERK",
     "ROBUST_FRACTION",
+    "TRAJECTORY_FRACTION",
     "BASE_ACCELERATION",
     "BASE_JERK",
     "declare",
@@ -42,7 +43,11 @@ FRANKA_JERK = (7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0)
 ROBUST_FRACTION = 0.9
 #: The velocity stream's default promise (s): a gap this long between two deliveries (two missed
 #: 1 kHz cycles) passes Franka's checks.
-TOLERATED_GAP = 0.003
+TOLERATED_GAP = 0.005
+#: The share of Franka's acceleration and jerk bounds the trajectory interface's segments keep by
+#: default: JTC reproduces a segment exactly, so the share is left for the position feedback
+#: k_p (q_d − q) the robot adds and for a robot's own limits below Franka's.
+TRAJECTORY_FRACTION = 0.5
 
 #: The base's command limits (Ridgeback-like: its driver ramps at about 1 m/s² itself): acceleration
 #: of vx, vy (m/s²) and ωz (rad/s²) and their jerk; the velocity bounds come from the URDF.
@@ -59,6 +64,7 @@ TOPIC_DEFAULTS: dict[str, str] = {
     "tau_ext_topic": "",
     "object_state_topic": "",
     "arm_command_topic": "forward_velocity_controller/commands",
+    "trajectory_topic": "joint_trajectory_controller/joint_trajectory",
     "cmd_vel_topic": "cmd_vel",
     "command_echo_topic": "",
     "obstacle_topic": "sabre/obstacles",
@@ -76,6 +82,7 @@ QOS_DEFAULTS: dict[str, str] = {
     "tau_ext_qos": "sensor",
     "object_state_qos": "sensor",
     "arm_command_qos": "reliable",
+    "trajectory_qos": "reliable",
     "cmd_vel_qos": "reliable",
     "command_echo_qos": "sensor",
     "obstacle_qos": "reliable",
@@ -131,6 +138,17 @@ CONTROLLER_PARAMETERS: dict[str, Any] = {
     "base_acceleration_limits": UNSET_DOUBLES,
     "base_jerk_limits": UNSET_DOUBLES,
     "command_period": 0.001,  # s: the arm command stream's step (the robot's control cycle)
+    # the arm's command interface: "trajectory" (joint_trajectory_controller's topic, trajectory_topic)
+    # or "velocity" (a stream on arm_command_topic, robust to delivery gaps up to tolerated_gap)
+    "arm_interface": "trajectory",
+    "trajectory_rate": 100.0,  # Hz: segments published
+    "trajectory_lead": 0.03,  # s: from a segment's stamp to its splice (the delivery latency it absorbs)
+    "trajectory_tolerated_gap": 0.1,  # s: the pause in deliveries a segment rides out before its stop
+    "trajectory_interpolation": "cubic",  # or "quintic" (points with accelerations)
+    "trajectory_position_gain": 0.0,  # 1/s: the robot's JTC k_p (0: feedforward, see docs/ros2.md)
+    # segment limits (unset: velocity from the URDF, half of Franka's acceleration and jerk)
+    "trajectory_acceleration_limits": UNSET_DOUBLES,
+    "trajectory_jerk_limits": UNSET_DOUBLES,
     # lifecycle and task
     "autostart": False,  # configure and activate by itself (retrying until the inputs are there)
     "start_on_activate": True,  # activating starts the task (else the start service does)
@@ -186,17 +204,14 @@ SIM_ROBOT_PARAMETERS: dict[str, Any] = {
     "noise_seed": 0,
     "reflexes": True,  # Franka's discontinuity reflexes on the arm command
     # "cycle": the command in effect at each plant tick, delivery included, as the arm checks it (a
-    # tick the plant loop itself ran late is excused); "command": each arm command against the one
-    # before, one plant period apart (the stream as sent). "cycle" becomes the default with the
-    # trajectory interface: the velocity stream's catch-up bursts (the watchdog's missed steps, a
-    # late shutdown ramp) trip it on a loaded machine
-    "reflex_check": "command",
-    # the arm's command interface the robot runs: "velocity" (a forward command controller on
-    # arm_command_topic) or "trajectory" (joint_trajectory_controller's topic interface on
-    # trajectory_topic, with the velocity command interface v_d + k_p (q_d − q))
-    "arm_interface": "velocity",
-    "trajectory_topic": "joint_trajectory_controller/joint_trajectory",
-    "trajectory_position_gain": 10.0,  # 1/s: JTC's k_p, every arm joint
+    # tick the plant loop itself ran late is excused); "command" (a diagnostic): each arm command
+    # against the one before, one plant period apart (the stream as sent)
+    "reflex_check": "cycle",
+    # the arm's command interface the robot runs: "trajectory" (joint_trajectory_controller's topic
+    # interface on trajectory_topic, with the velocity command interface v_d + k_p (q_d − q)) or
+    # "velocity" (a forward command controller on arm_command_topic)
+    "arm_interface": "trajectory",
+    "trajectory_position_gain": 0.0,  # 1/s: JTC's k_p, every arm joint (0: feedforward)
     # the arm's commands and joint states taken and published by the core from the plant loop (no
     # executor callback per command); False: an executor callback per command
     "direct_middleware": True,

@@ -394,6 +394,10 @@ class SimRobotNode:
         counts = driver.counts()
         s["latency"].record_all(driver.take_latencies())
         step_max, step_change_max, speed_max, command = driver.arm_record()
+        if self._trajectory:
+            # the commands are JTC's, one per cycle: their extremes are the cycles'
+            speed_max, step_max, step_change_max = (np.asarray(m) for m in driver.cycle_maxima())
+            step_max, step_change_max = step_max * self.period, step_change_max * self.period**2
         state = self.scene.split_state(np.asarray(self.plant.state))
         lat = s["latency"]
         wall = time.monotonic() - self._start_wall

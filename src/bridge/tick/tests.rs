@@ -26,6 +26,7 @@ fn layout() -> BridgeLayout {
         cmd_vel_stamped: true,
         cmd_vel_frame: "base_link".into(),
         echo_names: None,
+        trajectory: None,
     }
 }
 
@@ -130,7 +131,7 @@ fn a_followed_state_is_the_cascades_shaped_tick_over_the_step_since_the_previous
         assert_eq!(tick.x(), &x[..]);
         let expected = by_hand.tick_shaped(&x, t, dt, received).unwrap().clone();
         assert_eq!(c.output().tank_energy, by_hand.output().tank_energy, "at {t}: another step");
-        let (arm, answers) = messages::decode_float64_array(&answer.arm).unwrap();
+        let (arm, answers) = messages::decode_float64_array(answer.arm.as_ref().unwrap()).unwrap();
         assert_eq!((arm, answers), (expected.arm.clone(), Stamp::from_seconds(stamp).nanosec));
         assert_eq!(answer.base.is_some(), expected.base_due);
         if let Some(base) = answer.base {
@@ -164,7 +165,7 @@ fn an_old_plan_is_not_followed_and_steps_that_answer_no_state_carry_no_stamp() {
         Followed::StalePlan
     ));
     // a ramp step answering that state carries its stamp
-    let (arm, answers) = messages::decode_float64_array(&tick.stop(&mut c, 1.06).unwrap().arm).unwrap();
+    let (arm, answers) = messages::decode_float64_array(tick.stop(&mut c, 1.06).unwrap().arm.as_ref().unwrap()).unwrap();
     assert_eq!(answers, Stamp::from_seconds(100.06).nanosec);
     assert!(arm.iter().all(|v| *v != 0.0), "a ramp step, not a step to zero: {arm:?}");
     // no state for longer than the timeout: the watchdog's steps answer none (0), the base's stamped
@@ -172,14 +173,14 @@ fn an_old_plan_is_not_followed_and_steps_that_answer_no_state_carry_no_stamp() {
     let steps = tick.watchdog(&mut c, 1.06 + STATE_TIMEOUT + 0.0105, 100, stamp).unwrap();
     assert!(!steps.is_empty());
     for step in &steps {
-        assert_eq!(messages::decode_float64_array(&step.arm).unwrap().1, 0);
+        assert_eq!(messages::decode_float64_array(step.arm.as_ref().unwrap()).unwrap().1, 0);
         if let Some(base) = &step.base {
             assert_eq!(messages::decode_twist(base, true).unwrap().stamp, Some(stamp));
         }
     }
     let mut rest = 0;
     while let Some(step) = tick.ramp_step(&mut c, stamp).unwrap() {
-        assert_eq!(messages::decode_float64_array(&step.arm).unwrap().1, 0);
+        assert_eq!(messages::decode_float64_array(step.arm.as_ref().unwrap()).unwrap().1, 0);
         rest += 1;
         assert!(rest <= 10_000, "the shutdown's ramp does not come to rest");
     }

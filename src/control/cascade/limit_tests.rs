@@ -16,14 +16,14 @@ use crate::model::LimitBoundConfig;
 use crate::safety::SafetyConfig;
 use crate::sim::{Plant, PlantConfig};
 
-const DT: f64 = 0.001;
+pub(super) const DT: f64 = 0.001;
 /// Franka's published joint limits.
-const FRANKA_VELOCITY: [f64; 7] = [2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61];
-const FRANKA_ACCELERATION: [f64; 7] = [15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0];
-const FRANKA_JERK: [f64; 7] = [7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0];
+pub(super) const FRANKA_VELOCITY: [f64; 7] = [2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61];
+pub(super) const FRANKA_ACCELERATION: [f64; 7] = [15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0];
+pub(super) const FRANKA_JERK: [f64; 7] = [7500.0, 3750.0, 5000.0, 6250.0, 7500.0, 10000.0, 10000.0];
 /// The robot's joints: base x, y, yaw, then the arm's seven.
-const ARM: [usize; 7] = [3, 4, 5, 6, 7, 8, 9];
-const BASE: [usize; 3] = [0, 1, 2];
+pub(super) const ARM: [usize; 7] = [3, 4, 5, 6, 7, 8, 9];
+pub(super) const BASE: [usize; 3] = [0, 1, 2];
 
 /// The bridge's default arm limits: Franka's, kept robust to two missed commands at 1 kHz
 /// (`sabre.ros.params.robust_arm_limits`).
@@ -45,7 +45,7 @@ fn held_wrist() -> LowLevelConfig {
     }
 }
 
-fn scene() -> Arc<Scene> {
+pub(super) fn scene() -> Arc<Scene> {
     Arc::new(Scene::load("royalpanda", "shelf", None).expect("built-in scene loads"))
 }
 
@@ -112,7 +112,14 @@ fn a_limiter_stop_from_the_bound_ends_within_its_distance_and_within_two_steps_o
 /// limits (a plan that swings several joints at once harder than that saturates the Panda's efforts
 /// in the simulated dynamics, and the joints it throws about go where no bound on their commands can
 /// keep them); one in seven ramps every joint to rest. Without `from` it jumps to its targets.
-fn random_plan(rng: &mut ChaCha8Rng, scene: &Scene, q: &[f64], joints: &[usize], t0: f64, from: Option<&[f64]>) -> Arc<Plan> {
+pub(super) fn random_plan(
+    rng: &mut ChaCha8Rng,
+    scene: &Scene,
+    q: &[f64],
+    joints: &[usize],
+    t0: f64,
+    from: Option<&[f64]>,
+) -> Arc<Plan> {
     let (nq, rows, dt) = (scene.nq(), 6, 0.05);
     let limits = scene.robot_limits();
     let mut reference = vec![0.0; rows * nq];
@@ -142,7 +149,7 @@ fn random_plan(rng: &mut ChaCha8Rng, scene: &Scene, q: &[f64], joints: &[usize],
 
 /// A start near the limits: the scene's start posture with panda_joint6 2 mrad inside the margin
 /// toward its upper limit (where the scripted pull leaves it) and panda_joint4 near its lower one.
-fn start(scene: &Scene, margin: f64) -> Vec<f64> {
+pub(super) fn start(scene: &Scene, margin: f64) -> Vec<f64> {
     let limits = scene.robot_limits();
     let mut x = scene.default_state();
     let q = scene.start_configuration();
@@ -285,7 +292,7 @@ fn shaped_commands_with_e_stops_and_stale_states_stop_every_joint_inside_its_mar
 /// Asserts that no robot joint of `x` has reached its URDF limit; returns the smallest distance to one.
 /// No tolerance: the plant's own limit holds a joint pressed against it a fraction of a milliradian
 /// past it, so a joint that got there shows, and one the bound kept off it stays well inside.
-fn within_limits(scene: &Scene, x: &[f64], what: &str) -> f64 {
+pub(super) fn within_limits(scene: &Scene, x: &[f64], what: &str) -> f64 {
     let mut closest = f64::INFINITY;
     for (i, l) in scene.robot_limits().iter().enumerate() {
         let inside = (l.upper - x[i]).min(x[i] - l.lower);

@@ -1,0 +1,231 @@
+//! The cascade's trajectory stream against the simulated robot's joint_trajectory_controller (the
+//! bridge's own emulation, fed the serialized messages), sampled at 1 kHz as Franka checks it: random
+//! plans pushing toward the limits, e-stops, stalls of the controller up to the tolerated gap and
+//! deliveries up to the lead late pass every check and keep every joint inside its limits; a stream
+//! that ends brings the arm to rest.
+
+use std::sync::{Arc, Mutex};
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::limit_tests::{random_plan, scene, start, ARM, BASE, DT, FRANKA_ACCELERATION, FRANKA_JERK, FRANKA_VELOCITY};
+use super::*;
+use crate::bridge::jtc::TrajectoryFollower;
+use crate::bridge::messages::{decode_joint_trajectory, encode_joint_trajectory, Stamp, TrajectoryPoint};
+use crate::bridge::reflexes::FrankaReflexes;
+use crate::control::command_stream::{CommandGate, CommandShaper};
+use crate::control::segment::{Segment, SegmentShape};
+use crate::control::trajectory_stream::TrajectoryConfig;
+use crate::control::{LowLevelConfig, RateLimiter};
+use crate::model::LimitBoundConfig;
+use crate::safety::SafetyConfig;
+
+/// The robot's clock's offset from the ticks' (s): stamps are on the robot's clock.
+const WALL: f64 = 1_000.0;
+
+fn names() -> Vec<String> {
+    (1..=7).map(|i| format!("panda_joint{i}")).collect()
+}
+
+fn config(tolerated_gap: f64, lead: f64, gain: f64) -> TrajectoryConfig {
+    let half = |l: &[f64; 7]| l.iter().map(|x| 0.5 * x).collect();
+    TrajectoryConfig {
+        shape: SegmentShape::new(
+            FRANKA_VELOCITY.iter().map(|v| 0.9 * v).collect(),
+            half(&FRANKA_ACCELERATION),
+            half(&FRANKA_JERK),
+            0.002,
+            0.01,
+        )
+        .unwrap(),
+        period: 0.01,
+        lead,
+        tolerated_gap,
+        filter_step: 0.01,
+        position_gain: vec![gain; 7],
+    }
+}
+
+/// A segment published at `from` (ticks' clock) as the robot receives it.
+fn message(segment: &Segment, from: f64) -> Vec<u8> {
+    let points: Vec<TrajectoryPoint> = segment
+        .times
+        .iter()
+        .zip(&segment.states)
+        .map(|(&t, s)| TrajectoryPoint {
+            time_from_start: t,
+            positions: s.q.clone(),
+            velocities: s.v.clone(),
+            accelerations: Vec::new(),
+        })
+        .collect();
+    let mut out = Vec::new();
+    encode_joint_trajectory(&mut out, Stamp::from_seconds(from + WALL), &names(), &points).unwrap();
+    out
+}
+
+#[derive(Clone, Copy, PartialEq, Debug)]
+enum Mode {
+    Follow,
+    Stop,
+    /// The controller is not scheduled: no tick, no publication.
+    Stall,
+}
+
+/// What a run saw: the first reflex, the smallest distance of a joint to its URDF limit, the arm's
+/// last velocity command, segments published.
+struct Outcome {
+    reflex: Option<String>,
+    closest: f64,
+    last: Vec<f64>,
+    published: u64,
+    /// The largest acceleration of the command in effect over the segments' bound.
+    accel: f64,
+}
+
+/// The cascade (with the FILTER-QP when `filtered`) streaming segments to the robot for `seconds`,
+/// modes drawn by `modes` (time → None: draw at random), deliveries `delay` late; the arm moves by
+/// its JTC's velocity command (position gain `gain`), the base by its stream.
+fn drive(
+    seed: u64,
+    (filtered, gain): (bool, f64),
+    seconds: f64,
+    lead: f64,
+    modes: &dyn Fn(f64) -> Option<Mode>,
+    delay: &dyn Fn(&mut ChaCha8Rng) -> f64,
+) -> Outcome {
+    let scene = scene();
+    let nq = scene.nq();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let arm = RateLimiter::new(
+        FRANKA_VELOCITY.to_vec(),
+        FRANKA_ACCELERATION.to_vec(),
+        FRANKA_JERK.to_vec(),
+        DT,
+    )
+    .unwrap();
+    let base = RateLimiter::new(vec![1.0; 3], vec![1.0, 1.0, 2.0], vec![10.0, 10.0, 20.0], 0.02).unwrap();
+    let gate = CommandGate::new(CommandShaper::new(arm, Some(base), 20), 0.05).unwrap();
+    let low = Arc::new(Mutex::new(
+        LowLevelController::new(scene.clone(), DT, LowLevelConfig::default()).unwrap(),
+    ));
+    let filter = filtered.then(|| Arc::new(Mutex::new(SafetyFilter::new(scene.clone(), SafetyConfig::default()).unwrap())));
+    let tank = Arc::new(Mutex::new(EnergyTank::new(10.0, 2.0, None, false).unwrap()));
+    let tau = ExternalTorque::new(nq, None, None, None).unwrap();
+    let mut cascade = Cascade::new(low, filter, Some(tank), tau).unwrap();
+    cascade
+        .set_shaping(CommandShaping::new(gate, ARM.to_vec(), Some(BASE), nq).unwrap())
+        .unwrap();
+    cascade.set_trajectory(config(0.1, lead, gain)).unwrap();
+    let mut robot = TrajectoryFollower::new(names(), vec![gain; 7]).unwrap();
+    let mut reflexes = FrankaReflexes::new(DT, &FRANKA_VELOCITY, &FRANKA_ACCELERATION, &FRANKA_JERK).unwrap();
+    let limits = scene.robot_limits();
+    let mut x = start(&scene, LimitBoundConfig::default().margin);
+    let (mut in_flight, mut base_in_effect) = (Vec::<(f64, Vec<u8>)>::new(), [0.0; 3]);
+    let (mut mode, mut until, mut next_plan) = (Mode::Follow, 0.0, 0.0);
+    let moving: Vec<usize> = ARM.iter().copied().chain([BASE[2]]).collect();
+    let mut outcome = Outcome {
+        reflex: None,
+        closest: f64::INFINITY,
+        last: vec![],
+        published: 0,
+        accel: 0.0,
+    };
+    // the robot's cycles fall between the controller's ticks
+    let phase = 0.000_37;
+    for k in 0..(seconds / DT).round() as usize {
+        let t = k as f64 * DT;
+        if t >= until {
+            mode = modes(t).unwrap_or_else(|| match rng.random::<f64>() {
+                r if r < 0.75 => Mode::Follow,
+                r if r < 0.85 => Mode::Stop,
+                _ => Mode::Stall,
+            });
+            let longest = if mode == Mode::Stall { 0.1 } else { 0.3 };
+            until = t + rng.random_range(0.02..longest);
+        }
+        if t >= next_plan {
+            cascade
+                .hand_over(random_plan(&mut rng, &scene, &x, &moving, t, None), None)
+                .unwrap();
+            next_plan = t + rng.random_range(0.05..0.4);
+        }
+        let tick = match mode {
+            Mode::Follow => Some(cascade.tick_trajectory(&x, t, DT, t).unwrap()),
+            Mode::Stop => Some(cascade.stop_trajectory(t, t).unwrap()),
+            Mode::Stall => None,
+        };
+        if let Some(tick) = tick {
+            if let Some(segment) = &tick.segment {
+                // one publisher's messages on a reliable topic arrive in order
+                let after = in_flight.last().map_or(t, |(arrival, _)| *arrival);
+                in_flight.push(((t + delay(&mut rng)).max(after), message(segment, t)));
+            }
+            if tick.command.base_due {
+                base_in_effect.copy_from_slice(&tick.command.base);
+            }
+        }
+        // the robot's cycle: deliveries, then its command
+        let now = t + phase;
+        for (_, raw) in in_flight.iter().filter(|(arrival, _)| *arrival <= now) {
+            robot
+                .receive(&decode_joint_trajectory(raw).unwrap(), now, now + WALL)
+                .unwrap();
+        }
+        in_flight.retain(|(arrival, _)| *arrival > now);
+        let q: Vec<f64> = ARM.iter().map(|&i| x[i]).collect();
+        let command = robot.command(now, &q).to_vec();
+        if let Some(e) = reflexes.check(&command) {
+            outcome.reflex.get_or_insert(format!("t = {t:.3}: {e}"));
+        }
+        if !outcome.last.is_empty() {
+            for j in 0..7 {
+                let a = (command[j] - outcome.last[j]) / DT;
+                outcome.accel = outcome.accel.max(a.abs() / (0.5 * FRANKA_ACCELERATION[j]));
+            }
+        }
+        for (k, &i) in ARM.iter().enumerate() {
+            x[i] += command[k] * DT;
+            x[nq + i] = command[k];
+        }
+        let yaw = x[BASE[2]];
+        let b = base_in_effect;
+        x[BASE[0]] += (yaw.cos() * b[0] - yaw.sin() * b[1]) * DT;
+        x[BASE[1]] += (yaw.sin() * b[0] + yaw.cos() * b[1]) * DT;
+        x[BASE[2]] += b[2] * DT;
+        for &i in &ARM {
+            outcome.closest = outcome.closest.min(x[i] - limits[i].lower).min(limits[i].upper - x[i]);
+        }
+        outcome.last = command;
+    }
+    outcome.published = cascade.trajectory().unwrap().counts().published;
+    outcome
+}
+
+#[test]
+fn random_plans_e_stops_and_stalls_up_to_the_tolerated_gap_pass_frankas_checks_inside_the_limits() {
+    // feedforward (JTC's gains zero) and with a position gain, whose feedback the segments take off
+    for (seed, filtered, gain) in [(1, true, 0.0), (2, false, 10.0), (3, true, 10.0)] {
+        let lead = 0.03;
+        let out = drive(seed, (filtered, gain), 6.0, lead, &|_| None, &|rng| {
+            rng.random_range(0.0..lead)
+        });
+        assert!(out.reflex.is_none(), "seed {seed}: {:?}", out.reflex);
+        assert!(out.closest > 0.0, "seed {seed}: a joint {} past its limit", -out.closest);
+        assert!(out.published > 100, "seed {seed}: {} segments", out.published);
+        if gain == 0.0 {
+            // the command in effect is the segments' velocity: their own acceleration bound holds at
+            // every cycle, splices and stops included
+            assert!(out.accel <= 1.0 + 1e-9, "seed {seed}: {} of the bound", out.accel);
+        }
+    }
+}
+
+#[test]
+fn a_stream_that_ends_brings_the_arm_to_rest_within_the_checks() {
+    let follow_then_stall = |t: f64| Some(if t < 1.5 { Mode::Follow } else { Mode::Stall });
+    let out = drive(4, (true, 10.0), 3.0, 0.03, &follow_then_stall, &|_| 0.002);
+    assert!(out.reflex.is_none(), "{:?}", out.reflex);
+    assert!(out.last.iter().all(|v| v.abs() < 1e-6), "at rest: {:?}", out.last);
+}
