@@ -13,40 +13,20 @@ between deliveries (count, p50, p99, p99.9, largest) the robot saw.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import os
-import subprocess
-import sys
-from collections.abc import Iterator
 
+from load import busy_cores
 from sabre.ros import params
 from sabre.ros.launch import run_bridge
 
 POSE = [1.0, 0.3, 0.0, 0.0, 0.0, 0.349]
-BUSY = "while True: pass"
-
-
-@contextlib.contextmanager
-def busy_cores(loaded: bool) -> Iterator[None]:
-    """One busy loop pinned to each core while the block runs (none when not ``loaded``)."""
-    loops = []
-    if loaded:
-        for core in range(os.cpu_count() or 1):
-            loops.append(subprocess.Popen(["taskset", "-c", str(core), sys.executable, "-c", BUSY]))
-    try:
-        yield
-    finally:
-        for p in loops:
-            p.kill()
-            p.wait()
 
 
 def run(obj: str, variant: str, seed: int, gap: float, loaded: bool, timeout: float) -> dict:
-    sensor = {"object_state_topic": params.SIM_ROBOT_PARAMETERS["ground_truth_topic"], "tolerated_gap": gap}
+    velocity = {"arm_interface": "velocity"}
+    sensor = {"object_state_topic": params.SIM_ROBOT_PARAMETERS["ground_truth_topic"], "tolerated_gap": gap} | velocity
     with busy_cores(loaded):
-        result = run_bridge(
-            obj, variant, seed, timeout=timeout, object_pose=POSE, sim_params={"reflex_check": "cycle"}, controller_params=sensor
-        )
+        sim = {"reflex_check": "cycle"} | velocity
+        result = run_bridge(obj, variant, seed, timeout=timeout, object_pose=POSE, sim_params=sim, controller_params=sensor)
     s = result.sim or {}
     return {
         "opened": bool(s.get("success")),
