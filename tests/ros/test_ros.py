@@ -544,8 +544,7 @@ def test_a_fixed_base_arm_is_driven_by_the_roles_of_its_own_description(bridge):
     assert len(opening["last_arm_command"]) == 7
     cmd_vel, odom = params.CONTROLLER_PARAMETERS["cmd_vel_topic"], params.CONTROLLER_PARAMETERS["odometry_topic"]
     assert probe.node.count_publishers(cmd_vel) == 0 and probe.node.count_subscribers(odom) == 0
-    # the default interface: joint_trajectory_controller's topic
-    arm_publishers = probe.node.get_publishers_info_by_topic(params.CONTROLLER_PARAMETERS["trajectory_topic"])
+    arm_publishers = probe.node.get_publishers_info_by_topic(params.CONTROLLER_PARAMETERS["arm_command_topic"])
     assert "sabre_controller" in {p.node_name for p in arm_publishers}
     sim.stop()
     record = sim.summary()

@@ -186,16 +186,18 @@ impl Cascade {
         let mut steps = FilteredSteps::default();
         let mut fallbacks = 0;
         let mut first_status = None;
-        if let Some(f) = filter.as_deref_mut() {
-            f.in_sequence = true;
-        }
         let mut solve = || -> Result<()> {
             for k in 0..config.steps() {
                 let tk = splice + k as f64 * step;
+                // where the arm will be: the segment's positions less the desired positions' lead
+                // over the measured ones, which the robot's feedback takes back at k_p (kept whole
+                // with k_p = 0: a feedforward arm that was held back stays behind its segment)
                 let s = builder.state();
                 for (j, &i) in arm.iter().enumerate() {
-                    xk[i] = s.q[j];
-                    xk[nq + i] = s.v[j];
+                    let k_p = config.position_gain[j];
+                    let behind = lead[j] * (-k_p * (tk - t)).exp();
+                    xk[i] = s.q[j] - behind;
+                    xk[nq + i] = s.v[j] + k_p * behind;
                 }
                 plan.reference_at(tk, &mut reference);
                 self.limits.velocity_box(&xk[..nq], step, &mut lower, &mut upper);
@@ -234,9 +236,6 @@ impl Cascade {
             Ok(())
         };
         let solved = solve();
-        if let Some(f) = filter.as_deref_mut() {
-            f.in_sequence = false;
-        }
         drop(filter);
         solved?;
         let new = builder.finish()?;
@@ -244,7 +243,7 @@ impl Cascade {
         self.out.status = first_status;
         let stream = self.trajectory.as_mut().expect("checked by the caller");
         stream.counts_mut().fallbacks += fallbacks;
-        if !keeps_margin(&self.limits, &arm, &new) {
+        if !keeps_margin(&self.limits, &arm, &new, t - splice, &lead, &config.position_gain) {
             stream.skip(t);
             return Ok(None);
         }
@@ -253,16 +252,20 @@ impl Cascade {
     }
 }
 
-/// Whether every knot of `segment` (the arm's joints `arm`) lies within the bound's inner limits,
-/// give or take half the smaller margin (the knots of a stop the bound allowed end about there).
-fn keeps_margin(limits: &LimitBound, arm: &[usize], segment: &Segment) -> bool {
+/// Whether every knot of `segment` (the arm's joints `arm`, times from `start` s before the tick)
+/// puts the arm within the bound's inner limits, give or take half the smaller margin (the knots of a
+/// stop the bound allowed end about there), or at least no further out than where the segment starts
+/// (a joint the world pushed into the margin may stay or move inward): the knot's position less the
+/// desired positions' `lead` over the measured ones, which the robot's feedback takes back at `gain`.
+fn keeps_margin(limits: &LimitBound, arm: &[usize], segment: &Segment, start: f64, lead: &[f64], gain: &[f64]) -> bool {
     let (lower, upper) = limits.inner_limits();
     let config = limits.config();
     let slack = 0.5 * config.margin.min(config.prismatic_margin);
-    segment.states.iter().all(|s| {
-        arm.iter()
-            .enumerate()
-            .all(|(j, &i)| s.q[j] >= lower[i] - slack && s.q[j] <= upper[i] + slack)
+    let at = |k: usize, j: usize| segment.states[k].q[j] - lead[j] * (-gain[j] * (segment.times[k] - start)).exp();
+    arm.iter().enumerate().all(|(j, &i)| {
+        let first = at(0, j);
+        let (low, high) = ((lower[i] - slack).min(first), (upper[i] + slack).max(first));
+        (0..segment.times.len()).all(|k| (low..=high).contains(&at(k, j)))
     })
 }
 
