@@ -124,11 +124,12 @@ def _planner_main(
     nice: int,
     idle: bool,
     compensate: bool,
+    command_delay: float,
 ) -> None:
     """The planner process: build the controller, then plan on the newest shared state until told
-    to stop, with ``compensate`` from the state predicted when the plan will take over (the last
-    iteration's time from reading the state to handing the plan over). SIGINT is the parent's to
-    handle (it stops the planner through ``stop``)."""
+    to stop, with ``compensate`` from the state predicted when the plan's commands will act (the last
+    iteration's time from reading the state to handing the plan over, plus ``command_delay``). SIGINT
+    is the parent's to handle (it stops the planner through ``stop``)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _lower_priority(nice, idle)
     parent = os.getppid()
@@ -149,8 +150,8 @@ def _planner_main(
             taken = time.perf_counter()
             copy = read[1]
             t, x = float(copy[1]), copy[_STATE_HEADER : _STATE_HEADER + nx]
-            if compensate:
-                x, t = controller.predict(x, t, delay)
+            if compensate and delay + command_delay > 0.0:
+                x, t = controller.predict(x, t, delay + command_delay)
             controller.update(x, t)
             _hand_over(plan, controller.snapshot(), phases, steps, nu)
             delay = time.perf_counter() - taken
@@ -171,7 +172,8 @@ class PlannerProcess:
     with ``idle``, under SCHED_IDLE where the OS has it, so that a machine with few cores serves the
     1 kHz path and the middleware's threads first. With ``compensate`` (default) each plan is made
     from :meth:`Controller.predict` of the shared state, a delay ahead: the last iteration's time
-    from reading the state to handing its plan over, which the inner loop spent on the previous plan.
+    from reading the state to handing its plan over, which the inner loop spent on the previous plan,
+    plus ``command_delay`` (s, the robot's own wait before a command acts).
     """
 
     def __init__(
@@ -186,6 +188,7 @@ class PlannerProcess:
         nice: int,
         idle: bool = False,
         compensate: bool = True,
+        command_delay: float = 0.0,
         start_timeout: float = 120.0,
     ) -> None:
         self._factory = factory
@@ -195,6 +198,7 @@ class PlannerProcess:
         self._nice = int(nice)
         self._idle = bool(idle)
         self._compensate = bool(compensate)
+        self._command_delay = float(command_delay)
         self._start_timeout = float(start_timeout)
         self._ctx = multiprocessing.get_context("spawn")
         self._state_raw = self._ctx.RawArray("d", _STATE_HEADER + int(nx))
@@ -239,6 +243,7 @@ class PlannerProcess:
                 self._nice,
                 self._idle,
                 self._compensate,
+                self._command_delay,
             ),
         )
         # The planner's Python side makes many small NumPy calls; BLAS threads of its own would spin

@@ -85,7 +85,9 @@ class RealtimeCascade:
     ``delay_compensation`` (default True): each plan takes over only once computed, while the inner
     loop still follows the previous one, so the planner plans from the state
     :meth:`Controller.predict` expects at that moment (the planning time ahead) instead of the
-    measured one.
+    measured one. ``command_delay`` (s, default 0) adds the time a robot takes before a command acts
+    beyond that (an arm on trajectory segments: their lead and half a publication period), so that
+    the plan starts where the robot will be when its first command takes effect.
 
     τ_ext as a robot delivers it (:meth:`set_external_torque`, or a wrist wrench read in the core by the
     ROS 2 bridge through ``wrench_frames``: world frame, the sensor frame of an empty header, the moment's
@@ -104,6 +106,7 @@ class RealtimeCascade:
         planner_nice: int = 10,
         planner_idle: bool = False,
         delay_compensation: bool = True,
+        command_delay: float = 0.0,
         tau_ext_cutoff: float | None = None,
         tau_ext_timeout: float | None = None,
         wrench_frames: tuple[str, str, str] | None = None,
@@ -125,6 +128,7 @@ class RealtimeCascade:
         self._planner_nice = int(planner_nice)
         self._planner_idle = bool(planner_idle)
         self.delay_compensation = bool(delay_compensation)
+        self.command_delay = as_non_negative("command_delay", command_delay)
         self._low = low_level if low_level is not None else LowLevelController(scene, dt=self.inner_dt)
         self._cascade = inner_cascade(
             self._low,
@@ -185,7 +189,7 @@ class RealtimeCascade:
         else:
             delay = as_non_negative("delay", delay)
             self._plan_at(t)  # a plan handed over for t or earlier is in force by now
-            snapshot = self._make_plan(x, t, delay if self.delay_compensation else 0.0)
+            snapshot = self._make_plan(x, t, delay + self.command_delay if self.delay_compensation else 0.0)
             self._put(snapshot, t + delay if delay > 0.0 else None)
         return snapshot
 
@@ -231,7 +235,7 @@ class RealtimeCascade:
     def _plan_now(self, x: np.ndarray, t: float) -> PlanSnapshot:
         """A wall-clock planning iteration: compensated by the previous one's measured time, and timed."""
         taken = time.perf_counter()
-        snapshot = self._make_plan(x, t, self._delay if self.delay_compensation else 0.0)
+        snapshot = self._make_plan(x, t, self._delay + self.command_delay if self.delay_compensation else 0.0)
         self._delay = time.perf_counter() - taken
         return snapshot
 
@@ -269,6 +273,7 @@ class RealtimeCascade:
             nice=self._planner_nice,
             idle=self._planner_idle,
             compensate=self.delay_compensation,
+            command_delay=self.command_delay,
         )
         for name, args in self._obstacle_log:
             self._process.call(name, *args)

@@ -29,7 +29,7 @@ from .descriptions import Descriptions, build_controller
 from .durations import Durations
 from .inputs import JointStates, JointTorques, base_from_odometry
 from .qos import profile
-from .trajectory import arm_interface, stream_trajectory, trajectory_limits
+from .trajectory import arm_interface, command_delay, stream_trajectory, trajectory_limits
 
 __all__ = ["ControllerLoop", "TASK_STATES"]
 
@@ -66,6 +66,7 @@ class ControllerLoop:
             planner_nice=int(p["planner_nice"]),
             planner_idle=bool(p["planner_idle"]),
             delay_compensation=bool(p["delay_compensation"]),
+            command_delay=command_delay(p),
             tau_ext_cutoff=float(p["tau_ext_cutoff"]),
             tau_ext_timeout=float(p["wrench_timeout"]),
             wrench_frames=self._wrench_frames,

@@ -144,6 +144,7 @@ CONTROLLER_PARAMETERS: dict[str, Any] = {
     "trajectory_rate": 100.0,  # Hz: segments published
     "trajectory_lead": 0.03,  # s: from a segment's stamp to its splice (the delivery latency it absorbs)
     "trajectory_tolerated_gap": 0.1,  # s: the pause in deliveries a segment rides out before its stop
+    "trajectory_filter_step": 0.01,  # s: the sequential filter's step along a segment (whole knots of 2 ms)
     "trajectory_interpolation": "cubic",  # or "quintic" (points with accelerations)
     "trajectory_position_gain": 0.0,  # 1/s: the robot's JTC k_p (0: feedforward, see docs/ros2.md)
     # segment limits (unset: velocity from the URDF, half of Franka's acceleration and jerk)

@@ -15,7 +15,15 @@ from ..errors import InvalidValueError
 from .commands import Limits
 from .params import FRANKA_ACCELERATION, FRANKA_JERK, TRAJECTORY_FRACTION, finite_list
 
-__all__ = ["ARM_INTERFACES", "INTERPOLATIONS", "VELOCITY_FRACTION", "arm_interface", "trajectory_limits", "stream_trajectory"]
+__all__ = [
+    "ARM_INTERFACES",
+    "INTERPOLATIONS",
+    "VELOCITY_FRACTION",
+    "arm_interface",
+    "command_delay",
+    "trajectory_limits",
+    "stream_trajectory",
+]
 
 #: The arm's command interfaces: joint_trajectory_controller's topic, or a velocity stream.
 ARM_INTERFACES = ("trajectory", "velocity")
@@ -26,6 +34,8 @@ INTERPOLATIONS = ("cubic", "quintic")
 #: feedback k_p (q_d − q) to the segment's velocity, and an arm that trails its desired positions by a
 #: few milliseconds at full speed is commanded a few percent above the segment.
 VELOCITY_FRACTION = 0.9
+#: The segments' velocity time constant (s): ``_core.Cascade.set_trajectory``'s default.
+TIME_CONSTANT = 0.01
 
 
 def arm_interface(params: dict[str, Any]) -> str:
@@ -34,6 +44,16 @@ def arm_interface(params: dict[str, Any]) -> str:
     if value not in ARM_INTERFACES:
         raise InvalidValueError(f"arm_interface must be one of {ARM_INTERFACES}, got {value!r}")
     return value
+
+
+def command_delay(params: dict[str, Any]) -> float:
+    """How long after the planner's state a command acts on the robot beyond the planning itself
+    (``sabre.RealtimeCascade``'s ``command_delay``): on the trajectory interface a segment copies
+    the one in force for its lead and is made every period (half of one on average), and its velocity
+    follows the filtered command with the segments' time constant; 0 on the velocity stream."""
+    if arm_interface(params) != "trajectory":
+        return 0.0
+    return float(params["trajectory_lead"]) + 0.5 / float(params["trajectory_rate"]) + TIME_CONSTANT
 
 
 def trajectory_limits(arm_velocity: Sequence[float] | np.ndarray, params: dict[str, Any]) -> Limits:
@@ -76,5 +96,6 @@ def stream_trajectory(cascade: _core.Cascade, limits: Limits, params: dict[str, 
         period=1.0 / rate,
         lead=float(params["trajectory_lead"]),
         tolerated_gap=float(params["trajectory_tolerated_gap"]),
+        filter_step=float(params["trajectory_filter_step"]),
     )
     return interpolation == "quintic"
