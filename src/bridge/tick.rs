@@ -302,19 +302,8 @@ impl BridgeTick {
                 "the cascade streams segments but the bridge names no trajectory joints",
             )
         })?;
-        let points: Vec<TrajectoryPoint> = segment
-            .times
-            .iter()
-            .zip(&segment.states)
-            .map(|(&t, s)| TrajectoryPoint {
-                time_from_start: t,
-                positions: s.q.clone(),
-                velocities: s.v.clone(),
-                accelerations: if layout.accelerations { s.a.clone() } else { Vec::new() },
-            })
-            .collect();
         let mut out = Vec::new();
-        messages::encode_joint_trajectory(&mut out, stamp, &layout.names, &points)?;
+        encode_segment(&mut out, segment, stamp, &layout.names, layout.accelerations)?;
         Ok(out)
     }
 
@@ -414,6 +403,23 @@ impl BridgeTick {
     pub fn opening(&self) -> f64 {
         self.object.0.first().copied().unwrap_or(f64::NAN)
     }
+}
+
+/// Serializes `segment` as a JointTrajectory for the joints `names` stamped `stamp` (its start) into
+/// `out`: a point per knot with positions and velocities, and with `accelerations` its accelerations.
+pub fn encode_segment(out: &mut Vec<u8>, segment: &Segment, stamp: Stamp, names: &[String], accelerations: bool) -> Result<()> {
+    let points: Vec<TrajectoryPoint> = segment
+        .times
+        .iter()
+        .zip(&segment.states)
+        .map(|(&t, s)| TrajectoryPoint {
+            time_from_start: t,
+            positions: s.q.clone(),
+            velocities: s.v.clone(),
+            accelerations: if accelerations { s.a.clone() } else { Vec::new() },
+        })
+        .collect();
+    messages::encode_joint_trajectory(out, stamp, names, &points)
 }
 
 /// The cascade's command shaping, which a bridge's cascade must have.

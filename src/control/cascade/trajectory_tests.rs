@@ -12,8 +12,9 @@ use rand_chacha::ChaCha8Rng;
 use super::limit_tests::{random_plan, scene, start, ARM, BASE, DT, FRANKA_ACCELERATION, FRANKA_JERK, FRANKA_VELOCITY};
 use super::*;
 use crate::bridge::jtc::TrajectoryFollower;
-use crate::bridge::messages::{decode_joint_trajectory, encode_joint_trajectory, Stamp, TrajectoryPoint};
+use crate::bridge::messages::{decode_joint_trajectory, Stamp};
 use crate::bridge::reflexes::FrankaReflexes;
+use crate::bridge::tick::encode_segment;
 use crate::control::command_stream::{CommandGate, CommandShaper};
 use crate::control::segment::{Segment, SegmentShape};
 use crate::control::trajectory_stream::TrajectoryConfig;
@@ -49,19 +50,8 @@ fn config(tolerated_gap: f64, lead: f64, gain: f64) -> TrajectoryConfig {
 
 /// A segment published at `from` (ticks' clock) as the robot receives it.
 fn message(segment: &Segment, from: f64) -> Vec<u8> {
-    let points: Vec<TrajectoryPoint> = segment
-        .times
-        .iter()
-        .zip(&segment.states)
-        .map(|(&t, s)| TrajectoryPoint {
-            time_from_start: t,
-            positions: s.q.clone(),
-            velocities: s.v.clone(),
-            accelerations: Vec::new(),
-        })
-        .collect();
     let mut out = Vec::new();
-    encode_joint_trajectory(&mut out, Stamp::from_seconds(from + WALL), &names(), &points).unwrap();
+    encode_segment(&mut out, segment, Stamp::from_seconds(from + WALL), &names(), false).unwrap();
     out
 }
 
