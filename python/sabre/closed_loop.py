@@ -202,7 +202,7 @@ class _ClosedLoop:
         state the controller predicts for when the plan takes over."""
         controller = self.controller
         if self.delay_steps and self.delay_compensation:
-            stats = controller.update(*controller.predict(x, t, self.delay_steps * self.plant.dt))
+            stats = controller.update(*controller.predict(x, t, self.delay_steps * self.plant.dt), observed=x)
         else:
             stats = controller.update(x, t)
         self.planning_times.append(stats.iteration_time)

@@ -346,11 +346,16 @@ class Controller:
             self._planner.set_cost(self._cost.core)
             self.phase_history.append((float(t), phase))
 
-    def update(self, x: Sequence[float] | np.ndarray, t: float) -> IterationStats:
-        """One planning iteration from the measured state x (nx,) at time t (s); returns its statistics.
+    def update(
+        self, x: Sequence[float] | np.ndarray, t: float, *, observed: Sequence[float] | np.ndarray | None = None
+    ) -> IterationStats:
+        """One planning iteration from the state x (nx,) at time t (s); returns its statistics.
 
         Runs the task's phase switch and ``on_step``, samples around the nominal, rolls out, weighs
-        and updates the nominal (and, with the outer filter, filters it along its rollout).
+        and updates the nominal (and, with the outer filter, filters it along its rollout). When x is
+        a prediction (:meth:`predict`), ``observed`` (nx,) is the measured state it was predicted from:
+        the phase switch reads it, since the phases' tests are contact events (a slip, a stalled hook)
+        that the rollout model's reduced contact predicts less well than the robot measures them.
 
         Raises:
             ShapeError: x is not (nx,), or the task's guides are not (M, K, nu).
@@ -360,7 +365,8 @@ class Controller:
         t = float(t)
         if not math.isfinite(t):
             raise InvalidValueError("t must be finite")
-        phase = self.task.next_phase(self.scene, x, t, self.phase)
+        seen = x if observed is None else as_state_vector("observed", observed, self.scene.nx)
+        phase = self.task.next_phase(self.scene, seen, t, self.phase)
         if phase not in self.task.phases:
             raise InvalidValueError(f"task returned unknown phase {phase!r}; phases: {self.task.phases}")
         self.set_phase(phase, t)

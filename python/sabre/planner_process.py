@@ -150,9 +150,10 @@ def _planner_main(
             taken = time.perf_counter()
             copy = read[1]
             t, x = float(copy[1]), copy[_STATE_HEADER : _STATE_HEADER + nx]
+            measured = x
             if compensate and delay + command_delay > 0.0:
                 x, t = controller.predict(x, t, delay + command_delay)
-            controller.update(x, t)
+            controller.update(x, t, observed=measured)
             _hand_over(plan, controller.snapshot(), phases, steps, nu)
             delay = time.perf_counter() - taken
             rest = min_period - (time.perf_counter() - started)

@@ -227,9 +227,10 @@ class RealtimeCascade:
 
     def _make_plan(self, x: np.ndarray, t: float, delay: float) -> PlanSnapshot:
         """One planning iteration from the state predicted ``delay`` s after x at t (x itself for 0)."""
+        observed = x
         if delay > 0.0:
             x, t = self.controller.predict(x, t, delay)
-        self.controller.update(x, t)
+        self.controller.update(x, t, observed=observed)
         return self.controller.snapshot()
 
     def _plan_now(self, x: np.ndarray, t: float) -> PlanSnapshot:

@@ -318,3 +318,45 @@ def test_with_a_planning_delay_the_compensated_planner_opens_the_dishwasher_abou
     assert undelayed < 20.0
     assert compensated <= 1.15 * undelayed
     assert uncompensated > 1.5 * undelayed
+
+
+class _RecordingReach(sabre.tasks.Reach):
+    """A Reach that records the state its phase switch and its costs are given."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.phase_states: list[np.ndarray] = []
+
+    def next_phase(self, scene, x, t, phase):
+        self.phase_states.append(np.array(x))
+        return phase
+
+
+def test_a_plan_from_a_prediction_switches_phase_on_the_measured_state(scene):
+    """With a compensated delay, run_episode plans from the state predicted for the takeover, and the
+    task's phase switch reads the plant's state it was predicted from (a slip or a stalled hook is a
+    measured contact event); without ``observed``, update reads the state it plans from."""
+    task = _RecordingReach(target_pose=scene.fk(scene.default_state()[: scene.nq], "grasp"))
+    controller = sabre.Controller(scene, task, sabre.ControllerConfig(rollouts=8, seed=0))
+    measured = []
+    sabre.run_episode(
+        scene,
+        controller,
+        0.2,
+        x0=scene.default_state(),
+        replan_rate=20.0,
+        plan_delay=0.02,
+        progress=False,
+        on_replan=lambda t, x, p, c: measured.append(np.array(x)),
+    )
+    assert len(task.phase_states) == len(measured) >= 3
+    for seen, x in zip(task.phase_states, measured):
+        np.testing.assert_array_equal(seen, x)
+    x, t = task.phase_states[-1], 0.2
+    predicted, _ = controller.predict(x, t, 0.02)
+    assert not np.allclose(predicted, x)  # the prediction moved: the test tells the two apart
+    task.phase_states.clear()
+    controller.update(predicted, t + 0.02, observed=x)
+    controller.update(predicted, t + 0.04)
+    np.testing.assert_array_equal(task.phase_states[0], x)
+    np.testing.assert_array_equal(task.phase_states[1], predicted)
