@@ -9,6 +9,7 @@
 use super::{lock, Cascade};
 use crate::control::plan::Plan;
 use crate::control::segment::{Segment, SegmentBuilder};
+use crate::control::shaping::CommandShaping;
 use crate::control::trajectory_stream::{FilteredSteps, TrajectoryConfig, TrajectoryStream, TrajectoryTick};
 use crate::error::{Result, SabreError};
 use crate::model::LimitBound;
@@ -184,6 +185,9 @@ impl Cascade {
         let mut filter = self.filter.as_deref().map(lock);
         let step = config.filter_step;
         let mut steps = FilteredSteps::default();
+        // the base's velocity where the segment starts: its stream's command (world rates)
+        let mut base_velocity = self.out.command.clone();
+        let reach = Reach::of(&config, shaping, step);
         let mut fallbacks = 0;
         let mut first_status = None;
         let mut solve = || -> Result<()> {
@@ -201,6 +205,7 @@ impl Cascade {
                 }
                 plan.reference_at(tk, &mut reference);
                 self.limits.velocity_box(&xk[..nq], step, &mut lower, &mut upper);
+                reach.narrow(&arm, &builder.state().v, &base_velocity, &mut lower, &mut upper);
                 let u: &[f64] = match filter.as_deref_mut() {
                     Some(f) => {
                         let passivity = energy.map(|e| (tau_ext, e));
@@ -228,6 +233,7 @@ impl Cascade {
                 for i in (0..nq).filter(|i| !arm.contains(i)) {
                     xk[i] += u[i] * step;
                     xk[nq + i] = u[i];
+                    base_velocity[i] = u[i];
                 }
                 for _ in 0..config.knots_per_step() {
                     builder.push(&target)?;
@@ -249,6 +255,51 @@ impl Cascade {
         }
         self.filtered_steps = steps;
         stream.commit(t, splice, new, false).map(|s| Some(s.clone()))
+    }
+}
+
+/// The velocities the command path can reach within one filter step: the segment's joints at its
+/// acceleration bound from the segment's velocity, the base's at its stream's acceleration bound from
+/// the base's command. The filter chooses within them, so that the velocity the robot executes (which
+/// the tank books) is the one the passivity row passed, not a lagging approach to it.
+struct Reach {
+    /// Per arm joint (the segment's order): the velocity change (rad/s) one filter step allows.
+    arm: Vec<f64>,
+    /// The base's joints (x, y, yaw) and the change of their world rates one filter step allows:
+    /// the base frame's smaller linear bound over √2 for x and y (reachable at any heading).
+    base: Option<([usize; 3], [f64; 3])>,
+}
+
+impl Reach {
+    fn of(config: &TrajectoryConfig, shaping: &CommandShaping, step: f64) -> Self {
+        let arm = config.shape.acceleration.iter().map(|a| a * step).collect();
+        let base = shaping
+            .base_index()
+            .zip(shaping.gate().shaper().base())
+            .map(|(index, limiter)| {
+                let a = limiter.a_max();
+                let linear = a[0].min(a[1]) * step / std::f64::consts::SQRT_2;
+                (index, [linear, linear, a[2] * step])
+            });
+        Self { arm, base }
+    }
+
+    /// Narrows the box [`lower`, `upper`] (nq, holding 0) to what is reachable from the segment's
+    /// velocities `arm_velocity` (the joints `arm`) and the base's `base_velocity` (nq, world rates),
+    /// widened to hold 0: a stop stays the filter's safe choice, and the stream brakes toward it.
+    fn narrow(&self, arm: &[usize], arm_velocity: &[f64], base_velocity: &[f64], lower: &mut [f64], upper: &mut [f64]) {
+        let mut meet = |i: usize, v: f64, r: f64| {
+            lower[i] = lower[i].max((v - r).min(0.0));
+            upper[i] = upper[i].min((v + r).max(0.0));
+        };
+        for (j, &i) in arm.iter().enumerate() {
+            meet(i, arm_velocity[j], self.arm[j]);
+        }
+        if let Some((index, reach)) = &self.base {
+            for (&i, &r) in index.iter().zip(reach) {
+                meet(i, base_velocity[i], r);
+            }
+        }
     }
 }
 
