@@ -102,16 +102,17 @@ impl Cascade {
         } else {
             None
         };
-        // the base's stream follows the filtered step in force; the arm's entries are the segment's
+        // the base's stream follows the filtered step for now, the one the arm's segment executes now
+        // (its stream has no lead); none yet: as it goes; past the last: at rest, as the segment ends
         let mut target = self.out.command.clone();
         let steps = &self.filtered_steps;
-        if !steps.times.is_empty() {
-            let k = steps.times.partition_point(|&tk| tk <= t).saturating_sub(1);
-            let row = &steps.rows[k * self.nq..(k + 1) * self.nq];
-            if let Some(base) = self.shaping.as_ref().and_then(|s| s.base_index()) {
-                for i in base {
-                    target[i] = row[i];
-                }
+        let started = steps.times.first().is_some_and(|&t0| t0 <= t);
+        if let (true, Some(base)) = (started, self.shaping.as_ref().and_then(|s| s.base_index())) {
+            let k = steps.times.partition_point(|&tk| tk <= t) - 1;
+            let ended = t >= steps.times[k] + self.trajectory.as_ref().expect("checked above").config().filter_step;
+            let ended = ended && k + 1 == steps.times.len();
+            for i in base {
+                target[i] = if ended { 0.0 } else { steps.rows[k * self.nq + i] };
             }
         }
         let shaping = self.shaping.as_mut().expect("set with the stream");
@@ -185,9 +186,23 @@ impl Cascade {
         let mut filter = self.filter.as_deref().map(lock);
         let step = config.filter_step;
         let mut steps = FilteredSteps::default();
-        // the base's velocity where the segment starts: its stream's command (world rates)
+        // the base's velocity where the segment starts: the filtered step it executes until the
+        // splice, or before any its stream's command (world rates)
         let mut base_velocity = self.out.command.clone();
-        let reach = Reach::of(&config, shaping, step);
+        let kept = &self.filtered_steps;
+        if let Some(k) = kept.times.partition_point(|&tk| tk < splice).checked_sub(1) {
+            base_velocity.copy_from_slice(&kept.rows[k * nq..(k + 1) * nq]);
+        }
+        // the tank where the segment starts: what the steps executed until the splice spend first
+        if let Some(e) = energy.as_mut() {
+            for (k, &tk) in kept.times.iter().enumerate() {
+                let overlap = (tk + config.filter_step).min(splice) - tk.max(t);
+                if overlap > 0.0 {
+                    *e += overlap * EnergyTank::power(tau_ext, &kept.rows[k * nq..(k + 1) * nq]);
+                }
+            }
+        }
+        let mut reach = Reach::of(&config, shaping, step);
         let mut fallbacks = 0;
         let mut first_status = None;
         let mut solve = || -> Result<()> {
@@ -230,6 +245,7 @@ impl Cascade {
                     let k_p = config.position_gain[j];
                     target[j] = u[i] - k_p * lead[j] * (-k_p * (tk - t)).exp();
                 }
+                reach.advance(&base_velocity, u);
                 for i in (0..nq).filter(|i| !arm.contains(i)) {
                     xk[i] += u[i] * step;
                     xk[nq + i] = u[i];
@@ -253,21 +269,42 @@ impl Cascade {
             stream.skip(t);
             return Ok(None);
         }
-        self.filtered_steps = steps;
+        // the steps in force until the splice stay (the base executes them while the arm still
+        // follows the segment they came with), then the new ones; those before now are done
+        let kept = &self.filtered_steps;
+        let from = kept.times.partition_point(|&tk| tk <= t).saturating_sub(1);
+        let to = kept.times.partition_point(|&tk| tk < splice).max(from);
+        let mut merged = FilteredSteps {
+            times: kept.times[from..to].to_vec(),
+            rows: kept.rows[from * nq..to * nq].to_vec(),
+        };
+        merged.times.extend_from_slice(&steps.times);
+        merged.rows.extend_from_slice(&steps.rows);
+        self.filtered_steps = merged;
         stream.commit(t, splice, new, false).map(|s| Some(s.clone()))
     }
 }
 
 /// The velocities the command path can reach within one filter step: the segment's joints at its
-/// acceleration bound from the segment's velocity, the base's at its stream's acceleration bound from
-/// the base's command. The filter chooses within them, so that the velocity the robot executes (which
-/// the tank books) is the one the passivity row passed, not a lagging approach to it.
+/// acceleration bound from the segment's velocity, the base's from the base's command at the
+/// acceleration its stream reaches by then (its jerk bound raises it from the acceleration of the step
+/// before, up to its acceleration bound). The filter chooses within them, so that the velocity the
+/// robot executes (which the tank books) is the one the passivity row passed, not a lagging approach to it.
 struct Reach {
+    step: f64,
     /// Per arm joint (the segment's order): the velocity change (rad/s) one filter step allows.
     arm: Vec<f64>,
-    /// The base's joints (x, y, yaw) and the change of their world rates one filter step allows:
-    /// the base frame's smaller linear bound over √2 for x and y (reachable at any heading).
-    base: Option<([usize; 3], [f64; 3])>,
+    /// The base's joints (x, y, yaw), their world rates' acceleration and jerk bounds (the base
+    /// frame's smaller linear bound over √2 for x and y: reachable at any heading), and the
+    /// acceleration each has reached.
+    base: Option<BaseReach>,
+}
+
+struct BaseReach {
+    index: [usize; 3],
+    acceleration: [f64; 3],
+    jerk: [f64; 3],
+    reached: [f64; 3],
 }
 
 impl Reach {
@@ -277,11 +314,27 @@ impl Reach {
             .base_index()
             .zip(shaping.gate().shaper().base())
             .map(|(index, limiter)| {
-                let a = limiter.a_max();
-                let linear = a[0].min(a[1]) * step / std::f64::consts::SQRT_2;
-                (index, [linear, linear, a[2] * step])
+                let (a, j, now) = (limiter.a_max(), limiter.j_max(), limiter.acceleration());
+                let linear = |b: &[f64]| b[0].min(b[1]) / std::f64::consts::SQRT_2;
+                let planar = now[0].hypot(now[1]);
+                BaseReach {
+                    index,
+                    acceleration: [linear(a), linear(a), a[2]],
+                    jerk: [linear(j), linear(j), j[2]],
+                    reached: [planar, planar, now[2].abs()],
+                }
             });
-        Self { arm, base }
+        Self { step, arm, base }
+    }
+
+    /// After a filter step from the base's world rates `from` to `to` (nq): the acceleration the
+    /// base's stream has reached.
+    fn advance(&mut self, from: &[f64], to: &[f64]) {
+        if let Some(b) = self.base.as_mut() {
+            for (k, &i) in b.index.iter().enumerate() {
+                b.reached[k] = ((to[i] - from[i]) / self.step).abs().min(b.acceleration[k]);
+            }
+        }
     }
 
     /// Narrows the box [`lower`, `upper`] (nq, holding 0) to what is reachable from the segment's
@@ -295,9 +348,10 @@ impl Reach {
         for (j, &i) in arm.iter().enumerate() {
             meet(i, arm_velocity[j], self.arm[j]);
         }
-        if let Some((index, reach)) = &self.base {
-            for (&i, &r) in index.iter().zip(reach) {
-                meet(i, base_velocity[i], r);
+        if let Some(b) = &self.base {
+            for (k, &i) in b.index.iter().enumerate() {
+                let a = (b.reached[k] + b.jerk[k] * self.step).min(b.acceleration[k]);
+                meet(i, base_velocity[i], a * self.step);
             }
         }
     }

@@ -316,3 +316,99 @@ fn the_tank_booked_against_the_executed_velocity_stays_above_its_floor() {
     );
     assert!(lowest < initial - 1.0, "the tank only fell to {lowest} J");
 }
+
+/// The lag (s) at which `executed` best matches `planned` shifted later, searched over ±0.1 s at the
+/// samples' step `dt` (least squares over the samples both cover).
+fn best_lag(planned: &[f64], executed: &[f64], dt: f64) -> f64 {
+    let span = (0.1 / dt).round() as i64;
+    let n = planned.len() as i64;
+    let misfit = |lag: i64| -> f64 {
+        let pairs = (span..n - span).map(|k| (executed[k as usize] - planned[(k - lag) as usize]).powi(2));
+        pairs.sum::<f64>()
+    };
+    let best = (-span..=span).min_by(|&a, &b| misfit(a).total_cmp(&misfit(b))).unwrap();
+    best as f64 * dt
+}
+
+/// The base and the arm execute the plan on one time axis: a filtered step is executed by the base
+/// when the arm executes the segment's knots for the same time, not a segment's lead earlier (the
+/// base's stream has no lead). A slow sinusoid in the plan for the base's x rate and for every arm
+/// joint; the lag of each executed velocity behind the plan, from their best least-squares match.
+#[test]
+fn the_base_and_the_arm_execute_the_plan_at_the_same_time() {
+    let scene = scene();
+    let nq = scene.nq();
+    let arm = RateLimiter::new(
+        FRANKA_VELOCITY.to_vec(),
+        FRANKA_ACCELERATION.to_vec(),
+        FRANKA_JERK.to_vec(),
+        DT,
+    )
+    .unwrap();
+    let base = RateLimiter::new(vec![1.0; 3], vec![1.0, 1.0, 2.0], vec![10.0, 10.0, 20.0], 0.02).unwrap();
+    let gate = CommandGate::new(CommandShaper::new(arm, Some(base), 20), 0.05).unwrap();
+    let low = Arc::new(Mutex::new(
+        LowLevelController::new(scene.clone(), DT, LowLevelConfig::default()).unwrap(),
+    ));
+    let tau = ExternalTorque::new(nq, None, None, None).unwrap();
+    let mut cascade = Cascade::new(low, None, None, tau).unwrap();
+    cascade
+        .set_shaping(CommandShaping::new(gate, ARM.to_vec(), Some(BASE), nq).unwrap())
+        .unwrap();
+    let lead = 0.05;
+    cascade.set_trajectory(config(0.1, lead, 0.0)).unwrap();
+    let mut robot = TrajectoryFollower::new(names(), vec![0.0; 7]).unwrap();
+    let mut x = scene.default_state();
+    x[..nq].copy_from_slice(&scene.start_configuration());
+    x[BASE[2]] = 0.0;
+    let (step, seconds) = (0.01, 4.0);
+    let wave = |t: f64| 0.08 * (std::f64::consts::TAU * 0.5 * t).sin();
+    let rows: Vec<f64> = (0..=(seconds / step) as usize + 10)
+        .flat_map(|k| {
+            let mut row = vec![0.0; nq];
+            row[BASE[0]] = wave(k as f64 * step);
+            for &i in &ARM {
+                row[i] = 0.5 * wave(k as f64 * step);
+            }
+            row
+        })
+        .collect();
+    cascade
+        .hand_over(Arc::new(Plan::new(rows, nq, 0.0, step).unwrap()), None)
+        .unwrap();
+    let (mut base_in_effect, mut in_flight) = ([0.0; 3], Vec::<(f64, Vec<u8>)>::new());
+    let (mut planned, mut base_executed, mut arm_executed) = (vec![], vec![], vec![]);
+    for k in 0..(seconds / DT) as usize {
+        let t = k as f64 * DT;
+        let tick = cascade.tick_trajectory(&x, t, DT, t).unwrap();
+        if let Some(segment) = &tick.segment {
+            in_flight.push((t, message(segment, t)));
+        }
+        if tick.command.base_due {
+            base_in_effect.copy_from_slice(&tick.command.base);
+        }
+        for (_, raw) in in_flight.iter().filter(|(arrival, _)| *arrival <= t) {
+            robot.receive(&decode_joint_trajectory(raw).unwrap(), t, t + WALL).unwrap();
+        }
+        in_flight.clear();
+        let q: Vec<f64> = ARM.iter().map(|&i| x[i]).collect();
+        let command = robot.command(t, &q).to_vec();
+        for (j, &i) in ARM.iter().enumerate() {
+            x[i] += command[j] * DT;
+        }
+        // the base turns not (yaw 0, no yaw rate in the plan): its frame's x rate is the world's
+        x[BASE[0]] += base_in_effect[0] * DT;
+        planned.push(wave(t));
+        base_executed.push(base_in_effect[0]);
+        arm_executed.push(2.0 * command[0]);
+    }
+    let (base_lag, arm_lag) = (best_lag(&planned, &base_executed, DT), best_lag(&planned, &arm_executed, DT));
+    assert!(
+        base_lag >= 0.0 && arm_lag >= 0.0,
+        "executed before its time: base {base_lag} s, arm {arm_lag} s"
+    );
+    assert!(
+        (base_lag - arm_lag).abs() <= 0.4 * lead,
+        "the base executes the plan {base_lag} s after its time, the arm {arm_lag} s (lead {lead} s)"
+    );
+}
