@@ -209,6 +209,7 @@ class RolloutConfig:
     multibody_robot: bool
     skip_quiescent_steps: bool
     contact_model: str
+    command_acceleration: list[float] | None
     def __new__(cls) -> RolloutConfig: ...
 
 @final

@@ -86,6 +86,10 @@ class ControllerConfig:
     contact_friction: float = _ROLLOUT.contact_friction
     #: how the rollout model resolves contacts (:data:`sabre.CONTACT_MODELS`): "reduced" or "rapier".
     contact_model: str = _ROLLOUT.contact_model
+    #: per joint (nq), the largest acceleration (rad/s² or m/s²) the robot's command path gives it,
+    #: which bounds the rollout model's servo (:class:`sabre.RolloutModel`); None: the joints' efforts
+    #: alone (a plant driven directly). The ROS 2 bridge sets it from its command limits.
+    command_acceleration: tuple[float, ...] | None = None
     #: "N" (no filter), "I" (1 kHz FILTER-QP with the energy tank), "O" (Sequential FILTER-QP on
     #: the optimised sequence, which warm-starts the next round) or "IO" (both).
     variant: str = "N"
@@ -127,6 +131,10 @@ class ControllerConfig:
             limit = np.asarray(self.input_limit, dtype=float)
             if limit.ndim != 1 or np.any(~np.isfinite(limit)) or np.any(limit <= 0):
                 raise InvalidValueError("input_limit must be a sequence of positive, finite bounds")
+        if self.command_acceleration is not None:
+            a = np.asarray(self.command_acceleration, dtype=float)
+            if a.ndim != 1 or np.any(~np.isfinite(a)) or np.any(a <= 0):
+                raise InvalidValueError("command_acceleration must be a sequence of positive, finite bounds")
         if self.sigma is not None:
             sigma = np.asarray(self.sigma, dtype=float)
             if sigma.ndim != 1 or np.any(~np.isfinite(sigma)) or np.any(sigma < 0):
@@ -243,7 +251,12 @@ class Controller:
         # more to the point than the rollout model's limits.
         task.check(scene)
         self.model = RolloutModel(
-            scene, c.dt, servo_bandwidth=c.servo_bandwidth, contact_friction=c.contact_friction, contact_model=c.contact_model
+            scene,
+            c.dt,
+            servo_bandwidth=c.servo_bandwidth,
+            contact_friction=c.contact_friction,
+            contact_model=c.contact_model,
+            command_acceleration=c.command_acceleration,
         )
         self.phase = task.initial_phase()
         self._compiled: dict[str, CompiledCost] = {}

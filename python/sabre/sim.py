@@ -72,6 +72,14 @@ class RolloutResult:
     engine_time: np.ndarray
 
 
+def _accelerations(value: Sequence[float] | np.ndarray, nq: int) -> list[float]:
+    """``command_acceleration`` checked: nq positive, finite bounds."""
+    a = as_float_array("command_acceleration", value, (nq,))
+    if np.any(a <= 0):
+        raise InvalidValueError(f"command_acceleration must hold positive bounds, got {a.tolist()}")
+    return [float(v) for v in a]
+
+
 class RolloutModel:
     """The reduced-order model the controller plans with (paper Sec. V-F, eq. 57).
 
@@ -89,6 +97,12 @@ class RolloutModel:
     (at rest, its dry friction or a limit holding it against gravity) and no contact body can reach
     it within a step, the physics step is skipped — it could not change anything — unless
     ``skip_quiescent_steps=False``.
+
+    ``command_acceleration`` (nq,): per joint, the largest acceleration (rad/s² or m/s²) the robot's
+    command path gives it (an arm's trajectory or command stream bound, a base driver's ramp); the
+    servo's acceleration is bounded by it besides the joint's effort. None (the default): the effort
+    alone, as for a plant driven directly. A robot whose commands are rate-limited needs it: a plan
+    from a faster model asks the slow joints for what they cannot follow while the others follow at once.
 
     Rollouts run in parallel on ``threads`` workers (default: all cores), each with its own physics
     world restored from a pristine snapshot before every rollout; the GIL is released and the
@@ -108,6 +122,7 @@ class RolloutModel:
         multibody_robot: bool = _ROLLOUT.multibody_robot,
         skip_quiescent_steps: bool = _ROLLOUT.skip_quiescent_steps,
         contact_model: str = _ROLLOUT.contact_model,
+        command_acceleration: Sequence[float] | np.ndarray | None = None,
     ) -> None:
         if not isinstance(scene, Scene):
             raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
@@ -127,6 +142,7 @@ class RolloutModel:
             multibody_robot=bool(multibody_robot),
             skip_quiescent_steps=bool(skip_quiescent_steps),
             contact_model=contact_model,
+            command_acceleration=None if command_acceleration is None else _accelerations(command_acceleration, scene.nq),
         )
         self._core = _core.RolloutModel(scene._core, config)
 

@@ -32,6 +32,8 @@ pub struct PyRolloutConfig {
     skip_quiescent_steps: bool,
     /// "reduced" (contacts solved in sabre) or "rapier" (Rapier's pipeline, the reference).
     contact_model: String,
+    /// Per robot joint, the largest acceleration its command path gives (None: the effort's alone).
+    command_acceleration: Option<Vec<f64>>,
 }
 
 impl From<RolloutConfig> for PyRolloutConfig {
@@ -46,6 +48,7 @@ impl From<RolloutConfig> for PyRolloutConfig {
             multibody_robot: c.multibody_robot,
             skip_quiescent_steps: c.skip_quiescent_steps,
             contact_model: c.contact_model.name().to_string(),
+            command_acceleration: c.command_acceleration,
         }
     }
 }
@@ -65,6 +68,7 @@ impl TryFrom<&PyRolloutConfig> for RolloutConfig {
             multibody_robot: c.multibody_robot,
             skip_quiescent_steps: c.skip_quiescent_steps,
             contact_model,
+            command_acceleration: c.command_acceleration.clone(),
         })
     }
 }

@@ -35,6 +35,12 @@ impl RolloutWorld {
         each!(self, w => w.dt())
     }
 
+    /// Bounds the servo's joint accelerations by the robot's command path (see
+    /// [`super::servo::ServoLimits::cap_acceleration`]), before the world is copied.
+    pub fn cap_servo_acceleration(&mut self, caps: &[f64]) -> crate::error::Result<()> {
+        each!(self, w => w.cap_servo_acceleration(caps))
+    }
+
     /// Whether both worlds are copies of one built world (the same model).
     pub fn same_model(&self, other: &RolloutWorld) -> bool {
         match (self, other) {

@@ -62,6 +62,34 @@ impl ServoLimits {
     }
 }
 
+impl ServoLimits {
+    /// Bounds each joint's acceleration by `caps` (nq, positive; infinity: no bound) as well as by
+    /// its effort: the command path of a robot that rate-limits its commands (a trajectory's or a
+    /// stream's acceleration bound, a base driver's ramp) is slower than its motors.
+    pub fn cap_acceleration(&mut self, caps: &[f64]) -> Result<()> {
+        if caps.len() != self.acceleration.len() {
+            return Err(SabreError::invalid(
+                "command_acceleration",
+                format!(
+                    "needs one bound per robot joint ({}), got {}",
+                    self.acceleration.len(),
+                    caps.len()
+                ),
+            ));
+        }
+        if let Some(bad) = caps.iter().find(|a| a.is_nan() || **a <= 0.0) {
+            return Err(SabreError::invalid(
+                "command_acceleration",
+                format!("bounds must be positive, got {bad}"),
+            ));
+        }
+        for (a, &cap) in self.acceleration.iter_mut().zip(caps) {
+            *a = a.min(cap);
+        }
+        Ok(())
+    }
+}
+
 /// The servo's state: configuration, velocity, accumulated lag, the command of the next step and
 /// the factorised mass matrix of the contact term.
 #[derive(Clone, Debug)]

@@ -12,7 +12,7 @@ import pytest
 
 import sabre
 from sabre.ros import params, qos
-from sabre.ros.commands import CommandGate, CommandShaper, command_limits
+from sabre.ros.commands import CommandGate, CommandShaper, Limits, command_limits, joint_accelerations
 from sabre.ros.conversions import JointMap, MessageError, base_to_world, quaternion_of, rpy_of, world_to_base, yaw_of
 from sabre.ros.descriptions import DescriptionSources, build_scene
 from sabre.ros.inputs import JointStates, JointTorques, WrenchFrames, base_from_odometry
@@ -356,3 +356,20 @@ def test_the_sim_robots_contact_record_gives_each_contact_ticks_wrist_force_magn
     np.testing.assert_allclose(hand_contact_forces(np.array(wrenches), np.array(contacts)), forces, rtol=1e-12)
     stats = contact_force_stats(forces)
     assert stats["steps"] == len(expected) and stats["max"] == pytest.approx(max(f for _, f in expected))
+
+
+def test_the_planners_joint_accelerations_are_the_command_paths():
+    """The arm's joints take their stream's (or segments') bounds; the base's world x and y the smaller
+    of its frame's linear bounds: a world-frame acceleration of that size, at any heading, has base-frame
+    components within both of the driver's bounds. A joint of neither stream has no bound to give."""
+    base = (1.0, 0.5, 2.0)
+    a = joint_accelerations(6, [3, 4, 5], [7.0, 8.0, 9.0], [0, 1, 2], Limits((1.0,) * 3, base, (10.0,) * 3))
+    assert a == (0.5, 0.5, 2.0, 7.0, 8.0, 9.0)
+    for yaw in np.linspace(-math.pi, math.pi, 37):
+        for direction in np.linspace(0.0, 2 * math.pi, 36, endpoint=False):
+            world = a[0] * np.array([math.cos(direction), math.sin(direction)])
+            body = world_to_base(np.array([world[0], world[1], 0.0]), yaw)
+            assert abs(body[0]) <= base[0] + 1e-12 and abs(body[1]) <= base[1] + 1e-12
+    assert joint_accelerations(2, [0, 1], [3.0, 4.0], None, None) == (3.0, 4.0)
+    with pytest.raises(sabre.SabreError, match="neither"):
+        joint_accelerations(4, [3], [7.0], None, None)

@@ -51,6 +51,41 @@ def test_free_motion_tracks_commanded_velocities(scenes):
     np.testing.assert_allclose(x[-1, :NQ] - x0[:NQ], u * k * model.dt, atol=1e-3)
 
 
+@pytest.mark.parametrize("contact_model", sabre.CONTACT_MODELS)
+def test_command_acceleration_bounds_the_servo_as_a_rate_limited_command_path_does(scenes, contact_model):
+    """A velocity step from rest on the base's x and on the first arm joint, with each joint's command
+    acceleration bounded at a: the velocity ramps at a (|Δq̇| ≤ a·dt every step, and q̇(t) = a t until
+    the servo takes over near u), where the effort-bound model (no command bound) is at u within
+    a few steps; the joints without a step stay at rest either way."""
+    scene = scenes["shelf"]
+    x0 = scene.default_state()
+    u = np.zeros(NQ)
+    u[0], u[3] = 0.5, 0.8
+    caps = np.full(NQ, 50.0)
+    caps[0], caps[3] = 1.0, 2.0
+    bounded = sabre.RolloutModel(scene, contact_model=contact_model, command_acceleration=caps)
+    free = sabre.RolloutModel(scene, contact_model=contact_model)
+    k = 40
+    qd = bounded.rollout(x0, np.broadcast_to(u, (1, k, NQ))).states[0, :, NQ : 2 * NQ]
+    qd_free = free.rollout(x0, np.broadcast_to(u, (1, k, NQ))).states[0, :, NQ : 2 * NQ]
+    dt = bounded.dt
+    assert np.all(np.abs(np.diff(qd, axis=0)) <= caps * dt * (1 + 1e-9) + 1e-12)
+    ramp = int(0.5 * u[0] / caps[0] / dt)  # halfway up the base's ramp the servo is still saturated
+    t = np.arange(k + 1) * dt
+    np.testing.assert_allclose(qd[: ramp + 1, 0], caps[0] * t[: ramp + 1], rtol=1e-9, atol=1e-12)
+    assert qd_free[ramp, 0] > 1.5 * qd[ramp, 0]
+    np.testing.assert_allclose(qd[-1, [0, 3]], u[[0, 3]], atol=0.02)
+    assert np.all(qd[:, [1, 2, 4, 5, 6, 7, 8, 9]] == 0.0)
+
+
+@pytest.mark.parametrize("bad", [[1.0] * (NQ - 1), [0.0] + [1.0] * (NQ - 1), [np.nan] + [1.0] * (NQ - 1)])
+def test_bad_command_accelerations_are_refused(scenes, bad):
+    with pytest.raises(sabre.SabreError):
+        sabre.RolloutModel(scenes["shelf"], command_acceleration=bad)
+    with pytest.raises(sabre.SabreError):
+        sabre.Controller(scenes["shelf"], sabre.tasks.OpenObject(), sabre.ControllerConfig(command_acceleration=tuple(bad)))
+
+
 def test_inputs_are_projected_onto_velocity_limits(scenes):
     scene = scenes["shelf"]
     model = sabre.RolloutModel(scene)

@@ -16,7 +16,7 @@ from .. import _core
 from ..errors import InvalidValueError
 from .params import BASE_ACCELERATION, BASE_JERK, TOLERATED_GAP, finite_list, robust_arm_limits
 
-__all__ = ["Limits", "CommandLimits", "CommandShaper", "Command", "CommandGate", "command_limits"]
+__all__ = ["Limits", "CommandLimits", "CommandShaper", "Command", "CommandGate", "command_limits", "joint_accelerations"]
 
 
 @dataclass(frozen=True)
@@ -72,6 +72,31 @@ def command_limits(
             pick("base_jerk_limits", BASE_JERK, 3),
         )
     return CommandLimits(arm=arm, base=base, period=period, base_period=max(period, 1.0 / rate))
+
+
+def joint_accelerations(
+    nq: int,
+    arm_index: Sequence[int] | np.ndarray,
+    arm_acceleration: Sequence[float],
+    base_index: Sequence[int] | np.ndarray | None,
+    base: Limits | None,
+) -> tuple[float, ...]:
+    """Per joint (nq), the largest acceleration the robot's command path gives it, for the rollout
+    model (:class:`sabre.ControllerConfig`'s ``command_acceleration``): the arm's joints ``arm_index``
+    their stream's or segments' ``arm_acceleration``; the base's x and y (world rates) the smaller of
+    its stream's (``base``) two linear bounds, which it reaches at any heading, and its yaw its own.
+    Every joint must be the arm's or the base's."""
+    out = [math.nan] * nq
+    for i, a in zip(arm_index, arm_acceleration):
+        out[int(i)] = float(a)
+    if base_index is not None and len(base_index) and base is not None:
+        ix, iy, iyaw = (int(i) for i in base_index)
+        linear = min(float(base.acceleration[0]), float(base.acceleration[1]))
+        out[ix], out[iy], out[iyaw] = linear, linear, float(base.acceleration[2])
+    missing = [i for i, a in enumerate(out) if math.isnan(a)]
+    if missing:
+        raise InvalidValueError(f"joints {missing} are neither the arm's nor the base's: no command bound for them")
+    return tuple(out)
 
 
 @dataclass(frozen=True)

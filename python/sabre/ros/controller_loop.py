@@ -23,9 +23,9 @@ from ..errors import SabreError
 from ..estimation import ObjectStateEstimator
 from ..realtime import RealtimeCascade
 from . import gil_priority, realtime_thread
-from .commands import CommandGate, CommandShaper, command_limits
+from .commands import CommandGate, CommandShaper, command_limits, joint_accelerations
 from .conversions import MessageError, yaw_of
-from .descriptions import Descriptions, build_controller
+from .descriptions import Descriptions, build_controller, build_scene
 from .durations import Durations
 from .inputs import JointStates, JointTorques, base_from_odometry
 from .qos import profile
@@ -54,10 +54,18 @@ class ControllerLoop:
         self.node = node
         self.params = p = params
         self.descriptions = descriptions
-        factory = functools.partial(build_controller, descriptions, str(p["variant"]), int(p["seed"]), int(p["threads"]))
-        self.controller = factory()
-        self.scene = self.controller.scene
+        self.scene = build_scene(descriptions)
         self._map_joints(p)
+        dq = self.scene.dq_limit
+        self.limits = command_limits(dq[self.arm_index], dq[self.base_index] if self.has_base else None, p)
+        self.arm_interface = arm_interface(p)
+        self.trajectory_limits = trajectory_limits(dq[self.arm_index], p) if self.arm_interface == "trajectory" else None
+        # the planner's model moves each joint no faster than its command path lets it
+        arm = self.trajectory_limits or self.limits.arm
+        accelerations = joint_accelerations(self.scene.nq, self.arm_index, arm.acceleration, self.base_index, self.limits.base)
+        setup = (descriptions, str(p["variant"]), int(p["seed"]), int(p["threads"]), accelerations)
+        factory = functools.partial(build_controller, *setup)
+        self.controller = build_controller(*setup, scene=self.scene)
         self._init_inputs(p)
         self.cascade = RealtimeCascade(
             self.controller,
@@ -72,8 +80,6 @@ class ControllerLoop:
             wrench_frames=self._wrench_frames,
         )
         self.horizon = float(self.controller.config.horizon)
-        dq = self.scene.dq_limit
-        self.limits = command_limits(dq[self.arm_index], dq[self.base_index] if self.has_base else None, p)
         self._init_tick(p)
         self._lock = threading.Lock()  # the tick's gate and the command publishers
         self._init_state()
@@ -130,12 +136,8 @@ class ControllerLoop:
         gate = CommandGate(CommandShaper(self.limits), float(p["state_timeout"]))
         base = [int(i) for i in self.base_index] if self.has_base else None
         self.cascade.core.set_shaping(gate.core, [int(i) for i in self.arm_index], base)
-        self.arm_interface = arm_interface(p)
-        accelerations = False
-        if self.arm_interface == "trajectory":
-            self.trajectory_limits = trajectory_limits(self.scene.dq_limit[self.arm_index], p)
-            accelerations = stream_trajectory(self.cascade.core, self.trajectory_limits, p)
-        segments = self.arm_interface == "trajectory"
+        segments = self.trajectory_limits is not None
+        accelerations = self.trajectory_limits is not None and stream_trajectory(self.cascade.core, self.trajectory_limits, p)
         self.tick = _core.BridgeTick(
             self.cascade.core,
             joints.core,
@@ -593,5 +595,5 @@ class ControllerLoop:
 
     def _limits_report(self) -> dict[str, list[float]]:
         """The arm's command limits: the segments' on the trajectory interface, else the stream's."""
-        arm = self.trajectory_limits if self.arm_interface == "trajectory" else self.limits.arm
+        arm = self.trajectory_limits or self.limits.arm
         return {"arm_velocity": list(arm.velocity), "arm_acceleration": list(arm.acceleration), "arm_jerk": list(arm.jerk)}

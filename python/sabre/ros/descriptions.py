@@ -38,11 +38,20 @@ def build_scene(d: Descriptions) -> Scene:
     return Scene.from_urdf_strings(d.robot_urdf, d.object_urdf, d.object_pose, joint=d.joint, hold=d.hold or None)
 
 
-def build_controller(d: Descriptions, variant: str, seed: int, threads: int) -> Controller:
-    """The node's controller: OpenObject on the described scene."""
-    scene = build_scene(d)
+def build_controller(
+    d: Descriptions,
+    variant: str,
+    seed: int,
+    threads: int,
+    command_acceleration: tuple[float, ...] | None = None,
+    scene: Scene | None = None,
+) -> Controller:
+    """The node's controller: OpenObject on the described scene (``scene``: that scene built already),
+    its rollout model bounded by the robot's ``command_acceleration`` (see :class:`sabre.ControllerConfig`)."""
+    scene = build_scene(d) if scene is None else scene
     task = tasks.OpenObject(handle=d.handle)
-    return Controller(scene, task, ControllerConfig(seed=seed, variant=variant, threads=threads or None))
+    config = ControllerConfig(seed=seed, variant=variant, threads=threads or None, command_acceleration=command_acceleration)
+    return Controller(scene, task, config)
 
 
 def _read(path: str, what: str) -> str:

@@ -228,6 +228,15 @@ impl ReducedWorld {
         self.layout.config.dt
     }
 
+    /// Bounds the servo's joint accelerations (see [`ServoLimits::cap_acceleration`]); before the
+    /// world is copied (its copies share the layout). Errors: a bad bound, or a world already copied.
+    pub fn cap_servo_acceleration(&mut self, caps: &[f64]) -> crate::error::Result<()> {
+        Arc::get_mut(&mut self.layout)
+            .ok_or_else(|| crate::error::SabreError::invalid("command_acceleration", "set before the world is copied"))?
+            .servo_limits
+            .cap_acceleration(caps)
+    }
+
     /// Whether `other` is a copy of this world (built together, sharing one layout).
     pub fn same_layout(&self, other: &ReducedWorld) -> bool {
         Arc::ptr_eq(&self.layout, &other.layout)

@@ -80,6 +80,12 @@ pub struct RolloutConfig {
     pub solver_iterations: usize,
     /// Which contact path the model steps (the multibody robot needs [`ContactModel::Rapier`]).
     pub contact_model: ContactModel,
+    /// Per robot joint, the largest acceleration (rad/s² or m/s²) the robot's command path gives it
+    /// (a trajectory's or a command stream's bound, a base driver's ramp), which bounds the servo's
+    /// besides the joint's effort; None: the effort's bound alone (a plant driven directly). A plan
+    /// from a model faster than the command path asks one joint group for what it cannot follow
+    /// while another follows at once.
+    pub command_acceleration: Option<Vec<f64>>,
 }
 
 impl Default for RolloutConfig {
@@ -94,6 +100,7 @@ impl Default for RolloutConfig {
             contact_friction: 0.2,
             solver_iterations: 1,
             contact_model: ContactModel::Reduced,
+            command_acceleration: None,
         }
     }
 }
@@ -132,7 +139,7 @@ impl RolloutModel {
                 return Err(SabreError::invalid(name, format!("must be finite and non-negative, got {v}")));
             }
         }
-        let template = match config.contact_model {
+        let mut template = match config.contact_model {
             ContactModel::Rapier => {
                 let world_config = WorldConfig {
                     dt: config.dt,
@@ -175,6 +182,9 @@ impl RolloutModel {
                 },
             )?)),
         };
+        if let Some(caps) = &config.command_acceleration {
+            template.cap_servo_acceleration(caps)?;
+        }
         Ok(Self {
             speed_bounds: super::divergence::joint_speed_bounds(&scene)
                 .into_iter()
