@@ -86,9 +86,9 @@ class ControllerConfig:
     contact_friction: float = _ROLLOUT.contact_friction
     #: how the rollout model resolves contacts (:data:`sabre.CONTACT_MODELS`): "reduced" or "rapier".
     contact_model: str = _ROLLOUT.contact_model
-    #: per joint (nq), the largest acceleration (rad/s² or m/s²) the robot's command path gives it,
-    #: which bounds the rollout model's servo (:class:`sabre.RolloutModel`); None: the joints' efforts
-    #: alone (a plant driven directly). The ROS 2 bridge sets it from its command limits.
+    #: per joint (nq), the largest acceleration (rad/s² or m/s²) the robot's command path gives it:
+    #: the rollout model's servo tracks its commands rate-limited at it (:class:`sabre.RolloutModel`);
+    #: None: as given (a plant driven directly). The ROS 2 bridge sets it from its command limits.
     command_acceleration: tuple[float, ...] | None = None
     #: "N" (no filter), "I" (1 kHz FILTER-QP with the energy tank), "O" (Sequential FILTER-QP on
     #: the optimised sequence, which warm-starts the next round) or "IO" (both).

@@ -99,10 +99,11 @@ class RolloutModel:
     ``skip_quiescent_steps=False``.
 
     ``command_acceleration`` (nq,): per joint, the largest acceleration (rad/s² or m/s²) the robot's
-    command path gives it (an arm's trajectory or command stream bound, a base driver's ramp); the
-    servo's acceleration is bounded by it besides the joint's effort. None (the default): the effort
-    alone, as for a plant driven directly. A robot whose commands are rate-limited needs it: a plan
-    from a faster model asks the slow joints for what they cannot follow while the others follow at once.
+    command path gives it (an arm's trajectory or command stream bound, a base driver's ramp): the
+    servo tracks the commands rate-limited at it, starting from the state's velocity. None (the
+    default): the commands as given, as for a plant driven directly. A robot whose commands are
+    rate-limited needs it: a plan from a faster model asks the slow joints for what they cannot
+    follow while the others follow at once.
 
     Rollouts run in parallel on ``threads`` workers (default: all cores), each with its own physics
     world restored from a pristine snapshot before every rollout; the GIL is released and the

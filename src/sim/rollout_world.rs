@@ -35,7 +35,7 @@ impl RolloutWorld {
         each!(self, w => w.dt())
     }
 
-    /// Bounds the servo's joint accelerations by the robot's command path (see
+    /// Rate-limits the servo's commands as the robot's command path does (see
     /// [`super::servo::ServoLimits::cap_acceleration`]), before the world is copied.
     pub fn cap_servo_acceleration(&mut self, caps: &[f64]) -> crate::error::Result<()> {
         each!(self, w => w.cap_servo_acceleration(caps))

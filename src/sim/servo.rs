@@ -43,6 +43,9 @@ pub struct ServoLimits {
     /// Per joint: whether the mass matrix changes as it moves, the joints whose motion calls for a
     /// new factor (a mobile base's x and y do not).
     pub moves_mass: Vec<bool>,
+    /// Per joint, the most the command may change in a step (see [`Self::cap_acceleration`]); None:
+    /// the command is taken as given.
+    pub command_step: Option<Vec<f64>>,
 }
 
 impl ServoLimits {
@@ -58,15 +61,17 @@ impl ServoLimits {
             velocity: limits.iter().map(|l| l.velocity).collect(),
             position: limits.iter().map(|l| (l.lower, l.upper)).collect(),
             moves_mass: scene.robot.mass_invariant_coordinates().iter().map(|&i| !i).collect(),
+            command_step: None,
         })
     }
 }
 
 impl ServoLimits {
-    /// Bounds each joint's acceleration by `caps` (nq, positive; infinity: no bound) as well as by
-    /// its effort: the command path of a robot that rate-limits its commands (a trajectory's or a
-    /// stream's acceleration bound, a base driver's ramp) is slower than its motors.
-    pub fn cap_acceleration(&mut self, caps: &[f64]) -> Result<()> {
+    /// Rate-limits the servo's command as a robot's command path does (a trajectory's or a stream's
+    /// acceleration bound, a base driver's ramp): each step the command moves from the last by at
+    /// most `caps` (nq, positive; rad/s² or m/s²) times `dt`, the world's step. The servo tracks
+    /// that command with its bandwidth and effort, and contacts push the joints as before.
+    pub fn cap_acceleration(&mut self, caps: &[f64], dt: f64) -> Result<()> {
         if caps.len() != self.acceleration.len() {
             return Err(SabreError::invalid(
                 "command_acceleration",
@@ -83,9 +88,7 @@ impl ServoLimits {
                 format!("bounds must be positive, got {bad}"),
             ));
         }
-        for (a, &cap) in self.acceleration.iter_mut().zip(caps) {
-            *a = a.min(cap);
-        }
+        self.command_step = Some(caps.iter().map(|a| a * dt).collect());
         Ok(())
     }
 }
@@ -130,19 +133,25 @@ impl ServoState {
         }
     }
 
-    /// Places the servo at (q, q̇) with no accumulated lag, no command and no cached mass matrix.
+    /// Places the servo at (q, q̇) with no accumulated lag and no cached mass matrix, its command at
+    /// q̇ (where a rate-limited command path is when the robot moves at q̇).
     pub fn reset(&mut self, q: &[f64], qd: &[f64]) {
         self.q.copy_from_slice(q);
         self.qd.copy_from_slice(qd);
         self.integral.iter_mut().for_each(|v| *v = 0.0);
-        self.command.iter_mut().for_each(|v| *v = 0.0);
+        self.command.copy_from_slice(qd);
         self.mass_factor.clear();
     }
 
-    /// Sets the command of the next step, projected onto the joint velocity limits.
+    /// Sets the command of the next step, projected onto the joint velocity limits and, with a
+    /// command path's bound ([`ServoLimits::cap_acceleration`]), moved toward `u` by at most its step.
     pub fn set_command(&mut self, u: &[f64], limits: &ServoLimits) {
-        for ((c, &v), &limit) in self.command.iter_mut().zip(u).zip(&limits.velocity) {
-            *c = v.clamp(-limit, limit);
+        for (i, (&v, &limit)) in u.iter().zip(&limits.velocity).enumerate() {
+            let v = v.clamp(-limit, limit);
+            self.command[i] = match &limits.command_step {
+                Some(step) => v.clamp(self.command[i] - step[i], self.command[i] + step[i]),
+                None => v,
+            };
         }
     }
 

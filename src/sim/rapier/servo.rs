@@ -9,15 +9,16 @@ use super::{pose_to_rapier, DofRef, RobotDrive, SimWorld};
 use crate::sim::servo::ServoGains;
 
 impl SimWorld {
-    /// Bounds the kinematic servo's joint accelerations (see
+    /// Rate-limits the kinematic servo's commands (see
     /// [`crate::sim::servo::ServoLimits::cap_acceleration`]);
     /// before the world is copied (its copies share the layout). Errors: a bad bound, or a world
     /// already copied.
     pub fn cap_servo_acceleration(&mut self, caps: &[f64]) -> crate::error::Result<()> {
+        let dt = self.dt();
         std::sync::Arc::get_mut(&mut self.layout)
             .ok_or_else(|| crate::error::SabreError::invalid("command_acceleration", "set before the world is copied"))?
             .servo_limits
-            .cap_acceleration(caps)
+            .cap_acceleration(caps, dt)
     }
 
     fn set_tree_state(

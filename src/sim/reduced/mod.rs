@@ -228,13 +228,14 @@ impl ReducedWorld {
         self.layout.config.dt
     }
 
-    /// Bounds the servo's joint accelerations (see [`ServoLimits::cap_acceleration`]); before the
+    /// Rate-limits the servo's commands (see [`ServoLimits::cap_acceleration`]); before the
     /// world is copied (its copies share the layout). Errors: a bad bound, or a world already copied.
     pub fn cap_servo_acceleration(&mut self, caps: &[f64]) -> crate::error::Result<()> {
+        let dt = self.dt();
         Arc::get_mut(&mut self.layout)
             .ok_or_else(|| crate::error::SabreError::invalid("command_acceleration", "set before the world is copied"))?
             .servo_limits
-            .cap_acceleration(caps)
+            .cap_acceleration(caps, dt)
     }
 
     /// Whether `other` is a copy of this world (built together, sharing one layout).

@@ -81,10 +81,10 @@ pub struct RolloutConfig {
     /// Which contact path the model steps (the multibody robot needs [`ContactModel::Rapier`]).
     pub contact_model: ContactModel,
     /// Per robot joint, the largest acceleration (rad/s² or m/s²) the robot's command path gives it
-    /// (a trajectory's or a command stream's bound, a base driver's ramp), which bounds the servo's
-    /// besides the joint's effort; None: the effort's bound alone (a plant driven directly). A plan
-    /// from a model faster than the command path asks one joint group for what it cannot follow
-    /// while another follows at once.
+    /// (a trajectory's or a command stream's bound, a base driver's ramp): the servo tracks the
+    /// commands rate-limited at it; None: as given (a plant driven directly). A plan from a model
+    /// faster than the command path asks one joint group for what it cannot follow while another
+    /// follows at once.
     pub command_acceleration: Option<Vec<f64>>,
 }
 
