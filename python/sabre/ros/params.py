@@ -164,7 +164,9 @@ CONTROLLER_PARAMETERS: dict[str, Any] = {
     "visualization_rate": 4.0,  # Hz, 0: off
     "tau_ext_cutoff": 10.0,  # Hz, low-pass of the wrench-derived τ_ext the tank reads
     "max_tick_dt": 0.02,  # s: the tank integrates at most this long per state
-    "min_replan_period": 0.0,
+    # s: the planner's iterations at most this often (50 Hz, as the acceptance's run_episode plans);
+    # each takes a step toward the samples' weighted mean, so the rate shapes how fast plans change
+    "min_replan_period": 0.02,
     "realtime_priority": 70,
     "planner_process": True,
     "planner_nice": 10,
