@@ -20,7 +20,7 @@ use crate::control::command_stream::{CommandGate, CommandShaper};
 use crate::control::segment::{Segment, SegmentShape};
 use crate::control::trajectory_stream::TrajectoryConfig;
 use crate::control::{LowLevelConfig, RateLimiter};
-use crate::model::LimitBoundConfig;
+use crate::model::{LimitBoundConfig, Scene};
 use crate::safety::SafetyConfig;
 
 /// The robot's clock's offset from the ticks' (s): stamps are on the robot's clock.
@@ -47,6 +47,31 @@ fn config(tolerated_gap: f64, lead: f64, gain: f64) -> TrajectoryConfig {
         filter_step: 0.01,
         position_gain: vec![gain; 7],
     }
+}
+
+/// The cascade on `scene` streaming segments per `trajectory`: Franka's arm stream and a Ridgeback-like
+/// base stream, the default low-level controller, the FILTER-QP when `filtered`, and `tank`.
+fn streaming(scene: &Arc<Scene>, filtered: bool, tank: Option<EnergyTank>, trajectory: TrajectoryConfig) -> Cascade {
+    let arm = RateLimiter::new(
+        FRANKA_VELOCITY.to_vec(),
+        FRANKA_ACCELERATION.to_vec(),
+        FRANKA_JERK.to_vec(),
+        DT,
+    )
+    .unwrap();
+    let base = RateLimiter::new(vec![1.0; 3], vec![1.0, 1.0, 2.0], vec![10.0, 10.0, 20.0], 0.02).unwrap();
+    let gate = CommandGate::new(CommandShaper::new(arm, Some(base), 20), 0.05).unwrap();
+    let low = Arc::new(Mutex::new(
+        LowLevelController::new(scene.clone(), DT, LowLevelConfig::default()).unwrap(),
+    ));
+    let filter = filtered.then(|| Arc::new(Mutex::new(SafetyFilter::new(scene.clone(), SafetyConfig::default()).unwrap())));
+    let tau = ExternalTorque::new(scene.nq(), None, None, None).unwrap();
+    let mut cascade = Cascade::new(low, filter, tank.map(|t| Arc::new(Mutex::new(t))), tau).unwrap();
+    cascade
+        .set_shaping(CommandShaping::new(gate, ARM.to_vec(), Some(BASE), scene.nq()).unwrap())
+        .unwrap();
+    cascade.set_trajectory(trajectory).unwrap();
+    cascade
 }
 
 /// A segment published at `from` (ticks' clock) as the robot receives it.
@@ -89,26 +114,8 @@ fn drive(
     let scene = scene();
     let nq = scene.nq();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let arm = RateLimiter::new(
-        FRANKA_VELOCITY.to_vec(),
-        FRANKA_ACCELERATION.to_vec(),
-        FRANKA_JERK.to_vec(),
-        DT,
-    )
-    .unwrap();
-    let base = RateLimiter::new(vec![1.0; 3], vec![1.0, 1.0, 2.0], vec![10.0, 10.0, 20.0], 0.02).unwrap();
-    let gate = CommandGate::new(CommandShaper::new(arm, Some(base), 20), 0.05).unwrap();
-    let low = Arc::new(Mutex::new(
-        LowLevelController::new(scene.clone(), DT, LowLevelConfig::default()).unwrap(),
-    ));
-    let filter = filtered.then(|| Arc::new(Mutex::new(SafetyFilter::new(scene.clone(), SafetyConfig::default()).unwrap())));
-    let tank = Arc::new(Mutex::new(EnergyTank::new(10.0, 2.0, None, false).unwrap()));
-    let tau = ExternalTorque::new(nq, None, None, None).unwrap();
-    let mut cascade = Cascade::new(low, filter, Some(tank), tau).unwrap();
-    cascade
-        .set_shaping(CommandShaping::new(gate, ARM.to_vec(), Some(BASE), nq).unwrap())
-        .unwrap();
-    cascade.set_trajectory(config(0.1, lead, gain)).unwrap();
+    let tank = EnergyTank::new(10.0, 2.0, None, false).unwrap();
+    let mut cascade = streaming(&scene, filtered, Some(tank), config(0.1, lead, gain));
     let mut robot = TrajectoryFollower::new(names(), vec![gain; 7]).unwrap();
     let mut reflexes = FrankaReflexes::new(DT, &FRANKA_VELOCITY, &FRANKA_ACCELERATION, &FRANKA_JERK).unwrap();
     let limits = scene.robot_limits();
@@ -229,27 +236,9 @@ fn a_stream_that_ends_brings_the_arm_to_rest_within_the_checks() {
 fn the_tank_booked_against_the_executed_velocity_stays_above_its_floor() {
     let scene = scene();
     let nq = scene.nq();
-    let arm = RateLimiter::new(
-        FRANKA_VELOCITY.to_vec(),
-        FRANKA_ACCELERATION.to_vec(),
-        FRANKA_JERK.to_vec(),
-        DT,
-    )
-    .unwrap();
-    let base = RateLimiter::new(vec![1.0; 3], vec![1.0, 1.0, 2.0], vec![10.0, 10.0, 20.0], 0.02).unwrap();
-    let gate = CommandGate::new(CommandShaper::new(arm, Some(base), 20), 0.05).unwrap();
-    let low = Arc::new(Mutex::new(
-        LowLevelController::new(scene.clone(), DT, LowLevelConfig::default()).unwrap(),
-    ));
-    let filter = Arc::new(Mutex::new(SafetyFilter::new(scene.clone(), SafetyConfig::default()).unwrap()));
     let (floor, initial) = (2.0, 6.0);
-    let tank = Arc::new(Mutex::new(EnergyTank::new(initial, floor, None, false).unwrap()));
-    let tau = ExternalTorque::new(nq, None, None, None).unwrap();
-    let mut cascade = Cascade::new(low, Some(filter), Some(tank), tau).unwrap();
-    cascade
-        .set_shaping(CommandShaping::new(gate, ARM.to_vec(), Some(BASE), nq).unwrap())
-        .unwrap();
-    cascade.set_trajectory(config(0.1, 0.03, 0.0)).unwrap();
+    let tank = EnergyTank::new(initial, floor, None, false).unwrap();
+    let mut cascade = streaming(&scene, true, Some(tank), config(0.1, 0.03, 0.0));
     let mut robot = TrajectoryFollower::new(names(), vec![0.0; 7]).unwrap();
     let mut x = scene.default_state();
     x[..nq].copy_from_slice(&scene.start_configuration());
@@ -338,25 +327,8 @@ fn best_lag(planned: &[f64], executed: &[f64], dt: f64) -> f64 {
 fn the_base_and_the_arm_execute_the_plan_at_the_same_time() {
     let scene = scene();
     let nq = scene.nq();
-    let arm = RateLimiter::new(
-        FRANKA_VELOCITY.to_vec(),
-        FRANKA_ACCELERATION.to_vec(),
-        FRANKA_JERK.to_vec(),
-        DT,
-    )
-    .unwrap();
-    let base = RateLimiter::new(vec![1.0; 3], vec![1.0, 1.0, 2.0], vec![10.0, 10.0, 20.0], 0.02).unwrap();
-    let gate = CommandGate::new(CommandShaper::new(arm, Some(base), 20), 0.05).unwrap();
-    let low = Arc::new(Mutex::new(
-        LowLevelController::new(scene.clone(), DT, LowLevelConfig::default()).unwrap(),
-    ));
-    let tau = ExternalTorque::new(nq, None, None, None).unwrap();
-    let mut cascade = Cascade::new(low, None, None, tau).unwrap();
-    cascade
-        .set_shaping(CommandShaping::new(gate, ARM.to_vec(), Some(BASE), nq).unwrap())
-        .unwrap();
     let lead = 0.05;
-    cascade.set_trajectory(config(0.1, lead, 0.0)).unwrap();
+    let mut cascade = streaming(&scene, false, None, config(0.1, lead, 0.0));
     let mut robot = TrajectoryFollower::new(names(), vec![0.0; 7]).unwrap();
     let mut x = scene.default_state();
     x[..nq].copy_from_slice(&scene.start_configuration());
