@@ -88,14 +88,19 @@ def force_kept(row: dict) -> bool:
 
 
 def within_limits(s: dict, c: dict) -> bool:
+    """Whether the command in effect at every robot cycle kept the interface's velocity, acceleration
+    and jerk bounds, to rounding (a few parts in 10⁶: the segments and the stream reach their bounds,
+    and the robot evaluates them on its own clock)."""
     limits = c.get("limits")
     if not limits or "arm_accel_max" not in s:
         return False
-    return bool(
-        np.all(np.array(s["arm_accel_max"]) <= np.array(limits["arm_acceleration"]) * (1 + 1e-6) + 1e-6)
-        and np.all(np.array(s["arm_jerk_max"]) <= np.array(limits["arm_jerk"]) * (1 + 1e-6) + 1e-3)
-        # a segment's velocity peaks between its knots a few parts in 10⁷ above its bound
-        and np.all(np.array(s["arm_speed_max"]) <= np.array(limits["arm_velocity"]) * (1 + 1e-6) + 1e-9)
+    return all(
+        np.all(np.array(s[seen]) <= np.array(limits[bound]) * (1 + 1e-5) + 1e-9)
+        for seen, bound in (
+            ("arm_speed_max", "arm_velocity"),
+            ("arm_accel_max", "arm_acceleration"),
+            ("arm_jerk_max", "arm_jerk"),
+        )
     )
 
 

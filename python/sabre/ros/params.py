@@ -138,9 +138,10 @@ CONTROLLER_PARAMETERS: dict[str, Any] = {
     "base_acceleration_limits": UNSET_DOUBLES,
     "base_jerk_limits": UNSET_DOUBLES,
     "command_period": 0.001,  # s: the arm command stream's step (the robot's control cycle)
-    # the arm's command interface: "velocity" (a stream on arm_command_topic, robust to delivery gaps
-    # up to tolerated_gap) or "trajectory" (joint_trajectory_controller's topic, trajectory_topic)
-    "arm_interface": "velocity",
+    # the arm's command interface: "trajectory" (joint_trajectory_controller's topic, trajectory_topic:
+    # segments that ride out delivery gaps up to trajectory_tolerated_gap) or "velocity" (a 1 kHz
+    # stream on arm_command_topic, robust to delivery gaps up to tolerated_gap only)
+    "arm_interface": "trajectory",
     "trajectory_rate": 100.0,  # Hz: segments published
     "trajectory_lead": 0.03,  # s: from a segment's stamp to its splice (the delivery latency it absorbs)
     "trajectory_tolerated_gap": 0.1,  # s: the pause in deliveries a segment rides out before its stop
@@ -210,10 +211,10 @@ SIM_ROBOT_PARAMETERS: dict[str, Any] = {
     # tick the plant loop itself ran late is excused); "command" (a diagnostic): each arm command
     # against the one before, one plant period apart (the stream as sent)
     "reflex_check": "cycle",
-    # the arm's command interface the robot runs: "velocity" (a forward command controller on
-    # arm_command_topic) or "trajectory" (joint_trajectory_controller's topic interface on
-    # trajectory_topic, with the velocity command interface v_d + k_p (q_d − q))
-    "arm_interface": "velocity",
+    # the arm's command interface the robot runs: "trajectory" (joint_trajectory_controller's topic
+    # interface on trajectory_topic, with the velocity command interface v_d + k_p (q_d − q)) or
+    # "velocity" (a forward command controller on arm_command_topic)
+    "arm_interface": "trajectory",
     "trajectory_position_gain": 0.0,  # 1/s: JTC's k_p, every arm joint (0: feedforward)
     # the arm's commands and joint states taken and published by the core from the plant loop (no
     # executor callback per command); False: an executor callback per command

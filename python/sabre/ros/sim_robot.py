@@ -162,6 +162,7 @@ class SimRobotNode:
             "latency": Durations(),
             "loop_work": Durations(),
             "success_time": None,
+            "first_command_time": None,
             "contact": ContactRecord(),
             "hold_started": None,
             "hold_ended": None,
@@ -308,6 +309,9 @@ class SimRobotNode:
             self.stats["loops"] += 1
             if k >= next_check and self.stats["success_time"] is None:
                 next_check = k + check_every
+                if self.stats["first_command_time"] is None and self._driver.counts()["arm_commands"]:
+                    # the controller's start as the robot sees it: run_episode's t = 0
+                    self.stats["first_command_time"] = self.plant.time
                 if self.task.success(self.scene, self.plant.state):
                     self.stats["success_time"] = self.plant.time
             opened_at = self.stats["success_time"]
@@ -445,7 +449,14 @@ class SimRobotNode:
             **self._cycle_summary(),
             "opening": float(state.o[0]),
             "success": s["success_time"] is not None,
-            "time_to_open": s["success_time"],
+            # plant time (s) of the success and of the first arm command taken (checked at 100 Hz)
+            "success_time": s["success_time"],
+            "first_command_time": s["first_command_time"],
+            # from the first arm command to the success: the controller's time to open, without the
+            # seconds the robot ran before the controller was configured and activated
+            "time_to_open": None
+            if s["success_time"] is None or s["first_command_time"] is None
+            else s["success_time"] - s["first_command_time"],
             **self._contact_summary(),
             "hold_started": s["hold_started"],
             "hold_ended": s["hold_ended"],
