@@ -43,9 +43,11 @@ import sabre
 from load import busy_cores
 from sabre import tasks
 from sabre.episode import contact_force_stats
-from sabre.ros import require_ros
+from sabre.ros import params, require_ros
+from sabre.ros.commands import command_limits, joint_accelerations
 from sabre.ros.launch import run_bridge
 from sabre.ros.sim_robot import make_plant
+from sabre.ros.trajectory import trajectory_limits
 
 #: Where each object stands (x, y, z, roll, pitch, yaw): 0.2–0.3 m aside and turned 10–20° from its default.
 POSES: dict[str, tuple[float, ...]] = {
@@ -61,11 +63,29 @@ TIME_WITHIN = 1.2
 WITHIN = 1.5
 
 
-def reference(obj: str, variant: str, seed: int, duration: float, plant: str) -> dict:
+def command_path(scene: sabre.Scene, interface: str, tolerated_gap: float) -> tuple[float, ...]:
+    """Per joint, the acceleration bound (rad/s², m/s²) of the bridge's command path at its default
+    parameters: the arm's segments' (trajectory) or stream's (velocity), the base stream's."""
+    defaults = {k: [] if v == params.UNSET_DOUBLES else v for k, v in params.CONTROLLER_PARAMETERS.items()}
+    p = defaults | {"arm_interface": interface, "tolerated_gap": tolerated_gap}
+    base = list(scene.base_indices) if scene.base_indices is not None else []
+    arm = [i for i in range(scene.nq) if i not in base]
+    dq = np.asarray(scene.dq_limit)
+    limits = command_limits(dq[arm], dq[base] if base else None, p)
+    arm_acceleration = trajectory_limits(dq[arm], p).acceleration if interface == "trajectory" else limits.arm.acceleration
+    return joint_accelerations(scene.nq, arm, arm_acceleration, base or None, limits.base)
+
+
+def reference(obj: str, variant: str, seed: int, duration: float, plant: str, path: tuple[float, ...] | None = None) -> dict:
     """run_episode on the same object at the same pose and on the same plant: its time to open
-    (simulated time; None if it did not) and the hand's contact force while in contact."""
+    (simulated time; None if it did not) and the hand's contact force while in contact. With ``path``
+    (per joint acceleration bounds), on the bridge's command path: the plant's servo tracks commands
+    rate-limited at those bounds (`LowLevelController(command_acceleration=...)`) and the planner knows
+    them (`ControllerConfig.command_acceleration`), as the bridge's planner does."""
     scene = sabre.Scene.load(obj=obj, obj_pose=POSES[obj])
-    controller = sabre.Controller(scene, tasks.OpenObject(), sabre.ControllerConfig(variant=variant, seed=seed))
+    config = sabre.ControllerConfig(variant=variant, seed=seed, command_acceleration=path)
+    controller = sabre.Controller(scene, tasks.OpenObject(), config)
+    low_level = None if path is None else sabre.LowLevelController(scene, dt=0.001, command_acceleration=path)
     episode = sabre.run_episode(
         scene,
         controller,
@@ -76,15 +96,16 @@ def reference(obj: str, variant: str, seed: int, duration: float, plant: str) ->
         progress=False,
         record_every=1,  # the force at every plant step, as the simulated robot records it
         plant=make_plant(plant, scene, 0.001),
+        low_level=low_level,
     )
     force = contact_force_stats(episode.hand_contact_forces)
     return {"time": episode.time_to_success if episode.success else None, "mean": force["mean"], "p99": force["p99"]}
 
 
-def force_kept(row: dict) -> bool:
-    """Whether the bridge's contact force, its mean and its p99, are each within WITHIN× run_episode's."""
-    ref = row["reference"]
-    return all(row[f"force_{k}"] <= WITHIN * ref[k] for k in ("mean", "p99"))
+def force_kept(row: dict, ref: str = "reference") -> bool:
+    """Whether the bridge's contact force, its mean and its p99, are each within WITHIN× the
+    reference's (``reference``: run_episode's; ``on_path``: run_episode's on the command path)."""
+    return all(row[f"force_{k}"] <= WITHIN * row[ref][k] for k in ("mean", "p99"))
 
 
 def within_limits(s: dict, c: dict) -> bool:
@@ -104,12 +125,14 @@ def within_limits(s: dict, c: dict) -> bool:
     )
 
 
-def cached_reference(cache: Path | None, obj: str, variant: str, seed: int, duration: float, plant: str) -> dict:
+def cached_reference(
+    cache: Path | None, obj: str, variant: str, seed: int, duration: float, plant: str, path: tuple[float, ...] | None = None
+) -> dict:
     """:func:`reference`, read from and written to the JSON file ``cache`` (None: always run)."""
-    key = f"{obj}/{variant}/{seed}/{duration:g}/{plant}"
+    key = f"{obj}/{variant}/{seed}/{duration:g}/{plant}" + ("" if path is None else "/path " + " ".join(f"{a:g}" for a in path))
     known = json.loads(cache.read_text()) if cache is not None and cache.exists() else {}
     if key not in known:
-        known[key] = reference(obj, variant, seed, duration, plant)
+        known[key] = reference(obj, variant, seed, duration, plant, path)
         if cache is not None:
             cache.parent.mkdir(parents=True, exist_ok=True)
             cache.write_text(json.dumps(known, indent=1))
@@ -131,11 +154,15 @@ def one_run(obj: str, variant: str, seed: int, args: argparse.Namespace) -> dict
         )
     s, c = run.sim, run.controller
     ref = cached_reference(args.cache, obj, variant, seed, args.timeout, args.plant)
+    scene = sabre.Scene.load(obj=obj, obj_pose=POSES[obj])
+    path = command_path(scene, args.interface, args.tolerated_gap)
+    on_path = cached_reference(args.cache, obj, variant, seed, args.timeout, args.plant, path)
     gaps = s.get("delivery_gaps", {})
     row = {
         "opened": bool(s.get("success")),
         "time": s.get("time_to_open"),
         "reference": ref,
+        "on_path": on_path,
         "force_mean": s.get("contact_force_mean", float("nan")),
         "force_p99": s.get("contact_force_p99", float("nan")),
         "gap_p99": gaps.get("p99_ms", float("nan")),
@@ -151,7 +178,8 @@ def one_run(obj: str, variant: str, seed: int, args: argparse.Namespace) -> dict
     print(
         f"{obj} {variant} seed {seed}: opened {row['opened']} in {row['time']} s (run_episode {ref['time']}), "
         f"contact force mean {row['force_mean']:.1f} N, p99 {row['force_p99']:.1f} N "
-        f"(run_episode {ref['mean']:.1f} N, {ref['p99']:.1f} N), delivery gaps p99 {row['gap_p99']:g} ms, "
+        f"(run_episode {ref['mean']:.1f} N, {ref['p99']:.1f} N; on the command path {on_path['time']} s, "
+        f"{on_path['mean']:.1f} N, {on_path['p99']:.1f} N), delivery gaps p99 {row['gap_p99']:g} ms, "
         f"max {row['gap_max']:g} ms, reflexes {row['reflexes']} {row['reflex_errors']}, "
         f"limits kept {row['limits_kept']}, CPU {100 * row['cpu_controller']:.0f} % / {100 * row['cpu_sim']:.0f} %",
         file=sys.stderr,
@@ -160,34 +188,49 @@ def one_run(obj: str, variant: str, seed: int, args: argparse.Namespace) -> dict
     return row
 
 
-def force_cell(runs: list, key: str) -> str:
-    """'bridge / run_episode' (N, medians over the runs that both opened) of a contact-force statistic."""
-    both = [r for r in runs if r["opened"] and r["reference"]["time"] is not None]
+def compared(runs: list, ref: str) -> list:
+    """The runs that opened through the bridge and in the reference ``ref``."""
+    return [r for r in runs if r["opened"] and r[ref]["time"] is not None]
+
+
+def force_cell(runs: list, key: str, ref: str = "reference") -> str:
+    """'bridge / reference' (N, medians over the runs that both opened) of a contact-force statistic."""
+    both = compared(runs, ref)
     if not both:
         return "—"
     bridge = statistics.median(r[f"force_{key}"] for r in both)
-    return f"{bridge:.0f} / {statistics.median(r['reference'][key] for r in both):.0f}"
+    return f"{bridge:.0f} / {statistics.median(r[ref][key] for r in both):.0f}"
+
+
+def ratio_cell(runs: list, ref: str) -> str:
+    """The bridge's time to open over the reference's: median and largest."""
+    ratios = [r["time"] / r[ref]["time"] for r in compared(runs, ref)]
+    return f"{statistics.median(ratios):.2f}×, {max(ratios):.2f}×" if ratios else "—"
 
 
 def table(rows: list) -> list[str]:
     lines = [
-        "| object | variant | opened | time to open, bridge / run_episode (median, max) "
+        "| object | variant | opened (bridge; run_episode, on the command path) "
+        "| time to open, bridge / run_episode (median, max) "
         "| contact force mean, bridge / run_episode (N, median) | contact force p99, bridge / run_episode (N, median) "
-        f"| force within {WITHIN:g}× | delivery gaps p99 / max (ms, worst run) "
+        f"| force within {WITHIN:g}× | time, bridge / on the command path | force mean, p99, bridge / on the command path (N) "
+        f"| force within {WITHIN:g}× of the command path | delivery gaps p99 / max (ms, worst run) "
         "| reflex aborts | limits kept | planner (Hz, median) | CPU controller / sim robot (median) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for obj, variant, runs in rows:
-        k = sum(r["opened"] for r in runs)
-        ratios = [r["time"] / r["reference"]["time"] for r in runs if r["opened"] and r["reference"]["time"]]
-        ratio = f"{statistics.median(ratios):.2f}×, {max(ratios):.2f}×" if ratios else "—"
-        compared = [r for r in runs if r["opened"] and r["reference"]["time"] is not None]
+        n = len(runs)
+        opened = sum(r["opened"] for r in runs)
+        references = ", ".join(str(sum(r[ref]["time"] is not None for r in runs)) for ref in ("reference", "on_path"))
+        both, on_path = compared(runs, "reference"), compared(runs, "on_path")
         lines.append(
-            f"| {obj} | {variant} | {k}/{len(runs)} | {ratio} "
-            f"| {force_cell(runs, 'mean')} | {force_cell(runs, 'p99')} | {sum(force_kept(r) for r in compared)}/{len(compared)} "
+            f"| {obj} | {variant} | {opened}/{n} ({references}) | {ratio_cell(runs, 'reference')} "
+            f"| {force_cell(runs, 'mean')} | {force_cell(runs, 'p99')} | {sum(force_kept(r) for r in both)}/{len(both)} "
+            f"| {ratio_cell(runs, 'on_path')} | {force_cell(runs, 'mean', 'on_path')}, {force_cell(runs, 'p99', 'on_path')} "
+            f"| {sum(force_kept(r, 'on_path') for r in on_path)}/{len(on_path)} "
             f"| {max(r['gap_p99'] for r in runs):g} / {max(r['gap_max'] for r in runs):g} "
             f"| {sum(max(r['reflexes'], 0) for r in runs)} "
-            f"| {sum(r['limits_kept'] for r in runs)}/{len(runs)} | {statistics.median(r['planner_hz'] for r in runs):.0f} "
+            f"| {sum(r['limits_kept'] for r in runs)}/{n} | {statistics.median(r['planner_hz'] for r in runs):.0f} "
             f"| {100 * statistics.median(r['cpu_controller'] for r in runs):.0f} % / "
             f"{100 * statistics.median(r['cpu_sim'] for r in runs):.0f} % |"
         )
@@ -195,15 +238,23 @@ def table(rows: list) -> list[str]:
 
 
 def totals(rows: list) -> str:
-    """The whole run against the goals: opened, median time ratio, aborts."""
+    """The whole run against the goals: opened, median time ratio, aborts, forces; against both references."""
     runs = [r for _, _, rs in rows for r in rs]
-    ratios = [r["time"] / r["reference"]["time"] for r in runs if r["opened"] and r["reference"]["time"]]
-    median = f"{statistics.median(ratios):.2f}×" if ratios else "—"
+
+    def median_ratio(ref: str) -> str:
+        ratios = [r["time"] / r[ref]["time"] for r in compared(runs, ref)]
+        return f"{statistics.median(ratios):.2f}×" if ratios else "—"
+
     aborts = sum(max(r["reflexes"], 0) for r in runs)
+    both, on_path = compared(runs, "reference"), compared(runs, "on_path")
     return (
-        f"In all: opened {sum(r['opened'] for r in runs)}/{len(runs)}, median time to open {median} run_episode's "
-        f"(goal ≤ {TIME_WITHIN:g}×), reflex aborts {aborts}, contact force within {WITHIN:g}× in "
-        f"{sum(force_kept(r) for r in runs if r['opened'] and r['reference']['time'] is not None)} of the runs both opened."
+        f"In all: opened {sum(r['opened'] for r in runs)}/{len(runs)} (run_episode "
+        f"{sum(r['reference']['time'] is not None for r in runs)}, on the command path "
+        f"{sum(r['on_path']['time'] is not None for r in runs)}), median time to open {median_ratio('reference')} "
+        f"run_episode's (goal ≤ {TIME_WITHIN:g}×) and {median_ratio('on_path')} its on the command path, reflex aborts "
+        f"{aborts}, contact force within {WITHIN:g}× in {sum(force_kept(r) for r in both)} of the {len(both)} runs both "
+        f"opened and within {WITHIN:g}× of the command path's in "
+        f"{sum(force_kept(r, 'on_path') for r in on_path)} of {len(on_path)}."
     )
 
 

@@ -115,6 +115,15 @@ def as_count(name: str, value: Any, minimum: int = 1, maximum: int | None = None
     return int(value)
 
 
+def as_accelerations(name: str, value: Any, size: int) -> list[float]:
+    """``value`` as ``size`` finite, positive per-joint bounds (rad/s² or m/s²), else InvalidValueError
+    (ShapeError for the wrong shape)."""
+    a = as_float_array(name, value, (size,))
+    if np.any(a <= 0):
+        raise InvalidValueError(f"{name} must hold positive bounds, got {a.tolist()}")
+    return [float(v) for v in a]
+
+
 def readonly(array: np.ndarray) -> np.ndarray:
     array.setflags(write=False)
     return array

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from . import _core
-from ._validate import as_count, as_float_array, as_non_negative, as_positive, core_config, readonly
+from ._validate import as_accelerations, as_count, as_float_array, as_non_negative, as_positive, core_config, readonly
 from .errors import InvalidValueError, ShapeError
 from .plants import PlantInterface, as_plant
 from .safety import EnergyTank, SafetyConfig, SafetyFilter
@@ -46,6 +46,13 @@ class LowLevelController:
     task can ask for a floor per phase (:meth:`sabre.tasks.Task.gain_inertia_floor`). A floor too
     large for the step, one that would make a light joint diverge, is refused when the controller
     drives the plant (:meth:`track`, :meth:`follow`).
+
+    ``command_acceleration`` (nq,) makes the controller the robot's command path too: it tracks a
+    command that follows the reference at most that fast per joint (rad/s² or m/s²; a base driver's
+    ramp, a trajectory's or a stream's acceleration bound), from the measured velocity after a reset,
+    as :class:`sabre.RolloutModel`'s servo does with its own ``command_acceleration``. A cascade
+    built on it (:func:`sabre.run_episode`) brakes each joint toward its limits no faster. None (the
+    default): the reference is tracked as given.
     """
 
     def __init__(
@@ -57,6 +64,7 @@ class LowLevelController:
         integral_gain: float = _LOW_LEVEL.integral_gain,
         integral_limit: float = _LOW_LEVEL.integral_limit,
         gain_inertia_floor: float | str = _LOW_LEVEL.gain_inertia_floor,
+        command_acceleration: Sequence[float] | np.ndarray | None = None,
     ) -> None:
         if not isinstance(scene, Scene):
             raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
@@ -73,6 +81,14 @@ class LowLevelController:
         self._core = _core.LowLevelController(scene._core, dt, config)
         if auto:
             self._core.gain_inertia_floor = 0.5 * self.max_stable_floor
+        if command_acceleration is not None:
+            self._core.command_acceleration = as_accelerations("command_acceleration", command_acceleration, scene.nq)
+
+    @property
+    def command_acceleration(self) -> np.ndarray | None:
+        """(nq,) the bounds at which the tracked command follows the reference, or None."""
+        a = self._core.command_acceleration
+        return None if a is None else readonly(np.asarray(a, dtype=float))
 
     @property
     def max_stable_floor(self) -> float:

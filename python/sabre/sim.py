@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _core
-from ._validate import as_count, as_float_array, as_non_negative, as_positive, core_config, readonly
+from ._validate import as_accelerations, as_count, as_float_array, as_non_negative, as_positive, core_config, readonly
 from .errors import InvalidValueError
 from .scene import Scene
 
@@ -70,14 +70,6 @@ class RolloutResult:
     failed: np.ndarray
     engine_steps: np.ndarray
     engine_time: np.ndarray
-
-
-def _accelerations(value: Sequence[float] | np.ndarray, nq: int) -> list[float]:
-    """``command_acceleration`` checked: nq positive, finite bounds."""
-    a = as_float_array("command_acceleration", value, (nq,))
-    if np.any(a <= 0):
-        raise InvalidValueError(f"command_acceleration must hold positive bounds, got {a.tolist()}")
-    return [float(v) for v in a]
 
 
 class RolloutModel:
@@ -143,7 +135,9 @@ class RolloutModel:
             multibody_robot=bool(multibody_robot),
             skip_quiescent_steps=bool(skip_quiescent_steps),
             contact_model=contact_model,
-            command_acceleration=None if command_acceleration is None else _accelerations(command_acceleration, scene.nq),
+            command_acceleration=None
+            if command_acceleration is None
+            else as_accelerations("command_acceleration", command_acceleration, scene.nq),
         )
         self._core = _core.RolloutModel(scene._core, config)
 

@@ -146,7 +146,8 @@ impl Cascade {
             }
             bound = f.config().limit_bound;
         }
-        let limits = LimitBound::new(&scene, &bound)?;
+        let mut limits = LimitBound::new(&scene, &bound)?;
+        brake_within_low_level(&mut limits, &lock(&low_level))?;
         if tau_ext.raw().len() != nq {
             return Err(SabreError::invalid(
                 "tau_ext",
@@ -204,6 +205,7 @@ impl Cascade {
         }
         let mut limits = self.limits.clone();
         limits.clear_braking();
+        brake_within_low_level(&mut limits, &lock(&self.low_level))?;
         brake_as_shaped(&mut limits, &shaping)?;
         self.rebrake_trajectory(&mut limits, shaping.arm_index())?;
         (self.limits, self.shaping) = (limits, Some(shaping));
@@ -215,6 +217,7 @@ impl Cascade {
     pub fn set_limit_bound(&mut self, config: &LimitBoundConfig) -> Result<()> {
         let scene = lock(&self.low_level).scene().clone();
         let mut limits = LimitBound::new(&scene, config)?;
+        brake_within_low_level(&mut limits, &lock(&self.low_level))?;
         if let Some(shaping) = &self.shaping {
             brake_as_shaped(&mut limits, shaping)?;
             self.rebrake_trajectory(&mut limits, shaping.arm_index())?;
@@ -526,6 +529,15 @@ fn steered_positions(limits: &LimitBound, controller: &LowLevelController, q: &[
             q[i] + error[i].clamp((lower[i] - q[i]).min(0.0), (upper[i] - q[i]).max(0.0))
         };
     }
+}
+
+/// A low-level controller that rate-limits the command it tracks
+/// ([`LowLevelController::set_command_acceleration`]) brakes each joint at most at its bound.
+fn brake_within_low_level(limits: &mut LimitBound, low_level: &LowLevelController) -> Result<()> {
+    for (i, a) in low_level.command_acceleration().into_iter().flatten().enumerate() {
+        limits.cap_deceleration(i, a)?;
+    }
+    Ok(())
 }
 
 /// Joints a shaping's limiters command brake as those limiters do: an arm joint at its limiter's

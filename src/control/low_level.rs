@@ -72,6 +72,11 @@ pub struct LowLevelController {
     /// [`Self::loop_gain`]).
     apparent_inertia: Vec<f64>,
     diagonal_inertia: Vec<f64>,
+    /// Per joint, the most the tracked command may change in a call (see
+    /// [`Self::set_command_acceleration`]); None: the reference is tracked as given.
+    command_step: Option<Vec<f64>>,
+    /// The rate-limited command tracked by the last call; only valid while `has_previous`.
+    command: Vec<f64>,
 }
 
 /// Largest loop gain per plant step a joint may have (see [`LowLevelController::loop_gain`]): above 1
@@ -126,7 +131,36 @@ impl LowLevelController {
             acceleration: DVector::zeros(nq),
             pi_acceleration: DVector::zeros(nq),
             inertial_torque: DVector::zeros(nq),
+            command_step: None,
+            command: vec![0.0; nq],
         })
+    }
+
+    /// Rate-limits the command this controller tracks, as a robot's command path does (a base
+    /// driver's ramp, a trajectory's or a stream's acceleration bound): each call moves the tracked
+    /// command from the last one toward the reference by at most `caps` (nq, positive; rad/s² or
+    /// m/s²) times the control step, starting after a reset from the measured velocity. None: the
+    /// reference is tracked as given. The rollout model's servo does the same with
+    /// `RolloutConfig::command_acceleration`. Errors: a wrong length or a bound not positive.
+    pub fn set_command_acceleration(&mut self, caps: Option<&[f64]>) -> Result<()> {
+        let Some(caps) = caps else {
+            self.command_step = None;
+            return Ok(());
+        };
+        ensure_len("command_acceleration", caps, self.scene.nq())?;
+        if let Some(bad) = caps.iter().find(|a| !(a.is_finite() && **a > 0.0)) {
+            return Err(SabreError::invalid(
+                "command_acceleration",
+                format!("bounds must be finite and positive, got {bad}"),
+            ));
+        }
+        self.command_step = Some(caps.iter().map(|a| a * self.dt).collect());
+        Ok(())
+    }
+
+    /// The per-joint bounds of [`Self::set_command_acceleration`] (rad/s² or m/s²), if set.
+    pub fn command_acceleration(&self) -> Option<Vec<f64>> {
+        self.command_step.as_ref().map(|s| s.iter().map(|v| v / self.dt).collect())
     }
 
     pub fn config(&self) -> &LowLevelConfig {
@@ -240,6 +274,17 @@ impl LowLevelController {
             &mut self.mass_matrix,
             &mut self.gravity_torque,
         );
+        // the command tracked: the reference, or its rate-limited follower from the last call's
+        // (from the measured velocity after a reset)
+        if let Some(step) = &self.command_step {
+            for i in 0..nq {
+                let from = if self.has_previous { self.command[i] } else { qd[i] };
+                self.command[i] = u_ref[i].clamp(from - step[i], from + step[i]);
+            }
+        } else {
+            self.command.copy_from_slice(u_ref);
+        }
+        let u_ref = &self.command;
         let c = &self.config;
         for i in 0..nq {
             let error = u_ref[i] - qd[i];

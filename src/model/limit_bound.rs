@@ -208,6 +208,27 @@ impl LimitBound {
         Ok(())
     }
 
+    /// Joint `joint`'s stop brakes at most at `deceleration` (its controller rate-limits the command
+    /// it tracks; positive), whatever else its braking is. Errors: a joint past the robot's, a bound
+    /// not positive.
+    pub fn cap_deceleration(&mut self, joint: usize, deceleration: f64) -> Result<()> {
+        if joint >= self.len() {
+            return Err(SabreError::invalid(
+                "joint",
+                format!("{joint} is past the robot's {} joints", self.len()),
+            ));
+        }
+        if !(deceleration.is_finite() && deceleration > 0.0) {
+            return Err(SabreError::invalid(
+                "deceleration",
+                format!("must be finite and positive, got {deceleration}"),
+            ));
+        }
+        let b = &mut self.braking[joint];
+        b.deceleration = b.deceleration.min(deceleration);
+        Ok(())
+    }
+
     /// Every joint back to the config's deceleration, no jerk bound and the caller's step.
     pub fn clear_braking(&mut self) {
         let deceleration = self.config.deceleration;

@@ -85,6 +85,18 @@ impl PyLowLevelController {
         run(|| controller.set_gain_inertia_floor(floor))
     }
 
+    /// Per joint, the bound (rad/s² or m/s²) at which the tracked command follows the reference; None: as given.
+    #[getter]
+    fn command_acceleration(&self) -> Option<Vec<f64>> {
+        lock(&self.inner).command_acceleration()
+    }
+
+    #[setter]
+    fn set_command_acceleration(&self, caps: Option<Vec<f64>>) -> PyResult<()> {
+        let mut controller = lock(&self.inner);
+        run(|| controller.set_command_acceleration(caps.as_deref()))
+    }
+
     /// The largest gain inertia floor (kg m²) that keeps every joint's loop stable at plant step `plant_dt` (s).
     fn max_stable_floor(&self, plant_dt: f64) -> f64 {
         lock(&self.inner).max_stable_floor(plant_dt)
