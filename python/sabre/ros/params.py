@@ -22,6 +22,7 @@ __all__ = [
     "TRAJECTORY_FRACTION",
     "BASE_ACCELERATION",
     "BASE_JERK",
+    "BASE_RAMP_TIME",
     "declare",
 ]
 
@@ -49,10 +50,15 @@ TOLERATED_GAP = 0.005
 #: k_p (q_d − q) the robot adds and for a robot's own limits below Franka's.
 TRAJECTORY_FRACTION = 0.5
 
-#: The base's command limits (Ridgeback-like: its driver ramps at about 1 m/s² itself): acceleration
-#: of vx, vy (m/s²) and ωz (rad/s²) and their jerk; the velocity bounds come from the URDF.
+#: The base's command limits: acceleration of vx, vy (m/s²) and ωz (rad/s²), Ridgeback-like (its
+#: driver, ridgeback_control's control.yaml, bounds vx and vy at 1 m/s²), and their jerk, which the
+#: driver does not bound: the stream reaches its acceleration bound within BASE_RAMP_TIME, one step of
+#: the trajectory's filter, as the planner's rollout model assumes (it bounds the base's acceleration,
+#: not its jerk; a slower ramp leaves the base behind the plan the arm follows). The velocity bounds
+#: come from the URDF.
 BASE_ACCELERATION = (1.0, 1.0, 2.0)
-BASE_JERK = (10.0, 10.0, 20.0)
+BASE_RAMP_TIME = 0.01
+BASE_JERK = tuple(a / BASE_RAMP_TIME for a in BASE_ACCELERATION)
 
 #: Topics both nodes share (a real robot's drivers publish and subscribe the same names).
 TOPIC_DEFAULTS: dict[str, str] = {
