@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import tempfile
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -49,10 +49,16 @@ class ObjectSpec:
     distance: float
     bearing: float  # rad: direction of the object from the robot
     facing: float  # rad: how far its front turns away from facing the robot
+    bar_size: float = 0.01  # m: the bar's thickness and depth (a cylinder bar's diameter)
+    standoff: float = 0.056  # m: from the bar's back face to the panel
 
     @property
     def handle_link(self) -> str:
         return f"grip_{self.index}"
+
+    @property
+    def handle_class(self) -> str:
+        return handle_class(self.standoff)
 
     def pose(self) -> list[float]:
         """(x, y, z, roll, pitch, yaw): the front (−x of the object frame) faces the robot at the
@@ -62,7 +68,26 @@ class ObjectSpec:
 
     def describe(self) -> str:
         bar = "vertical" if self.vertical_bar else "horizontal"
-        return f"{self.kind}, w {self.width:.2f}, h {self.handle_height:.2f}, {bar} {self.bar_shape}"
+        size = f"{1000 * self.bar_size:.0f} mm on {1000 * self.standoff:.0f} mm standoffs"
+        return f"{self.kind}, w {self.width:.2f}, h {self.handle_height:.2f}, {bar} {self.bar_shape}, {size}"
+
+
+#: Standoffs shorter than this (m) make a handle of the short-standoff class: bars of 10–20 mm on
+#: standoffs of 20–40 mm, as benchmark cabinets and kitchen pulls have them.
+SHORT_STANDOFF = 0.045
+
+
+def handle_class(standoff: float) -> str:
+    """The handle class the sweep reports on its own: "short standoff" or "standard"."""
+    return "short standoff" if standoff < SHORT_STANDOFF else "standard"
+
+
+def short_handle(rng: np.random.Generator) -> tuple[float, float]:
+    """(bar size, standoff) in m: half the handles standard (a 10 mm bar on 56 mm standoffs), half of
+    the short-standoff class (a 10–20 mm bar on 20–40 mm standoffs)."""
+    if rng.random() < 0.5:
+        return 0.01, 0.056
+    return float(rng.uniform(0.01, 0.02)), float(rng.uniform(0.02, 0.04))
 
 
 def random_spec(rng: np.random.Generator, index: int) -> ObjectSpec:
@@ -70,7 +95,7 @@ def random_spec(rng: np.random.Generator, index: int) -> ObjectSpec:
         return float(np.exp(rng.uniform(np.log(0.5), np.log(2.0))))
 
     kind = "door" if rng.random() < 0.6 else "drawer"
-    return ObjectSpec(
+    spec = ObjectSpec(
         index=index,
         kind=kind,
         width=float(rng.uniform(0.25, 0.6)),
@@ -85,6 +110,8 @@ def random_spec(rng: np.random.Generator, index: int) -> ObjectSpec:
         bearing=float(rng.uniform(-0.5, 0.5)),
         facing=float(rng.uniform(-np.pi / 3, np.pi / 3)),
     )
+    bar_size, standoff = short_handle(rng)
+    return replace(spec, bar_size=bar_size, standoff=standoff)
 
 
 def _box(name: str, xyz: tuple[float, float, float], size: tuple[float, float, float]) -> str:
@@ -155,11 +182,13 @@ def object_urdf(spec: ObjectSpec) -> str:
             f'<dynamics damping="{2.0 * spec.damping_scale:.3f}" friction="{0.5 * spec.friction_scale:.3f}"/></joint>'
         )
         grip_y = 0.0
-    length = 0.17
+    length, b, post = 0.17, spec.bar_size, spec.standoff
+    x = b / 2 + post / 2  # a standoff's centre: from the bar's back face to the panel
     if spec.vertical_bar:
-        bar_size, standoffs, rpy = (0.01, 0.01, length), [(0.033, 0.0, 0.08), (0.033, 0.0, -0.08)], "0 0 0"
+        bar_size, standoffs, rpy = (b, b, length), [(x, 0.0, 0.08), (x, 0.0, -0.08)], "0 0 0"
     else:
-        bar_size, standoffs, rpy = (0.01, length, 0.01), [(0.033, 0.08, 0.0), (0.033, -0.08, 0.0)], "1.5707963 0 0"
+        bar_size, standoffs, rpy = (b, length, b), [(x, 0.08, 0.0), (x, -0.08, 0.0)], "1.5707963 0 0"
+    radius = 0.6 * b
     if spec.bar_shape == "box":
         bar = _box("bar", (0.0, 0.0, 0.0), bar_size)
     elif spec.bar_shape == "mesh":
@@ -170,14 +199,15 @@ def object_urdf(spec: ObjectSpec) -> str:
         )
     else:
         bar = (
-            f'<collision name="bar"><origin xyz="0 0 0" rpy="{rpy}"/><geometry><cylinder radius="0.006" length="{length}"/>'
-            f'</geometry></collision><visual name="bar"><origin xyz="0 0 0" rpy="{rpy}"/><geometry>'
-            f'<cylinder radius="0.006" length="{length}"/></geometry></visual>'
+            f'<collision name="bar"><origin xyz="0 0 0" rpy="{rpy}"/><geometry>'
+            f'<cylinder radius="{radius:.4f}" length="{length}"/></geometry></collision>'
+            f'<visual name="bar"><origin xyz="0 0 0" rpy="{rpy}"/><geometry>'
+            f'<cylinder radius="{radius:.4f}" length="{length}"/></geometry></visual>'
         )
     grip = (
         _inertial(0.1, (0.013, 0.0, 0.0), (0.06, 0.02, 0.17))
         + bar
-        + "".join(_box(f"standoff_{k}", xyz, (0.056, 0.01, 0.01)) for k, xyz in enumerate(standoffs))
+        + "".join(_box(f"standoff_{k}", xyz, (post, 0.01, 0.01)) for k, xyz in enumerate(standoffs))
     )
     return f"""<?xml version="1.0"?>
 <robot name="generated_{spec.kind}_{i}">
@@ -188,7 +218,7 @@ def object_urdf(spec: ObjectSpec) -> str:
   {joint}
   <link name="grip_{i}">{grip}</link>
   <joint name="grip_mount_{i}" type="fixed"><parent link="leaf_{i}"/><child link="grip_{i}"/>
-    <origin xyz="-0.061 {grip_y:.4f} 0"/></joint>
+    <origin xyz="{-(post + b / 2):.4f} {grip_y:.4f} 0"/></joint>
 </robot>
 """
 
@@ -230,10 +260,21 @@ class MeshCabinetSpec:
     distance: float
     bearing: float
     facing: float
+    bar_size: float = 0.01  # m: the bar's thickness and depth (the round bar's diameter)
+    standoff: float = 0.056  # m: from the bar's back face to the front it is mounted on
 
     @property
     def handle_link(self) -> str:
         return f"handle_{self.target}"
+
+    @property
+    def handle_class(self) -> str:
+        return handle_class(self.standoff)
+
+    @property
+    def handle_mount(self) -> float:
+        """x (m) of the handle's origin (the bar's centre) in its part's frame: in front of the front."""
+        return -(self.standoff + self.bar_size / 2)
 
     @property
     def package(self) -> str:
@@ -261,7 +302,8 @@ class MeshCabinetSpec:
         return bottom + height - self.handle_inset if self.drawers_on_top else bottom + self.handle_inset
 
     def describe(self) -> str:
-        return f"{PARTS[self.target]}, w {self.width:.2f}, h {self.handle_height():.2f}, {self.handle_style} mesh handle"
+        size = f"{1000 * self.bar_size:.0f} mm on {1000 * self.standoff:.0f} mm standoffs"
+        return f"{PARTS[self.target]}, w {self.width:.2f}, h {self.handle_height():.2f}, {self.handle_style} mesh handle, {size}"
 
 
 def random_mesh_spec(rng: np.random.Generator, index: int) -> MeshCabinetSpec:
@@ -269,7 +311,7 @@ def random_mesh_spec(rng: np.random.Generator, index: int) -> MeshCabinetSpec:
         return float(np.exp(rng.uniform(np.log(0.5), np.log(2.0))))
 
     drawers_on_top = bool(rng.random() < 0.5)
-    return MeshCabinetSpec(
+    spec = MeshCabinetSpec(
         index=index,
         width=float(rng.uniform(0.6, 0.9)),
         # drawers on top of low doors: door handles 0.51–0.77 m, drawers 0.75–1.23 m; drawers under
@@ -290,6 +332,8 @@ def random_mesh_spec(rng: np.random.Generator, index: int) -> MeshCabinetSpec:
         bearing=float(rng.uniform(-0.5, 0.5)),
         facing=float(rng.uniform(-np.pi / 3, np.pi / 3)),
     )
+    bar_size, standoff = short_handle(rng)
+    return replace(spec, bar_size=bar_size, standoff=standoff)
 
 
 def _carcass(spec: MeshCabinetSpec) -> list[tuple[str, mesh_files.Piece]]:
@@ -313,16 +357,22 @@ def _carcass(spec: MeshCabinetSpec) -> list[tuple[str, mesh_files.Piece]]:
 
 def _handle_pieces(spec: MeshCabinetSpec, vertical: bool) -> list[tuple[str, mesh_files.Piece]]:
     """The handle's convex pieces in its link frame (origin at the bar's centre, +x into the front):
-    the bar and two standoffs 0.061 m deep."""
-    length, axis = spec.bar_length, 2 if vertical else 1
+    the bar and two standoffs from its back face to the front (1 mm into the bar)."""
+    length, axis, b = spec.bar_length, 2 if vertical else 1, spec.bar_size
     along = np.eye(3)[axis]
+    post = spec.standoff + 0.001
     standoffs = [
-        (f"standoff_{k}", mesh_files.box(np.array([0.0325, 0.0, 0.0]) + sign * (length / 2 - 0.012) * along, (0.057, 0.01, 0.01)))
+        (
+            f"standoff_{k}",
+            mesh_files.box(
+                np.array([b / 2 - 0.001 + post / 2, 0.0, 0.0]) + sign * (length / 2 - 0.012) * along, (post, 0.01, 0.01)
+            ),
+        )
         for k, sign in enumerate((-1.0, 1.0))
     ]
     if spec.handle_style == "round":
-        return [("bar", mesh_files.prism((0.0, 0.0, 0.0), axis, 0.006, length))] + standoffs
-    size = np.full(3, 0.01)
+        return [("bar", mesh_files.prism((0.0, 0.0, 0.0), axis, 0.6 * b, length))] + standoffs
+    size = np.full(3, b)
     size[axis] = length
     if spec.handle_style == "split":
         halves = []
@@ -346,7 +396,7 @@ def _door(spec: MeshCabinetSpec, k: int) -> tuple[list[tuple[str, mesh_files.Pie
     ]
     handle_z = (height / 2 - spec.handle_inset) if spec.drawers_on_top else (spec.handle_inset - height / 2)
     joint = [0.0, s * (spec.width / 2 - 0.002), bottom + height / 2]
-    return half, joint, f"-0.061 {-s * (leaf_w - spec.handle_edge):.4f} {handle_z:.4f}"
+    return half, joint, f"{spec.handle_mount:g} {-s * (leaf_w - spec.handle_edge):.4f} {handle_z:.4f}"
 
 
 def _drawer(spec: MeshCabinetSpec, name: str) -> tuple[list[tuple[str, mesh_files.Piece]], list[float]]:
@@ -396,7 +446,7 @@ def _moving_parts(spec: MeshCabinetSpec, meshes: Path, url: str) -> str:
             )
         else:
             pieces, origin = _drawer(spec, PARTS[part])
-            handle_origin = "-0.061 0 0"
+            handle_origin = f"{spec.handle_mount:g} 0 0"
             joint = (
                 f'type="prismatic"><axis xyz="-1 0 0"/><limit lower="0" upper="0.35" effort="100" velocity="1"/>'
                 f'<dynamics damping="{2.0 * spec.damping_scale:.3f}" friction="{0.5 * spec.friction_scale:.3f}"/>'

@@ -157,7 +157,7 @@ fn infer(scene: &Scene, link: usize) -> Result<Isometry3<f64>> {
 }
 
 /// Points in the link frame whose convex hull is the collision primitive (round ones sampled).
-fn shape_points(collision: &Collision) -> Vec<Point3<f64>> {
+pub(crate) fn shape_points(collision: &Collision) -> Vec<Point3<f64>> {
     let circle = |radius: f64, z: f64| {
         (0..ROUND_SAMPLES).map(move |k| {
             let angle = 2.0 * PI * k as f64 / ROUND_SAMPLES as f64;

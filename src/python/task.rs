@@ -41,6 +41,7 @@ open_object_config!(
     hook_offset: [f64; 3],
     open_offset: [f64; 3],
     pitch: f64,
+    fit_clearance: Option<f64>,
     switch_position: f64,
     switch_angle: f64,
     hook_tolerance: f64,
@@ -241,6 +242,37 @@ impl PyOpenObjectRules {
         Ok(Self { inner })
     }
 
+    /// (4, 4) the grasp target of `phase` in the handle frame, as fitted to the handle (release: the
+    /// open phase's).
+    fn offset<'py>(&self, py: Python<'py>, phase: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let phase = run(|| OpenPhase::from_name(phase))?;
+        pose_array(py, self.inner.offset(phase))
+    }
+
+    /// The targets fitted to the handle's measured geometry and what was measured (handle frame, m
+    /// and rad), or None (the fit is off, or no bar stands at the handle frame).
+    fn fit<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
+        let Some(f) = self.inner.fit() else {
+            return Ok(None);
+        };
+        let c = &f.clearance;
+        let out = pyo3::types::PyDict::new(py);
+        out.set_item("pitch", f.pitch)?;
+        out.set_item("pregrasp", f.pregrasp.to_vec())?;
+        out.set_item("insert", f.insert.to_vec())?;
+        out.set_item("hook", f.hook.to_vec())?;
+        out.set_item("open", f.open.to_vec())?;
+        out.set_item("tip_behind", f.tip_behind)?;
+        out.set_item("gap", f.gap)?;
+        out.set_item("need", f.need)?;
+        out.set_item("bar_along", c.along.to_vec())?;
+        out.set_item("bar_across", c.across.to_vec())?;
+        out.set_item("bar_front", c.front)?;
+        out.set_item("bar_back", c.back)?;
+        out.set_item("widest_gap", c.widest_gap())?;
+        Ok(Some(out))
+    }
+
     /// The phase to plan in from state x, coming from `phase`.
     fn next_phase(&self, py: Python<'_>, x: PyReadonlyArrayDyn<'_, f64>, phase: &str) -> PyResult<&'static str> {
         let phase = run(|| OpenPhase::from_name(phase))?;
@@ -276,12 +308,6 @@ impl PyOpenObjectRules {
         let x = self.state(&x)?;
         let plan = run(|| self.inner.guide_plan(x, phase, steps, dt))?;
         Ok(PyServoGuidePlan::new(plan, steps))
-    }
-
-    /// (4, 4) grasp target of `phase` in the handle frame.
-    fn offset<'py>(&self, py: Python<'py>, phase: &str) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
-        let phase = run(|| OpenPhase::from_name(phase))?;
-        pose_array(py, self.inner.offset(phase))
     }
 
     fn success(&self, x: PyReadonlyArrayDyn<'_, f64>) -> PyResult<bool> {

@@ -10,6 +10,7 @@ use std::sync::Arc;
 use nalgebra::Isometry3;
 
 use super::handle::{HandAtHandle, HandleGeometry, ReleaseMove};
+use super::handle_fit::{self, HandleFit};
 use crate::error::{ensure_finite, Result, SabreError};
 use crate::model::scene::Scene;
 use crate::mppi::{ServoGuideConfig, ServoGuidePlan};
@@ -74,6 +75,11 @@ pub struct OpenObjectConfig {
     pub hook_offset: [f64; 3],
     pub open_offset: [f64; 3],
     pub pitch: f64,
+    /// Clearance (m) the grasp targets keep from the bar and the panel when they are fitted to the
+    /// handle's measured geometry (see [`super::handle_fit`]): the targets above where they fit,
+    /// moved the least where they do not, the task refused where the tool cannot fit. None: the
+    /// targets as given.
+    pub fit_clearance: Option<f64>,
     /// Distance to the target that ends inserting (twice it ends approaching); angle that ends
     /// approaching, inserting and hooking.
     pub switch_position: f64,
@@ -133,6 +139,7 @@ impl Default for OpenObjectConfig {
             hook_offset: [0.0, 0.003, 0.0],
             open_offset: [0.0, 0.003, -0.016],
             pitch: 0.3,
+            fit_clearance: Some(0.002),
             switch_position: 0.015,
             switch_angle: 0.15,
             hook_tolerance: 0.006,
@@ -179,6 +186,7 @@ impl OpenObjectConfig {
             ("blocked_depth", self.blocked_depth),
             ("backout", self.backout),
             ("stall_depth", self.stall_depth),
+            ("fit_clearance", self.fit_clearance),
         ];
         let plain = [
             ("switch_position", self.switch_position),
@@ -231,6 +239,8 @@ pub struct OpenObjectRules {
     pub(super) config: OpenObjectConfig,
     /// Grasp targets in the handle frame, by phase (release has none: it uses `open`'s).
     offsets: [Isometry3<f64>; 4],
+    /// The targets fitted to the handle's geometry (None: as configured, or no bar to measure).
+    fit: Option<HandleFit>,
     target_opening: f64,
     object_setpoint: f64,
     /// The rollout model that watches the object alone (a fixed-base robot's links out of the contact).
@@ -244,11 +254,45 @@ impl OpenObjectRules {
         config.check()?;
         ensure_finite("target_opening", &[target_opening])?;
         ensure_finite("object_setpoint", &[object_setpoint])?;
+        let fit = match config.fit_clearance {
+            Some(margin) => match handle_fit::measure(&geometry) {
+                Some(clearance) => {
+                    let want = handle_fit::Preferred {
+                        pregrasp: config.pregrasp_offset,
+                        insert: config.insert_offset,
+                        hook: config.hook_offset,
+                        open: config.open_offset,
+                        pitch: config.pitch,
+                        margin,
+                    };
+                    Some(handle_fit::fit(
+                        &geometry,
+                        clearance,
+                        &handle_fit::tool_points(&geometry),
+                        &want,
+                    )?)
+                }
+                None => None,
+            },
+            None => None,
+        };
+        let (targets, pitch) = match &fit {
+            Some(f) => ([f.pregrasp, f.insert, f.hook, f.open], f.pitch),
+            None => (
+                [
+                    config.pregrasp_offset,
+                    config.insert_offset,
+                    config.hook_offset,
+                    config.open_offset,
+                ],
+                config.pitch,
+            ),
+        };
         let offsets = [
-            geometry.grasp_offset(config.pregrasp_offset, config.pitch)?,
-            geometry.grasp_offset(config.insert_offset, config.pitch)?,
-            geometry.grasp_offset(config.hook_offset, config.pitch)?,
-            geometry.grasp_offset(config.open_offset, config.pitch)?,
+            geometry.grasp_offset(targets[0], pitch)?,
+            geometry.grasp_offset(targets[1], pitch)?,
+            geometry.grasp_offset(targets[2], pitch)?,
+            geometry.grasp_offset(targets[3], pitch)?,
         ];
         let scene = geometry.scene();
         let probe_scene = if scene.roles.base.is_none() {
@@ -263,6 +307,7 @@ impl OpenObjectRules {
             geometry,
             config,
             offsets,
+            fit,
             target_opening,
             object_setpoint,
             probe,
@@ -271,6 +316,11 @@ impl OpenObjectRules {
 
     pub fn geometry(&self) -> &HandleGeometry {
         &self.geometry
+    }
+
+    /// The grasp targets fitted to the handle's measured geometry (None: the configured ones).
+    pub fn fit(&self) -> Option<&HandleFit> {
+        self.fit.as_ref()
     }
 
     /// The grasp target of `phase` in the handle frame (release: the open phase's).

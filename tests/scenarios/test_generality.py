@@ -20,6 +20,11 @@ def test_the_generated_objects_cover_every_kind_and_range():
     widths, heights = [s.width for s in SPECS], [s.handle_height for s in SPECS]
     assert 0.25 <= min(widths) and max(widths) <= 0.6 and 0.6 <= min(heights) and max(heights) <= 1.1
     assert all(2.0 <= s.distance <= 4.0 and abs(s.facing) <= np.pi / 3 for s in SPECS)
+    # the short-standoff class: bars of 10–20 mm on standoffs of 20–40 mm, doors and drawers, both bar directions
+    short = [s for s in SPECS if s.handle_class == "short standoff"]
+    assert {s.kind for s in short} == {"door", "drawer"} and {s.vertical_bar for s in short} == {True, False}
+    assert all(0.01 <= s.bar_size <= 0.02 and 0.02 <= s.standoff <= 0.04 for s in short)
+    assert all((s.bar_size, s.standoff) == (0.01, 0.056) for s in SPECS if s not in short) and 10 <= len(short) <= 30
 
 
 @pytest.mark.parametrize("spec", SPECS, ids=lambda s: f"{s.index}-{s.kind}-{'v' if s.vertical_bar else 'h'}-{s.bar_shape}")
@@ -33,7 +38,7 @@ def test_the_inferred_handle_frame_is_the_generated_bar(spec):
     side = 1.0 if spec.hinge_left else -1.0
     # a door's bar sits 4 cm from its free edge, the hinge on the other edge; a drawer's in the middle
     grip_y = -side * (spec.width / 2 - 0.04) if spec.kind == "door" else 0.0
-    local = np.array([-0.061, grip_y])
+    local = np.array([-(spec.standoff + spec.bar_size / 2), grip_y])
     expected_centre = [x + c * local[0] - s * local[1], y + s * local[0] + c * local[1], spec.handle_height]
     np.testing.assert_allclose(pose[:3, 3], expected_centre, atol=1e-4)  # the URDF prints 4 decimals
     into = np.array([c, s, 0.0])  # the object's +x: from the front into the body

@@ -39,6 +39,11 @@ class ApproachConfig:
         pregrasp_offset: target while approaching, in front of the bar and beside it (m).
         insert_offset: target while inserting, beside the bar with the finger's tip past it (m).
         pitch: the hand points this far (rad) below the handle's normal.
+        fit_clearance: clearance (m) the targets keep from the bar and the panel when fitted to the
+            handle's collision geometry: the bar's size and the gap behind it are measured, and the
+            targets above (and the hook's and the pull's, and the pitch down to level) are kept where
+            the tool fits and moved the least where it does not; a handle whose gap is too small for
+            the tool is refused before anything moves. None: the targets as given, unmeasured.
         weight: pose weight of the reaching targets (the paper's approach weight).
         switch_position: distance (m) to the target that ends inserting (twice it ends the approach).
         switch_angle: angle (rad) to the target that ends approaching, inserting and hooking.
@@ -53,6 +58,7 @@ class ApproachConfig:
     pregrasp_offset: tuple[float, float, float] = xyz("pregrasp_offset", _RULES.pregrasp_offset)
     insert_offset: tuple[float, float, float] = xyz("insert_offset", _RULES.insert_offset)
     pitch: float = _RULES.pitch
+    fit_clearance: float | None = _RULES.fit_clearance
     weight: float = costs.TargetPose.linear_weight
     switch_position: float = _RULES.switch_position
     switch_angle: float = _RULES.switch_angle
@@ -63,6 +69,7 @@ class ApproachConfig:
         object.__setattr__(self, "pregrasp_offset", xyz("approach.pregrasp_offset", self.pregrasp_offset))
         object.__setattr__(self, "insert_offset", xyz("approach.insert_offset", self.insert_offset))
         object.__setattr__(self, "pitch", as_finite("approach.pitch", self.pitch))
+        object.__setattr__(self, "fit_clearance", optional_non_negative("approach.fit_clearance", self.fit_clearance))
         for name in ("weight", "switch_position", "switch_angle", "posture_weight"):
             object.__setattr__(self, name, as_non_negative(f"approach.{name}", getattr(self, name)))
         if self.posture is not None:
@@ -252,6 +259,7 @@ def rules_config(
         hook_offset=list(hook.offset),
         open_offset=list(open.offset),
         pitch=approach.pitch,
+        fit_clearance=approach.fit_clearance,
         switch_position=approach.switch_position,
         switch_angle=approach.switch_angle,
         hook_tolerance=hook.tolerance,

@@ -156,6 +156,16 @@ class OpenObject(Task):
             raise InvalidValueError(f"opening {self.opening} is outside the object's travel ({lower}, {upper}]")
         if self.approach.posture is not None and len(self.approach.posture) != scene.nq:
             raise InvalidValueError(f"approach.posture has {len(self.approach.posture)} entries, the robot has {scene.nq} joints")
+        self._rules(scene)  # the targets fit the handle: a hook that cannot is refused before anything moves
+
+    def handle_fit(self, scene: Scene) -> dict[str, Any] | None:
+        """The grasp targets fitted to the handle's collision geometry on ``scene`` and what was
+        measured, in the handle frame (m, rad): ``pitch``, ``pregrasp``, ``insert``, ``hook``,
+        ``open`` (the targets), ``bar_along``, ``bar_across``, ``bar_front``, ``bar_back`` (the
+        bar's extent), ``gap`` (behind the bar where the finger goes), ``widest_gap``, ``need`` (the
+        least gap the tool needs) and ``tip_behind`` (how far a pull moves the hooked hand before the
+        tip bites). None with ``approach.fit_clearance`` None, or when no bar stands at the handle frame."""
+        return self._rules(scene).fit()
 
     # -- targets and costs ------------------------------------------------------------------------
     def target_opening(self, scene: Scene) -> float:
@@ -207,9 +217,9 @@ class OpenObject(Task):
         return float(self.open.lead)
 
     def grasp_offset(self, scene: Scene, phase: str) -> np.ndarray:
-        """(4, 4) pose of the grasp target in the handle frame for `phase`."""
-        offsets = {"approach": self.approach.pregrasp_offset, "insert": self.approach.insert_offset, "hook": self.hook.offset}
-        return geometry.grasp_offset(scene, self.handle, offsets.get(phase, self.open.offset), self.approach.pitch)
+        """(4, 4) pose of the grasp target in the handle frame for `phase`: the configured offsets and
+        pitch as fitted to the handle (see :meth:`handle_fit`)."""
+        return self._rules(scene).offset(phase)
 
     def posture_term(self, scene: Scene) -> costs.Cost:
         """The posture cost of the approach (empty when ``approach.posture_weight`` is 0)."""
