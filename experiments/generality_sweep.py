@@ -12,10 +12,12 @@ joint of the target part's handle (`Scene.from_urdf(..., handle=...)`) and holds
 `OpenObject(handle=<bar link>)` opens each from the default robot state; success is 90 % of the target
 opening within the simulated duration. Half the handles are of the short-standoff class (bars of
 10–20 mm on standoffs of 20–40 mm; the others a 10 mm bar on 56 mm standoffs), reported on their own.
-Failures are classified: could not reach (never inserting),
-could not hook (never opening), slipped (opening, then back to reaching), stalled at a joint limit (an
-arm joint within 0.02 rad of a limit over the last 5 s), tank spent (I/IO: the tank within 0.1 J of its
-floor at the end), or stalled (none of these). ``--first``/``--objects`` split a sweep over processes.
+Failures are classified: refused (the hook does not fit the handle), could not reach (never
+inserting), could not hook (never opening), slipped (opening, then back to reaching), stalled at a
+joint limit (an arm joint within 0.02 rad of a limit over the last 5 s), tank spent (I/IO: the tank
+within 0.1 J of its floor at the end), or stalled (none of these). ``--first``/``--objects`` split a
+sweep over processes; ``--no-fit`` keeps the configured grasp targets instead of fitting them to the
+handle's geometry.
 """
 
 from __future__ import annotations
@@ -56,15 +58,44 @@ def classify(episode: sabre.Episode, scene: sabre.Scene) -> str:
     return "stalled"
 
 
-def run_one(spec: ObjectSpec | MeshCabinetSpec, variant: str, duration: float, seed: int = 0) -> tuple[str, float | None]:
+def hook_skill(episode: sabre.Episode) -> dict:
+    """The hook's skill in one episode, from its phase trace: whether the first insert ended in the
+    hook phase and how long it took (s, from entering insert to entering hook), the slips (open, then
+    back to reaching) and the re-inserts after them that reached the hook again."""
+    names = [episode.phases[p] for p in episode.phase]
+    entries = [(t, b) for t, a, b in zip(episode.time[1:], names, names[1:]) if a != b]
+    first_insert = next((t for t, p in entries if p == "insert"), None)
+    first_hook = next((t for t, p in entries if p == "hook" and first_insert is not None and t >= first_insert), None)
+    slips, reinserts, after_slip = 0, 0, False
+    for (_, before), (_, after) in zip([(0.0, names[0])] + entries, entries):
+        if before == "open" and after in ("approach", "insert", "hook"):
+            slips, after_slip = slips + 1, True
+        if after_slip and after == "hook" and before == "insert":
+            reinserts, after_slip = reinserts + 1, False
+    return {
+        "inserted": first_hook is not None,
+        "insert_time": None if first_hook is None or first_insert is None else float(first_hook - first_insert),
+        "slips": slips,
+        "reinserts": reinserts,
+    }
+
+
+def run_one(
+    spec: ObjectSpec | MeshCabinetSpec, variant: str, duration: float, seed: int = 0, fit: bool = True
+) -> tuple[str, float | None, dict]:
     scene = scene_of(spec)
-    task = sabre.tasks.OpenObject(handle=spec.handle_link)
+    approach = sabre.tasks.ApproachConfig() if fit else sabre.tasks.ApproachConfig(fit_clearance=None)
+    task = sabre.tasks.OpenObject(handle=spec.handle_link, approach=approach)
+    try:
+        task.check(scene)
+    except sabre.InvalidValueError:
+        return "refused", None, {}
     # The filter's base box (the paper's experiments: ±2 m) must hold the robot's way to an object
     # 2–4 m away: ±5 m here.
     safety = sabre.SafetyConfig(base_box=(-5.0, 5.0, -5.0, 5.0))
     controller = sabre.Controller(scene, task, sabre.ControllerConfig(variant=variant, seed=seed, safety=safety))
     episode = sabre.run_episode(scene, controller, duration, seed=seed, x0=scene.default_state(), progress=False)
-    return classify(episode, scene), episode.time_to_success
+    return classify(episode, scene), episode.time_to_success, hook_skill(episode)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -76,6 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variants", nargs="+", default=["N", "IO"], choices=["N", "I", "O", "IO"])
     parser.add_argument("--seed", type=int, default=0, help="seed of the object generator")
     parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument("--no-fit", action="store_true", help="the configured grasp targets, not fitted to the handle")
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
     draw = random_mesh_spec if args.family == "mesh" else random_spec
@@ -83,12 +115,15 @@ def main(argv: list[str] | None = None) -> int:
     started = time.perf_counter()
     classes = sorted({spec.handle_class for spec in specs})
     outcomes: dict[tuple[str, str], Counter] = {(v, c): Counter() for v in args.variants for c in ["all", *classes]}
+    skills: dict[tuple[str, str], list[dict]] = {key: [] for key in outcomes}
     rows = []
     for spec in specs:
         for variant in args.variants:
-            outcome, when = run_one(spec, variant, args.duration)
-            outcomes[variant, "all"][outcome] += 1
-            outcomes[variant, spec.handle_class][outcome] += 1
+            outcome, when, skill = run_one(spec, variant, args.duration, fit=not args.no_fit)
+            for group in ("all", spec.handle_class):
+                outcomes[variant, group][outcome] += 1
+                if skill:
+                    skills[variant, group].append(skill | {"opened": outcome == "opened"})
             rows.append((spec, variant, outcome, when))
             print(
                 f"object {spec.index} ({spec.describe()}) {variant}: {outcome}"
@@ -96,21 +131,35 @@ def main(argv: list[str] | None = None) -> int:
                 file=sys.stderr,
                 flush=True,
             )
-    failures = ("could not reach", "could not hook", "slipped", "stalled at a joint limit", "tank spent", "stalled")
+    failures = ("refused", "could not reach", "could not hook", "slipped", "stalled at a joint limit", "tank spent", "stalled")
     command = (
         f"python experiments/generality_sweep.py --family {args.family} --objects {args.objects} --first {args.first} "
         f"--duration {args.duration:g} --variants {' '.join(args.variants)} --seed {args.seed}"
+        + (" --no-fit" if args.no_fit else "")
     )
     lines = [
         f"Command: `{command}`; wall time {time.perf_counter() - started:.0f} s.",
         "",
         "| variant | handles | opened | " + " | ".join(failures) + " |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for (variant, group), counts in outcomes.items():
         total = sum(counts.values())
         opened = f"{counts['opened']}/{total} ({100 * counts['opened'] / max(total, 1):.0f} %)"
         lines.append(f"| {variant} | {group} | {opened} | " + " | ".join(str(counts[c]) for c in failures) + " |")
+    lines += [
+        "",
+        "| variant | handles | first insert hooked | insert time, median (max) | slips per opening | re-inserts hooked |",
+        "|---|---|---|---|---|---|",
+    ]
+    for (variant, group), runs in skills.items():
+        hooked = sum(r["inserted"] for r in runs)
+        times = [r["insert_time"] for r in runs if r["insert_time"] is not None]
+        timing = f"{np.median(times):.1f} s ({max(times):.1f} s)" if times else "—"
+        opened = sum(r["opened"] for r in runs)
+        slips, reinserts = sum(r["slips"] for r in runs), sum(r["reinserts"] for r in runs)
+        per_opening = f"{slips / opened:.2f}" if opened else "—"
+        lines.append(f"| {variant} | {group} | {hooked}/{len(runs)} | {timing} | {per_opening} | {reinserts}/{slips} |")
     report = "\n".join(lines) + "\n"
     print(report)
     if args.out is not None:

@@ -245,9 +245,12 @@ fn to_pose(iso: &Isometry3<f64>) -> Pose {
 }
 
 impl Detector {
-    /// Forgets every kept manifold: the next detection builds each anew.
+    /// Forgets every kept manifold: the next detection builds each anew. A manifold is replaced, not
+    /// cleared: parry's clear keeps the last normal, which seeds the next detection of the pair, so a
+    /// reset world would carry the rollout before it into the next (a row's result would depend on
+    /// which rows its worker ran before).
     pub fn reset(&mut self) {
-        self.manifolds.iter_mut().for_each(ContactManifold::clear);
+        self.manifolds.iter_mut().for_each(|m| *m = ContactManifold::default());
         self.kept.iter_mut().for_each(|k| *k = false);
     }
 
