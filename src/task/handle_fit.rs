@@ -5,10 +5,11 @@
 //!
 //! The handle frame (x along the bar, y sideways toward the finger, z into the door, origin at the bar's
 //! centre) is scanned with the object closed: rays along z, one per column (x, y), give the occupied
-//! depths of every object part. The bar is the run of each column that holds the frame's origin depth;
-//! its back face is the shallowest of the bar's per-x backs (a standoff or a panel fused with the bar
-//! makes a column's run longer, never shorter); behind it, per x, the nearest occupied depth across the
-//! tip's sweep is the panel, a standoff (at the back face: no gap) or nothing within the scan.
+//! depths of every object part. The bar is what stands frontmost at the frame's origin: a column meets
+//! it when its frontmost run starts in front of the bar's back face. That face is the shallowest of the
+//! bar's per-x backs (a standoff or a panel fused with the bar makes a column's run longer, never
+//! shorter); behind it, per x, the nearest occupied depth across the tip's sweep is the panel, a
+//! standoff (at the back face: no gap) or nothing within the scan.
 //!
 //! The tool is every collision shape rigidly attached to the grasp frame. With the hand at a target
 //! (x, y, z) and the configured pitch (or less, down to level, when the configured one does not fit),
@@ -38,13 +39,13 @@ const ACROSS_STEP: f64 = 0.0005;
 /// where the tip sweeps while inserting and hooking.
 const FINGER_SIDE: f64 = 0.035;
 const FAR_SIDE: f64 = 0.015;
-/// Depth steps (m) of the search for the insert depth, and pitch steps (rad) toward level.
-const DEPTH_STEP: f64 = 0.0005;
 /// The deepest (m) a bar's front may stand behind the handle frame's origin.
 const MAX_BAR_DEPTH: f64 = 0.02;
+/// Depth steps (m) of the search for the insert depth, and pitch steps (rad) toward level.
+const DEPTH_STEP: f64 = 0.0005;
 const PITCH_STEP: f64 = 0.05;
 /// How far (m) the tip's face behind the bar should clear its back face, where a pitch allows (the
-/// shipped handles' 7–9.5 mm at the configured targets): closer, the tip sliding behind the bar
+/// shipped handles' 9.5–12 mm at the configured targets): closer, the tip sliding behind the bar
 /// catches its edge.
 const BITE_CLEARANCE: f64 = 0.005;
 /// Spacing (m) of the points on the tool's box faces.
@@ -201,7 +202,7 @@ pub fn measure(geometry: &HandleGeometry) -> Option<HandleClearance> {
         .filter(|r| r[0] <= front + 0.005)
         .map(|r| r[1])
         .fold(f64::INFINITY, f64::min);
-    // the bar's ends: columns at y = 0 whose run holds the middle depth, contiguous from x = 0
+    // the bar's ends: the columns at y = 0 that meet it, contiguous from x = 0
     let extent = |step: f64, sign: f64, reach: f64, at: &dyn Fn(f64) -> bool| {
         let mut last = 0.0;
         let mut s = step;
