@@ -493,11 +493,12 @@ impl OpenObjectRules {
 
     /// The release's grasp-frame targets (`steps + 1`, see [`HandleGeometry::release_path`]): a
     /// finger within `slip_distance` of the pocket leaves across the bar to the insert offset's
-    /// side, then back to the pre-grasp depth, riding on the handle; then the hand backs off.
+    /// side, then back to the pre-grasp depth, riding on the handle (both as fitted to the handle);
+    /// then the hand backs off.
     pub fn release_path(&self, x: &[f64], steps: usize, dt: f64) -> Result<Vec<Isometry3<f64>>> {
         let motion = ReleaseMove {
-            entry_side: self.config.insert_offset[1],
-            entry_depth: self.config.pregrasp_offset[2],
+            entry_side: self.offset(OpenPhase::Insert).translation.y,
+            entry_depth: self.offset(OpenPhase::Approach).translation.z,
             hooked_within: self.config.slip_distance,
             speed: self.config.release_speed,
             distance: self.config.release_distance,
