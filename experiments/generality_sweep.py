@@ -3,9 +3,10 @@
     .venv/bin/python experiments/generality_sweep.py --family box --objects 40 --duration 60 --variants N IO
     .venv/bin/python experiments/generality_sweep.py --family mesh --objects 40 --duration 60 --variants N IO
 
-The objects are support/objects.py's. The box family: a URDF each with its own link and joint names, a
-`world` root with a fixed joint and no `handle_frame`, varying handle height, width, hinge side, bar
-orientation and shape, door or drawer, friction, damping, moving mass and where it stands. The mesh
+The objects are sabre.experiments.families' (`python -m sabre experiment hook` runs the same episodes
+through the experiment runner, cached and in parallel, per robot). The box family: a URDF each with
+its own link and joint names, a `world` root with a fixed joint and no `handle_frame`, varying handle
+height, width, hinge side, bar orientation and shape, door or drawer, friction, damping, moving mass and where it stands. The mesh
 family: cabinets as robot-learning benchmarks ship them (a ROS package each, every part convex mesh
 pieces, no inertials, two doors and two drawers, handles as mesh bars on standoffs); the scene keeps the
 joint of the target part's handle (`Scene.from_urdf(..., handle=...)`) and holds the others shut.
@@ -31,53 +32,8 @@ from pathlib import Path
 import numpy as np
 
 import sabre
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository root, for support/
-from support.objects import MeshCabinetSpec, ObjectSpec, random_mesh_spec, random_spec, scene_of
-
-
-def classify(episode: sabre.Episode, scene: sabre.Scene) -> str:
-    """Why an episode did not open its object (see the module's docstring)."""
-    if episode.success:
-        return "opened"
-    phases = [episode.phases[p] for p in episode.phase]
-    if "insert" not in phases:
-        return "could not reach"
-    if "open" not in phases:
-        return "could not hook"
-    first_open = phases.index("open")
-    if any(p in ("approach", "insert", "hook") for p in phases[first_open:]):
-        return "slipped"
-    tail = episode.time >= episode.time[-1] - 5.0
-    q = episode.state[tail, 3 : scene.nq]
-    near = (q - scene.q_lower[3:] < 0.02) | (scene.q_upper[3:] - q < 0.02)
-    if np.any(near.mean(axis=0) > 0.5):
-        return "stalled at a joint limit"
-    if episode.variant in ("I", "IO") and episode.tank_energy[-1] < episode.tank_floor + 0.1:
-        return "tank spent"
-    return "stalled"
-
-
-def hook_skill(episode: sabre.Episode) -> dict:
-    """The hook's skill in one episode, from its phase trace: whether the first insert ended in the
-    hook phase and how long it took (s, from entering insert to entering hook), the slips (open, then
-    back to reaching) and the re-inserts after them that reached the hook again."""
-    names = [episode.phases[p] for p in episode.phase]
-    entries = [(t, b) for t, a, b in zip(episode.time[1:], names, names[1:]) if a != b]
-    first_insert = next((t for t, p in entries if p == "insert"), None)
-    first_hook = next((t for t, p in entries if p == "hook" and first_insert is not None and t >= first_insert), None)
-    slips, reinserts, after_slip = 0, 0, False
-    for (_, before), (_, after) in zip([(0.0, names[0])] + entries, entries):
-        if before == "open" and after in ("approach", "insert", "hook"):
-            slips, after_slip = slips + 1, True
-        if after_slip and after == "hook" and before == "insert":
-            reinserts, after_slip = reinserts + 1, False
-    return {
-        "inserted": first_hook is not None,
-        "insert_time": None if first_hook is None or first_insert is None else float(first_hook - first_insert),
-        "slips": slips,
-        "reinserts": reinserts,
-    }
+from sabre.experiments.families import MeshCabinetSpec, ObjectSpec, random_mesh_spec, random_spec, scene_of
+from sabre.experiments.hook import classify, hook_skill
 
 
 def run_one(

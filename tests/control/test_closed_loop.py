@@ -88,7 +88,7 @@ def test_an_episode_in_contact_with_mesh_pieces_is_the_same_to_the_bit_again_and
     which seed a pair's next detection with its last normal): 20 s of approach, hook and pull, twice
     on one thread and once on two, end in the same state. A rollout world reset for the next row must
     carry nothing of the row before, whichever rows its worker ran."""
-    from support.objects import random_spec, scene_of
+    from sabre.experiments.families import random_spec, scene_of
 
     rng = np.random.default_rng(0)
     spec = [random_spec(rng, i) for i in range(7)][6]

@@ -8,7 +8,7 @@ import pytest
 
 import sabre
 from sabre import tasks
-from support.objects import ObjectSpec, scene_of
+from sabre.experiments.families import ObjectSpec, scene_of
 
 
 def door(bar: float, standoff: float, vertical: bool = True, kind: str = "door") -> ObjectSpec:

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import sabre
+from sabre.experiments import mesh_files
 from sabre.handles import infer_handle_frame
-from support import mesh_files
 
 ROBOT = Path(__file__).resolve().parents[2] / "assets" / "robots" / "royalpanda.urdf"
 HINGE = np.array([0.0, 0.2, 0.8])  # the door's hinge in the object frame; the leaf spans y ∈ [−0.2, 0.2]

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import sabre
-from support import mesh_files
+from sabre.experiments import mesh_files
 
 ROBOT = Path(__file__).resolve().parents[2] / "assets" / "robots" / "royalpanda.urdf"
 

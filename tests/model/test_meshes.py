@@ -129,7 +129,7 @@ def test_a_package_that_is_nowhere_lists_where_it_was_looked_for(tmp_path, cache
 
 
 def test_an_obj_with_several_objects_is_that_many_convex_pieces(tmp_path, cache):
-    from support import mesh_files
+    from sabre.experiments import mesh_files
 
     halves = [(f"half_{k}", mesh_files.box((0.0, 0.0, z), (0.01, 0.01, 0.085))) for k, z in enumerate((-0.0425, 0.0425))]
     mesh_files.write_obj(tmp_path / "bar.obj", halves)

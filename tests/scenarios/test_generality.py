@@ -1,4 +1,4 @@
-"""The generality sweep's objects (support/objects.py): each loads as another tool writes it, and the
+"""The generality sweep's objects (sabre.experiments.families): each loads as another tool writes it, and the
 handle frame inferred from its bar is where the generator put the bar, oriented as the generator built it."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import sabre
-from support import objects
+from sabre.experiments import families as objects
 
 _RNG = np.random.default_rng(0)  # the sweep's default generator seed
 SPECS = [objects.random_spec(_RNG, i) for i in range(40)]

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import sabre
-from support import objects
+from sabre.experiments import families as objects
 from support.starts import pre_grasp_configuration
 
 ASSETS = Path(__file__).resolve().parents[2] / "assets"

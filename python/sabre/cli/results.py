@@ -43,7 +43,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--robot",
         choices=("royalpanda", *EXAMPLE_ROBOTS),
         default="royalpanda",
-        help="the acceptance's robot: an example robot opens its own objects (docs/robots.md)",
+        help="the acceptance's robot (an example robot opens its own objects, docs/robots.md) and the hook "
+        "experiment's (a mobile one)",
+    )
+    exp.add_argument(
+        "--objects",
+        type=int,
+        default=None,
+        help="the hook experiment's generated objects per family (default 40, 2 with --short)",
     )
     exp.set_defaults(run=experiment_command)
 
@@ -68,5 +75,6 @@ def experiment_command(args: argparse.Namespace) -> int:
         short=args.short,
         plant=plant,
         robot=args.robot,
+        objects=args.objects,
     )
     return 0

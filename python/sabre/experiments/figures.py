@@ -21,6 +21,7 @@ PAPER = {
     "fig3": "the invariant mapping (55) keeps the effective sample size independent of the cost scale",
     "fig4": "the tank energy stays above the floor ε in the worst case",
     "acceptance": "every object opens from the paper's start",
+    "hook": "no counterpart in the paper: the hook's skill on generated objects (insertion, slips, re-insertion)",
     "transfer": "the controller planned in simulation opens the objects on the real robot (Sec. VI); here a second "
     "simulator (MuJoCo) stands in for it, with the object's damping and friction scaled and a 20 ms planning delay",
 }
@@ -57,6 +58,8 @@ def draw(name: str, records: list[dict], path: str | os.PathLike[str]) -> None:
         _draw_openings(ax, records)
     elif name == "transfer":
         _draw_transfer(ax, records)
+    elif name == "hook":
+        _draw_hook(ax, records)
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
@@ -171,6 +174,44 @@ def _draw_transfer(ax: Any, records: list[dict]) -> None:
     ax.set(ylabel="opened", ylim=(0, 1.05), title="Transfer: Rapier and MuJoCo plants, object damping and friction scaled")
 
 
+def _draw_hook(ax: Any, records: list[dict]) -> None:
+    """Hook: per family, handle class, robot and variant, the share of runs that opened and of first
+    inserts that reached the hook."""
+    groups: defaultdict[str, list[dict]] = defaultdict(list)
+    for r in records:
+        c = r["config"]
+        groups[f"{c['family']}, {r['handle_class']}, {c['variant']}"].append(r)
+    labels = sorted(groups)
+    x = np.arange(len(labels))
+    for i, (metric, label) in enumerate((("inserted", "first insert hooked"), ("success", "opened"))):
+        rates = [np.mean([r["metrics"][metric] for r in groups[g]]) for g in labels]
+        ax.bar(x + 0.4 * i, rates, 0.4, label=label)
+    robots = ", ".join(sorted({r["config"].get("robot", "royalpanda") for r in records}))
+    ax.set_xticks(x + 0.2, labels, rotation=30, ha="right", fontsize=7)
+    ax.set(ylabel="share of runs", ylim=(0, 1.05), title=f"Hook: generated objects ({robots})")
+
+
+def cpu_name() -> str:
+    """The processor's model name as ``lscpu`` gives it (from /proc/cpuinfo), else the machine type."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return f"{line.split(':', 1)[1].strip()}, {os.cpu_count()} CPUs"
+    except OSError:
+        pass
+    return f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPUs"
+
+
+def _options(name: str, records: list[dict]) -> str:
+    """The command-line options besides seeds that the records were run with (robot, objects per family)."""
+    robots = {r["config"].get("robot", "royalpanda") for r in records}
+    text = f" --robot {robots.pop()}" if len(robots) == 1 and "royalpanda" not in robots else ""
+    if name == "hook" and records:
+        text += f" --objects {1 + max(r['config']['index'] for r in records)}"
+    return text
+
+
 def summary(name: str, records: list[dict], *, seeds: int, short: bool) -> str:
     """Markdown: the command, the machine and date, mean ± std of every metric per configuration,
     and the paper's reported result."""
@@ -183,11 +224,17 @@ def summary(name: str, records: list[dict], *, seeds: int, short: bool) -> str:
     lines = [
         f"# {name}",
         "",
-        f"`python -m sabre experiment {name} --seeds {seeds}{' --short' if short else ''}` on "
-        f"{datetime.date.today().isoformat()}, {platform.node()} ({platform.machine()}, {platform.python_version()})",
+        f"`python -m sabre experiment {name} --seeds {seeds}{' --short' if short else ''}{_options(name, records)}` on "
+        f"{datetime.date.today().isoformat()}, {platform.node()} ({cpu_name()}, {platform.python_version()})",
         "",
         f"Paper: {PAPER[name]}.",
         "",
+    ]
+    if name == "hook":  # one run per object: the table per family, handle class, robot and variant says it
+        from .hook import hook_table
+
+        return "\n".join([*lines, hook_table(records)]) + "\n"
+    lines += [
         "| configuration | " + " | ".join(metrics) + " |",
         "|---" * (len(metrics) + 1) + "|",
     ]

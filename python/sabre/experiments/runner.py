@@ -28,9 +28,21 @@ from .._validate import as_count
 from ..errors import InvalidValueError, require_extra
 from ..scene import OBJECTS
 
-__all__ = ["NAMES", "RunSpec", "run_one", "run_experiments", "run_specs", "specs", "acceptance_specs", "transfer_specs"]
+__all__ = [
+    "NAMES",
+    "RunSpec",
+    "run_one",
+    "run_experiments",
+    "run_specs",
+    "specs",
+    "acceptance_specs",
+    "transfer_specs",
+    "hook_specs",
+]
 
-NAMES: tuple[str, ...] = ("fig3", "fig4", "fig8", "fig10", "fig11", "fig12", "acceptance", "transfer")
+NAMES: tuple[str, ...] = ("fig3", "fig4", "fig8", "fig10", "fig11", "fig12", "acceptance", "transfer", "hook")
+#: objects per family of the hook experiment: the full run's and the short (smoke test) run's
+_HOOK_OBJECTS = (40, 2)
 _SERIES_POINTS = 400
 
 
@@ -78,13 +90,19 @@ def _plant_factory(plant: str | None) -> Callable | None:
     return factory
 
 
-def specs(name: str, seeds: int, short: bool, plant: str | None = None, robot: str = "royalpanda") -> list[RunSpec]:
+def specs(
+    name: str, seeds: int, short: bool, plant: str | None = None, robot: str = "royalpanda", objects: int | None = None
+) -> list[RunSpec]:
     """Every run of one experiment (on the plant ``plant`` names, "module:factory"; None: the Rapier plant;
-    ``robot``: the acceptance's robot, the other experiments are the RoyalPanda's)."""
+    ``robot``: the acceptance's and the hook experiment's robot, the other experiments are the
+    RoyalPanda's; ``objects``: the hook experiment's objects per family, None: 40, 2 if short)."""
     if name == "acceptance":
         return acceptance_specs(range(seeds), duration=8.0 if short else 60.0, plant=plant, robot=robot)
+    if name == "hook":
+        count = _HOOK_OBJECTS[bool(short)] if objects is None else objects
+        return _on_plant(hook_specs(range(seeds), objects=count, robot=robot, duration=8.0 if short else 60.0), plant)
     if robot != "royalpanda":
-        raise InvalidValueError(f"experiment {name!r} runs on the RoyalPanda; only acceptance takes another robot")
+        raise InvalidValueError(f"experiment {name!r} runs on the RoyalPanda; only acceptance and hook take another robot")
     if name == "transfer":
         # its runs name their own plants (sabre's and MuJoCo's), so `plant` does not apply; short: a smoke test
         # of every object, variant and plant, nominal damping only
@@ -189,6 +207,14 @@ def transfer_specs(seeds: Iterable[int], **options: Any) -> list[RunSpec]:
     return [_spec("transfer", seed, **config) for config in transfer_configs(**options) for seed in seeds]
 
 
+def hook_specs(seeds: Iterable[int], **options: Any) -> list[RunSpec]:
+    """The hook experiment's runs (:mod:`sabre.experiments.hook`) at every seed; ``options`` are those of
+    :func:`~sabre.experiments.hook.hook_configs` (objects, families, variants, robot, duration, fit, ...)."""
+    from .hook import hook_configs
+
+    return [_spec("hook", seed, **config) for config in hook_configs(**options) for seed in seeds]
+
+
 def _series(t: np.ndarray, y: np.ndarray) -> dict:
     idx = np.linspace(0, len(t) - 1, min(len(t), _SERIES_POINTS)).round().astype(int) if len(t) else []
     return {"t": np.asarray(t)[idx].tolist(), "y": np.asarray(y)[idx].tolist()}
@@ -198,6 +224,7 @@ def run_one(spec: RunSpec) -> dict:
     """Runs one experiment configuration at one seed; returns scalar ``metrics`` and plot ``series``."""
     from ..planner import likelihood_weights
     from . import scenarios
+    from .hook import hook_run
 
     c, seed = spec.options, spec.seed
     plant = _plant_factory(c.get("plant"))
@@ -239,8 +266,8 @@ def run_one(spec: RunSpec) -> dict:
         }
     if spec.name == "acceptance":
         return _acceptance_run(c, seed, plant)
-    if spec.name == "transfer":
-        return _transfer_run(c, seed)
+    if spec.name in ("transfer", "hook"):
+        return _transfer_run(c, seed) if spec.name == "transfer" else hook_run(c, seed, plant)
     if spec.name == "fig8":
         manipulation = scenarios.object_manipulation(c["variant"], "shelf", seed, c["duration"], plant=plant)
         ep = manipulation.episode
@@ -376,19 +403,22 @@ def run_experiments(
     short: bool = False,
     plant: str | None = None,
     robot: str = "royalpanda",
+    objects: int | None = None,
 ) -> dict[str, list[dict]]:
     """Runs ``name`` (one of :data:`NAMES` or "all") over ``seeds`` seeds, reusing cached runs, and
     writes ``<out>/<name>/runs.csv``, ``<name>.png`` and ``summary.md``. Returns the run records.
     ``plant``: "module:factory" naming a callable that builds the plant of a scene (a
     :class:`~sabre.PlantInterface`, e.g. a class taking the scene); None: the Rapier plant.
-    ``robot`` other than the RoyalPanda: the acceptance of that example robot, in ``<out>/acceptance_<robot>/``."""
+    ``robot`` other than the RoyalPanda: the acceptance (or the hook experiment) of that example robot, in
+    ``<out>/<name>_<robot>/``. ``objects``: the hook experiment's objects per family (None: 40, 2 if short)."""
     if int(seeds) < 1:
         raise InvalidValueError(f"seeds must be at least 1, got {seeds}")
     names = NAMES if name == "all" else (name,)
     records = {}
     for n in names:
         folder = Path(out) / (n if robot == "royalpanda" else f"{n}_{robot}")
-        ordered = run_specs(specs(n, int(seeds), short, plant, robot), folder, workers=workers, ray_address=ray_address)
+        runs = specs(n, int(seeds), short, plant, robot, objects)
+        ordered = run_specs(runs, folder, workers=workers, ray_address=ray_address)
         records[n] = ordered
         _write_csv(folder / "runs.csv", ordered)
         from .figures import draw, summary

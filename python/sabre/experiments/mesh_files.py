@@ -30,14 +30,14 @@ def _outward(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return out
 
 
-def box(centre: Sequence[float], size: Sequence[float]) -> Piece:
+def box(centre: Sequence[float] | np.ndarray, size: Sequence[float] | np.ndarray) -> Piece:
     """An axis-aligned box of ``size`` (m) centred at ``centre`` (m)."""
     signs = np.array([[sx, sy, sz] for sx in (-0.5, 0.5) for sy in (-0.5, 0.5) for sz in (-0.5, 0.5)])
     vertices = np.asarray(centre, dtype=float) + signs * np.asarray(size, dtype=float)
     return vertices, _outward(vertices, _BOX_FACES)
 
 
-def prism(centre: Sequence[float], axis: int, radius: float, length: float, sides: int = 16) -> Piece:
+def prism(centre: Sequence[float] | np.ndarray, axis: int, radius: float, length: float, sides: int = 16) -> Piece:
     """A regular prism of ``sides`` sides around coordinate axis ``axis`` (0, 1, 2): a round bar as
     meshes write one, its corners on the circle of ``radius`` (m), ``length`` (m) long."""
     angles = 2.0 * np.pi * np.arange(sides) / sides

@@ -1,4 +1,5 @@
-"""Objects written the way other tools write them, in two families, each drawn from a random specification.
+"""The generated object families of the generality sweep and the hook experiment: objects written the
+way other tools write them, in two families, each drawn from a random specification.
 
 The box family (`random_spec`, `object_urdf`): a URDF per object with its own link and joint names, a
 `world` root with a fixed joint and no `handle_frame`; handle height 0.6–1.1 m, door or drawer width
@@ -11,9 +12,9 @@ convex mesh pieces (STL and multi-object OBJ files), no inertial anywhere; two d
 right over or under two stacked drawers, so that handles stand 0.51–1.23 m high; handles as mesh bars
 (one piece, two halves, or a 16-sided round bar) on standoffs; one of the four parts is the target.
 
-Both stand 2–4 m from the robot, their front within ±60° of facing it (`pose()`), and `scene_of(spec)`
-loads either next to the RoyalPanda. The generality sweep (experiments/generality_sweep.py) opens these
-objects and tests/scenarios/test_generality.py checks the handle frame inferred from each.
+Both stand 2–4 m from the robot, their front within ±60° of facing it (`pose()`), and `scene_of(spec, robot)`
+loads either next to a mobile robot (the RoyalPanda or a mobile example robot). `python -m sabre
+experiment hook` (:mod:`sabre.experiments.hook`) opens these objects.
 """
 
 from __future__ import annotations
@@ -25,11 +26,21 @@ from pathlib import Path
 
 import numpy as np
 
-import sabre
-
+from .. import assets
+from ..errors import AssumedInertialWarning, InvalidValueError
+from ..robot_examples import EXAMPLE_ROBOTS, example_robot_urdf
+from ..scene import Scene
 from . import mesh_files
 
-ROBOT_URDF = Path(__file__).resolve().parents[1] / "assets" / "robots" / "royalpanda.urdf"
+
+def robot_urdf(robot: str = "royalpanda") -> Path:
+    """The URDF file of ``robot``: the built-in RoyalPanda or an example robot
+    (:data:`sabre.robot_examples.EXAMPLE_ROBOTS`)."""
+    if robot == "royalpanda":
+        return assets.urdf_path(robot)
+    if robot in EXAMPLE_ROBOTS:
+        return example_robot_urdf(robot)
+    raise InvalidValueError(f"unknown robot {robot!r}; royalpanda or one of {sorted(EXAMPLE_ROBOTS)}")
 
 
 @dataclass(frozen=True)
@@ -223,11 +234,11 @@ def object_urdf(spec: ObjectSpec) -> str:
 """
 
 
-def scene_of(spec: ObjectSpec | MeshCabinetSpec) -> sabre.Scene:
-    """The object of either family next to the RoyalPanda, its target joint the one movable."""
+def scene_of(spec: ObjectSpec | MeshCabinetSpec, robot: str = "royalpanda") -> Scene:
+    """The object of either family next to ``robot`` (see :func:`robot_urdf`), its target joint the one movable."""
     if isinstance(spec, MeshCabinetSpec):
-        return mesh_scene_of(spec)
-    return sabre.Scene.from_urdf_strings(ROBOT_URDF.read_text(), object_urdf(spec), spec.pose())
+        return mesh_scene_of(spec, robot=robot)
+    return Scene.from_urdf(robot_urdf(robot), assets.urdf_file(object_urdf(spec), f"generated-{spec.index}"), spec.pose())
 
 
 # -- the mesh family: cabinets as robot-learning benchmarks ship them ------------------------------------------------
@@ -512,11 +523,11 @@ def write_mesh_cabinet(spec: MeshCabinetSpec, root: Path, package: str | None = 
     return path
 
 
-def mesh_scene_of(spec: MeshCabinetSpec, root: Path | None = None) -> sabre.Scene:
+def mesh_scene_of(spec: MeshCabinetSpec, root: Path | None = None, robot: str = "royalpanda") -> Scene:
     """The cabinet written under ``root`` (default: the temp directory) and loaded from its file next to
-    the RoyalPanda, keeping the joint of the target's handle; no inertial warnings (there are none
+    ``robot``, keeping the joint of the target's handle; no inertial warnings (there are none
     by design: sabre fills every moving part's in from its meshes)."""
     path = write_mesh_cabinet(spec, root or Path(tempfile.gettempdir()) / "sabre-generated" / "mesh-cabinets")
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", sabre.errors.AssumedInertialWarning)
-        return sabre.Scene.from_urdf(ROBOT_URDF, path, spec.pose(), handle=spec.handle_link)
+        warnings.simplefilter("ignore", AssumedInertialWarning)
+        return Scene.from_urdf(robot_urdf(robot), path, spec.pose(), handle=spec.handle_link)
