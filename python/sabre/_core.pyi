@@ -635,6 +635,8 @@ class OpenObjectConfig:
     open_speeds: list[float]
     slip_distance: float
     slip_lateral: float
+    hold_speed: float
+    hold_pull: float
     success_fraction: float
     release_speed: float
     release_distance: float

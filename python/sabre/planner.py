@@ -298,6 +298,13 @@ class Controller:
             self._compiled[phase] = self.task.cost(self.scene, phase).compile(self.scene)
         return self._compiled[phase]
 
+    def refresh_cost(self) -> None:
+        """Builds the current phase's cost again from the task: for a task whose cost depends on
+        where the phase began (:class:`sabre.tasks.OpenObject`'s hold)."""
+        self._compiled.pop(self.phase, None)
+        self._cost = self._compile(self.phase)
+        self._planner.set_cost(self._cost.core)
+
     def reset(self, seed: int | None = None, t0: float = 0.0) -> None:
         """Forgets the policy, the filters' remembered active sets and the tank's energy, and restarts
         the random stream (default: the configured seed): an episode re-run after reset repeats exactly."""
@@ -348,6 +355,11 @@ class Controller:
         """
         U = as_float_array("U", U, (self.config.horizon_steps, self.scene.nu))
         self._planner.set_nominal(np.ascontiguousarray(U), as_finite("t0", t0))
+
+    @property
+    def phase_since(self) -> float:
+        """When (s) the controller entered its current phase."""
+        return self.phase_history[-1][0]
 
     def set_phase(self, phase: str, t: float = 0.0) -> None:
         """Switches the task phase by hand (the task's own rule keeps running afterwards)."""

@@ -28,13 +28,23 @@ EXAMPLE_ROBOTS: dict[str, str] = {
     "ur5_mobile": "robots/ur_description/urdf/ur5_robot.urdf",
 }
 
-#: The objects each example robot opens and where they stand (x, y, z, roll, pitch, yaw): the fixed
+#: Where each example robot opens the four built-in objects (x, y, z, roll, pitch, yaw): the fixed
 #: Panda's in front of the pedestal where the hand can follow the handle all the way open (the drawer
 #: turned so that it slides out past the arm rather than into it), the mobile UR5's where the
 #: RoyalPanda's stand.
 EXAMPLE_OBJECTS: dict[str, dict[str, tuple[float, ...]]] = {
-    "panda_pedestal": {"drawer": (0.686, -0.235, 0.0, 0.0, 0.0, -1.047), "microwave": (0.86, 0.22, 0.0, 0.0, 0.0, 0.0)},
-    "ur5_mobile": {"shelf": (1.0, 0.0, 0.0, 0.0, 0.0, 0.0), "dishwasher": (1.2, 0.0, 0.0, 0.0, 0.0, 0.0)},
+    "panda_pedestal": {
+        "drawer": (0.686, -0.235, 0.0, 0.0, 0.0, -1.047),
+        "microwave": (0.86, 0.22, 0.0, 0.0, 0.0, 0.0),
+        "shelf": (0.86, 0.22, 0.0, 0.0, 0.0, 0.0),
+        "dishwasher": (0.9, 0.2, 0.0, 0.0, 0.0, 0.0),
+    },
+    "ur5_mobile": {
+        "shelf": (1.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+        "dishwasher": (1.2, 0.0, 0.0, 0.0, 0.0, 0.0),
+        "drawer": (1.2, 0.0, 0.0, 0.0, 0.0, 0.0),
+        "microwave": (1.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+    },
 }
 
 _PACKAGE = "package://example-robot-data/"

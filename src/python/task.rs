@@ -56,6 +56,8 @@ open_object_config!(
     open_speeds: Vec<f64>,
     slip_distance: f64,
     slip_lateral: f64,
+    hold_speed: f64,
+    hold_pull: f64,
     success_fraction: f64,
     release_speed: f64,
     release_distance: f64,

@@ -29,10 +29,21 @@ pub enum OpenPhase {
     Open,
     /// Letting go of an object that opens by itself.
     Release,
+    /// Holding the bar of an opened object that stopped following the pull: the hand keeps its
+    /// place in the pocket, pulling out along the handle's normal, instead of following the path
+    /// the rollout model predicts for the object.
+    Hold,
 }
 
 impl OpenPhase {
-    pub const ALL: [OpenPhase; 5] = [Self::Approach, Self::Insert, Self::Hook, Self::Open, Self::Release];
+    pub const ALL: [OpenPhase; 6] = [
+        Self::Approach,
+        Self::Insert,
+        Self::Hook,
+        Self::Open,
+        Self::Release,
+        Self::Hold,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
@@ -41,6 +52,7 @@ impl OpenPhase {
             Self::Hook => "hook",
             Self::Open => "open",
             Self::Release => "release",
+            Self::Hold => "hold",
         }
     }
 
@@ -57,7 +69,7 @@ impl OpenPhase {
             Self::Approach => Some(Self::Insert),
             Self::Insert => Some(Self::Hook),
             Self::Hook => Some(Self::Open),
-            Self::Open | Self::Release => None,
+            Self::Open | Self::Release | Self::Hold => None,
         }
     }
 }
@@ -109,6 +121,12 @@ pub struct OpenObjectConfig {
     /// beyond `slip_lateral` sideways of it.
     pub slip_distance: f64,
     pub slip_lateral: f64,
+    /// An opened object (beyond `drag_distance` from closed, short of success) whose handle moves
+    /// slower than `hold_speed` while the bar is in the pocket has stopped following the pull: the
+    /// task holds it (0: never), its target `hold_pull` further out from the door than the open
+    /// target's; it opens again once the handle moves faster than twice `hold_speed`.
+    pub hold_speed: f64,
+    pub hold_pull: f64,
     /// Success once the opening reaches this share of the target, in (0, 1].
     pub success_fraction: f64,
     /// Release: speed of the move (0: no release guide) and how far the hand backs off.
@@ -154,6 +172,8 @@ impl Default for OpenObjectConfig {
             open_speeds: vec![0.1, 0.05],
             slip_distance: 0.05,
             slip_lateral: 0.01,
+            hold_speed: 0.01,
+            hold_pull: 0.05,
             success_fraction: 0.9,
             release_speed: 0.4,
             release_distance: 0.3,
@@ -198,6 +218,8 @@ impl OpenObjectConfig {
             ("drag_distance", self.drag_distance),
             ("slip_distance", self.slip_distance),
             ("slip_lateral", self.slip_lateral),
+            ("hold_speed", self.hold_speed),
+            ("hold_pull", self.hold_pull),
             ("release_speed", self.release_speed),
             ("release_distance", self.release_distance),
             ("release_rate", self.release_rate),
@@ -237,8 +259,9 @@ impl OpenObjectConfig {
 pub struct OpenObjectRules {
     pub(super) geometry: HandleGeometry,
     pub(super) config: OpenObjectConfig,
-    /// Grasp targets in the handle frame, by phase (release has none: it uses `open`'s).
-    offsets: [Isometry3<f64>; 4],
+    /// Grasp targets in the handle frame, by phase (release has none: it uses `open`'s; hold's is
+    /// `open`'s moved `hold_pull` out from the door).
+    offsets: [Isometry3<f64>; 5],
     /// The targets fitted to the handle's geometry (None: as configured, or no bar to measure).
     fit: Option<HandleFit>,
     target_opening: f64,
@@ -288,11 +311,13 @@ impl OpenObjectRules {
                 config.pitch,
             ),
         };
+        let [x, y, z] = targets[3];
         let offsets = [
             geometry.grasp_offset(targets[0], pitch)?,
             geometry.grasp_offset(targets[1], pitch)?,
             geometry.grasp_offset(targets[2], pitch)?,
             geometry.grasp_offset(targets[3], pitch)?,
+            geometry.grasp_offset([x, y, z - config.hold_pull], pitch)?,
         ];
         let scene = geometry.scene();
         let probe_scene = if scene.roles.base.is_none() {
@@ -330,6 +355,7 @@ impl OpenObjectRules {
             OpenPhase::Insert => &self.offsets[1],
             OpenPhase::Hook => &self.offsets[2],
             OpenPhase::Open | OpenPhase::Release => &self.offsets[3],
+            OpenPhase::Hold => &self.offsets[4],
         }
     }
 
@@ -426,6 +452,14 @@ impl OpenObjectRules {
         }
     }
 
+    /// Whether an opened object, short of success, has stopped following the pull: its handle
+    /// beyond `drag_distance` from closed and slower than `hold_speed`.
+    fn stalled(&self, x: &[f64]) -> bool {
+        self.config.hold_speed > 0.0
+            && self.geometry.distance_from_closed(x) > self.config.drag_distance
+            && self.geometry.speed(x).abs() < self.config.hold_speed
+    }
+
     /// Whether an inserting finger has stopped short of the insert depth, within `blocked_depth`
     /// of it: something in front of the hand holds it there, and this close the tip clears the bar.
     fn blocked(&self, x: &[f64], depth_error: f64) -> bool {
@@ -450,16 +484,25 @@ impl OpenObjectRules {
         Ok(match phase {
             OpenPhase::Release if self.self_opening(x)? => OpenPhase::Release,
             OpenPhase::Release => OpenPhase::Approach,
-            OpenPhase::Open => {
+            OpenPhase::Open | OpenPhase::Hold => {
                 // release a door that opens by itself (holding it makes the arm follow it down into
                 // its joint limits); start over when the bar has left the pocket and the object is
-                // not running ahead of the hand
+                // not running ahead of the hand; hold an object that stopped following the pull
+                // until it moves again
                 if self.succeeded(x) {
                     OpenPhase::Open
                 } else if self.self_opening(x)? {
                     OpenPhase::Release
                 } else if self.slipped(&at) && self.geometry.speed(x) <= self.config.runaway_speed {
                     OpenPhase::Approach
+                } else if phase == OpenPhase::Hold {
+                    if self.geometry.speed(x).abs() > 2.0 * self.config.hold_speed {
+                        OpenPhase::Open
+                    } else {
+                        OpenPhase::Hold
+                    }
+                } else if self.stalled(x) {
+                    OpenPhase::Hold
                 } else {
                     OpenPhase::Open
                 }
@@ -482,7 +525,7 @@ impl OpenObjectRules {
 
     /// Factor on the sampling covariance in `phase` at state x.
     pub fn noise_scale(&self, x: &[f64], phase: OpenPhase) -> Result<f64> {
-        if matches!(phase, OpenPhase::Open | OpenPhase::Release) {
+        if matches!(phase, OpenPhase::Open | OpenPhase::Release | OpenPhase::Hold) {
             return Ok(self.config.noise_open);
         }
         let (distance, _) = self.checked_at(x)?.approach_error(self.offset(phase));

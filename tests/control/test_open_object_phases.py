@@ -115,12 +115,13 @@ def test_inserting_ends_only_once_the_hook_tip_is_behind_the_bar(scene):
     )
 
 
-def test_only_inserting_leaves_the_object_cost_out(scene):
+def test_only_inserting_and_holding_leave_the_object_cost_out(scene):
     """While inserting, the object cost would reward dragging the closed door by the finger's tip
-    beside the bar; every other phase carries it (a door resting on the hand is seen to open)."""
+    beside the bar, and while holding, pulling along the path the object does not follow; every
+    other phase carries it (a door resting on the hand is seen to open)."""
     task = sabre.tasks.OpenObject()
     carries = {phase: any(isinstance(t, costs.ObjectState) for t in task.cost(scene, phase).terms) for phase in task.phases}
-    assert carries == {"approach": True, "insert": False, "hook": True, "open": True, "release": True}
+    assert carries == {"approach": True, "insert": False, "hook": True, "open": True, "release": True, "hold": False}
 
 
 def test_a_finger_stopped_a_few_millimetres_short_of_the_insert_depth_hooks(scene):
@@ -235,6 +236,40 @@ def test_a_finger_that_already_drags_the_handle_open_switches_to_opening(scene):
     early = _place_grasp(scene, x, handle @ task.grasp_offset(scene, "hook") @ _translation(0.0, 0.0, -0.01))
     early[2 * nq + no] = rate
     assert task.next_phase(scene, early, 0.0, "hook") == "hook"
+
+
+def test_an_opened_object_that_stops_following_the_pull_is_held_until_it_moves(scene):
+    """Opened 0.2 rad with the bar in the pocket and the handle still: hold. The handle faster than
+    twice hold_speed either way: open again (between once and twice: each phase stays). The bar out of the
+    pocket: start over. Closed, or hold_speed 0: never held. The hold target lies hold_pull out
+    from the open target along the handle's normal."""
+    task = sabre.tasks.OpenObject()
+    nq, no = scene.nq, scene.no
+    x = scene.default_state()
+    x[0] = 0.939 - 0.75
+    x[2 * nq] = 0.2
+    handle = scene.object_fk(np.array([0.2]), "handle_frame")
+    hooked = _place_grasp(scene, x, handle @ task.grasp_offset(scene, "open"))
+    assert task.next_phase(scene, hooked, 0.0, "open") == "hold"
+    assert task.next_phase(scene, hooked, 0.0, "hold") == "hold"
+    assert task.noise_scale(scene, hooked, "hold") == task.noise.open
+    per_speed = 1.0 / task.handle_travel(scene, 0.2)  # opening rate per m/s at the handle
+    for factor, from_open, from_hold in ((3.0, "open", "open"), (1.5, "open", "hold"), (-3.0, "open", "open")):
+        moving = hooked.copy()
+        moving[2 * nq + no] = factor * task.open.hold_speed * per_speed
+        assert task.next_phase(scene, moving, 0.0, "open") == from_open, factor
+        assert task.next_phase(scene, moving, 0.0, "hold") == from_hold, factor
+    slipped = _place_grasp(scene, x, handle @ task.grasp_offset(scene, "open") @ _translation(0.0, -0.015, 0.0))
+    assert task.next_phase(scene, slipped, 0.0, "hold") == "approach"
+    never = sabre.tasks.OpenObject(open=sabre.tasks.OpenConfig(hold_speed=0.0))
+    assert never.next_phase(scene, hooked, 0.0, "open") == "open"
+    x[2 * nq] = 0.0
+    closed = _place_grasp(scene, x, scene.object_fk(np.zeros(1), "handle_frame") @ task.grasp_offset(scene, "open"))
+    assert task.next_phase(scene, closed, 0.0, "open") == "open"
+    pull = np.linalg.solve(task.grasp_offset(scene, "open"), task.grasp_offset(scene, "hold"))
+    normal = task.grasp_offset(scene, "open")[:3, :3].T @ np.array([0.0, 0.0, -task.open.hold_pull])
+    np.testing.assert_allclose(pull[:3, 3], normal, atol=1e-12)
+    np.testing.assert_allclose(pull[:3, :3], np.eye(3), atol=1e-12)
 
 
 def _translation(x, y, z):

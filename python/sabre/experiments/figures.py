@@ -109,6 +109,16 @@ def _draw_time_series(ax: Any, name: str, records: list[dict]) -> None:
         ax.plot(grid, mean, label=label)
         # a force magnitude is never negative: its band stops at zero
         ax.fill_between(grid, np.maximum(mean - std, 0.0) if series == "wrench" else mean - std, mean + std, alpha=0.25)
+    if series == "wrench" and all("contact" in r["series"] for r in records):
+        # the hook's contact with the handle: the share of 0.1 s windows, mean over seeds
+        twin = ax.twinx()
+        for i, (value, runs) in enumerate(_group(records, key).items()):
+            grid = np.linspace(
+                max(r["series"]["contact"]["t"][0] for r in runs), min(r["series"]["contact"]["t"][-1] for r in runs), 300
+            )
+            twin.plot(grid, _mean_std(runs, "contact", grid)[0], color=f"C{i}", ls="--", lw=0.9, label=f"{value} in contact")
+        twin.set(ylabel="hook in contact (share, dashed)", ylim=(0.0, 1.05))
+        twin.legend(fontsize=8, loc="center right")
     if series == "tank":
         ax.axhline(2.0, color="k", ls="--", lw=0.8, label="floor ε")
     ax.axvline(0.0, color="grey", ls=":", lw=0.8)

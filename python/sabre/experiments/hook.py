@@ -68,7 +68,7 @@ def classify(episode: Episode, scene: Scene) -> str:
     if "open" not in phases:
         return "could not hook"
     first_open = phases.index("open")
-    if any(p in ("approach", "insert", "hook") for p in phases[first_open:]):
+    if any(p in ("approach", "insert", "hook") for p in phases[first_open:]):  # hold comes only after open
         return "slipped"
     arm = [i for i in range(scene.nq) if i not in (scene.base_indices or ())]
     tail = episode.time >= episode.time[-1] - 5.0
@@ -91,7 +91,7 @@ def hook_skill(episode: Episode) -> dict[str, Any]:
     first_hook = next((t for t, p in entries if p == "hook" and first_insert is not None and t >= first_insert), None)
     slips, reinsert_times, after_slip, insert_start = 0, [], False, None
     for (_, before), (t, after) in itertools.pairwise([(0.0, names[0]), *entries]):
-        if before == "open" and after in ("approach", "insert", "hook"):
+        if before in ("open", "hold") and after in ("approach", "insert", "hook"):
             slips, after_slip = slips + 1, True
         if after_slip and after == "insert":
             insert_start = t

@@ -215,6 +215,13 @@ def hook_specs(seeds: Iterable[int], **options: Any) -> list[RunSpec]:
     return [_spec("hook", seed, **config) for config in hook_configs(**options) for seed in seeds]
 
 
+def _window_share(flags: np.ndarray, width: int) -> np.ndarray:
+    """The share of the ``width`` samples around each sample that are set (1.0 for a 0/1 series)."""
+    if len(flags) == 0:
+        return flags
+    return np.convolve(flags, np.ones(width) / width, mode="same")
+
+
 def _series(t: np.ndarray, y: np.ndarray) -> dict:
     idx = np.linspace(0, len(t) - 1, min(len(t), _SERIES_POINTS)).round().astype(int) if len(t) else []
     return {"t": np.asarray(t)[idx].tolist(), "y": np.asarray(y)[idx].tolist()}
@@ -262,6 +269,7 @@ def run_one(spec: RunSpec) -> dict:
             "series": {
                 "tank": _series(ep.time - door.hold_start, door.tank_energy),
                 "wrench": _series(ep.time - door.hold_start, force),
+                "contact": _series(ep.time - door.hold_start, _window_share(np.asarray(ep.contact, dtype=float), 100)),
             },
         }
     if spec.name == "acceptance":
@@ -338,7 +346,7 @@ def _acceptance_run(c: dict, seed: int, plant: Callable | None = None) -> dict:
         "final_opening": float(ep.opening[-1]),
         "needed_opening": float("nan") if needed is None else float(needed),
         "mean_wrench": float(ep.mean_wrench()),
-        "slips": float(sum(1 for a, b in transitions if a == "open" and b == "approach")),
+        "slips": float(sum(1 for a, b in transitions if a in ("open", "hold") and b == "approach")),
         "releases": float(sum(1 for a, b in transitions if a != "release" and b == "release")),
         "real_time_factor": float(ep.real_time_factor),
         "planning_ms_median": 1e3 * float(np.median(ep.planning_times)),

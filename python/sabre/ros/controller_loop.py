@@ -34,8 +34,9 @@ from .trajectory import arm_interface, command_delay, stream_trajectory, traject
 __all__ = ["ControllerLoop", "TASK_STATES"]
 
 #: The task's phases in which its hook sits on the handle (release: it lets go of a door that opens
-#: by itself, along that door's path): the estimator declares and keeps a hook only then.
-HOOK_SEATED_PHASES = ("hook", "open", "release")
+#: by itself, along that door's path; hold: it holds an object that stopped following the pull):
+#: the estimator declares and keeps a hook only then.
+HOOK_SEATED_PHASES = ("hook", "open", "release", "hold")
 
 #: idle: no task; starting: the planner starts on the next state; running; succeeded: the task's
 #: success test passed on the controller's state (``stop_on_success``): the commands ramp to zero and

@@ -70,6 +70,22 @@ class TaskController(Protocol):
         """The phase the controller plans for."""
         ...
 
+    @property
+    def phase_since(self) -> float:
+        """When (s) the controller entered its phase."""
+        ...
+
+    @property
+    def nominal(self) -> np.ndarray:
+        """(K, nu) the nominal input sequence the next iteration samples around."""
+        ...
+
+    def set_nominal(self, U: np.ndarray, t0: float) -> None: ...
+
+    def set_phase(self, phase: str, t: float = 0.0) -> None: ...
+
+    def refresh_cost(self) -> None: ...
+
 
 class Task:
     """Base class: a sequence of named phases, each with its cost."""

@@ -140,13 +140,20 @@ class OpenConfig:
         slip_distance: distance (m) of the grasp frame from its target beyond which the bar has
             left the pocket.
         slip_lateral: sideways offset (m) from the target beyond which the bar has left the pocket.
+        hold_speed: an opened object (beyond ``hook.drag_distance`` from closed, short of success)
+            whose handle moves slower than this (m/s) with the bar in the pocket has stopped
+            following the pull: the task holds it (phase hold) until the handle moves faster than
+            twice this; 0: never.
+        hold_pull: the hold target lies this far (m) further out from the door than ``offset``.
+        hold_probe: after holding this long (s) the task pulls along the object's path again (phase
+            open), and holds again if it still does not follow.
         success_fraction: success once the opening reaches this share of the target, in (0, 1].
         gain_inertia_floor: the low-level controller's gain inertia floor (kg m²) while opening
             (see :class:`sabre.LowLevelController`); None: the controller's own.
 
     Raises:
         InvalidValueError: a negative weight, speed or bound, a non-finite lead or overshoot, a
-            success fraction outside (0, 1].
+            success fraction outside (0, 1], a hold probe that is not positive.
     """
 
     offset: tuple[float, float, float] = xyz("open_offset", _RULES.open_offset)
@@ -157,6 +164,9 @@ class OpenConfig:
     speeds: tuple[float, ...] = tuple(_RULES.open_speeds)
     slip_distance: float = _RULES.slip_distance
     slip_lateral: float = _RULES.slip_lateral
+    hold_speed: float = _RULES.hold_speed
+    hold_pull: float = _RULES.hold_pull
+    hold_probe: float = 1.0
     success_fraction: float = _RULES.success_fraction
     gain_inertia_floor: float | None = None
 
@@ -171,8 +181,9 @@ class OpenConfig:
             object.__setattr__(self, "object_overshoot", as_finite("open.object_overshoot", self.object_overshoot))
         speeds = tuple(as_non_negative("open.speeds", s) for s in self.speeds)
         object.__setattr__(self, "speeds", speeds)
-        for name in ("object_weight", "slip_distance", "slip_lateral"):
+        for name in ("object_weight", "slip_distance", "slip_lateral", "hold_speed", "hold_pull"):
             object.__setattr__(self, name, as_non_negative(f"open.{name}", getattr(self, name)))
+        object.__setattr__(self, "hold_probe", as_positive("open.hold_probe", self.hold_probe))
         object.__setattr__(self, "gain_inertia_floor", optional_non_negative("open.gain_inertia_floor", self.gain_inertia_floor))
         if not 0.0 < self.success_fraction <= 1.0:
             raise InvalidValueError(f"open.success_fraction must be in (0, 1], got {self.success_fraction}")
@@ -274,6 +285,8 @@ def rules_config(
         open_speeds=list(open.speeds),
         slip_distance=open.slip_distance,
         slip_lateral=open.slip_lateral,
+        hold_speed=open.hold_speed,
+        hold_pull=open.hold_pull,
         success_fraction=open.success_fraction,
         release_speed=release.speed,
         release_distance=release.distance,

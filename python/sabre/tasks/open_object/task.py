@@ -14,7 +14,7 @@ from ..._validate import as_finite, as_non_negative, as_positive
 from ...errors import InvalidValueError
 from ...scene import Scene
 from .._per_scene import per_scene
-from ..base import SafetyWeights, Task
+from ..base import SafetyWeights, Task, TaskController
 from . import geometry
 from .config import ApproachConfig, GuideConfig, HookConfig, NoiseConfig, OpenConfig, ReleaseConfig, rules_config
 from .geometry import GraspError, PocketError
@@ -41,7 +41,11 @@ class OpenObject(Task):
     - open (:class:`OpenConfig`): the pose target sits in the pocket, pulled out from the bar,
       and follows the handle as the object moves; the object cost (34) pulls toward the target;
     - release (:class:`ReleaseConfig`): an object that opens by itself (a door past its balance
-      point) is let go: the finger leaves the pocket and the hand backs off.
+      point) is let go: the finger leaves the pocket and the hand backs off;
+    - hold (:class:`OpenConfig`): an opened object that stops following the pull (held, jammed) is
+      held with the bar in the pocket, the pose target ``open.hold_pull`` out from the door and no
+      object cost, the plan restarted from rest; it opens again when the handle moves, and tries
+      every ``open.hold_probe`` s.
 
     ``noise`` (:class:`NoiseConfig`) shapes the sampling covariance per phase and ``guide``
     (:class:`GuideConfig`) the reaching guides. ``horizon`` (s) is the controller's horizon T,
@@ -77,7 +81,9 @@ class OpenObject(Task):
     extra: costs.Cost = field(default_factory=costs.Cost)
     handle: str = "handle_frame"
 
-    phases = ("approach", "insert", "hook", "open", "release")
+    phases = ("approach", "insert", "hook", "open", "release", "hold")
+    #: the world pose the hold pulls toward, set when a hold begins (see :meth:`next_phase`)
+    _hold_pose: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     # -- settings ---------------------------------------------------------------------------------
     def __post_init__(self) -> None:
@@ -240,6 +246,15 @@ class OpenObject(Task):
         every_phase = self.safety.terms(scene) + self.extra
         if phase == "release":
             return pull_object + costs.Contact(self.contact_weight) + every_phase
+        if phase == "hold":
+            # No object cost, and the target fixed in the world where the hold began: the rollout
+            # model lets the object follow the hand, so a target on the handle recedes as the hand
+            # pulls, and a plan that pulls along the object's path moves the hand out of the
+            # pocket sideways when the object does not follow.
+            weights = tuple(self.open.pose_weights)
+            if self._hold_pose is None:
+                return costs.TargetPose(target, tool, frame, weights=weights) + every_phase
+            return costs.TargetPose(self._hold_pose, tool, weights=weights) + every_phase
         if phase in ("approach", "insert", "hook"):
             # The object cost also before the hook holds (approaching, hooking): a door that can open
             # by itself (a dishwasher past its balance point, resting on the hand after a slip)
@@ -371,7 +386,11 @@ class OpenObject(Task):
           sideways of it) and the object is not :meth:`running_ahead` of the hand;
         - release: stays while the object opens by itself, then starts over.
         """
-        return str(self._rules(scene).next_phase(_state(x), phase))
+        after = str(self._rules(scene).next_phase(_state(x), phase))
+        if after == "hold" and phase != "hold":
+            o = scene.split_state(np.asarray(x, dtype=float)).o
+            self._hold_pose = self.handle_pose(scene, o) @ self.grasp_offset(scene, "hold")
+        return after
 
     # -- sampling: guides and noise -----------------------------------------------------------------
     def guides(self, scene: Scene, x: np.ndarray, phase: str, steps: int, dt: float) -> np.ndarray | None:
@@ -393,7 +412,20 @@ class OpenObject(Task):
         return self._rules(scene).guide_plan(_state(x), phase, int(steps), float(dt))
 
     def gain_inertia_floor(self, phase: str) -> float | None:
-        return self.open.gain_inertia_floor if phase == "open" else None
+        return self.open.gain_inertia_floor if phase in ("open", "hold") else None
+
+    def on_step(self, scene: Scene, x: np.ndarray, t: float, controller: TaskController) -> None:
+        """Holding: when the hold begins its cost pulls toward where it began and the plan restarts
+        from rest (the nominal still follows the path the object was expected to take, and the
+        sampling noise while opening is too small to turn it round in time); after
+        ``open.hold_probe`` s the task pulls along the path again."""
+        if controller.phase != "hold":
+            return
+        if controller.phase_since == t:
+            controller.refresh_cost()  # toward where this hold began
+            controller.set_nominal(np.zeros_like(controller.nominal), t)
+        elif t - controller.phase_since >= self.open.hold_probe - 1e-9:
+            controller.set_phase("open", t)
 
     def noise_scale(self, scene: Scene, x: np.ndarray, phase: str) -> float:
         """``noise.open`` while opening and releasing; while reaching (d / ``noise.distance``)²
