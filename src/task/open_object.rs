@@ -172,7 +172,7 @@ impl Default for OpenObjectConfig {
             open_speeds: vec![0.1, 0.05],
             slip_distance: 0.05,
             slip_lateral: 0.01,
-            hold_speed: 0.01,
+            hold_speed: 0.003,
             hold_pull: 0.05,
             success_fraction: 0.9,
             release_speed: 0.4,
