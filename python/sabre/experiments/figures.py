@@ -60,7 +60,7 @@ def draw(name: str, records: list[dict], path: str | os.PathLike[str]) -> None:
         _draw_transfer(ax, records)
     elif name == "hook":
         _draw_hook(ax, records)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper left" if name == "fig11" else "best")  # fig11: its contact axis is on the right
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
