@@ -154,9 +154,10 @@ def test_run_episode_hands_over_the_task_gain_floor_per_phase_and_keeps_the_cont
         low.gain_inertia_floor = float("nan")
 
 
-def test_open_object_stiffens_the_hand_only_while_opening():
+def test_open_object_stiffens_the_hand_only_while_opening_or_holding():
     task = sabre.tasks.OpenObject(open=sabre.tasks.OpenConfig(gain_inertia_floor=0.03))
-    assert [task.gain_inertia_floor(p) for p in task.phases] == [None, None, None, 0.03, None]
+    floors = {p: task.gain_inertia_floor(p) for p in task.phases}
+    assert floors == {"approach": None, "insert": None, "hook": None, "open": 0.03, "release": None, "hold": 0.03}
     assert sabre.tasks.OpenObject().gain_inertia_floor("open") is None
     with pytest.raises(InvalidValueError):
         sabre.tasks.OpenConfig(gain_inertia_floor=-0.1)
