@@ -206,10 +206,7 @@ def test_a_finger_that_already_drags_the_handle_open_switches_to_opening(scene):
     before the handle is drag_distance from closed."""
     task = sabre.tasks.OpenObject()
     nq, no = scene.nq, scene.no
-    x = scene.default_state()
-    x[0] = 0.939 - 0.75
-    x[2 * nq] = 0.2
-    handle = scene.object_fk(np.array([0.2]), "handle_frame")
+    x, handle = _opened(scene, 0.2)
     off_target = _place_grasp(scene, x, handle @ task.grasp_offset(scene, "hook") @ _translation(0.0, 0.0, -0.01))
     across = task.pocket_error(scene, off_target, "hook").across
     assert task.hook.tolerance < across < task.open.slip_distance
@@ -245,10 +242,7 @@ def test_an_opened_object_that_stops_following_the_pull_is_held_until_it_moves(s
     from the open target along the handle's normal."""
     task = sabre.tasks.OpenObject()
     nq, no = scene.nq, scene.no
-    x = scene.default_state()
-    x[0] = 0.939 - 0.75
-    x[2 * nq] = 0.2
-    handle = scene.object_fk(np.array([0.2]), "handle_frame")
+    x, handle = _opened(scene, 0.2)
     hooked = _place_grasp(scene, x, handle @ task.grasp_offset(scene, "open"))
     assert task.next_phase(scene, hooked, 0.0, "open") == "hold"
     assert task.next_phase(scene, hooked, 0.0, "hold") == "hold"
@@ -270,6 +264,15 @@ def test_an_opened_object_that_stops_following_the_pull_is_held_until_it_moves(s
     normal = task.grasp_offset(scene, "open")[:3, :3].T @ np.array([0.0, 0.0, -task.open.hold_pull])
     np.testing.assert_allclose(pull[:3, 3], normal, atol=1e-12)
     np.testing.assert_allclose(pull[:3, :3], np.eye(3), atol=1e-12)
+
+
+def _opened(scene, opening):
+    """The default state with the base in front of the handle and the shelf open `opening` rad,
+    and the handle frame's world pose there."""
+    x = scene.default_state()
+    x[0] = 0.939 - 0.75
+    x[2 * scene.nq] = opening
+    return x, scene.object_fk(np.array([opening]), "handle_frame")
 
 
 def _translation(x, y, z):

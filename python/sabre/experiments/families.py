@@ -101,10 +101,20 @@ def short_handle(rng: np.random.Generator) -> tuple[float, float]:
     return float(rng.uniform(0.01, 0.02)), float(rng.uniform(0.02, 0.04))
 
 
-def random_spec(rng: np.random.Generator, index: int) -> ObjectSpec:
-    def scale() -> float:  # ×0.5–×2, uniform in log
-        return float(np.exp(rng.uniform(np.log(0.5), np.log(2.0))))
+def _log_scale(rng: np.random.Generator) -> float:
+    """A factor ×0.5–×2, uniform in log."""
+    return float(np.exp(rng.uniform(np.log(0.5), np.log(2.0))))
 
+
+def _placement(rng: np.random.Generator) -> dict[str, float]:
+    """Where an object stands: 2–4 m away, within ±0.5 rad of straight ahead, its front within ±60°
+    of facing the robot (drawn in this order)."""
+    distance = float(rng.uniform(2.0, 4.0))
+    bearing = float(rng.uniform(-0.5, 0.5))
+    return {"distance": distance, "bearing": bearing, "facing": float(rng.uniform(-np.pi / 3, np.pi / 3))}
+
+
+def random_spec(rng: np.random.Generator, index: int) -> ObjectSpec:
     kind = "door" if rng.random() < 0.6 else "drawer"
     spec = ObjectSpec(
         index=index,
@@ -114,12 +124,10 @@ def random_spec(rng: np.random.Generator, index: int) -> ObjectSpec:
         hinge_left=bool(rng.random() < 0.5),
         vertical_bar=bool(rng.random() < (0.7 if kind == "door" else 0.3)),
         bar_shape=("box", "cylinder", "mesh")[min(2, int(3 * rng.random()))],
-        damping_scale=scale(),
-        friction_scale=scale(),
-        mass_scale=scale(),
-        distance=float(rng.uniform(2.0, 4.0)),
-        bearing=float(rng.uniform(-0.5, 0.5)),
-        facing=float(rng.uniform(-np.pi / 3, np.pi / 3)),
+        damping_scale=_log_scale(rng),
+        friction_scale=_log_scale(rng),
+        mass_scale=_log_scale(rng),
+        **_placement(rng),
     )
     bar_size, standoff = short_handle(rng)
     return replace(spec, bar_size=bar_size, standoff=standoff)
@@ -318,9 +326,6 @@ class MeshCabinetSpec:
 
 
 def random_mesh_spec(rng: np.random.Generator, index: int) -> MeshCabinetSpec:
-    def scale() -> float:
-        return float(np.exp(rng.uniform(np.log(0.5), np.log(2.0))))
-
     drawers_on_top = bool(rng.random() < 0.5)
     spec = MeshCabinetSpec(
         index=index,
@@ -337,11 +342,9 @@ def random_mesh_spec(rng: np.random.Generator, index: int) -> MeshCabinetSpec:
         bar_length=float(rng.uniform(0.14, 0.22)),
         handle_style=("pieces", "split", "round")[int(rng.integers(3))],
         target=int(rng.integers(4)),
-        damping_scale=scale(),
-        friction_scale=scale(),
-        distance=float(rng.uniform(2.0, 4.0)),
-        bearing=float(rng.uniform(-0.5, 0.5)),
-        facing=float(rng.uniform(-np.pi / 3, np.pi / 3)),
+        damping_scale=_log_scale(rng),
+        friction_scale=_log_scale(rng),
+        **_placement(rng),
     )
     bar_size, standoff = short_handle(rng)
     return replace(spec, bar_size=bar_size, standoff=standoff)
