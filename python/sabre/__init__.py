@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     # What a type checker and an IDE see; the same names, from the same modules, as _HOMES below.
     from . import assets, costs, guides, paper, tasks
     from ._core import __version__
+    from .articulation import ArticulationConfig, ArticulationEstimate, ArticulationEstimator
     from .closed_loop import run_episode
     from .episode import Episode
     from .errors import (
@@ -50,7 +51,9 @@ if TYPE_CHECKING:
         UnknownFrameError,
         UrdfError,
     )
+    from .estimated_object import EstimatedObject
     from .estimation import ObjectEstimate, ObjectStateEstimator
+    from .handle_object import DetectedHandle
     from .inner_loop import LowLevelController, PlanSnapshot, Trace
     from .mujoco import MujocoPlant
     from .planner import VARIANTS, Controller, ControllerConfig, IterationStats
@@ -133,6 +136,11 @@ __all__ = [
     # the object's state on a robot without a door sensor
     "ObjectEstimate",
     "ObjectStateEstimator",
+    "DetectedHandle",
+    "EstimatedObject",
+    "ArticulationEstimator",
+    "ArticulationEstimate",
+    "ArticulationConfig",
     # what exists only to reproduce the paper
     "paper",
     # errors
@@ -182,6 +190,9 @@ _HOMES: dict[str, tuple[str, ...]] = {
     ".viz.plots": ("plot_episode",),
     ".scripted": ("ScriptedMotion", "hook_and_pull"),
     ".estimation": ("ObjectEstimate", "ObjectStateEstimator"),
+    ".handle_object": ("DetectedHandle",),
+    ".estimated_object": ("EstimatedObject",),
+    ".articulation": ("ArticulationEstimator", "ArticulationEstimate", "ArticulationConfig"),
     ".errors": (
         "SabreError",
         "ShapeError",

@@ -32,6 +32,8 @@ __all__ = [
     "CommandGate",
     "JointMerge",
     "ObjectStateEstimator",
+    "ArticulationConfig",
+    "ArticulationEstimator",
     "BridgeTick",
     "SimDriver",
     "FrankaReflexes",
@@ -514,6 +516,41 @@ class JointMerge:
     def velocity(self) -> npt.NDArray[np.float64]: ...
     @property
     def received(self) -> npt.NDArray[np.float64]: ...
+
+@final
+class ArticulationConfig:
+    position_noise: float
+    noise_floor: float
+    bin_length: float
+    max_bins: int
+    axis_std: float
+    gravity_aligned: bool
+    aligned_within: float
+    aligned_std: float
+    radius: tuple[float, float]
+    min_path: float
+    decide: float
+    rate_cutoff: float
+    rehook_time: float
+    def __new__(cls) -> ArticulationConfig: ...
+
+@final
+class ArticulationEstimator:
+    def __new__(
+        cls, handle: npt.NDArray[np.float64], p_revolute: float = 0.5, config: ArticulationConfig | None = None
+    ) -> ArticulationEstimator: ...
+    def update(
+        self, t: npt.NDArray[np.float64], hand: npt.NDArray[np.float64], hooked: list[bool], record: list[bool]
+    ) -> dict[str, Any]: ...
+    def estimate(self) -> dict[str, Any]: ...
+    def set_reference(self, reference: list[float]) -> None: ...
+    @property
+    def reference(self) -> list[float]: ...
+    def points(self) -> npt.NDArray[np.float64]: ...
+    def opening_at(self, hand: list[float]) -> float: ...
+    def reset(self) -> None: ...
+    @property
+    def config(self) -> ArticulationConfig: ...
 
 @final
 class ObjectStateEstimator:

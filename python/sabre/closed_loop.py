@@ -17,6 +17,7 @@ import numpy as np
 from ._validate import as_count, as_float_array, as_non_negative, as_positive
 from .episode import Episode, PlanRecorder, TraceChunks
 from .errors import InvalidValueError
+from .estimated_object import SEATING_PHASE, EstimatedObject
 from .inner_loop import LowLevelController, PlanSnapshot, follow_plant, inner_cascade
 from .planner import Controller, likelihood_weights
 from .plants import PlantInterface, as_plant
@@ -38,6 +39,7 @@ def paper_start_state(scene: Scene) -> np.ndarray:
     return scene.start_state()
 
 
+# long: the docstring documents each keyword of the one entry point; the body is short
 def run_episode(
     scene: Scene,
     controller: Controller,
@@ -57,6 +59,7 @@ def run_episode(
     viewer: Viewer | None = None,
     plan_delay: float = 0.0,
     delay_compensation: bool = True,
+    estimated: EstimatedObject | None = None,
 ) -> Episode:
     """Runs the controller on the plant for ``duration`` seconds of simulated time; returns the traces.
 
@@ -84,6 +87,11 @@ def run_episode(
             here in simulated time. At most the re-planning period.
         delay_compensation: with a ``plan_delay``, plan from the state :meth:`Controller.predict`
             expects when the plan takes over (default True), as :class:`sabre.RealtimeCascade` does.
+        estimated: an object the controller knows only by its handle (:class:`sabre.EstimatedObject`):
+            ``scene`` (the plant's) holds the true object, hidden from the controller, which plans
+            with the estimated object's scene (switched to it at the start and whenever it is rebuilt)
+            from the robot's measured joints and the object's state along the estimate. The estimate
+            takes every recorded plant step (``record_every``); success is the true object's.
 
     Raises:
         InvalidValueError: non-positive duration or replan_rate, record_every < 1, non-finite x0,
@@ -103,6 +111,8 @@ def run_episode(
         raise InvalidValueError(f"plan_delay {plan_delay} s is longer than the re-planning period {1.0 / replan_rate} s")
     plant.reset(x0)
     low_level.reset()
+    if estimated is not None:
+        _plan_with_estimate(controller, estimated)
     controller.reset(seed, 0.0)
     bar = _progress_bar(scene, duration, duration > 10.0 if progress is None else progress)
     loop = _ClosedLoop(
@@ -115,9 +125,19 @@ def run_episode(
         delay_compensation=delay_compensation,
         record_plans=record_plans or viewer is not None,
         viewer=viewer,
+        estimated=estimated,
     )
     total_steps = max(1, int(round(duration / plant.dt)))
     return loop.run(total_steps, steps_per_plan, on_replan, stop_on_success, settle_time, bar)
+
+
+def _plan_with_estimate(controller: Controller, estimated: EstimatedObject) -> None:
+    """Has the controller plan with the estimated object's scene, the opening counted from where its hook
+    holds the bar."""
+    if controller.scene is not estimated.scene:
+        controller.set_scene(estimated.scene)
+    if isinstance(controller.task, OpenObject):
+        estimated.hook_point = controller.task.grasp_offset(estimated.scene, "hook")[:3, 3]
 
 
 def _progress_bar(scene: Scene, duration: float, show: bool) -> Any:
@@ -147,8 +167,10 @@ class _ClosedLoop:
         delay_compensation: bool,
         record_plans: bool,
         viewer: Viewer | None,
+        estimated: EstimatedObject | None = None,
     ) -> None:
         self.scene, self.controller, self.plant, self.low_level = scene, controller, plant, low_level
+        self.estimated = estimated
         self.delay_steps, self.record_every, self.delay_compensation = delay_steps, record_every, delay_compensation
         self.viewer = viewer
         safety = controller.config.safety_config
@@ -184,6 +206,7 @@ class _ClosedLoop:
                 t = plant.time
                 if on_replan is not None and on_replan(t, x, plant, self.controller) is True:
                     break
+                x = self.seen(x, t)
                 self.follow(self.replan(x, t), steps)
                 self.record(x, t)
                 if bar is not None:
@@ -196,6 +219,22 @@ class _ClosedLoop:
             if bar is not None:
                 bar.close()
         return self.episode(time.perf_counter() - wall)
+
+    def seen(self, x: np.ndarray, t: float) -> np.ndarray:
+        """The state the controller plans from: the plant's, or with an estimated object the robot's
+        joints and the object along the estimate (the controller switched to a rebuilt scene first)."""
+        estimated = self.estimated
+        if estimated is None:
+            return x
+        scene = estimated.refresh(t)
+        if scene is not None:
+            self.controller.set_scene(scene)
+        nq = self.scene.nq
+        if estimated.hook_pulls and self.controller.phase == SEATING_PHASE:
+            # the pull begins where the hand holds the handle now
+            self.controller.set_phase("open", t)
+            estimated.observe([t], x[None, :nq], None, "open")
+        return estimated.state(x[:nq], x[nq : 2 * nq])
 
     def replan(self, x: np.ndarray, t: float) -> PlanSnapshot:
         """One planning iteration from the plant's state x at time t, or, with a compensated delay, from the
@@ -220,6 +259,9 @@ class _ClosedLoop:
                 continue
             trace = follow_plant(self.cascade, self.plant, count, self.record_every)
             self.chunks.append(trace, cost=segment.nominal_cost, phase=self.controller.task.phases.index(segment.phase))
+            if self.estimated is not None and len(trace.time):
+                nq = self.scene.nq
+                self.estimated.observe(trace.time, trace.state[:, :nq], trace.wrench, segment.phase)
         self.running = plan
 
     def record(self, x: np.ndarray, t: float) -> None:

@@ -12,6 +12,7 @@ import numpy as np
 
 from . import _core
 from .errors import InvalidValueError, UnknownAssetError
+from .poses import pose_to_xyz_rpy
 from .safety import CLASSES, SafetyConfig, SafetyFilter
 from .scene import OBJECTS, ROBOTS, Scene
 
@@ -32,15 +33,6 @@ __all__ = [
 
 #: The tank's floor ε (J) an episode reports when the run did not say (the core's default).
 _TANK_FLOOR = _core.SafetyConfig().tank_floor
-
-
-def pose_to_xyz_rpy(pose: np.ndarray) -> np.ndarray:
-    """(6,) x, y, z, roll, pitch, yaw of a (4, 4) pose, with R = Rz(yaw) Ry(pitch) Rx(roll) as in URDF."""
-    r = np.asarray(pose, dtype=np.float64)[:3, :3]
-    roll = np.arctan2(r[2, 1], r[2, 2])
-    pitch = -np.arcsin(np.clip(r[2, 0], -1.0, 1.0))
-    yaw = np.arctan2(r[1, 0], r[0, 0])
-    return np.concatenate([np.asarray(pose, dtype=np.float64)[:3, 3], [roll, pitch, yaw]])
 
 
 def hand_contact_forces(wrench: np.ndarray, contact: np.ndarray) -> np.ndarray:

@@ -247,10 +247,28 @@ class Controller:
         self.keep_samples = False
         self.last_samples: tuple[np.ndarray, np.ndarray] | None = None
         c = self.config
+        #: How often :meth:`set_scene` replaced the scene.
+        self.scene_changes = 0
+        self.phase = task.initial_phase()
+        self._build(scene, c.seed)
+        self._stats: IterationStats | None = None
+        self.phase_history: list[tuple[float, str]] = [(0.0, self.phase)]
+        safety = c.safety_config
+        #: Sequential FILTER-QP of the outer loop (variants O, IO), else None.
+        self.outer_filter = SafetyFilter(scene, safety) if c.outer_filter else None
+        #: FILTER-QP of the 1 kHz inner loop with the passivity row (variants I, IO), else None.
+        self.inner_filter = SafetyFilter(scene, safety) if c.inner_filter else None
+        #: The energy tank of the inner loop; without the inner filter it only keeps the books.
+        self.tank = EnergyTank(c.tank_initial, safety.tank_floor, refill=c.tank_refill if c.inner_filter else None)
+        self._predicted_dissipation: np.ndarray | None = None
+
+    def _build(self, scene: Scene, seed: int) -> None:
+        """The rollout model, the phases' costs and the sampler for ``scene``."""
+        c = self.config
         # The task's check first: what it says about a scene (files swapped, a joint to pick) is
         # more to the point than the rollout model's limits.
-        task.check(scene)
-        self.model = RolloutModel(
+        self.task.check(scene)
+        model = RolloutModel(
             scene,
             c.dt,
             servo_bandwidth=c.servo_bandwidth,
@@ -258,11 +276,9 @@ class Controller:
             contact_model=c.contact_model,
             command_acceleration=c.command_acceleration,
         )
-        self.phase = task.initial_phase()
-        self._compiled: dict[str, CompiledCost] = {}
-        for phase in task.phases:  # a phase the scene cannot serve fails here, not mid-episode
-            self._compile(phase)
-        self._cost = self._compile(self.phase)
+        compiled: dict[str, CompiledCost] = {}
+        for phase in self.task.phases:  # a phase the scene cannot serve fails here, not mid-episode
+            compiled[phase] = self.task.cost(scene, phase).compile(scene)
         planner_config = core_config(
             _core.MppiConfig,
             rollouts=c.rollouts,
@@ -274,24 +290,38 @@ class Controller:
             keep_fraction=c.keep_fraction,
             smoothing_window=c.smoothing_window,
             smoothing_order=c.smoothing_order,
-            seed=c.seed,
+            seed=seed,
             threads=c.threads,
             noise_interval=c.noise_interval,
             input_limit=None if c.input_limit is None else [float(v) for v in c.input_limit],
             # the plan handed to the cascade keeps its hard joint-limit bound along the kinematics
             limit_bound=c.safety_config._limit_bound(),
         )
-        self._planner = _core.Planner(self.model._core, self._cost.core, planner_config)
-        self._stats: IterationStats | None = None
-        self.phase_history: list[tuple[float, str]] = [(0.0, self.phase)]
-        safety = c.safety_config
-        #: Sequential FILTER-QP of the outer loop (variants O, IO), else None.
-        self.outer_filter = SafetyFilter(scene, safety) if c.outer_filter else None
-        #: FILTER-QP of the 1 kHz inner loop with the passivity row (variants I, IO), else None.
-        self.inner_filter = SafetyFilter(scene, safety) if c.inner_filter else None
-        #: The energy tank of the inner loop; without the inner filter it only keeps the books.
-        self.tank = EnergyTank(c.tank_initial, safety.tank_floor, refill=c.tank_refill if c.inner_filter else None)
-        self._predicted_dissipation: np.ndarray | None = None
+        self.scene, self.model, self._compiled = scene, model, compiled
+        self._cost = compiled[self.phase]
+        self._planner = _core.Planner(model._core, self._cost.core, planner_config)
+
+    def set_scene(self, scene: Scene) -> None:
+        """Plans with ``scene`` from now on, the plan in force continuing: the rollout model and the
+        phases' costs are built for it, the nominal, phase, filters and tank carry over. For an object
+        whose model changes while it is opened (:class:`sabre.EstimatedObject`); the robot must be the
+        same (its joints and state layout).
+
+        Raises:
+            TypeError: scene is no :class:`~sabre.Scene`.
+            InvalidValueError: a scene of another robot or state layout, or one the task refuses.
+        """
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene must be a sabre.Scene, got {type(scene).__name__}")
+        if scene.joint_names != self.scene.joint_names or scene.nx != self.scene.nx:
+            raise InvalidValueError(
+                f"set_scene: the new scene's robot ({scene.nq} joints, nx {scene.nx}) is not the controller's "
+                f"({self.scene.nq} joints, nx {self.scene.nx})"
+            )
+        nominal, t0 = np.array(self.nominal), self.nominal_t0
+        self.scene_changes += 1
+        self._build(scene, self.config.seed + self.scene_changes)
+        self._planner.set_nominal(np.ascontiguousarray(nominal), t0)
 
     def _compile(self, phase: str) -> CompiledCost:
         if phase not in self._compiled:

@@ -5,15 +5,19 @@ from __future__ import annotations
 import os
 import warnings
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from . import _core
 from ._validate import as_array, as_finite, as_float_array, as_positive, readonly
 from .errors import AssumedInertialWarning, InvalidValueError, ShapeError, UnknownFrameError, UrdfError
+from .handle_object import DetectedHandle, object_urdf
 from .robots import Tool, robot_options
 from .scene_parts import AssumedInertial, CollisionShape, StateParts, Visual, collision_shapes
+
+if TYPE_CHECKING:
+    from .articulation import ArticulationEstimate
 
 __all__ = ["Scene", "StateParts", "CollisionShape", "AssumedInertial", "Visual", "ROBOTS", "OBJECTS", "DEFAULT_DENSITY"]
 
@@ -81,13 +85,14 @@ class Scene:
     Build one with :meth:`load` (built-in assets) or :meth:`from_urdf` (your own files).
     """
 
-    __slots__ = ("__weakref__", "_core", "_roles")
+    __slots__ = ("__weakref__", "_core", "_detected", "_roles")
 
     def __init__(self, core: _core.Scene) -> None:
         if not isinstance(core, _core.Scene):
             raise TypeError("use Scene.load(...) or Scene.from_urdf(...) to build a scene")
         self._core = core
         self._roles = core.roles()
+        self._detected: tuple[DetectedHandle, ArticulationEstimate | None] | None = None
 
     # -- construction -------------------------------------------------------------------------
     @classmethod
@@ -199,6 +204,52 @@ class Scene:
             robot_urdf, obj_urdf, _pose(obj_pose), *_selection(joint, hold, handle), _density(density)
         )
         return _warn_assumed(cls(core))
+
+    @classmethod
+    def from_handle(
+        cls,
+        robot: str | os.PathLike[str],
+        handle: DetectedHandle,
+        estimate: ArticulationEstimate | None = None,
+        **options: Any,
+    ) -> Scene:
+        """A scene of the robot (a built-in name, :data:`ROBOTS`, or a URDF file) and an object that
+        has no model, known by a detected handle: the parametric object :func:`sabre.handle_object.object_urdf`
+        builds around it for ``estimate``'s articulation (None: the first pull, a drawer along the
+        handle's outward normal). The object's joint is ``articulation``, its handle frame the detected
+        pose. ``options`` are the robot options of :meth:`from_urdf`. :class:`sabre.EstimatedObject`
+        keeps such a scene following the estimate while the hand pulls.
+
+        Raises:
+            TypeError: ``handle`` is no :class:`~sabre.DetectedHandle`.
+            UrdfError: a robot file that does not exist or does not load.
+            InvalidValueError: an estimate whose hinge runs through the handle.
+        """
+        if not isinstance(handle, DetectedHandle):
+            raise TypeError(f"handle must be a sabre.DetectedHandle, got {type(handle).__name__}")
+        robot = os.fspath(robot)
+        if robot in ROBOTS:
+            source = ("builtin", robot)
+        elif os.path.isfile(robot):
+            source = ("file", robot)
+        else:
+            raise UrdfError(f"URDF {robot}: robot file does not exist (nor is it a built-in robot: {', '.join(ROBOTS)})")
+        scene = cls._build(
+            source, ("text", object_urdf(handle, estimate)), [0.0] * 6, (None, None, None, DEFAULT_DENSITY), options
+        )
+        scene._detected = (handle, estimate)
+        return scene
+
+    @property
+    def detected_handle(self) -> DetectedHandle | None:
+        """The detected handle a :meth:`from_handle` scene was built around (None for a modelled object)."""
+        return None if self._detected is None else self._detected[0]
+
+    @property
+    def hypothesis(self) -> ArticulationEstimate | None:
+        """The articulation estimate a :meth:`from_handle` scene's object was built for (None: the first
+        pull's drawer along the handle's normal, or a modelled object)."""
+        return None if self._detected is None else self._detected[1]
 
     @classmethod
     def _build(

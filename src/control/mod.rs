@@ -1,6 +1,7 @@
 //! The control cascade's inner loop ([`Cascade`]: the plan in force, τ_ext conditioning, the safety stage
 //! and the low-level joint velocity controller), and the command shaping for a robot's command interface.
 
+pub mod articulation;
 pub mod cascade;
 pub mod command_stream;
 pub mod joint_merge;

@@ -5,6 +5,7 @@
 //! never crosses into Python. Config objects (`RolloutConfig()`, `MppiConfig()`, …) hold the
 //! core's defaults: Python reads its defaults from them.
 
+mod articulation;
 mod bridge;
 mod bridge_tick;
 mod cascade;
@@ -61,6 +62,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<bridge_tick::PyBridgeTick>()?;
     m.add_class::<bridge_tick::PyWrenchFrames>()?;
     m.add_class::<estimation::PyObjectStateEstimator>()?;
+    m.add_class::<articulation::PyArticulationConfig>()?;
+    m.add_class::<articulation::PyArticulationEstimator>()?;
     m.add_class::<cost::PyCost>()?;
     m.add_class::<mppi::PyMppiConfig>()?;
     m.add_class::<mppi::PyServoGuideConfig>()?;

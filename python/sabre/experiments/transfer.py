@@ -19,6 +19,7 @@ import numpy as np
 from ..episode import Episode
 from ..errors import InvalidValueError
 from ..plants import PlantInterface
+from ..poses import pose_to_xyz_rpy
 from ..scene import OBJECTS, Scene
 
 __all__ = [
@@ -52,15 +53,6 @@ def scaled_object_urdf(text: str, scale: float) -> str:
     return ET.tostring(root, encoding="unicode")
 
 
-def _xyzrpy(pose: np.ndarray) -> list[float]:
-    """(x, y, z, roll, pitch, yaw) of a (4, 4) pose, rpy as in URDF (R = Rz(yaw) Ry(pitch) Rx(roll))."""
-    r = pose[:3, :3]
-    pitch = float(np.arcsin(-np.clip(r[2, 0], -1.0, 1.0)))
-    roll = float(np.arctan2(r[2, 1], r[2, 2]))
-    yaw = float(np.arctan2(r[1, 0], r[0, 0]))
-    return [float(v) for v in pose[:3, 3]] + [roll, pitch, yaw]
-
-
 def scaled_plant(scene: Scene, simulator: str, scale: float) -> PlantInterface:
     """A 1 kHz plant (``simulator``: one of :data:`SIMULATORS`) of the built-in ``scene`` whose object joint has its
     damping and dry friction multiplied by ``scale``; the controller keeps planning with ``scene``."""
@@ -72,7 +64,7 @@ def scaled_plant(scene: Scene, simulator: str, scale: float) -> PlantInterface:
         raise InvalidValueError(f"simulator must be one of {SIMULATORS}, got {simulator!r}")
     robot = assets.urdf_path(scene.robot_name)
     obj = assets.urdf_file(scaled_object_urdf(assets.urdf_text(scene.object_name), scale), f"{scene.object_name}-x{scale:g}")
-    scaled = Scene.from_urdf(robot, obj, _xyzrpy(scene.object_pose))
+    scaled = Scene.from_urdf(robot, obj, pose_to_xyz_rpy(scene.object_pose).tolist())
     if simulator == "mujoco":
         return MujocoPlant(scaled, robot_urdf=robot, object_urdf=obj)
     return Plant(scaled)

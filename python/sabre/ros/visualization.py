@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from ..poses import pose_to_xyz_rpy
 from ..scene import Scene
 from .conversions import MessageError, quaternion_of
 
@@ -151,7 +152,7 @@ class Visualizer:
         markers.markers.append(clear)
         frame = self._marker("sabre/handle", 0, Marker.ARROW, stamp)
         frame.pose.position.x, frame.pose.position.y, frame.pose.position.z = (float(v) for v in handle[:3, 3])
-        roll, pitch, yaw = _rpy(handle[:3, :3])
+        roll, pitch, yaw = (float(v) for v in pose_to_xyz_rpy(handle)[3:])
         frame.pose.orientation.x, frame.pose.orientation.y, frame.pose.orientation.z, frame.pose.orientation.w = quaternion_of(
             roll, pitch, yaw
         )
@@ -176,9 +177,3 @@ class Visualizer:
         state = JointState(name=list(scene.object_joint_names), position=[float(v) for v in o], velocity=[float(v) for v in od])
         state.header.frame_id, state.header.stamp = self.frame, stamp
         self.object_pub.publish(state)
-
-
-def _rpy(r: np.ndarray) -> tuple[float, float, float]:
-    """(roll, pitch, yaw) of a rotation matrix R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    pitch = math.asin(max(-1.0, min(1.0, -float(r[2, 0]))))
-    return math.atan2(float(r[2, 1]), float(r[2, 2])), pitch, math.atan2(float(r[1, 0]), float(r[0, 0]))
