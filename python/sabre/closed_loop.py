@@ -60,6 +60,7 @@ def run_episode(
     plan_delay: float = 0.0,
     delay_compensation: bool = True,
     estimated: EstimatedObject | None = None,
+    judge: Task | None = None,
 ) -> Episode:
     """Runs the controller on the plant for ``duration`` seconds of simulated time; returns the traces.
 
@@ -92,6 +93,8 @@ def run_episode(
             with the estimated object's scene (switched to it at the start and whenever it is rebuilt)
             from the robot's measured joints and the object's state along the estimate. The estimate
             takes every recorded plant step (``record_every``); success is the true object's.
+        judge: the task whose success rule judges ``scene``'s state (default: the controller's); a
+            hidden object's own task (its handle named as the true object names it).
 
     Raises:
         InvalidValueError: non-positive duration or replan_rate, record_every < 1, non-finite x0,
@@ -126,6 +129,7 @@ def run_episode(
         record_plans=record_plans or viewer is not None,
         viewer=viewer,
         estimated=estimated,
+        judge=judge,
     )
     total_steps = max(1, int(round(duration / plant.dt)))
     return loop.run(total_steps, steps_per_plan, on_replan, stop_on_success, settle_time, bar)
@@ -168,9 +172,11 @@ class _ClosedLoop:
         record_plans: bool,
         viewer: Viewer | None,
         estimated: EstimatedObject | None = None,
+        judge: Task | None = None,
     ) -> None:
         self.scene, self.controller, self.plant, self.low_level = scene, controller, plant, low_level
         self.estimated = estimated
+        self.judge = judge or controller.task
         self.delay_steps, self.record_every, self.delay_compensation = delay_steps, record_every, delay_compensation
         self.viewer = viewer
         safety = controller.config.safety_config
@@ -282,14 +288,14 @@ class _ClosedLoop:
 
     def note_success(self) -> None:
         """Notes the time the task first succeeds."""
-        if self.success_time is None and self.controller.task.success(self.scene, self.plant.state):
+        if self.success_time is None and self.judge.success(self.scene, self.plant.state):
             self.success_time = self.plant.time
 
     def episode(self, wall_time: float) -> Episode:
         """The recorded traces as an :class:`Episode`, ``wall_time`` s after the start."""
         data = self.chunks.arrays()
         controller = self.controller
-        target_opening, success_opening = _opening_targets(self.scene, controller.task)
+        target_opening, success_opening = _opening_targets(self.scene, self.judge)
         return Episode(
             scene=self.scene,
             time=data["time"],

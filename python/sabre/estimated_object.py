@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -35,7 +36,8 @@ class EstimatedObject:
     from the hand's path (:class:`~sabre.ArticulationEstimator`, ``config``).
 
     :attr:`scene` is the scene to plan with: at first the first pull's (a drawer along the handle's
-    outward normal), rebuilt (:meth:`refresh`) when the estimate decides the type, or when its axis
+    outward normal, its travel half as long again whenever the type is still open with two thirds of
+    it done), rebuilt (:meth:`refresh`) when the estimate decides the type, or when its axis
     turns by more than ``rebuild_angle`` rad or its hinge moves by more than ``rebuild_distance`` m, at
     most every ``rebuild_interval`` s (a type decided rebuilds at once). :meth:`state` is the state the
     controller plans from: the robot's measured joints and the object's opening and rate along the
@@ -202,6 +204,14 @@ class EstimatedObject:
             return bool(np.linalg.norm(d - (d @ a) * a) > self.rebuild_distance)
         return False
 
+    def _first_pull_runs_out(self, estimate: ArticulationEstimate, handle: DetectedHandle) -> bool:
+        """Whether the type is still open with the first pull two thirds done, and it may go further."""
+        return (
+            estimate.kind is None
+            and handle.first_pull < self.handle.drawer_travel
+            and estimate.opening > 2.0 / 3.0 * handle.first_pull
+        )
+
     def refresh(self, t: float) -> Scene | None:
         """Rebuilds :attr:`scene` for the current estimate when it has moved (see the class); returns the
         new scene, or None when the one in force stays."""
@@ -210,11 +220,17 @@ class EstimatedObject:
         kind_changed = (held.geometry if held is not None else "prismatic") != estimate.geometry or (
             (held is None or held.kind is None) and estimate.kind is not None
         )
-        if not self._differs(estimate):
+        handle = self.scene.detected_handle or self.handle
+        if self._first_pull_runs_out(estimate, handle):
+            # still undecided near the first pull's end: pull on, straight, for longer
+            handle = replace(handle, first_pull=min(1.5 * handle.first_pull, self.handle.drawer_travel))
+        elif not self._differs(estimate):
             return None
-        if not kind_changed and t - self._rebuilt_at < self.rebuild_interval:
+        elif not kind_changed and t - self._rebuilt_at < self.rebuild_interval:
             return None
-        self.scene = Scene.from_handle(self._robot, self.handle, estimate, **self._options)
+        if estimate.kind is not None:
+            handle = self.handle
+        self.scene = Scene.from_handle(self._robot, handle, estimate, **self._options)
         self._rebuilt_at = float(t)
         self.rebuilds.append(float(t))
         return self.scene

@@ -50,7 +50,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--objects",
         type=int,
         default=None,
-        help="the hook experiment's generated objects per family (default 40, 2 with --short)",
+        help="the hook and unknown experiments' generated objects per family (default 40 and 20, 2 and 0 with --short)",
     )
     exp.set_defaults(run=experiment_command)
 

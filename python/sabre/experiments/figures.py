@@ -22,6 +22,8 @@ PAPER = {
     "fig4": "the tank energy stays above the floor ε in the worst case",
     "acceptance": "every object opens from the paper's start",
     "hook": "no counterpart in the paper: the hook's skill on generated objects (insertion, slips, re-insertion)",
+    "unknown": "no counterpart in the paper (every object has a model there): objects opened from a handle's pose, "
+    "their joint estimated while pulling",
     "transfer": "the controller planned in simulation opens the objects on the real robot (Sec. VI); here a second "
     "simulator (MuJoCo) stands in for it, with the object's damping and friction scaled and a 20 ms planning delay",
 }
@@ -60,6 +62,8 @@ def draw(name: str, records: list[dict], path: str | os.PathLike[str]) -> None:
         _draw_transfer(ax, records)
     elif name == "hook":
         _draw_hook(ax, records)
+    elif name == "unknown":
+        _draw_unknown(ax, records)
     ax.legend(fontsize=8, loc="upper left" if name == "fig11" else "best")  # fig11: its contact axis is on the right
     fig.tight_layout()
     fig.savefig(path, dpi=100)
@@ -201,6 +205,33 @@ def _draw_hook(ax: Any, records: list[dict]) -> None:
     ax.set(ylabel="share of runs", ylim=(0, 1.05), title=f"Hook: generated objects ({robots})")
 
 
+def _draw_unknown(ax: Any, records: list[dict]) -> None:
+    """Unknown: the hinge axis's error against the true opening in every estimated door run, and per
+    object group and variant the share opened with the model and from the handle alone (inset bars)."""
+    for r in records:
+        s = r["series"].get("axis_error")
+        if s and r["kind"] == "revolute" and s["t"]:
+            ax.plot(np.degrees(s["t"]), s["y"], lw=0.6, alpha=0.6, color="C0")
+    ax.plot([], [], color="C0", label="estimated hinge axis error (each door run)")
+    ax.axvline(15.0, color="0.5", ls=":", lw=0.8)
+    ax.axhline(3.0, color="0.5", ls=":", lw=0.8)
+    ax.set(xlabel="true opening (°)", ylabel="axis error (°)", ylim=(0, 10), title="Unknown objects: estimate and success")
+    inset = ax.inset_axes((0.55, 0.45, 0.42, 0.45))
+    groups: defaultdict[str, defaultdict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
+    for r in records:
+        c = r["config"]
+        groups[f"{c['case']} {c['variant']}"][c["mode"]].append(r["metrics"]["success"])
+    labels = sorted(groups)
+    x = np.arange(len(labels))
+    for i, mode in enumerate(("known", "unknown", "wrong prior")):
+        inset.bar(x + 0.27 * i, [np.mean(groups[g][mode]) if groups[g][mode] else 0.0 for g in labels], 0.27, label=mode)
+    inset.set_xticks(x + 0.27, labels, rotation=30, ha="right", fontsize=6)
+    inset.set_ylim(0, 1.05)
+    inset.tick_params(labelsize=6)
+    inset.legend(fontsize=6, loc="lower left")
+    inset.set_title("opened (share)", fontsize=7)
+
+
 def cpu_name() -> str:
     """The processor's model name as ``lscpu`` gives it (from /proc/cpuinfo), else the machine type."""
     try:
@@ -219,6 +250,9 @@ def _options(name: str, records: list[dict]) -> str:
     text = f" --robot {robots.pop()}" if len(robots) == 1 and "royalpanda" not in robots else ""
     if name == "hook" and records:
         text += f" --objects {1 + max(r['config']['index'] for r in records)}"
+    if name == "unknown":
+        generated = [r["config"]["object"] for r in records if r["config"]["case"] != "builtin"]
+        text += f" --objects {1 + max(generated) if generated else 0}"
     return text
 
 
@@ -244,6 +278,10 @@ def summary(name: str, records: list[dict], *, seeds: int, short: bool) -> str:
         from .hook import hook_table
 
         return "\n".join([*lines, hook_table(records)]) + "\n"
+    if name == "unknown":
+        from .unknown import unknown_table
+
+        return "\n".join([*lines, unknown_table(records)]) + "\n"
     lines += [
         "| configuration | " + " | ".join(metrics) + " |",
         "|---" * (len(metrics) + 1) + "|",

@@ -40,7 +40,7 @@ __all__ = [
     "hook_specs",
 ]
 
-NAMES: tuple[str, ...] = ("fig3", "fig4", "fig8", "fig10", "fig11", "fig12", "acceptance", "transfer", "hook")
+NAMES: tuple[str, ...] = ("fig3", "fig4", "fig8", "fig10", "fig11", "fig12", "acceptance", "transfer", "hook", "unknown")
 #: objects per family of the hook experiment: the full run's and the short (smoke test) run's
 _HOOK_OBJECTS = (40, 2)
 _SERIES_POINTS = 400
@@ -95,7 +95,7 @@ def specs(
 ) -> list[RunSpec]:
     """Every run of one experiment (on the plant ``plant`` names, "module:factory"; None: the Rapier plant;
     ``robot``: the acceptance's and the hook experiment's robot, the other experiments are the
-    RoyalPanda's; ``objects``: the hook experiment's objects per family, None: 40, 2 if short)."""
+    RoyalPanda's; ``objects``: the hook and unknown experiments' objects per family, None: 40 and 20, 2 and 0 if short)."""
     if name == "acceptance":
         return acceptance_specs(range(seeds), duration=8.0 if short else 60.0, plant=plant, robot=robot)
     if name == "hook":
@@ -103,6 +103,14 @@ def specs(
         return _on_plant(hook_specs(range(seeds), objects=count, robot=robot, duration=8.0 if short else 60.0), plant)
     if robot != "royalpanda":
         raise InvalidValueError(f"experiment {name!r} runs on the RoyalPanda; only acceptance and hook take another robot")
+    if name == "unknown":
+        from .unknown import unknown_configs
+
+        count = (0 if short else 20) if objects is None else objects
+        # short: a smoke test of every mode on a door and a drawer
+        smoke = {"builtins": ("shelf", "drawer"), "variants": ("N",)} if short else {}
+        configs = unknown_configs(objects=count, duration=8.0 if short else 60.0, **smoke)
+        return _on_plant([_spec(name, seed, **c) for c in configs for seed in range(seeds)], plant)
     if name == "transfer":
         # its runs name their own plants (sabre's and MuJoCo's), so `plant` does not apply; short: a smoke test
         # of every object, variant and plant, nominal damping only
@@ -276,6 +284,10 @@ def run_one(spec: RunSpec) -> dict:
         return _acceptance_run(c, seed, plant)
     if spec.name in ("transfer", "hook"):
         return _transfer_run(c, seed) if spec.name == "transfer" else hook_run(c, seed, plant)
+    if spec.name == "unknown":
+        from .unknown import unknown_run
+
+        return unknown_run(c, seed, plant)
     if spec.name == "fig8":
         manipulation = scenarios.object_manipulation(c["variant"], "shelf", seed, c["duration"], plant=plant)
         ep = manipulation.episode

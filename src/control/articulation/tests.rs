@@ -167,7 +167,8 @@ fn a_door_is_found_within_ten_degrees_and_its_axis_within_fifteen() {
                 at15.axis_std
             );
             let true_radius = (start - hinge).norm();
-            for (e, bound) in [(at15, 0.05), (at25, 0.03)] {
+            // at 15° a 0.3 m door's arc bows 2.6 mm: its hinge is known to its σ, a few centimetres
+            for (e, bound) in [(at15, 0.1), (at25, 0.025)] {
                 // the hinge's point in the plane of the path, against the true axis through it
                 let off = e.point - hinge;
                 let across = (off - off.dot(&axis) * axis).norm();
