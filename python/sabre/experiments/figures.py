@@ -64,7 +64,8 @@ def draw(name: str, records: list[dict], path: str | os.PathLike[str]) -> None:
         _draw_hook(ax, records)
     elif name == "unknown":
         _draw_unknown(ax, records)
-    ax.legend(fontsize=8, loc="upper left" if name == "fig11" else "best")  # fig11: its contact axis is on the right
+    # fig11: its contact axis is on the right; unknown: its bars are inset on the right
+    ax.legend(fontsize=8, loc="upper left" if name in ("fig11", "unknown") else "best")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -216,7 +217,7 @@ def _draw_unknown(ax: Any, records: list[dict]) -> None:
     ax.axvline(15.0, color="0.5", ls=":", lw=0.8)
     ax.axhline(3.0, color="0.5", ls=":", lw=0.8)
     ax.set(xlabel="true opening (°)", ylabel="axis error (°)", ylim=(0, 10), title="Unknown objects: estimate and success")
-    inset = ax.inset_axes((0.55, 0.45, 0.42, 0.45))
+    inset = ax.inset_axes((0.6, 0.5, 0.38, 0.42))
     groups: defaultdict[str, defaultdict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
     for r in records:
         c = r["config"]
@@ -228,7 +229,7 @@ def _draw_unknown(ax: Any, records: list[dict]) -> None:
     inset.set_xticks(x + 0.27, labels, rotation=30, ha="right", fontsize=6)
     inset.set_ylim(0, 1.05)
     inset.tick_params(labelsize=6)
-    inset.legend(fontsize=6, loc="lower left")
+    inset.legend(fontsize=5, loc="lower left", framealpha=0.6)
     inset.set_title("opened (share)", fontsize=7)
 
 

@@ -200,17 +200,16 @@ def unknown_table(records: list[dict[str, Any]]) -> str:
         slides = [r["metrics"] for r in estimated if r["kind"] == "prismatic"]
         typed = [r["metrics"]["type_right"] for r in estimated if np.isfinite(r["metrics"]["type_right"])]
 
-        def spread(ms: list[dict], key: str, fmt: str) -> str:
-            v = [m[key] for m in ms if np.isfinite(m[key])]
-            return f"{np.median(v):{fmt}} ({max(v):{fmt}})" if v else "—"
+        def spread(ms: list[dict], key: str, unit: str, scale: float = 1.0) -> str:
+            v = [scale * m[key] for m in ms if np.isfinite(m[key])]
+            return f"{np.median(v):.1f}{unit} ({max(v):.1f}{unit})" if v else "—"
 
         lines.append(
             f"| {case} | {variant} | {opened[0]:.0f}/{len(known)} | {opened[1]:.0f}/{len(unknown)}{share} "
             f"| {opened[2]:.0f}/{len(wrong)} "
             f"| {_median([r['metrics']['time_to_success'] for r in known], '.1f')} s / "
             f"{_median([r['metrics']['time_to_success'] for r in unknown], '.1f')} s "
-            f"| {sum(typed):.0f}/{len(typed)} | {spread(doors, 'axis_error', '.1f')}° "
-            f"| {spread([{'e': 100 * m['hinge_error']} for m in doors], 'e', '.1f')} cm "
-            f"| {spread(slides, 'axis_error', '.1f')}° |"
+            f"| {sum(typed):.0f}/{len(typed)} | {spread(doors, 'axis_error', '°')} "
+            f"| {spread(doors, 'hinge_error', ' cm', 100.0)} | {spread(slides, 'axis_error', '°')} |"
         )
     return "\n".join(lines)
