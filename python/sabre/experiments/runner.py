@@ -235,6 +235,7 @@ def _series(t: np.ndarray, y: np.ndarray) -> dict:
     return {"t": np.asarray(t)[idx].tolist(), "y": np.asarray(y)[idx].tolist()}
 
 
+# long: one branch per experiment, each a few lines that turn its scenario's result into the record
 def run_one(spec: RunSpec) -> dict:
     """Runs one experiment configuration at one seed; returns scalar ``metrics`` and plot ``series``."""
     from ..planner import likelihood_weights

@@ -150,10 +150,10 @@ def unknown_run(config: dict[str, Any], seed: int, plant: Callable[[Scene], Any]
     ``kind`` (the true joint's type) and the ``series`` of the axis error against the opening."""
     scene, task, x0, safety, robot = _object(config)
     truth = true_joint(scene, task)
-    cfg = ControllerConfig(variant=config["variant"], seed=seed, **({} if safety is None else {"safety": safety}))
+    cfg = ControllerConfig(variant=config["variant"], seed=seed, safety=safety)
     nan = float("nan")
     record: dict[str, Any] = {"kind": truth[0], "series": {}}
-    common = dict(seed=seed, x0=x0, progress=False, plant=None if plant is None else plant(scene))
+    common: dict[str, Any] = {"seed": seed, "x0": x0, "progress": False, "plant": None if plant is None else plant(scene)}
     if config["mode"] == "known":
         episode = run_episode(scene, Controller(scene, task, cfg), config["duration"], **common)
         metrics = dict.fromkeys(("type_right", "axis_error", "hinge_error", "rebuilds"), nan)
