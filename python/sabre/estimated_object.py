@@ -14,6 +14,7 @@ import numpy as np
 from ._validate import as_float_array, as_non_negative, as_positive
 from .articulation import ArticulationConfig, ArticulationEstimate, ArticulationEstimator
 from .errors import InvalidValueError, ShapeError
+from .estimation import LowPass
 from .handle_object import DetectedHandle
 from .scene import Scene
 
@@ -22,6 +23,8 @@ __all__ = ["EstimatedObject", "PULLING_PHASES", "SEATING_PHASE"]
 #: The phases of :class:`sabre.tasks.OpenObject` in which the seated hook pulls the handle: the object's
 #: opening follows the hand, and the hand's path traces the object's.
 PULLING_PHASES = ("open", "hold")
+#: Cutoff (Hz) of the low-pass on the wrist force that contact is read from.
+FORCE_CUTOFF = 10.0
 #: The phase in which the hook seats itself behind the bar.
 SEATING_PHASE = "hook"
 
@@ -45,7 +48,8 @@ class EstimatedObject:
     does it with its own measurements.
 
     The object's opening follows the hand while the task's hook pulls (:data:`PULLING_PHASES`) and the
-    wrist force reached ``contact_force`` N within the last ``release_time`` s (a drawer that coasts
+    wrist force, low-passed at :data:`FORCE_CUTOFF` Hz, reached ``contact_force`` N within the last
+    ``release_time`` s (a drawer that coasts
     ahead of the hand for a moment is still where the hand is, near enough, and meets it again); the
     path is recorded while it pulls in contact (a hand that left the handle does not trace the
     object). The opening counts from where the hand holds the handle with the object closed, the
@@ -72,7 +76,7 @@ class EstimatedObject:
         handle: DetectedHandle,
         *,
         config: ArticulationConfig | None = None,
-        contact_force: float = 2.0,
+        contact_force: float = 1.0,
         release_time: float = 0.5,
         seat_time: float = 0.1,
         seat_distance: float = 0.01,
@@ -91,6 +95,7 @@ class EstimatedObject:
         self.contact_force = as_non_negative("contact_force", contact_force)
         self.release_time = as_non_negative("release_time", release_time)
         self._touched_at = -math.inf
+        self._force, self._force_time = LowPass(FORCE_CUTOFF), None
         self.seat_time = as_non_negative("seat_time", seat_time)
         self.seat_distance = as_positive("seat_distance", seat_distance)
         self.seat_across = as_positive("seat_across", seat_across)
@@ -155,6 +160,11 @@ class EstimatedObject:
             f = w[:, :3]
             if self.simulated_noise is not None:
                 f = f + self._rng.normal(0.0, self.simulated_noise[1], f.shape)
+            # contact on the force low-passed at FORCE_CUTOFF: a sensor's noise crosses a newton's
+            # threshold now and then, a hook pulling on a handle stays over it
+            dt = np.diff(t, prepend=self._force_time if self._force_time is not None else t[0])
+            f = np.array([self._force.update(fi, max(float(di), 0.0)) for fi, di in zip(f, dt, strict=True)])
+            self._force_time = float(t[-1])
             touching = np.linalg.norm(f, axis=1) >= self.contact_force
             pressing = f @ self.handle.pose[:3, 2] >= self.contact_force
         if self.simulated_noise is not None:
