@@ -95,7 +95,8 @@ class EstimatedObject:
         self.contact_force = as_non_negative("contact_force", contact_force)
         self.release_time = as_non_negative("release_time", release_time)
         self._touched_at = -math.inf
-        self._force, self._force_time = LowPass(FORCE_CUTOFF), None
+        self._force = LowPass(FORCE_CUTOFF)
+        self._force_time: float | None = None
         self.seat_time = as_non_negative("seat_time", seat_time)
         self.seat_distance = as_positive("seat_distance", seat_distance)
         self.seat_across = as_positive("seat_across", seat_across)
