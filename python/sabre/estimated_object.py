@@ -151,6 +151,8 @@ class EstimatedObject:
         t = np.atleast_1d(np.asarray(t, dtype=np.float64))
         n = len(t)
         q = as_float_array("q", q, (n, self.scene.nq))
+        if n == 0:  # nothing measured: the estimate stands
+            return self.estimate
         hands = self.scene.fk_many(q, self._hand)[:, :3, 3]
         if wrench is None:  # in contact, the bar pulling the hand toward the panel
             touching = pressing = np.ones(n, dtype=bool)

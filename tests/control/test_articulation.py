@@ -157,3 +157,15 @@ def test_the_controller_takes_a_rebuilt_scene_with_its_plan_in_force():
     other = example_scene("ur5_mobile", "drawer")
     with pytest.raises(InvalidValueError, match="robot"):
         controller.set_scene(other)
+
+
+def test_an_estimated_object_takes_no_samples_and_refuses_a_wrench_of_another_length():
+    estimated = sabre.EstimatedObject("royalpanda", sabre.DetectedHandle(HANDLE))
+    assert estimated.observe([], np.zeros((0, estimated.scene.nq))).samples == 0
+    assert estimated.history == []
+    q = estimated.scene.start_state()[: estimated.scene.nq]
+    with pytest.raises(ShapeError, match="wrench"):
+        estimated.observe([0.0, 0.001], np.tile(q, (2, 1)), np.zeros((3, 6)))
+    # the first pull's scene reads the robot's joints and a closed object
+    x = estimated.state(q, np.zeros_like(q))
+    assert x.shape == (estimated.scene.nx,) and x[-2:].tolist() == [0.0, 0.0]
